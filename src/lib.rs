@@ -1,0 +1,13 @@
+//! # mjskill
+//!
+//! ManiSkill3's tabletop manipulation tasks (PickCube-v1 and its SO100/WidowX AI variants,
+//! PokeCube-v1, PlaceSphere-v1) on MuJoCo 2.2, from Rust.
+//!
+//! The modules follow the flow of data:
+//! `mujoco-sys` (FFI) → [`mujoco`] (the safe layer) → [`mjcf`] (URDF → MJCF scene generation)
+//! → [`robots`] and [`controllers`] → [`tasks`] → [`env`] (the gymnasium-style API)
+//! → [`record`] (MCAP) → the `mjskill` command line ([`cli`]).
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod mujoco;
