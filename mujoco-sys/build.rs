@@ -5,7 +5,8 @@
 use std::env;
 use std::path::PathBuf;
 
-const INSTALL_HINT: &str = "install the Debian packages: apt-get install -y libmujoco-dev libclang-dev";
+const INSTALL_HINT: &str =
+    "install the Debian packages: apt-get install -y libmujoco-dev libclang-dev";
 
 fn fail(msg: &str) -> ! {
     // One clear line, then stop the build.

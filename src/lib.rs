@@ -6,8 +6,15 @@
 //! The modules follow the flow of data:
 //! `mujoco-sys` (FFI) → [`mujoco`] (the safe layer) → [`mjcf`] (URDF → MJCF scene generation)
 //! → [`robots`] and [`controllers`] → [`tasks`] → [`env`] (the gymnasium-style API)
-//! → [`record`] (MCAP) → the `mjskill` command line ([`cli`]).
+//! → the `mjskill` command line ([`cli`]).
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod cli;
+pub mod controllers;
+pub mod env;
+pub mod mjcf;
+pub mod models;
 pub mod mujoco;
+pub mod robots;
+pub mod tasks;

@@ -2,7 +2,12 @@
 //!
 //! Everything here is `unsafe` and mirrors `mujoco.h` one to one. Use the safe layer in the
 //! `mjskill` crate (`mjskill::mujoco`) instead of calling these directly.
-#![allow(non_upper_case_globals, non_camel_case_types, non_snake_case, missing_docs)]
+#![allow(
+    non_upper_case_globals,
+    non_camel_case_types,
+    non_snake_case,
+    missing_docs
+)]
 #![allow(clippy::all)]
 
 include!(concat!(env!("OUT_DIR"), "/bindings.rs"));

@@ -1,1 +1,4 @@
-fn main(){}
+//! The `mjskill` binary: see `mjskill --help`.
+fn main() {
+    std::process::exit(mjskill::cli::main());
+}

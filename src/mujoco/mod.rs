@@ -46,7 +46,11 @@ static WARNINGS_SEEN: AtomicU64 = AtomicU64::new(0);
 /// compiler installs its own handler while loading, so load errors arrive as text instead.)
 unsafe extern "C" fn error_handler(msg: *const c_char) {
     // SAFETY: MuJoCo passes a NUL-terminated message string (or null).
-    let text = if msg.is_null() { "(no message)".into() } else { unsafe { CStr::from_ptr(msg) }.to_string_lossy() };
+    let text = if msg.is_null() {
+        "(no message)".into()
+    } else {
+        unsafe { CStr::from_ptr(msg) }.to_string_lossy()
+    };
     eprintln!("fatal MuJoCo error: {text}");
     std::process::abort();
 }
@@ -66,7 +70,9 @@ pub fn version() -> i32 {
 /// The version string of the loaded library, e.g. "2.2.2".
 pub fn version_string() -> String {
     // SAFETY: mj_versionString returns a pointer to a static NUL-terminated string.
-    unsafe { CStr::from_ptr(sys::mj_versionString()) }.to_string_lossy().into_owned()
+    unsafe { CStr::from_ptr(sys::mj_versionString()) }
+        .to_string_lossy()
+        .into_owned()
 }
 
 /// Checks that the loaded library is MuJoCo 2.2.x and installs the error and warning handlers.
@@ -202,11 +208,22 @@ impl Warnings {
     }
     /// True if any of the "simulation diverged" warnings (bad qpos/qvel/qacc/ctrl) fired.
     pub fn diverged(&self) -> bool {
-        [Warning::BadQpos, Warning::BadQvel, Warning::BadQacc, Warning::BadCtrl].iter().any(|w| self.count(*w) > 0)
+        [
+            Warning::BadQpos,
+            Warning::BadQvel,
+            Warning::BadQacc,
+            Warning::BadCtrl,
+        ]
+        .iter()
+        .any(|w| self.count(*w) > 0)
     }
     /// The kinds that fired, for messages.
     pub fn fired(&self) -> Vec<Warning> {
-        ALL_WARNINGS.iter().copied().filter(|w| self.count(*w) > 0).collect()
+        ALL_WARNINGS
+            .iter()
+            .copied()
+            .filter(|w| self.count(*w) > 0)
+            .collect()
     }
 }
 
@@ -230,7 +247,15 @@ impl Drop for Model {
 
 impl std::fmt::Debug for Model {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Model(nq={}, nv={}, nu={}, nbody={}, ngeom={})", self.nq(), self.nv(), self.nu(), self.nbody(), self.ngeom())
+        write!(
+            f,
+            "Model(nq={}, nv={}, nu={}, nbody={}, ngeom={})",
+            self.nq(),
+            self.nv(),
+            self.nu(),
+            self.nbody(),
+            self.ngeom()
+        )
     }
 }
 
@@ -250,22 +275,39 @@ impl Vfs {
     fn add(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         let cname = c_string(name)?;
         if name.len() >= 1000 {
-            return Err(MjError::Invalid(format!("asset file name too long for MuJoCo's VFS: {name}")));
+            return Err(MjError::Invalid(format!(
+                "asset file name too long for MuJoCo's VFS: {name}"
+            )));
         }
-        let len = c_int::try_from(bytes.len().max(1))
-            .map_err(|_| MjError::Invalid(format!("asset {name} is too large ({} bytes)", bytes.len())))?;
+        let len = c_int::try_from(bytes.len().max(1)).map_err(|_| {
+            MjError::Invalid(format!("asset {name} is too large ({} bytes)", bytes.len()))
+        })?;
         // SAFETY: self.0 is an initialised VFS; cname is NUL-terminated.
         let rc = unsafe { sys::mj_makeEmptyFileVFS(&mut *self.0, cname.as_ptr(), len) };
         match rc {
             0 => {}
-            1 => return Err(MjError::Invalid(format!("MuJoCo's VFS is full (2000 files); cannot add {name}"))),
-            2 => return Err(MjError::Invalid(format!("duplicate asset file name {name}"))),
-            other => return Err(MjError::Invalid(format!("mj_makeEmptyFileVFS({name}) failed with code {other}"))),
+            1 => {
+                return Err(MjError::Invalid(format!(
+                    "MuJoCo's VFS is full (2000 files); cannot add {name}"
+                )))
+            }
+            2 => {
+                return Err(MjError::Invalid(format!(
+                    "duplicate asset file name {name}"
+                )))
+            }
+            other => {
+                return Err(MjError::Invalid(format!(
+                    "mj_makeEmptyFileVFS({name}) failed with code {other}"
+                )))
+            }
         }
         // SAFETY: the file was just created, so findFile returns its valid index.
         let idx = unsafe { sys::mj_findFileVFS(&*self.0, cname.as_ptr()) };
         if idx < 0 {
-            return Err(MjError::Invalid(format!("asset {name} vanished from the VFS")));
+            return Err(MjError::Invalid(format!(
+                "asset {name} vanished from the VFS"
+            )));
         }
         let dst = self.0.filedata[idx as usize] as *mut u8;
         // SAFETY: mj_makeEmptyFileVFS allocated `len >= bytes.len()` bytes at dst.
@@ -423,11 +465,20 @@ impl Model {
         let mut err = vec![0 as c_char; 2048];
         // SAFETY: main is NUL-terminated, the VFS is initialised and outlives the call, and
         // err has the length we pass.
-        let ptr = unsafe { sys::mj_loadXML(main.as_ptr(), &*vfs.0, err.as_mut_ptr(), err.len() as c_int) };
+        let ptr = unsafe {
+            sys::mj_loadXML(main.as_ptr(), &*vfs.0, err.as_mut_ptr(), err.len() as c_int)
+        };
         if ptr.is_null() {
             // SAFETY: MuJoCo writes a NUL-terminated message into err (zero-initialised).
-            let msg = unsafe { CStr::from_ptr(err.as_ptr()) }.to_string_lossy().trim().to_string();
-            return Err(MjError::Load(if msg.is_empty() { "unknown error".into() } else { msg }));
+            let msg = unsafe { CStr::from_ptr(err.as_ptr()) }
+                .to_string_lossy()
+                .trim()
+                .to_string();
+            return Err(MjError::Load(if msg.is_empty() {
+                "unknown error".into()
+            } else {
+                msg
+            }));
         }
         Ok(Model { ptr })
     }
@@ -514,7 +565,8 @@ impl Model {
 
     /// Like [`Model::id`] but an error naming the missing object.
     pub fn require_id(&self, ty: ObjType, name: &str) -> Result<usize> {
-        self.id(ty, name).ok_or_else(|| MjError::Invalid(format!("the model has no {ty:?} named {name:?}")))
+        self.id(ty, name)
+            .ok_or_else(|| MjError::Invalid(format!("the model has no {ty:?} named {name:?}")))
     }
 
     /// The name of object `id` of type `ty` (empty if unnamed or out of range).
@@ -560,7 +612,9 @@ impl Model {
     /// Sets the simulation timestep.
     pub fn set_timestep(&mut self, dt: f64) -> Result<()> {
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(MjError::Invalid(format!("timestep must be positive and finite, got {dt}")));
+            return Err(MjError::Invalid(format!(
+                "timestep must be positive and finite, got {dt}"
+            )));
         }
         self.raw_mut().opt.timestep = dt;
         Ok(())
@@ -603,6 +657,12 @@ impl Drop for Data {
     }
 }
 
+impl std::fmt::Debug for Data {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Data(time={}, {:?})", self.time(), self.model)
+    }
+}
+
 impl Clone for Data {
     fn clone(&self) -> Self {
         // SAFETY: both pointers are valid; mj_makeData allocates a matching block and
@@ -612,7 +672,11 @@ impl Clone for Data {
             assert!(!dst.is_null(), "MuJoCo could not allocate mjData");
             sys::mj_copyData(dst, self.model.ptr, self.ptr)
         };
-        Data { model: self.model.clone(), ptr, warmstart: self.warmstart.clone() }
+        Data {
+            model: self.model.clone(),
+            ptr,
+            warmstart: self.warmstart.clone(),
+        }
     }
 }
 
@@ -721,7 +785,11 @@ impl Data {
             return Err(MjError::Invalid("MuJoCo could not allocate mjData".into()));
         }
         let warmstart = vec![0.0; model.nv()];
-        Ok(Data { model, ptr, warmstart })
+        Ok(Data {
+            model,
+            ptr,
+            warmstart,
+        })
     }
 
     fn raw(&self) -> &sys::mjData {
@@ -831,7 +899,11 @@ impl Data {
     /// torsion, roll1, roll2]. A positive normal force pushes geom2 along the normal
     /// (from geom1 towards geom2).
     pub fn contact_force(&self, i: usize) -> [f64; 6] {
-        assert!(i < self.ncon(), "contact index {i} out of range ({} contacts)", self.ncon());
+        assert!(
+            i < self.ncon(),
+            "contact index {i} out of range ({} contacts)",
+            self.ncon()
+        );
         let mut f = [0.0; 6];
         // SAFETY: i is a valid contact index and f has room for 6 values.
         unsafe { sys::mj_contactForce(self.model.ptr, self.ptr, i as c_int, f.as_mut_ptr()) };
@@ -843,18 +915,42 @@ impl Data {
     pub fn jac_site(&self, site: usize, jacp: &mut [f64], jacr: &mut [f64]) {
         let nv = self.model.nv();
         assert!(site < self.model.nsite(), "site id {site} out of range");
-        assert!(jacp.len() >= 3 * nv && jacr.len() >= 3 * nv, "Jacobian buffers need 3*nv = {} values", 3 * nv);
+        assert!(
+            jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
+            "Jacobian buffers need 3*nv = {} values",
+            3 * nv
+        );
         // SAFETY: site id valid; buffers hold at least 3*nv values each.
-        unsafe { sys::mj_jacSite(self.model.ptr, self.ptr, jacp.as_mut_ptr(), jacr.as_mut_ptr(), site as c_int) }
+        unsafe {
+            sys::mj_jacSite(
+                self.model.ptr,
+                self.ptr,
+                jacp.as_mut_ptr(),
+                jacr.as_mut_ptr(),
+                site as c_int,
+            )
+        }
     }
 
     /// Like [`Data::jac_site`] for the origin of body `body`.
     pub fn jac_body(&self, body: usize, jacp: &mut [f64], jacr: &mut [f64]) {
         let nv = self.model.nv();
         assert!(body < self.model.nbody(), "body id {body} out of range");
-        assert!(jacp.len() >= 3 * nv && jacr.len() >= 3 * nv, "Jacobian buffers need 3*nv = {} values", 3 * nv);
+        assert!(
+            jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
+            "Jacobian buffers need 3*nv = {} values",
+            3 * nv
+        );
         // SAFETY: body id valid; buffers hold at least 3*nv values each.
-        unsafe { sys::mj_jacBody(self.model.ptr, self.ptr, jacp.as_mut_ptr(), jacr.as_mut_ptr(), body as c_int) }
+        unsafe {
+            sys::mj_jacBody(
+                self.model.ptr,
+                self.ptr,
+                jacp.as_mut_ptr(),
+                jacr.as_mut_ptr(),
+                body as c_int,
+            )
+        }
     }
 
     /// 6-D velocity of body `body` at its frame origin, world-oriented: [angular 3, linear 3].
@@ -953,15 +1049,24 @@ mod tests {
 
     #[test]
     fn bad_xml_returns_mujoco_message() {
-        let err = Model::from_xml_string("<mujoco><worldbody><geom type='sphere' size='-1'/></worldbod></mujoco>", &[])
-            .unwrap_err();
+        let err = Model::from_xml_string(
+            "<mujoco><worldbody><geom type='sphere' size='-1'/></worldbod></mujoco>",
+            &[],
+        )
+        .unwrap_err();
         match err {
             MjError::Load(msg) => assert!(!msg.is_empty(), "empty message"),
             other => panic!("wrong error {other:?}"),
         }
-        let err = Model::from_xml_string("<mujoco><worldbody><body><joint type='bogus'/></body></worldbody></mujoco>", &[])
-            .unwrap_err();
-        assert!(err.to_string().contains("bogus") || err.to_string().contains("invalid"), "{err}");
+        let err = Model::from_xml_string(
+            "<mujoco><worldbody><body><joint type='bogus'/></body></worldbody></mujoco>",
+            &[],
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("bogus") || err.to_string().contains("invalid"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -972,7 +1077,11 @@ mod tests {
             d.step();
         }
         let b = m.require_id(ObjType::Body, "box").unwrap();
-        assert!((d.xpos()[3 * b + 2] - 0.05).abs() < 2e-3, "z = {}", d.xpos()[3 * b + 2]);
+        assert!(
+            (d.xpos()[3 * b + 2] - 0.05).abs() < 2e-3,
+            "z = {}",
+            d.xpos()[3 * b + 2]
+        );
         assert!(d.ncon() >= 1);
         // Sum of the world-frame force on the box from all contacts: must be +m g along z.
         let floor = m.require_id(ObjType::Geom, "floor").unwrap();
@@ -982,9 +1091,9 @@ mod tests {
             let f = d.contact_force(i);
             // world force on geom2 = frame^T * f[0..3]
             let mut w = [0.0; 3];
-            for r in 0..3 {
-                for k in 0..3 {
-                    w[k] += c.frame[3 * r + k] * f[r];
+            for (r, fr) in f.iter().enumerate().take(3) {
+                for (k, wk) in w.iter_mut().enumerate() {
+                    *wk += c.frame[3 * r + k] * fr;
                 }
             }
             let sign = if c.geom2 == floor { -1.0 } else { 1.0 };
@@ -1028,7 +1137,11 @@ mod tests {
         let s = m.require_id(ObjType::Site, "s").unwrap();
         assert_eq!(m.name(ObjType::Site, s), "s");
         assert!(m.id(ObjType::Body, "nope").is_none());
-        assert!(m.require_id(ObjType::Body, "nope").unwrap_err().to_string().contains("nope"));
+        assert!(m
+            .require_id(ObjType::Body, "nope")
+            .unwrap_err()
+            .to_string()
+            .contains("nope"));
         let nv = m.nv();
         let (mut jp, mut jr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
         d.jac_site(s, &mut jp, &mut jr);

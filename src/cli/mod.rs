@@ -1,0 +1,206 @@
+//! The `mjskill` command line.
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+pub mod bench;
+
+/// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
+#[derive(Debug, Parser)]
+#[command(name = "mjskill", version, about, long_about = None)]
+pub struct Cli {
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// mjskill's commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Write the complete generated MuJoCo scene (MJCF) of a robot, or of a task with a robot.
+    ExportMjcf {
+        /// Robot uid (panda, fetch, xarm6_robotiq, so100, widowxai).
+        #[arg(long, default_value = "panda")]
+        robot: String,
+        /// Env id whose scene to export (e.g. PickCube-v1); without it, the table scene and the robot.
+        #[arg(long)]
+        env: Option<String>,
+        /// Output file (default: standard output).
+        #[arg(short = 'o', long = "output")]
+        output: Option<PathBuf>,
+    },
+    /// Measure env steps/s against raw MuJoCo stepping of the same model; prints one JSON line.
+    Bench {
+        /// Env id.
+        #[arg(long, default_value = "PickCube-v1")]
+        env: String,
+        /// Robot uid (default: the env's default robot).
+        #[arg(long)]
+        robot: Option<String>,
+        /// Control mode (default: the robot's default).
+        #[arg(long)]
+        control_mode: Option<String>,
+        /// Env steps to time (after a warm-up of a tenth as many).
+        #[arg(long, default_value_t = 2000)]
+        steps: usize,
+    },
+    /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
+    /// `<collision>` elements, with their volume and the mesh volume they cover.
+    FitPrimitives {
+        /// Mesh file.
+        #[arg(long)]
+        mesh: PathBuf,
+        /// Primitive kind: box, capsule, cylinder or sphere; comma-separated to take the smallest.
+        #[arg(long, default_value = "box,capsule,cylinder")]
+        shape: String,
+        /// Decompose greedily into up to this many primitives (axis-aligned cuts); overrides --segments.
+        #[arg(long)]
+        parts: Option<usize>,
+        /// Split the (cropped) mesh into this many slabs along its principal axis.
+        #[arg(long, default_value_t = 1)]
+        segments: usize,
+        /// Keep only the mesh surface inside this box: "xmin,ymin,zmin,xmax,ymax,zmax" (mesh frame).
+        #[arg(long)]
+        crop: Option<String>,
+    },
+    /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
+    Envs,
+}
+
+/// Runs the command line; returns the process exit code.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e}");
+            2
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        Command::ExportMjcf { robot, env, output } => export_mjcf(&robot, env.as_deref(), output),
+        Command::Bench {
+            env,
+            robot,
+            control_mode,
+            steps,
+        } => {
+            let report = bench::run(&env, robot, control_mode, steps)?;
+            println!(
+                "{}",
+                serde_json::to_string(&report).map_err(|e| e.to_string())?
+            );
+            Ok(())
+        }
+        Command::FitPrimitives {
+            mesh,
+            shape,
+            parts,
+            segments,
+            crop,
+        } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref()),
+        Command::Envs => {
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&crate::env::registry()).map_err(|e| e.to_string())?
+            );
+            Ok(())
+        }
+    }
+}
+
+fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), String> {
+    match output {
+        Some(path) => {
+            std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
+        }
+        None => std::io::stdout()
+            .write_all(text.as_bytes())
+            .map_err(|e| format!("cannot write to stdout: {e}")),
+    }
+}
+
+fn export_mjcf(robot: &str, env: Option<&str>, output: Option<PathBuf>) -> Result<(), String> {
+    let mjcf = match env {
+        None => {
+            let spec = crate::robots::spec(robot)?;
+            crate::robots::table_scene_with(spec, |_| {})?.3
+        }
+        Some(id) => crate::env::scene_mjcf(id, robot)?,
+    };
+    if !mjcf.assets.is_empty() {
+        // Meshes live in MuJoCo's in-memory VFS; write them next to the XML so the file loads.
+        let dir = output
+            .as_ref()
+            .and_then(|p| p.parent().map(|d| d.to_path_buf()))
+            .unwrap_or_else(|| PathBuf::from("."));
+        for (name, bytes) in &mjcf.assets {
+            std::fs::write(dir.join(name), bytes)
+                .map_err(|e| format!("cannot write asset {name}: {e}"))?;
+        }
+    }
+    write_output(output, &mjcf.xml)
+}
+
+fn fit_primitives(
+    mesh: &std::path::Path,
+    shape: &str,
+    parts: Option<usize>,
+    segments: usize,
+    crop: Option<&str>,
+) -> Result<(), String> {
+    use crate::mjcf::mesh_fit;
+    let kinds: Vec<mesh_fit::Kind> = shape
+        .split(',')
+        .map(|s| s.trim().parse())
+        .collect::<Result<_, _>>()?;
+    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
+    let tris =
+        mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
+    let crop = match crop {
+        None => None,
+        Some(s) => {
+            let v: Vec<f64> = s
+                .split(',')
+                .map(|x| {
+                    x.trim()
+                        .parse::<f64>()
+                        .map_err(|_| format!("--crop: {x:?} is not a number"))
+                })
+                .collect::<Result<_, _>>()?;
+            if v.len() != 6 {
+                return Err(format!(
+                    "--crop needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}",
+                    v.len()
+                ));
+            }
+            Some(mesh_fit::Crop {
+                min: [v[0], v[1], v[2]].into(),
+                max: [v[3], v[4], v[5]].into(),
+            })
+        }
+    };
+    let pts = mesh_fit::surface_points(&tris, crop.as_ref()).map_err(|e| e.to_string())?;
+    let prims = match parts {
+        Some(n) => mesh_fit::decompose(&pts, &kinds, n),
+        None if segments > 1 && kinds.len() == 1 => {
+            mesh_fit::fit_segments(&pts, kinds[0], segments)
+        }
+        None if segments > 1 => return Err("--segments needs a single --shape".into()),
+        None => mesh_fit::fit_any(&pts, &kinds).map(|p| vec![p]),
+    }
+    .map_err(|e| e.to_string())?;
+    let total: f64 = prims.iter().map(|p| p.volume()).sum();
+    for p in &prims {
+        println!("{}", p.to_urdf());
+    }
+    println!(
+        "<!-- primitives volume {total:.3e} m^3, mesh volume {:.3e} m^3 -->",
+        mesh_fit::mesh_volume(&tris)
+    );
+    Ok(())
+}

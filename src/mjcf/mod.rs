@@ -1,0 +1,520 @@
+//! MJCF generation: robot URDFs (read by [`urdf`]) and task props ([`props`]) become one
+//! MuJoCo scene ([`Scene`] → [`Mjcf`]), compiled by the safe layer.
+//!
+//! Physics scheme (see the README's "Physics" section for the reasoning and measurements):
+//! * `timestep` [`TIMESTEP`] with the implicit integrator; one 20 Hz control step is
+//!   [`SUBSTEPS`] physics steps.
+//! * Every controlled joint gets a PhysX-style PD drive as one `general` actuator with gain 1
+//!   and bias `(0, −kp, −kd)`, so `force = clamp(ctrl − kp·q − kd·q̇, ±F)` with
+//!   `ctrl = kp·q* + kd·q̇*`: exactly ManiSkill's `clamp(kp(q*−q) + kd(q̇*−q̇), ±F)`.
+//! * Robot links do not feel gravity: the env applies `m·g` upward at each robot body's
+//!   centre of mass through `xfrc_applied` (MuJoCo 2.2 has no per-body gravity switch).
+//! * Friction: every shape has ManiSkill's default material μ = 0.3; shapes with their own
+//!   material (finger pads, μ = 2.0) get the PhysX *average* with the default, because
+//!   MuJoCo combines by *max* and every partner of a finger has μ = 0.3.
+pub mod mesh_fit;
+pub mod props;
+pub mod urdf;
+pub mod xml;
+
+use nalgebra::{Isometry3, UnitQuaternion};
+
+use crate::mujoco::{Model, Result as MjResult};
+use urdf::{JointKind, RobotDesc, ShapeGeom};
+use xml::{num, nums, Element};
+
+/// Physics timestep in seconds.
+pub const TIMESTEP: f64 = 0.002;
+/// Physics steps per 20 Hz control step (0.05 s / [`TIMESTEP`]).
+pub const SUBSTEPS: usize = 25;
+/// Control period of one env step (ManiSkill: 20 Hz).
+pub const CONTROL_DT: f64 = 0.05;
+/// Standard gravity used by ManiSkill.
+pub const GRAVITY: f64 = 9.81;
+/// ManiSkill's default material friction (static = dynamic).
+pub const DEFAULT_FRICTION: f64 = 0.3;
+/// MuJoCo torsional and rolling friction coefficients used for every geom.
+pub const TORSIONAL_ROLLING: [f64; 2] = [0.005, 0.0001];
+/// Contact `solref` (time constant, damping ratio): the stiffest stable setting at
+/// [`TIMESTEP`] (time constant 2·dt), so that rigid PhysX-like contacts are approximated and a
+/// grasped 4 cm cube is penetrated by well under a millimetre.
+pub const CONTACT_SOLREF: [f64; 2] = [2.0 * TIMESTEP, 1.0];
+/// Contact `solimp` (impedance 0.95 → 0.99 over 1 mm of penetration).
+pub const CONTACT_SOLIMP: [f64; 3] = [0.95, 0.99, 0.001];
+/// Density of every prop and of robot links without URDF inertials (kg/m³).
+pub const DENSITY: f64 = 1000.0;
+/// Mass and principal inertia SAPIEN gives a link with neither inertial nor shapes.
+pub const MASSLESS: f64 = 1e-6;
+/// Geom group of robot visual shapes.
+pub const GROUP_ROBOT_VISUAL: i32 = 1;
+/// Geom group of visual-only markers hidden from sensor cameras (e.g. PickCube's goal).
+pub const GROUP_HIDDEN: i32 = 2;
+/// Geom group of robot collision shapes (not drawn).
+pub const GROUP_COLLISION: i32 = 3;
+
+/// A compiled-ready MJCF document plus the in-memory asset files it references.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mjcf {
+    /// The MJCF XML text.
+    pub xml: String,
+    /// (file name, bytes) of meshes referenced by the XML.
+    pub assets: Vec<(String, Vec<u8>)>,
+}
+
+impl Mjcf {
+    /// Compiles the document with MuJoCo.
+    pub fn compile(&self) -> MjResult<Model> {
+        let assets: Vec<(&str, &[u8])> = self
+            .assets
+            .iter()
+            .map(|(n, b)| (n.as_str(), b.as_slice()))
+            .collect();
+        Model::from_xml_string(&self.xml, &assets)
+    }
+}
+
+/// A PD drive on one joint (controllers.md §5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drive {
+    /// Joint name.
+    pub joint: String,
+    /// Stiffness (N/m or N·m/rad).
+    pub kp: f64,
+    /// Damping.
+    pub kd: f64,
+    /// Force limit (N or N·m).
+    pub force_limit: f64,
+}
+
+/// A ball-joint loop closure between two links (MuJoCo `<equality><connect>`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Connect {
+    /// First link.
+    pub link1: String,
+    /// Second link.
+    pub link2: String,
+    /// Anchor in the first link's frame (coincides with the second link's anchor).
+    pub anchor: [f64; 3],
+}
+
+/// How a robot is placed and driven in a scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotOptions {
+    /// Pose of the root link in the world.
+    pub base: Isometry3<f64>,
+    /// PD drives (one actuator each, in this order).
+    pub drives: Vec<Drive>,
+    /// Armature added to every joint not listed in `armature`.
+    pub default_armature: f64,
+    /// Per-joint armature.
+    pub armature: Vec<(String, f64)>,
+    /// Per-joint passive damping (undriven joints, e.g. mimic followers without a drive).
+    pub damping: Vec<(String, f64)>,
+    /// Links whose collision shapes have their own material friction (PhysX value).
+    pub material_friction: Vec<(String, f64)>,
+    /// Sites: (site name, link, position in the link frame).
+    pub sites: Vec<(String, String, [f64; 3])>,
+    /// Link pairs excluded from contact in addition to the SRDF's.
+    pub extra_excludes: Vec<(String, String)>,
+    /// Links that never collide with the ground plane (e.g. Fetch's wheels).
+    pub no_ground_contact: Vec<String>,
+    /// Loop closures.
+    pub connects: Vec<Connect>,
+}
+
+impl Default for RobotOptions {
+    fn default() -> Self {
+        RobotOptions {
+            base: Isometry3::identity(),
+            drives: Vec::new(),
+            default_armature: 0.0,
+            armature: Vec::new(),
+            damping: Vec::new(),
+            material_friction: Vec::new(),
+            sites: Vec::new(),
+            extra_excludes: Vec::new(),
+            no_ground_contact: Vec::new(),
+            connects: Vec::new(),
+        }
+    }
+}
+
+/// Name of the actuator that drives `joint`.
+pub fn actuator_name(joint: &str) -> String {
+    format!("drive_{joint}")
+}
+
+/// contype/conaffinity of ordinary collision geoms: bit 0 (everything) and bit 1 (ground).
+pub const CONTACT_ALL: i32 = 3;
+/// contype/conaffinity of the ground plane: only bit 1.
+pub const CONTACT_GROUND: i32 = 2;
+/// contype/conaffinity of geoms that ignore the ground (Fetch's wheels): only bit 0.
+pub const CONTACT_NOT_GROUND: i32 = 1;
+
+/// Name of the ground plane geom.
+pub const GROUND: &str = "ground";
+/// Name of the table geom.
+pub const TABLE: &str = "table-workspace";
+
+/// Converts a pose to MJCF `pos` and `quat` attributes.
+pub fn pose_attrs(mut e: Element, p: &Isometry3<f64>) -> Element {
+    let t = p.translation.vector;
+    if t.norm() != 0.0 {
+        e = e.attr_nums("pos", &[t.x, t.y, t.z]);
+    }
+    let q = p.rotation;
+    if q.angle() != 0.0 {
+        e = e.attr_nums("quat", &[q.w, q.i, q.j, q.k]);
+    }
+    e
+}
+
+/// Builds an MJCF scene.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    root: Element,
+    assets: Vec<(String, Vec<u8>)>,
+}
+
+impl Scene {
+    /// An empty scene with mjskill's physics options.
+    pub fn new(model_name: &str) -> Scene {
+        let mut root = Element::new("mujoco").attr("model", model_name);
+        root.push(
+            Element::new("compiler")
+                .attr("angle", "radian")
+                .attr("inertiafromgeom", "auto"),
+        );
+        root.push(
+            Element::new("option")
+                .attr("timestep", num(TIMESTEP))
+                .attr("integrator", "implicit")
+                .attr_nums("gravity", &[0.0, 0.0, -GRAVITY]),
+        );
+        root.push(
+            Element::new("size")
+                .attr("njmax", 2000)
+                .attr("nconmax", 500),
+        );
+        root.push(
+            Element::new("visual")
+                .child(
+                    Element::new("global")
+                        .attr("offwidth", 640)
+                        .attr("offheight", 640),
+                )
+                .child(Element::new("quality").attr("shadowsize", 0)),
+        );
+        let friction = [DEFAULT_FRICTION, TORSIONAL_ROLLING[0], TORSIONAL_ROLLING[1]];
+        root.push(
+            Element::new("default").child(
+                Element::new("geom")
+                    .attr_nums("friction", &friction)
+                    .attr_nums("solref", &CONTACT_SOLREF)
+                    .attr_nums("solimp", &CONTACT_SOLIMP)
+                    .attr("contype", CONTACT_ALL)
+                    .attr("conaffinity", CONTACT_ALL),
+            ),
+        );
+        root.push(Element::new("asset"));
+        root.push(Element::new("worldbody"));
+        Scene {
+            root,
+            assets: Vec::new(),
+        }
+    }
+
+    /// The `<worldbody>` element.
+    pub fn worldbody(&mut self) -> &mut Element {
+        self.root.section("worldbody")
+    }
+
+    /// A top-level section (`asset`, `contact`, `equality`, `actuator`, ...), created if missing.
+    pub fn section(&mut self, name: &str) -> &mut Element {
+        self.root.section(name)
+    }
+
+    /// Adds a robot. `mesh_bytes` resolves a URDF mesh file name to its bytes.
+    pub fn add_robot(
+        &mut self,
+        robot: &RobotDesc,
+        opts: &RobotOptions,
+        mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
+    ) -> std::result::Result<(), String> {
+        for name in opts
+            .drives
+            .iter()
+            .map(|d| &d.joint)
+            .chain(opts.armature.iter().map(|a| &a.0))
+        {
+            if robot.joint(name).is_none() {
+                return Err(format!("robot {} has no joint {name:?}", robot.name));
+            }
+        }
+        for (_, link, _) in &opts.sites {
+            if robot.link(link).is_none() {
+                return Err(format!(
+                    "robot {} has no link {link:?} for a site",
+                    robot.name
+                ));
+            }
+        }
+        let root_body = self.link_body(robot, robot.root, opts, mesh_bytes, &opts.base)?;
+        self.worldbody().push(root_body);
+
+        // Contact exclusions: every URDF parent–child pair (PhysX never collides a link with its
+        // parent; MuJoCo's own parent filter skips bodies welded to the world, such as a fixed
+        // robot root), SRDF "Default" pairs and robot-specific extras.
+        let mut pairs: Vec<(String, String)> = robot
+            .joints
+            .iter()
+            .map(|j| {
+                (
+                    robot.links[j.parent].name.clone(),
+                    robot.links[j.child].name.clone(),
+                )
+            })
+            .collect();
+        pairs.extend(robot.disabled_pairs.iter().cloned());
+        pairs.extend(opts.extra_excludes.iter().cloned());
+        let mut seen = std::collections::HashSet::new();
+        for (a, b) in pairs {
+            let (Some(la), Some(lb)) = (robot.link(&a), robot.link(&b)) else {
+                return Err(format!(
+                    "collision exclusion names unknown link {a:?} or {b:?}"
+                ));
+            };
+            let key = if a < b {
+                (a.clone(), b.clone())
+            } else {
+                (b.clone(), a.clone())
+            };
+            if la == lb || !seen.insert(key) {
+                continue;
+            }
+            self.section("contact")
+                .push(Element::new("exclude").attr("body1", &a).attr("body2", &b));
+        }
+        // Mimic joints → joint equality q_follower = offset + multiplier · q_leader.
+        for j in &robot.joints {
+            if let Some(m) = &j.mimic {
+                self.section("equality").push(
+                    Element::new("joint")
+                        .attr("name", format!("mimic_{}", j.name))
+                        .attr("joint1", &j.name)
+                        .attr("joint2", &m.leader)
+                        .attr_nums("polycoef", &[m.offset, m.multiplier, 0.0, 0.0, 0.0]),
+                );
+            }
+        }
+        for c in &opts.connects {
+            self.section("equality").push(
+                Element::new("connect")
+                    .attr("name", format!("loop_{}_{}", c.link1, c.link2))
+                    .attr("body1", &c.link1)
+                    .attr("body2", &c.link2)
+                    .attr_nums("anchor", &c.anchor),
+            );
+        }
+        for d in &opts.drives {
+            self.section("actuator").push(
+                Element::new("general")
+                    .attr("name", actuator_name(&d.joint))
+                    .attr("joint", &d.joint)
+                    .attr("gaintype", "fixed")
+                    .attr("gainprm", "1")
+                    .attr("biastype", "affine")
+                    .attr_nums("biasprm", &[0.0, -d.kp, -d.kd])
+                    .attr("ctrllimited", "false")
+                    .attr("forcelimited", "true")
+                    .attr_nums("forcerange", &[-d.force_limit, d.force_limit]),
+            );
+        }
+        for link in &opts.no_ground_contact {
+            if robot.link(link).is_none() {
+                return Err(format!("robot {} has no link {link:?}", robot.name));
+            }
+        }
+        Ok(())
+    }
+
+    fn link_body(
+        &mut self,
+        robot: &RobotDesc,
+        link: usize,
+        opts: &RobotOptions,
+        mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
+        pose: &Isometry3<f64>,
+    ) -> std::result::Result<Element, String> {
+        let l = &robot.links[link];
+        let mut body = pose_attrs(Element::new("body").attr("name", &l.name), pose);
+        match &l.inertial {
+            Some(i) => {
+                let m = &i.inertia;
+                body.push(
+                    Element::new("inertial")
+                        .attr_nums("pos", &[i.com.x, i.com.y, i.com.z])
+                        .attr("mass", num(i.mass))
+                        .attr_nums(
+                            "fullinertia",
+                            &[
+                                m[(0, 0)],
+                                m[(1, 1)],
+                                m[(2, 2)],
+                                m[(0, 1)],
+                                m[(0, 2)],
+                                m[(1, 2)],
+                            ],
+                        ),
+                );
+            }
+            None if l.collisions.is_empty() => {
+                body.push(
+                    Element::new("inertial")
+                        .attr("pos", "0 0 0")
+                        .attr("mass", num(MASSLESS))
+                        .attr_nums("diaginertia", &[MASSLESS; 3]),
+                );
+            }
+            None => {} // MuJoCo computes it from the collision shapes at density 1000.
+        }
+        if let Some(j) = robot.parent_joint(link) {
+            let jd = &robot.joints[j];
+            if jd.kind != JointKind::Fixed {
+                let mut je = Element::new("joint")
+                    .attr("name", &jd.name)
+                    .attr(
+                        "type",
+                        if jd.kind == JointKind::Prismatic {
+                            "slide"
+                        } else {
+                            "hinge"
+                        },
+                    )
+                    .attr_nums("axis", &[jd.axis.x, jd.axis.y, jd.axis.z]);
+                if jd.kind == JointKind::Continuous {
+                    je = je.attr("limited", "false");
+                } else {
+                    je = je
+                        .attr("limited", "true")
+                        .attr_nums("range", &[jd.limits.0, jd.limits.1]);
+                }
+                let arm = opts
+                    .armature
+                    .iter()
+                    .find(|(n, _)| *n == jd.name)
+                    .map(|a| a.1)
+                    .unwrap_or(opts.default_armature);
+                if arm > 0.0 {
+                    je = je.attr("armature", num(arm));
+                }
+                if let Some((_, d)) = opts.damping.iter().find(|(n, _)| *n == jd.name) {
+                    je = je.attr("damping", num(*d));
+                }
+                body.push(je);
+            }
+        }
+        let friction = opts
+            .material_friction
+            .iter()
+            .find(|(n, _)| *n == l.name)
+            .map(|(_, mu)| (mu + DEFAULT_FRICTION) / 2.0);
+        for (k, s) in l.collisions.iter().enumerate() {
+            let mut g = self.shape_geom(s, &format!("{}_c{k}", l.name), mesh_bytes)?;
+            g.set("name", collision_geom_name(&l.name, k));
+            g.set("group", GROUP_COLLISION);
+            g.set("rgba", "0.5 0.5 0.5 0.3");
+            if opts.no_ground_contact.contains(&l.name) {
+                g.set("contype", CONTACT_NOT_GROUND);
+                g.set("conaffinity", CONTACT_NOT_GROUND);
+            }
+            if let Some(mu) = friction {
+                g.set(
+                    "friction",
+                    nums(&[mu, TORSIONAL_ROLLING[0], TORSIONAL_ROLLING[1]]),
+                );
+            }
+            body.push(g);
+        }
+        for (k, s) in l.visuals.iter().enumerate() {
+            let mut g = self.shape_geom(s, &format!("{}_v{k}", l.name), mesh_bytes)?;
+            g.set("name", format!("{}_visual{k}", l.name));
+            g.set("group", GROUP_ROBOT_VISUAL);
+            g.set("contype", 0);
+            g.set("conaffinity", 0);
+            g.set("density", 0);
+            if let Some(c) = s.rgba {
+                g.set("rgba", nums(&c));
+            }
+            body.push(g);
+        }
+        for (name, site_link, p) in &opts.sites {
+            if *site_link == l.name {
+                body.push(
+                    Element::new("site")
+                        .attr("name", name)
+                        .attr_nums("pos", p)
+                        .attr("size", "0.005")
+                        .attr("group", GROUP_HIDDEN),
+                );
+            }
+        }
+        for j in robot.child_joints(link) {
+            let jd = &robot.joints[j];
+            let child = self.link_body(robot, jd.child, opts, mesh_bytes, &jd.origin)?;
+            body.push(child);
+        }
+        Ok(body)
+    }
+
+    fn shape_geom(
+        &mut self,
+        s: &urdf::Shape,
+        mesh_name: &str,
+        mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
+    ) -> std::result::Result<Element, String> {
+        let g = pose_attrs(Element::new("geom"), &s.origin);
+        Ok(match &s.geom {
+            ShapeGeom::Box(h) => g.attr("type", "box").attr_nums("size", h),
+            ShapeGeom::Cylinder(r, hl) => g.attr("type", "cylinder").attr_nums("size", &[*r, *hl]),
+            ShapeGeom::Capsule(r, hl) => g.attr("type", "capsule").attr_nums("size", &[*r, *hl]),
+            ShapeGeom::Sphere(r) => g.attr("type", "sphere").attr_nums("size", &[*r]),
+            ShapeGeom::Mesh(file, scale) => {
+                let bytes =
+                    mesh_bytes(file).ok_or_else(|| format!("mesh file {file:?} not found"))?;
+                let ext = file
+                    .rsplit('.')
+                    .next()
+                    .unwrap_or("stl")
+                    .to_ascii_lowercase();
+                let vfs_name = format!("{mesh_name}.{ext}");
+                self.assets.push((vfs_name.clone(), bytes));
+                self.section("asset").push(
+                    Element::new("mesh")
+                        .attr("name", mesh_name)
+                        .attr("file", &vfs_name)
+                        .attr_nums("scale", scale),
+                );
+                g.attr("type", "mesh").attr("mesh", mesh_name)
+            }
+        })
+    }
+
+    /// Finishes the document.
+    pub fn finish(self) -> Mjcf {
+        Mjcf {
+            xml: self.root.to_xml(),
+            assets: self.assets,
+        }
+    }
+}
+
+/// Name of the k-th collision geom of a link.
+pub fn collision_geom_name(link: &str, k: usize) -> String {
+    format!("{link}_collision{k}")
+}
+
+/// A quaternion (w, x, y, z) for a rotation about z.
+pub fn rotz(theta: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_euler_angles(0.0, 0.0, theta)
+}

@@ -1,0 +1,265 @@
+//! Task props: the table scene (tasks.md §0.1) and builders for the objects the tasks use.
+//!
+//! Dynamic props are free bodies with density [`DENSITY`] (mass from volume, as SAPIEN's
+//! `add_*_collision(density=1000)`); kinematic props are MuJoCo mocap bodies (moved by
+//! writing `mocap_pos`/`mocap_quat`); visual-only markers have no collision.
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+use super::xml::{nums, Element};
+use super::{pose_attrs, Scene, CONTACT_GROUND, DENSITY, GROUND, GROUP_HIDDEN, TABLE};
+
+/// Half extents of the table-workspace box in its actor frame (tasks.md §0.1).
+pub const TABLE_HALF: [f64; 3] = [1.209, 0.6045, 0.45982145];
+/// Table actor position (its box centre is `TABLE_HALF[2]` above it).
+pub const TABLE_POS: [f64; 3] = [-0.12, 0.0, -0.9196429];
+/// Height of the ground plane (= −table height).
+pub const GROUND_Z: f64 = -0.91964293;
+
+/// RGBA colour.
+pub type Rgba = [f64; 4];
+
+fn visual(e: Element, rgba: &Rgba, group: i32) -> Element {
+    e.attr("contype", 0)
+        .attr("conaffinity", 0)
+        .attr("density", 0)
+        .attr("group", group)
+        .attr("rgba", nums(rgba))
+}
+
+impl Scene {
+    /// The static table scene: the table-workspace box (top face at z = 0), the ground plane
+    /// at [`GROUND_Z`], and lights like ManiSkill's defaults (ambient 0.3, two directional).
+    pub fn add_table_scene(&mut self) {
+        let table_rot = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let table_pose = Isometry3::from_parts(
+            Translation3::new(TABLE_POS[0], TABLE_POS[1], TABLE_POS[2] + TABLE_HALF[2]),
+            table_rot,
+        );
+        let wb = self.worldbody();
+        wb.push(
+            Element::new("light")
+                .attr("name", "dir1")
+                .attr("directional", "true")
+                .attr("castshadow", "false")
+                .attr_nums("pos", &[-1.0, -1.0, 2.0])
+                .attr_nums("dir", &[1.0, 1.0, -1.0])
+                .attr_nums("diffuse", &[0.7, 0.7, 0.7]),
+        );
+        wb.push(
+            Element::new("light")
+                .attr("name", "dir2")
+                .attr("directional", "true")
+                .attr("castshadow", "false")
+                .attr_nums("pos", &[0.0, 0.0, 2.0])
+                .attr_nums("dir", &[0.0, 0.0, -1.0])
+                .attr_nums("diffuse", &[0.7, 0.7, 0.7]),
+        );
+        wb.push(
+            pose_attrs(Element::new("geom"), &table_pose)
+                .attr("name", TABLE)
+                .attr("type", "box")
+                .attr_nums("size", &TABLE_HALF)
+                .attr("rgba", "0.82 0.72 0.58 1"),
+        );
+        wb.push(
+            Element::new("geom")
+                .attr("name", GROUND)
+                .attr("type", "plane")
+                .attr_nums("pos", &[0.0, 0.0, GROUND_Z])
+                .attr("size", "0 0 1")
+                .attr("contype", CONTACT_GROUND)
+                .attr("conaffinity", CONTACT_GROUND)
+                .attr("rgba", "0.9 0.9 0.9 1"),
+        );
+        self.section("visual")
+            .push(Element::new("headlight").attr_nums("ambient", &[0.3, 0.3, 0.3]));
+    }
+
+    /// A dynamic box (free joint named `name`) with half extents `half`, at `pos`.
+    pub fn add_box(&mut self, name: &str, half: [f64; 3], rgba: Rgba, pos: [f64; 3]) {
+        let body = Element::new("body")
+            .attr("name", name)
+            .attr_nums("pos", &pos)
+            .child(Element::new("freejoint").attr("name", name))
+            .child(
+                Element::new("geom")
+                    .attr("name", name)
+                    .attr("type", "box")
+                    .attr_nums("size", &half)
+                    .attr("density", DENSITY)
+                    .attr("rgba", nums(&rgba)),
+            );
+        self.worldbody().push(body);
+    }
+
+    /// A dynamic sphere (free joint named `name`) of radius `r`.
+    pub fn add_sphere(&mut self, name: &str, r: f64, rgba: Rgba, pos: [f64; 3]) {
+        let body = Element::new("body")
+            .attr("name", name)
+            .attr_nums("pos", &pos)
+            .child(Element::new("freejoint").attr("name", name))
+            .child(
+                Element::new("geom")
+                    .attr("name", name)
+                    .attr("type", "sphere")
+                    .attr_nums("size", &[r])
+                    .attr("density", DENSITY)
+                    .attr("rgba", nums(&rgba)),
+            );
+        self.worldbody().push(body);
+    }
+
+    /// PokeCube's peg (tasks.md §2.1): one collision box of half extents
+    /// (half_length, half_width, half_width) along local x, drawn as two visual half-boxes.
+    pub fn add_peg(
+        &mut self,
+        name: &str,
+        half_length: f64,
+        half_width: f64,
+        rgba: Rgba,
+        pos: [f64; 3],
+    ) {
+        let half_part = half_length / 2.0;
+        let mut body = Element::new("body")
+            .attr("name", name)
+            .attr_nums("pos", &pos)
+            .child(Element::new("freejoint").attr("name", name))
+            .child(
+                Element::new("geom")
+                    .attr("name", name)
+                    .attr("type", "box")
+                    .attr_nums("size", &[half_length, half_width, half_width])
+                    .attr("density", DENSITY)
+                    .attr("rgba", "0 0 0 0")
+                    .attr("group", super::GROUP_COLLISION),
+            );
+        for (k, x) in [-half_part, half_part].into_iter().enumerate() {
+            body.push(visual(
+                Element::new("geom")
+                    .attr("name", format!("{name}_visual{k}"))
+                    .attr("type", "box")
+                    .attr_nums("pos", &[x, 0.0, 0.0])
+                    .attr_nums("size", &[half_part, half_width, half_width]),
+                &rgba,
+                0,
+            ));
+        }
+        self.worldbody().push(body);
+    }
+
+    /// A kinematic (mocap) body made of boxes `(centre, half extents)` that collide.
+    pub fn add_kinematic_boxes(&mut self, name: &str, boxes: &[([f64; 3], [f64; 3])], rgba: Rgba) {
+        let mut body = Element::new("body")
+            .attr("name", name)
+            .attr("mocap", "true");
+        for (k, (c, h)) in boxes.iter().enumerate() {
+            body.push(
+                Element::new("geom")
+                    .attr("name", format!("{name}_{k}"))
+                    .attr("type", "box")
+                    .attr_nums("pos", c)
+                    .attr_nums("size", h)
+                    .attr("rgba", nums(&rgba)),
+            );
+        }
+        self.worldbody().push(body);
+    }
+
+    /// A visual-only marker sphere on a mocap body. `hidden` puts it in the group that sensor
+    /// cameras do not draw (ManiSkill's `_hidden_objects`).
+    pub fn add_marker_sphere(&mut self, name: &str, r: f64, rgba: Rgba, hidden: bool) {
+        let group = if hidden { GROUP_HIDDEN } else { 0 };
+        let body = Element::new("body")
+            .attr("name", name)
+            .attr("mocap", "true")
+            .child(visual(
+                Element::new("geom")
+                    .attr("name", name)
+                    .attr("type", "sphere")
+                    .attr_nums("size", &[r]),
+                &rgba,
+                group,
+            ));
+        self.worldbody().push(body);
+    }
+
+    /// A visual-only marker made of coaxial cylinders `(radius, half length, colour)`, axis
+    /// along the body's local z (PokeCube's red/white target).
+    pub fn add_marker_target(&mut self, name: &str, rings: &[(f64, f64, Rgba)]) {
+        let mut body = Element::new("body")
+            .attr("name", name)
+            .attr("mocap", "true");
+        for (k, (r, hl, rgba)) in rings.iter().enumerate() {
+            body.push(visual(
+                Element::new("geom")
+                    .attr("name", format!("{name}_{k}"))
+                    .attr("type", "cylinder")
+                    .attr_nums("size", &[*r, *hl]),
+                rgba,
+                0,
+            ));
+        }
+        self.worldbody().push(body);
+    }
+
+    /// A fixed camera. `pos`/`quat` are the MuJoCo camera frame (looks along −z, y up).
+    pub fn add_camera(&mut self, name: &str, pos: [f64; 3], quat: [f64; 4], fovy_deg: f64) {
+        self.worldbody().push(
+            Element::new("camera")
+                .attr("name", name)
+                .attr_nums("pos", &pos)
+                .attr_nums("quat", &quat)
+                .attr("fovy", super::xml::num(fovy_deg)),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mujoco::{Data, ObjType};
+    use std::sync::Arc;
+
+    #[test]
+    fn table_top_is_at_zero_and_box_masses_follow_density() {
+        let mut s = Scene::new("t");
+        s.add_table_scene();
+        s.add_box("cube", [0.02; 3], [1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.1]);
+        s.add_peg("peg", 0.12, 0.025, [0.0, 0.0, 1.0, 1.0], [0.3, 0.0, 0.1]);
+        s.add_sphere("sphere", 0.02, [0.0, 0.0, 1.0, 1.0], [-0.3, 0.0, 0.1]);
+        s.add_marker_sphere("goal", 0.025, [0.0, 1.0, 0.0, 1.0], true);
+        let m = Arc::new(s.finish().compile().unwrap());
+        let cube = m.require_id(ObjType::Body, "cube").unwrap();
+        let peg = m.require_id(ObjType::Body, "peg").unwrap();
+        let sphere = m.require_id(ObjType::Body, "sphere").unwrap();
+        assert!(
+            (m.body_mass()[cube] - 0.064).abs() < 1e-12,
+            "{}",
+            m.body_mass()[cube]
+        );
+        assert!(
+            (m.body_mass()[peg] - 0.6).abs() < 1e-9,
+            "{}",
+            m.body_mass()[peg]
+        );
+        assert!(
+            (m.body_mass()[sphere] - 0.0335103).abs() < 1e-6,
+            "{}",
+            m.body_mass()[sphere]
+        );
+        let mut d = Data::new(m.clone()).unwrap();
+        for _ in 0..1000 {
+            d.step();
+        }
+        // Resting on the table top (z = 0): centre at the half height, within contact softness.
+        assert!(
+            (d.xpos()[3 * cube + 2] - 0.02).abs() < 1e-3,
+            "{}",
+            d.xpos()[3 * cube + 2]
+        );
+        assert!((d.xpos()[3 * peg + 2] - 0.025).abs() < 1e-3);
+        // The goal marker is a mocap body that does not fall.
+        let goal = m.require_id(ObjType::Body, "goal").unwrap();
+        assert_eq!(m.body_mocapid()[goal], 0);
+    }
+}

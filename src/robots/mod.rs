@@ -1,0 +1,417 @@
+//! Robots: what ManiSkill defines per robot (robots.md) on top of its URDF — joint roles,
+//! drive gains, the TCP, the grasp check, keyframes and the table-scene placement — and the
+//! ids a compiled scene resolves them to ([`RobotIds`]).
+pub mod panda;
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::controllers::PartSpec;
+use crate::mjcf::urdf::RobotDesc;
+use crate::mjcf::{actuator_name, Drive, RobotOptions, GRAVITY};
+use crate::mujoco::{Data, Model, ObjType};
+
+/// Robot uids, as ManiSkill spells them.
+pub const ROBOT_UIDS: [&str; 5] = ["panda", "fetch", "xarm6_robotiq", "so100", "widowxai"];
+
+/// Armature (kg·m² or kg) added to every robot joint. PhysX drives are implicit and need
+/// none; MuJoCo needs a little on the 15 g fingers so that contacts with a stiff drive
+/// behind them resolve (mujoco-2.2-findings: fingers pass through a box without it). The PD
+/// drives are heavily overdamped (ζ ≈ 5), so their time constant kd/kp is unaffected.
+pub const ARMATURE: f64 = 0.1;
+
+/// How the tool-centre point is defined (robots.md: "TCP").
+#[derive(Debug, Clone, PartialEq)]
+pub enum TcpDef {
+    /// The pose of a link (a site named `tcp` is placed at its origin).
+    Link(&'static str),
+    /// Fetch: the midpoint of two finger links with the element-wise average of their
+    /// quaternions (not renormalised).
+    FingerMidpoint(&'static str, &'static str),
+    /// SO100: midpoint of two tip points (link, offset) with the orientation of a third link.
+    JawTips {
+        /// First tip: link and offset in the link frame.
+        tip1: (&'static str, [f64; 3]),
+        /// Second tip.
+        tip2: (&'static str, [f64; 3]),
+        /// Link whose orientation the TCP takes.
+        orientation: &'static str,
+    },
+}
+
+/// The grasp check of robots.md §1.3.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GraspDef {
+    /// First finger link and the sign of its local y axis that is its opening direction.
+    pub finger1: (&'static str, f64),
+    /// Second finger link and its opening-direction sign.
+    pub finger2: (&'static str, f64),
+    /// Minimum contact force (N).
+    pub min_force: f64,
+    /// Maximum angle between opening direction and force (degrees).
+    pub max_angle_deg: f64,
+}
+
+/// Which joints get initial-pose noise in the table scene (tasks.md §0.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InitNoise {
+    /// Draw `n_dof` normals, keep noise on all joints.
+    All,
+    /// Draw `n_dof` normals, then overwrite the last `k` joints with their rest value.
+    AllButLast(usize),
+    /// No draw at all.
+    None,
+}
+
+/// Everything mjskill knows about one robot besides its URDF.
+#[derive(Debug, Clone)]
+pub struct RobotSpec {
+    /// ManiSkill uid.
+    pub uid: &'static str,
+    /// URDF path inside `models/`.
+    pub urdf: &'static str,
+    /// SRDF path inside `models/`.
+    pub srdf: &'static str,
+    /// Arm joints (ManiSkill order).
+    pub arm_joints: &'static [&'static str],
+    /// Gripper joints: (control joint, followers).
+    pub gripper_joints: &'static [&'static str],
+    /// Arm drive: stiffness, damping, force limit.
+    pub arm_gains: (f64, f64, f64),
+    /// Gripper drive: stiffness, damping, force limit.
+    pub gripper_gains: (f64, f64, f64),
+    /// Links with their own material friction (PhysX static = dynamic value).
+    pub finger_friction: (&'static [&'static str], f64),
+    /// TCP definition (`agent.tcp_pose`, used by PickCube).
+    pub tcp: TcpDef,
+    /// The TCP link (`agent.tcp`, used by PokeCube and PlaceSphere); None for so100.
+    pub tcp_link: Option<&'static str>,
+    /// Grasp check parameters.
+    pub grasp: GraspDef,
+    /// Number of leading qvel entries checked by `is_static` (the arm).
+    pub static_dofs: usize,
+    /// Root pose in the table scene: position and quaternion (w, x, y, z).
+    pub table_pose: ([f64; 3], [f64; 4]),
+    /// Initial qpos in the table scene (ManiSkill order).
+    pub table_qpos: &'static [f64],
+    /// Noise rule of the table scene.
+    pub init_noise: InitNoise,
+    /// Control modes, the default (ManiSkill's first) first.
+    pub control_modes: &'static [&'static str],
+    /// The parts of a control mode (None for an unknown mode).
+    pub parts: fn(&str) -> Option<Vec<PartSpec>>,
+}
+
+impl RobotSpec {
+    /// The root pose in the table scene.
+    pub fn table_base(&self) -> Isometry3<f64> {
+        let (p, q) = self.table_pose;
+        Isometry3::from_parts(
+            Translation3::new(p[0], p[1], p[2]),
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
+        )
+    }
+
+    /// Loads and parses this robot's URDF and SRDF from `models/`.
+    pub fn description(&self) -> Result<RobotDesc, String> {
+        let urdf = crate::models::text(self.urdf)?;
+        let srdf = crate::models::text(self.srdf).ok();
+        RobotDesc::parse(urdf, srdf, self.urdf).map_err(|e| e.to_string())
+    }
+
+    /// Scene options for this robot placed at `base` with the given drives.
+    pub fn options(&self, base: Isometry3<f64>, drives: Vec<Drive>) -> RobotOptions {
+        let mut sites = Vec::new();
+        if let Some(l) = self.tcp_link {
+            sites.push(("tcp".to_string(), l.to_string(), [0.0; 3]));
+        }
+        RobotOptions {
+            base,
+            drives,
+            default_armature: ARMATURE,
+            material_friction: self
+                .finger_friction
+                .0
+                .iter()
+                .map(|l| (l.to_string(), self.finger_friction.1))
+                .collect(),
+            sites,
+            ..RobotOptions::default()
+        }
+    }
+
+    /// The parts of `mode`; the error lists this robot's control modes.
+    pub fn control_mode(&self, mode: &str) -> Result<Vec<PartSpec>, String> {
+        (self.parts)(mode).ok_or_else(|| {
+            format!(
+                "unknown control mode {mode:?} for robot {}; valid modes: {}",
+                self.uid,
+                self.control_modes.join(", ")
+            )
+        })
+    }
+
+    /// Drives with this robot's default gains on every arm and gripper joint.
+    pub fn default_drives(&self) -> Vec<Drive> {
+        let mk = |j: &&str, g: (f64, f64, f64)| Drive {
+            joint: j.to_string(),
+            kp: g.0,
+            kd: g.1,
+            force_limit: g.2,
+        };
+        self.arm_joints
+            .iter()
+            .map(|j| mk(j, self.arm_gains))
+            .chain(
+                self.gripper_joints
+                    .iter()
+                    .map(|j| mk(j, self.gripper_gains)),
+            )
+            .collect()
+    }
+}
+
+/// Looks up a robot spec by uid; the error lists the valid uids.
+pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
+    match uid {
+        "panda" => Ok(&panda::PANDA),
+        _ => Err(format!(
+            "unknown robot {uid:?}; valid robots: {}",
+            ROBOT_UIDS.join(", ")
+        )),
+    }
+}
+
+/// Resolved form of [`TcpDef`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum TcpIds {
+    /// A body's pose.
+    Body(usize),
+    /// Midpoint of two bodies, element-wise quaternion average.
+    Midpoint(usize, usize),
+    /// Midpoint of two offset points, orientation of a third body.
+    Tips((usize, [f64; 3]), (usize, [f64; 3]), usize),
+}
+
+/// A robot's ids in a compiled model, resolved once when an env is built.
+#[derive(Debug, Clone)]
+pub struct RobotIds {
+    /// qpos address of each active joint, ManiSkill (breadth-first) order.
+    pub qpos_adr: Vec<usize>,
+    /// dof address of each active joint, ManiSkill order.
+    pub dof_adr: Vec<usize>,
+    /// Joint names, ManiSkill order.
+    pub joint_names: Vec<String>,
+    /// Joint limits, ManiSkill order.
+    pub limits: Vec<(f64, f64)>,
+    /// Body ids of all robot links.
+    pub bodies: Vec<usize>,
+    /// Body id per URDF link name lookup (name, id).
+    pub link_bodies: Vec<(String, usize)>,
+    /// The `tcp` site (at the TCP link's origin), when the robot has a TCP link.
+    pub tcp_site: Option<usize>,
+    /// Body of the TCP link.
+    pub tcp_body: Option<usize>,
+    /// Bodies and offsets that define `tcp_pose` (see [`TcpDef`]).
+    pub tcp_parts: TcpIds,
+    /// Body ids of the two grasp fingers.
+    pub fingers: [usize; 2],
+    /// Actuator id per active joint (None if undriven), ManiSkill order.
+    pub actuator: Vec<Option<usize>>,
+    /// Upward force m·g per robot body (gravity compensation), aligned with `bodies`.
+    pub weight: Vec<f64>,
+}
+
+impl RobotIds {
+    /// Resolves the ids of `robot` in `model`. Errors name what is missing.
+    pub fn resolve(model: &Model, robot: &RobotDesc, spec: &RobotSpec) -> Result<RobotIds, String> {
+        let mut r = RobotIds {
+            qpos_adr: Vec::new(),
+            dof_adr: Vec::new(),
+            joint_names: Vec::new(),
+            limits: Vec::new(),
+            bodies: Vec::new(),
+            link_bodies: Vec::new(),
+            tcp_site: model.id(ObjType::Site, "tcp"),
+            tcp_body: None,
+            tcp_parts: TcpIds::Body(0),
+            fingers: [0, 0],
+            actuator: Vec::new(),
+            weight: Vec::new(),
+        };
+        for j in robot.active_joints() {
+            let jd = &robot.joints[j];
+            let id = model
+                .require_id(ObjType::Joint, &jd.name)
+                .map_err(|e| e.to_string())?;
+            r.qpos_adr.push(model.jnt_qposadr()[id] as usize);
+            r.dof_adr.push(model.jnt_dofadr()[id] as usize);
+            r.joint_names.push(jd.name.clone());
+            r.limits.push(jd.limits);
+            r.actuator
+                .push(model.id(ObjType::Actuator, &actuator_name(&jd.name)));
+        }
+        for l in &robot.links {
+            let b = model
+                .require_id(ObjType::Body, &l.name)
+                .map_err(|e| e.to_string())?;
+            r.bodies.push(b);
+            r.link_bodies.push((l.name.clone(), b));
+            r.weight.push(model.body_mass()[b] * GRAVITY);
+        }
+        r.fingers = [r.body(spec.grasp.finger1.0)?, r.body(spec.grasp.finger2.0)?];
+        r.tcp_body = spec.tcp_link.map(|l| r.body(l)).transpose()?;
+        r.tcp_parts = match &spec.tcp {
+            TcpDef::Link(l) => TcpIds::Body(r.body(l)?),
+            TcpDef::FingerMidpoint(a, b) => TcpIds::Midpoint(r.body(a)?, r.body(b)?),
+            TcpDef::JawTips {
+                tip1,
+                tip2,
+                orientation,
+            } => TcpIds::Tips(
+                (r.body(tip1.0)?, tip1.1),
+                (r.body(tip2.0)?, tip2.1),
+                r.body(orientation)?,
+            ),
+        };
+        Ok(r)
+    }
+
+    /// Body id of a robot link.
+    pub fn body(&self, link: &str) -> Result<usize, String> {
+        self.link_bodies
+            .iter()
+            .find(|(n, _)| n == link)
+            .map(|(_, b)| *b)
+            .ok_or_else(|| format!("robot has no link {link:?}"))
+    }
+
+    /// Cancels gravity on every robot body (ManiSkill disables gravity on robot links):
+    /// writes an upward force m·g at each body's centre of mass into `xfrc_applied`.
+    /// `xfrc_applied` persists across steps, so this is needed once per reset.
+    pub fn apply_gravity_compensation(&self, data: &mut Data) {
+        let x = data.xfrc_applied_mut();
+        for (&b, &w) in self.bodies.iter().zip(&self.weight) {
+            x[6 * b..6 * b + 6].copy_from_slice(&[0.0, 0.0, w, 0.0, 0.0, 0.0]);
+        }
+    }
+
+    /// Reads the robot qpos in ManiSkill order into `out`.
+    pub fn qpos(&self, data: &Data, out: &mut [f64]) {
+        let q = data.qpos();
+        for (o, &a) in out.iter_mut().zip(&self.qpos_adr) {
+            *o = q[a];
+        }
+    }
+
+    /// Reads the robot qvel in ManiSkill order into `out`.
+    pub fn qvel(&self, data: &Data, out: &mut [f64]) {
+        let v = data.qvel();
+        for (o, &a) in out.iter_mut().zip(&self.dof_adr) {
+            *o = v[a];
+        }
+    }
+
+    /// Writes a robot qpos (ManiSkill order) and zeroes the robot's velocities.
+    pub fn set_qpos(&self, data: &mut Data, q: &[f64]) {
+        let qp = data.qpos_mut();
+        for (&a, &x) in self.qpos_adr.iter().zip(q) {
+            qp[a] = x;
+        }
+        let qv = data.qvel_mut();
+        for &a in &self.dof_adr {
+            qv[a] = 0.0;
+        }
+    }
+
+    /// Sets the PD target of active joint `k` (ManiSkill order): ctrl = kp·q* + kd·q̇*.
+    pub fn set_drive_target(
+        &self,
+        model: &Model,
+        data: &mut Data,
+        k: usize,
+        q_target: f64,
+        v_target: f64,
+    ) {
+        if let Some(a) = self.actuator[k] {
+            let bias = &model.actuator_biasprm()[10 * a..10 * a + 3];
+            // bias = (0, −kp, −kd)
+            data.ctrl_mut()[a] = -bias[1] * q_target - bias[2] * v_target;
+        }
+    }
+
+    /// `agent.tcp_pose` (PickCube's TCP) as position and raw quaternion (w, x, y, z).
+    pub fn tcp_pose(&self, data: &Data) -> ([f64; 3], [f64; 4]) {
+        let pos = |b: usize| {
+            let p = &data.xpos()[3 * b..3 * b + 3];
+            [p[0], p[1], p[2]]
+        };
+        let quat = |b: usize| {
+            let q = &data.xquat()[4 * b..4 * b + 4];
+            [q[0], q[1], q[2], q[3]]
+        };
+        match &self.tcp_parts {
+            TcpIds::Body(b) => (pos(*b), quat(*b)),
+            TcpIds::Midpoint(a, b) => {
+                let (pa, pb, qa, qb) = (pos(*a), pos(*b), quat(*a), quat(*b));
+                (
+                    [
+                        (pa[0] + pb[0]) / 2.0,
+                        (pa[1] + pb[1]) / 2.0,
+                        (pa[2] + pb[2]) / 2.0,
+                    ],
+                    [
+                        (qa[0] + qb[0]) / 2.0,
+                        (qa[1] + qb[1]) / 2.0,
+                        (qa[2] + qb[2]) / 2.0,
+                        (qa[3] + qb[3]) / 2.0,
+                    ],
+                )
+            }
+            TcpIds::Tips((a, oa), (b, ob), o) => {
+                let ta = Self::body_pose(data, *a) * nalgebra::Point3::from(*oa);
+                let tb = Self::body_pose(data, *b) * nalgebra::Point3::from(*ob);
+                let m = nalgebra::center(&ta, &tb);
+                ([m.x, m.y, m.z], quat(*o))
+            }
+        }
+    }
+
+    /// Pose of a body in the world.
+    pub fn body_pose(data: &Data, body: usize) -> Isometry3<f64> {
+        let p = &data.xpos()[3 * body..3 * body + 3];
+        let q = &data.xquat()[4 * body..4 * body + 4];
+        Isometry3::from_parts(
+            Translation3::new(p[0], p[1], p[2]),
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
+        )
+    }
+}
+
+/// Builds a scene with the table, this robot at its table pose with default drives, and
+/// returns the compiled model and resolved ids (used by tests and `export-mjcf`).
+pub fn table_scene_with(
+    spec: &RobotSpec,
+    extra: impl FnOnce(&mut crate::mjcf::Scene),
+) -> Result<(Arc<Model>, RobotDesc, RobotIds, crate::mjcf::Mjcf), String> {
+    let desc = spec.description()?;
+    let mut scene = crate::mjcf::Scene::new(spec.uid);
+    scene.add_table_scene();
+    scene.add_robot(
+        &desc,
+        &spec.options(spec.table_base(), spec.default_drives()),
+        &|_| None,
+    )?;
+    extra(&mut scene);
+    let mjcf = scene.finish();
+    let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
+    let ids = RobotIds::resolve(&model, &desc, spec)?;
+    Ok((model, desc, ids, mjcf))
+}
+
+/// Unit vector helper: the local y axis of a body in world coordinates.
+pub fn body_y_axis(data: &Data, body: usize) -> Vector3<f64> {
+    let m = &data.xmat()[9 * body..9 * body + 9];
+    Vector3::new(m[1], m[4], m[7])
+}

@@ -1,0 +1,262 @@
+//! Tasks: one file per task that reads top-down — scene, episode initialisation, observation
+//! extras, `evaluate()`, dense reward — with every constant named once. This module holds
+//! what they share: the [`Task`] trait, the per-step [`TaskCtx`], the grasp check and pose
+//! helpers.
+pub mod pick_cube;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+
+use crate::env::rng::TorchGenerator;
+use crate::mjcf::Scene;
+use crate::mujoco::{Data, Model, ObjType};
+use crate::robots::{GraspDef, RobotIds, RobotSpec};
+
+/// A camera defined like ManiSkill's `look_at(eye, target)` with a vertical field of view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraDef {
+    /// Camera name.
+    pub name: &'static str,
+    /// Eye position.
+    pub eye: [f64; 3],
+    /// Target point.
+    pub target: [f64; 3],
+    /// Vertical field of view in radians.
+    pub fovy: f64,
+    /// Image width and height.
+    pub size: (usize, usize),
+}
+
+/// Everything a task reads in one evaluation, resolved and computed by the env.
+pub struct TaskCtx<'a> {
+    /// The model.
+    pub model: &'a Model,
+    /// The simulation state (post-step).
+    pub data: &'a Data,
+    /// Robot ids.
+    pub robot: &'a RobotIds,
+    /// Robot spec.
+    pub spec: &'static RobotSpec,
+    /// `agent.tcp_pose` position.
+    pub tcp_pos: [f64; 3],
+    /// `agent.tcp_pose` quaternion (w, x, y, z), raw.
+    pub tcp_quat: [f64; 4],
+    /// Robot qpos (ManiSkill order).
+    pub qpos: &'a [f64],
+    /// Robot qvel (ManiSkill order).
+    pub qvel: &'a [f64],
+    /// Contact forces on the two grasp fingers from the task's grasp object (world frame).
+    pub finger_forces: &'a [[f64; 3]; 2],
+}
+
+impl TaskCtx<'_> {
+    /// `agent.is_grasping(object)` with the forces the env computed (robots.md §1.3).
+    pub fn is_grasping(&self) -> bool {
+        is_grasping(
+            &self.spec.grasp,
+            self.data,
+            self.robot.fingers,
+            self.finger_forces,
+        )
+    }
+    /// `agent.is_static(0.2)`: max |qvel| over the arm dofs ≤ 0.2 (env.md §10).
+    pub fn is_robot_static(&self) -> bool {
+        self.qvel[..self.spec.static_dofs]
+            .iter()
+            .all(|v| v.abs() <= 0.2)
+    }
+    /// Position of a body.
+    pub fn body_pos(&self, body: usize) -> Vector3<f64> {
+        body_pos(self.data, body)
+    }
+    /// Quaternion (w, x, y, z) of a body.
+    pub fn body_quat(&self, body: usize) -> [f64; 4] {
+        let q = &self.data.xquat()[4 * body..4 * body + 4];
+        [q[0], q[1], q[2], q[3]]
+    }
+    /// `agent.tcp.pose.p`: the TCP link's position.
+    pub fn tcp_link_pos(&self) -> Vector3<f64> {
+        self.robot
+            .tcp_body
+            .map(|b| body_pos(self.data, b))
+            .unwrap_or_else(|| Vector3::from(self.tcp_pos))
+    }
+    /// Linear and angular velocity (world) of a free body.
+    pub fn body_velocity(&self, body: usize) -> (Vector3<f64>, Vector3<f64>) {
+        let v = self.data.body_velocity(body);
+        (
+            Vector3::new(v[3], v[4], v[5]),
+            Vector3::new(v[0], v[1], v[2]),
+        )
+    }
+}
+
+/// A task (the scene-specific part of an env).
+pub trait Task: Send + std::fmt::Debug {
+    /// Maximum dense reward (normalised reward = dense / this).
+    fn max_reward(&self) -> f64;
+    /// Adds the task's props and cameras to the scene.
+    fn build(&self, scene: &mut Scene);
+    /// Resolves the task's names to ids in the compiled model.
+    fn resolve(&mut self, model: &Model) -> Result<(), String>;
+    /// Body whose contacts with the fingers decide `is_grasping`.
+    fn grasp_object(&self) -> usize;
+    /// Places the objects for a new episode, drawing from `torch` in upstream order.
+    fn initialize_episode(&mut self, data: &mut Data, torch: &mut TorchGenerator);
+    /// `evaluate()` keys, in upstream insertion order (without `elapsed_steps`).
+    fn info_keys(&self) -> &'static [&'static str];
+    /// Computes `evaluate()` into `info` (aligned with [`Task::info_keys`]; bools as 0/1).
+    fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]);
+    /// Observation extras: (key, length), in insertion order; `state` = privileged keys too.
+    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)>;
+    /// Writes the extras (same order as [`Task::extra_layout`]).
+    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]);
+    /// Dense reward.
+    fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64;
+    /// Sensor and human-render cameras.
+    fn cameras(&self) -> (CameraDef, CameraDef);
+}
+
+/// Position of a body.
+pub fn body_pos(data: &Data, body: usize) -> Vector3<f64> {
+    let p = &data.xpos()[3 * body..3 * body + 3];
+    Vector3::new(p[0], p[1], p[2])
+}
+
+/// Resolves a body id with an error naming it.
+pub fn body_id(model: &Model, name: &str) -> Result<usize, String> {
+    model
+        .require_id(ObjType::Body, name)
+        .map_err(|e| e.to_string())
+}
+
+/// qpos address of a body's free joint.
+pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, String> {
+    let j = model
+        .require_id(ObjType::Joint, body)
+        .map_err(|e| e.to_string())?;
+    Ok(model.jnt_qposadr()[j] as usize)
+}
+
+/// Writes a free body's pose (position, quaternion wxyz) into qpos. (The env zeroes every
+/// velocity at reset, as ManiSkill's `_clear_sim_state`.)
+pub fn set_free_pose(data: &mut Data, qadr: usize, pos: [f64; 3], quat: [f64; 4]) {
+    let q = data.qpos_mut();
+    q[qadr..qadr + 3].copy_from_slice(&pos);
+    q[qadr + 3..qadr + 7].copy_from_slice(&quat);
+}
+
+/// Writes a mocap body's pose.
+pub fn set_mocap_pose(model: &Model, data: &mut Data, body: usize, pos: [f64; 3], quat: [f64; 4]) {
+    let m = model.body_mocapid()[body] as usize;
+    data.mocap_pos_mut()[3 * m..3 * m + 3].copy_from_slice(&pos);
+    data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&quat);
+}
+
+/// Writes a pose (p, q wxyz) as 7 f32s.
+pub fn write_pose(out: &mut [f32], p: Vector3<f64>, q: [f64; 4]) {
+    for (o, v) in out.iter_mut().zip([p.x, p.y, p.z, q[0], q[1], q[2], q[3]]) {
+        *o = v as f32;
+    }
+}
+
+/// Writes a 3-vector as f32s.
+pub fn write_vec(out: &mut [f32], v: Vector3<f64>) {
+    for (o, x) in out.iter_mut().zip([v.x, v.y, v.z]) {
+        *o = x as f32;
+    }
+}
+
+/// quat(euler XYZ (0, 0, yaw)) standardised to w ≥ 0, computed in float32 like upstream.
+pub fn yaw_quat_f32(yaw: f32) -> [f64; 4] {
+    let (s, c) = ((yaw / 2.0).sin(), (yaw / 2.0).cos());
+    let q = if c < 0.0 {
+        [-c, 0.0, 0.0, -s]
+    } else {
+        [c, 0.0, 0.0, s]
+    };
+    [q[0] as f64, q[1] as f64, q[2] as f64, q[3] as f64]
+}
+
+/// Angle between two vectors as ManiSkill computes it: vectors with norm < 1e-6 are left
+/// unnormalised, the dot product is clipped to [−1, 1] (a zero force gives 90°).
+pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let n = |v: &Vector3<f64>| if v.norm() < 1e-6 { *v } else { v.normalize() };
+    n(a).dot(&n(b)).clamp(-1.0, 1.0).acos()
+}
+
+/// The grasp check of robots.md §1.3 from the finger forces and the fingers' y axes.
+pub fn is_grasping(g: &GraspDef, data: &Data, fingers: [usize; 2], forces: &[[f64; 3]; 2]) -> bool {
+    let mut ok = true;
+    for (k, (&body, sign)) in fingers.iter().zip([g.finger1.1, g.finger2.1]).enumerate() {
+        let f = Vector3::from(forces[k]);
+        let dir = crate::robots::body_y_axis(data, body) * sign;
+        let angle = angle_between(&dir, &f).to_degrees();
+        ok &= f.norm() >= g.min_force && angle <= g.max_angle_deg;
+    }
+    ok
+}
+
+/// Net contact force (world frame) on each finger body from `object`, summed over the
+/// contacts of the current state (the last physics substep). No allocation.
+pub fn finger_forces(
+    model: &Model,
+    data: &Data,
+    fingers: [usize; 2],
+    object: usize,
+    out: &mut [[f64; 3]; 2],
+) {
+    *out = [[0.0; 3]; 2];
+    let geom_body = model.geom_bodyid();
+    for i in 0..data.ncon() {
+        let (g1, g2) = data.contact_geoms(i);
+        let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+        for (k, &finger) in fingers.iter().enumerate() {
+            let sign = if b1 == finger && b2 == object {
+                -1.0 // force on geom1 = −(force on geom2)
+            } else if b2 == finger && b1 == object {
+                1.0
+            } else {
+                continue;
+            };
+            let c = data.contact(i);
+            let f = data.contact_force(i);
+            for (axis, o) in out[k].iter_mut().enumerate() {
+                // world force on geom2 = frameᵀ · f[0..3]
+                *o += sign
+                    * (c.frame[axis] * f[0] + c.frame[3 + axis] * f[1] + c.frame[6 + axis] * f[2]);
+            }
+        }
+    }
+}
+
+/// A pose from position and quaternion arrays.
+pub fn pose(p: [f64; 3], q: [f64; 4]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(p[0], p[1], p[2]),
+        UnitQuaternion::new_unchecked(Quaternion::new(q[0], q[1], q[2], q[3])),
+    )
+}
+
+/// `sapien_utils.look_at(eye, target, up=(0,0,1))` expressed as a MuJoCo camera frame
+/// (MuJoCo cameras look along −z with +y up): returns the quaternion (w, x, y, z).
+pub fn look_at_mujoco(eye: [f64; 3], target: [f64; 3]) -> [f64; 4] {
+    let forward = (Vector3::from(target) - Vector3::from(eye)).normalize();
+    let left = Vector3::z().cross(&forward).normalize();
+    let up = forward.cross(&left);
+    // MuJoCo camera axes: x = right = −left, y = up, z = −forward.
+    let m = nalgebra::Matrix3::from_columns(&[-left, up, -forward]);
+    let q = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
+    [q.w, q.i, q.j, q.k]
+}
+
+/// Adds the task's two cameras to a scene.
+pub fn add_cameras(scene: &mut Scene, cams: (CameraDef, CameraDef)) {
+    for c in [cams.0, cams.1] {
+        scene.add_camera(
+            c.name,
+            c.eye,
+            look_at_mujoco(c.eye, c.target),
+            c.fovy.to_degrees(),
+        );
+    }
+}

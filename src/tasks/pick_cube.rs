@@ -1,0 +1,272 @@
+//! PickCube-v1 (tasks.md §1): grasp a red cube and move it to a green goal point.
+//! Registered variants PickCubeSO100-v1 / PickCubeWidowXAI-v1 force the robot.
+use std::f32::consts::PI;
+
+use nalgebra::Vector3;
+
+use super::{
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
+    yaw_quat_f32, CameraDef, Task, TaskCtx,
+};
+use crate::env::rng::{uniform_scaled, TorchGenerator};
+use crate::mjcf::Scene;
+use crate::mujoco::{Data, Model};
+
+/// Maximum dense reward.
+pub const MAX_REWARD: f64 = 5.0;
+/// Cube colour.
+pub const CUBE_RGBA: [f64; 4] = [1.0, 0.0, 0.0, 1.0];
+/// Goal marker colour.
+pub const GOAL_RGBA: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
+/// Sensor camera field of view (π/2) and size.
+const SENSOR_FOVY: f64 = std::f64::consts::FRAC_PI_2;
+/// Human camera field of view.
+const HUMAN_FOVY: f64 = 1.0;
+
+/// Per-robot task configuration (`PICK_CUBE_CONFIGS`, tasks.md §1.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PickCubeConfig {
+    /// Half edge of the cube.
+    pub cube_half_size: f32,
+    /// Success radius around the goal.
+    pub goal_thresh: f32,
+    /// Half size of the square spawn region of cube and goal xy.
+    pub cube_spawn_half_size: f32,
+    /// Centre of the spawn region.
+    pub cube_spawn_center: [f32; 2],
+    /// Goal height range above the cube half size.
+    pub max_goal_height: f32,
+    /// Sensor camera (eye, target).
+    pub sensor_cam: ([f64; 3], [f64; 3]),
+    /// Human camera (eye, target).
+    pub human_cam: ([f64; 3], [f64; 3]),
+}
+
+/// A camera as (eye, target).
+type Eye = ([f64; 3], [f64; 3]);
+
+const PANDA_CAMS: (Eye, Eye) = (
+    ([0.3, 0.0, 0.6], [-0.1, 0.0, 0.1]),
+    ([0.6, 0.7, 0.6], [0.0, 0.0, 0.35]),
+);
+
+/// The panda/fetch/xarm6 configuration (robots without an entry fall back to it).
+pub const PANDA_CONFIG: PickCubeConfig = PickCubeConfig {
+    cube_half_size: 0.02,
+    goal_thresh: 0.025,
+    cube_spawn_half_size: 0.1,
+    cube_spawn_center: [0.0, 0.0],
+    max_goal_height: 0.3,
+    sensor_cam: PANDA_CAMS.0,
+    human_cam: PANDA_CAMS.1,
+};
+
+/// The SO100 configuration.
+pub const SO100_CONFIG: PickCubeConfig = PickCubeConfig {
+    cube_half_size: 0.0125,
+    goal_thresh: 0.0125 * 1.25,
+    cube_spawn_half_size: 0.05,
+    cube_spawn_center: [-0.46, 0.0],
+    max_goal_height: 0.08,
+    sensor_cam: ([-0.27, 0.0, 0.4], [-0.56, 0.0, -0.25]),
+    human_cam: ([-0.1, 0.3, 0.4], [-0.46, 0.0, 0.1]),
+};
+
+/// The WidowX AI configuration.
+pub const WIDOWXAI_CONFIG: PickCubeConfig = PickCubeConfig {
+    cube_half_size: 0.018,
+    goal_thresh: 0.018 * 1.25,
+    cube_spawn_half_size: 0.05,
+    cube_spawn_center: [-0.25, 0.0],
+    max_goal_height: 0.2,
+    sensor_cam: ([0.0, 0.0, 0.35], [-0.2, 0.0, 0.1]),
+    human_cam: ([0.45, 0.5, 0.5], [-0.2, 0.0, 0.2]),
+};
+
+/// The configuration ManiSkill uses for `robot`.
+pub fn config_for(robot: &str) -> PickCubeConfig {
+    match robot {
+        "so100" => SO100_CONFIG,
+        "widowxai" => WIDOWXAI_CONFIG,
+        _ => PANDA_CONFIG,
+    }
+}
+
+/// `info` keys, in upstream order.
+pub const INFO_KEYS: [&str; 4] = ["success", "is_obj_placed", "is_robot_static", "is_grasped"];
+const SUCCESS: usize = 0;
+const IS_OBJ_PLACED: usize = 1;
+const IS_ROBOT_STATIC: usize = 2;
+const IS_GRASPED: usize = 3;
+
+/// PickCube-v1.
+#[derive(Debug, Clone)]
+pub struct PickCube {
+    cfg: PickCubeConfig,
+    /// Robot uid (the dense reward's static term depends on it).
+    robot: &'static str,
+    cube: usize,
+    cube_qadr: usize,
+    goal: usize,
+}
+
+impl PickCube {
+    /// PickCube with the configuration of `robot`.
+    pub fn new(robot: &'static str) -> Self {
+        PickCube {
+            cfg: config_for(robot),
+            robot,
+            cube: 0,
+            cube_qadr: 0,
+            goal: 0,
+        }
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &PickCubeConfig {
+        &self.cfg
+    }
+
+    /// Number of trailing qvel entries the static bonus ignores (tasks.md §1.7).
+    fn static_drop(&self) -> usize {
+        match self.robot {
+            "panda" | "widowxai" => 2,
+            "so100" => 1,
+            _ => 0,
+        }
+    }
+}
+
+impl Task for PickCube {
+    fn max_reward(&self) -> f64 {
+        MAX_REWARD
+    }
+
+    // ---- scene -------------------------------------------------------------------------
+    fn build(&self, scene: &mut Scene) {
+        let h = self.cfg.cube_half_size as f64;
+        scene.add_box("cube", [h; 3], CUBE_RGBA, [0.0, 0.0, h]);
+        scene.add_marker_sphere("goal_site", self.cfg.goal_thresh as f64, GOAL_RGBA, true);
+        add_cameras(scene, self.cameras());
+    }
+
+    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+        self.cube = body_id(model, "cube")?;
+        self.cube_qadr = free_joint_qpos(model, "cube")?;
+        self.goal = body_id(model, "goal_site")?;
+        Ok(())
+    }
+
+    fn grasp_object(&self) -> usize {
+        self.cube
+    }
+
+    // ---- episode initialisation (torch draws: rand(2), rand(3), rand(2), rand(1)) ------
+    fn initialize_episode(&mut self, data: &mut Data, torch: &mut TorchGenerator) {
+        let (s, c, h) = (
+            self.cfg.cube_spawn_half_size,
+            self.cfg.cube_spawn_center,
+            self.cfg.cube_half_size,
+        );
+        let mut u1 = [0f32; 2];
+        torch.fill_rand(&mut u1);
+        let mut u2 = [0f32; 3];
+        torch.fill_rand(&mut u2);
+        let yaw = u2[2] * (2.0 * PI);
+        let cube_pos = [
+            uniform_scaled(u1[0], s, c[0]) as f64,
+            uniform_scaled(u1[1], s, c[1]) as f64,
+            h as f64,
+        ];
+        set_free_pose(data, self.cube_qadr, cube_pos, yaw_quat_f32(yaw));
+
+        let mut u3 = [0f32; 2];
+        torch.fill_rand(&mut u3);
+        let mut u4 = [0f32; 1];
+        torch.fill_rand(&mut u4);
+        let goal_pos = [
+            uniform_scaled(u3[0], s, c[0]) as f64,
+            uniform_scaled(u3[1], s, c[1]) as f64,
+            (u4[0] * self.cfg.max_goal_height + h) as f64,
+        ];
+        let model = data.model().clone();
+        set_mocap_pose(&model, data, self.goal, goal_pos, [1.0, 0.0, 0.0, 0.0]);
+    }
+
+    // ---- evaluate ------------------------------------------------------------------------
+    fn info_keys(&self) -> &'static [&'static str] {
+        &INFO_KEYS
+    }
+
+    fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
+        let d = (ctx.body_pos(self.goal) - ctx.body_pos(self.cube)).norm();
+        let placed = d <= self.cfg.goal_thresh as f64;
+        let stat = ctx.is_robot_static();
+        info[SUCCESS] = (placed && stat) as u8 as f64;
+        info[IS_OBJ_PLACED] = placed as u8 as f64;
+        info[IS_ROBOT_STATIC] = stat as u8 as f64;
+        info[IS_GRASPED] = ctx.is_grasping() as u8 as f64;
+    }
+
+    // ---- observation extras ------------------------------------------------------------------
+    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
+        let mut v = vec![("is_grasped", 1), ("tcp_pose", 7), ("goal_pos", 3)];
+        if state {
+            v.extend([
+                ("obj_pose", 7),
+                ("tcp_to_obj_pos", 3),
+                ("obj_to_goal_pos", 3),
+            ]);
+        }
+        v
+    }
+
+    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]) {
+        let tcp = Vector3::from(ctx.tcp_pos);
+        let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
+        out[0] = info[IS_GRASPED] as f32;
+        write_pose(&mut out[1..8], tcp, ctx.tcp_quat);
+        write_vec(&mut out[8..11], goal);
+        if state {
+            write_pose(&mut out[11..18], cube, ctx.body_quat(self.cube));
+            write_vec(&mut out[18..21], cube - tcp);
+            write_vec(&mut out[21..24], goal - cube);
+        }
+    }
+
+    // ---- dense reward (max 5) ----------------------------------------------------------------
+    fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
+        if info[SUCCESS] > 0.0 {
+            return MAX_REWARD;
+        }
+        let tcp = Vector3::from(ctx.tcp_pos);
+        let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
+        let grasped = info[IS_GRASPED];
+        let mut r = 1.0 - (5.0 * (cube - tcp).norm()).tanh();
+        r += grasped;
+        r += (1.0 - (5.0 * (goal - cube).norm()).tanh()) * grasped;
+        let n = ctx.qvel.len() - self.static_drop();
+        let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
+        r += (1.0 - (5.0 * qv).tanh()) * info[IS_OBJ_PLACED];
+        r
+    }
+
+    fn cameras(&self) -> (CameraDef, CameraDef) {
+        (
+            CameraDef {
+                name: "base_camera",
+                eye: self.cfg.sensor_cam.0,
+                target: self.cfg.sensor_cam.1,
+                fovy: SENSOR_FOVY,
+                size: (128, 128),
+            },
+            CameraDef {
+                name: "render_camera",
+                eye: self.cfg.human_cam.0,
+                target: self.cfg.human_cam.1,
+                fovy: HUMAN_FOVY,
+                size: (512, 512),
+            },
+        )
+    }
+}

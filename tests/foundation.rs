@@ -1,0 +1,314 @@
+//! Issue 2: the foundation — safe layer errors, generated-robot kinematics against an
+//! independent URDF implementation, PD drives under gravity, grasping, and `export-mjcf`
+//! accepted by Debian's independent MuJoCo front end.
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+
+use mjskill::mujoco::{Data, Model, ObjType};
+use mjskill::robots::{self, RobotIds};
+
+/// An independent URDF forward-kinematics implementation: parses the XML with roxmltree
+/// (not urdf-rs, not mjskill's loader) and composes origin · motion along the chain.
+/// (name, type, parent, child, origin, axis) of one URDF joint.
+type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
+
+struct IndependentFk {
+    joints: Vec<JointRow>,
+}
+
+fn parse_floats(s: Option<&str>, default: [f64; 3]) -> [f64; 3] {
+    match s {
+        None => default,
+        Some(t) => {
+            let v: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        }
+    }
+}
+
+impl IndependentFk {
+    fn new(urdf: &str) -> Self {
+        let doc = roxmltree::Document::parse(urdf).unwrap();
+        let mut joints = Vec::new();
+        for j in doc
+            .root_element()
+            .children()
+            .filter(|n| n.has_tag_name("joint"))
+        {
+            let child = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
+            let origin = child("origin");
+            let xyz = parse_floats(origin.and_then(|o| o.attribute("xyz")), [0.0; 3]);
+            let rpy = parse_floats(origin.and_then(|o| o.attribute("rpy")), [0.0; 3]);
+            // rpy: fixed-axis roll, pitch, yaw ⇒ R = Rz(y)·Ry(p)·Rx(r)
+            let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rpy[2])
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), rpy[1])
+                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rpy[0]);
+            let axis = Vector3::from(parse_floats(
+                child("axis").and_then(|a| a.attribute("xyz")),
+                [1.0, 0.0, 0.0],
+            ));
+            joints.push((
+                j.attribute("name").unwrap().to_string(),
+                j.attribute("type").unwrap().to_string(),
+                child("parent")
+                    .unwrap()
+                    .attribute("link")
+                    .unwrap()
+                    .to_string(),
+                child("child")
+                    .unwrap()
+                    .attribute("link")
+                    .unwrap()
+                    .to_string(),
+                Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), rot),
+                axis.normalize(),
+            ));
+        }
+        IndependentFk { joints }
+    }
+
+    /// World pose of every link for joint values by name.
+    fn links(
+        &self,
+        base: &Isometry3<f64>,
+        root: &str,
+        q: &HashMap<String, f64>,
+    ) -> HashMap<String, Isometry3<f64>> {
+        let mut out = HashMap::from([(root.to_string(), *base)]);
+        // Repeat until every reachable link is placed (no ordering assumptions).
+        loop {
+            let mut added = false;
+            for (name, ty, parent, child, origin, axis) in &self.joints {
+                if out.contains_key(child) || !out.contains_key(parent) {
+                    continue;
+                }
+                let v = q.get(name).copied().unwrap_or(0.0);
+                let motion = match ty.as_str() {
+                    "revolute" | "continuous" => Isometry3::rotation(axis * v),
+                    "prismatic" => Isometry3::translation(axis.x * v, axis.y * v, axis.z * v),
+                    _ => Isometry3::identity(),
+                };
+                let p = out[parent] * origin * motion;
+                out.insert(child.clone(), p);
+                added = true;
+            }
+            if !added {
+                return out;
+            }
+        }
+    }
+}
+
+fn body_pose(d: &Data, b: usize) -> Isometry3<f64> {
+    RobotIds::body_pose(d, b)
+}
+
+#[test]
+fn generated_scene_with_a_mistake_returns_mujoco_error_text() {
+    let spec = robots::spec("panda").unwrap();
+    let (_, _, _, mjcf) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let broken = mjcf.xml.replacen("type=\"hinge\"", "type=\"hinje\"", 1);
+    let err = Model::from_xml_string(&broken, &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("hinje") || err.to_lowercase().contains("invalid"),
+        "{err}"
+    );
+    let err = Model::from_xml_string("<mujoco><worldbody><body><geom type='box'/></body>", &[])
+        .unwrap_err();
+    assert!(!err.to_string().is_empty());
+}
+
+#[test]
+fn panda_forward_kinematics_matches_independent_urdf_fk() {
+    let spec = robots::spec("panda").unwrap();
+    let (model, desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let urdf = mjskill::models::text(spec.urdf).unwrap();
+    let fk = IndependentFk::new(urdf);
+    let mut d = Data::new(model.clone()).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let root = &desc.links[desc.root].name;
+    let mut worst: f64 = 0.0;
+    for _ in 0..200 {
+        let mut q = HashMap::new();
+        let mut qv = vec![0.0; ids.qpos_adr.len()];
+        for (k, name) in ids.joint_names.iter().enumerate() {
+            let (lo, hi) = ids.limits[k];
+            let v = rng.random_range(lo..=hi);
+            q.insert(name.clone(), v);
+            qv[k] = v;
+        }
+        // The mimic finger follows the leader in the model only through the equality
+        // constraint; FK compares the configuration as written.
+        ids.set_qpos(&mut d, &qv);
+        d.forward();
+        let expect = fk.links(&spec.table_base(), root, &q);
+        assert_eq!(
+            expect.len(),
+            desc.links.len(),
+            "independent FK reached every link"
+        );
+        for (name, b) in &ids.link_bodies {
+            let got = body_pose(&d, *b);
+            let want = expect[name];
+            let dp = (got.translation.vector - want.translation.vector).norm();
+            let dr = got.rotation.angle_to(&want.rotation);
+            worst = worst.max(dp);
+            assert!(dp < 1e-6, "link {name}: position error {dp}");
+            assert!(dr < 1e-6, "link {name}: rotation error {dr}");
+        }
+    }
+    assert!(worst < 1e-6);
+}
+
+/// Steps `n` times keeping robot gravity compensation on.
+fn run(d: &mut Data, n: usize) {
+    for _ in 0..n {
+        d.step();
+    }
+}
+
+fn setup_panda(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data) {
+    let spec = robots::spec("panda").unwrap();
+    let (model, _, ids, _) = robots::table_scene_with(spec, extra).unwrap();
+    let mut d = Data::new(model.clone()).unwrap();
+    ids.set_qpos(&mut d, spec.table_qpos);
+    ids.apply_gravity_compensation(&mut d);
+    for (k, &q) in spec.table_qpos.iter().enumerate() {
+        ids.set_drive_target(&model, &mut d, k, q, 0.0);
+    }
+    d.forward();
+    (model, ids, d)
+}
+
+#[test]
+fn panda_holds_pose_under_gravity_and_tracks_a_step_target() {
+    let (model, ids, mut d) = setup_panda(|_| {});
+    let spec = robots::spec("panda").unwrap();
+    // Gravity is on in the model (objects fall); the robot's weight is cancelled.
+    assert!(model.gravity()[2] < -9.0);
+    let steps_5s = (5.0 / model.timestep()).round() as usize;
+    run(&mut d, steps_5s);
+    let mut q = vec![0.0; 9];
+    ids.qpos(&d, &mut q);
+    for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate().take(7) {
+        let sag = (qk - rest).abs();
+        assert!(sag < 1e-3, "joint {k} sagged {sag} rad over 5 s");
+    }
+    assert!(!d.warnings().diverged(), "{:?}", d.warnings());
+    // Step target of 0.2 rad on every arm joint; the shoulder (index 1) moves back so that the
+    // hand rises away from the table.
+    let mut target = spec.table_qpos.to_vec();
+    for (k, t) in target.iter_mut().enumerate().take(7) {
+        *t += if k == 1 { -0.2 } else { 0.2 };
+        ids.set_drive_target(&model, &mut d, k, *t, 0.0);
+    }
+    run(&mut d, (1.5 / model.timestep()) as usize);
+    assert_eq!(d.ncon(), 0, "the moved arm touches nothing");
+    ids.qpos(&d, &mut q);
+    for k in 0..7 {
+        let e = (q[k] - target[k]).abs();
+        assert!(e < 2e-3, "joint {k} tracking error {e} after 1.5 s");
+    }
+    assert!(!d.warnings().diverged(), "{:?}", d.warnings());
+}
+
+#[test]
+fn panda_fingers_close_on_a_4cm_box_and_hold_it_while_the_arm_moves() {
+    // The box floats between the open fingers at the TCP (hand points down at rest).
+    let spec = robots::spec("panda").unwrap();
+    let probe = setup_panda(|_| {});
+    let tcp_site = probe.1.tcp_site.unwrap();
+    let tcp = &probe.2.site_xpos()[3 * tcp_site..3 * tcp_site + 3];
+    let tcp = [tcp[0], tcp[1], tcp[2]];
+    let (model, ids, mut d) =
+        setup_panda(|s| s.add_box("box", [0.02; 3], [1.0, 0.0, 0.0, 1.0], tcp));
+    let bx = model.require_id(ObjType::Body, "box").unwrap();
+    // Close: target −0.01 m on both fingers (ManiSkill's "closed" command).
+    ids.set_drive_target(&model, &mut d, 7, -0.01, 0.0);
+    ids.set_drive_target(&model, &mut d, 8, -0.01, 0.0);
+    run(&mut d, 250);
+    let mut q = vec![0.0; 9];
+    ids.qpos(&d, &mut q);
+    assert!(
+        (q[7] - 0.02).abs() < 2e-3 && (q[8] - 0.02).abs() < 2e-3,
+        "fingers stop at the box faces: {:?}",
+        &q[7..]
+    );
+    // The box in the TCP frame, before and after the swing.
+    let in_tcp = |d: &Data| {
+        let r = nalgebra::Matrix3::from_row_slice(&d.site_xmat()[9 * tcp_site..9 * tcp_site + 9]);
+        let bp = Vector3::from_column_slice(&d.xpos()[3 * bx..3 * bx + 3]);
+        let tp = Vector3::from_column_slice(&d.site_xpos()[3 * tcp_site..3 * tcp_site + 3]);
+        r.transpose() * (bp - tp)
+    };
+    let rel0 = in_tcp(&d);
+    assert!(rel0.norm() < 0.03, "box is between the fingers: {rel0:?}");
+    // Swing the arm: base joint +0.8 rad, shoulder and elbow up.
+    let mut target = spec.table_qpos.to_vec();
+    target[0] += 0.8;
+    target[1] -= 0.3;
+    target[3] += 0.3;
+    for (k, t) in target.iter().enumerate().take(7) {
+        ids.set_drive_target(&model, &mut d, k, *t, 0.0);
+    }
+    run(&mut d, 1500);
+    let rel1 = in_tcp(&d);
+    assert!(
+        (rel1 - rel0).norm() < 0.005,
+        "box slipped in the gripper: {rel0:?} -> {rel1:?}"
+    );
+    ids.qpos(&d, &mut q);
+    assert!((q[0] - target[0]).abs() < 0.01, "the arm swung: {}", q[0]);
+    assert!(d.xpos()[3 * bx + 2] > 0.1, "box is still up in the air");
+    assert!(!d.warnings().diverged());
+}
+
+#[test]
+fn export_mjcf_is_accepted_by_debians_mujoco_compile() {
+    let dir = std::env::temp_dir().join(format!("mjskill-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let xml = dir.join("pickcube_panda.xml");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args([
+            "export-mjcf",
+            "--robot",
+            "panda",
+            "--env",
+            "PickCube-v1",
+            "-o",
+        ])
+        .arg(&xml)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = std::process::Command::new("mujoco-compile")
+        .arg(&xml)
+        .arg(dir.join("scene.txt"))
+        .output()
+        .expect("mujoco-compile (Debian package libmujoco-samples) must be installed");
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && !text.to_lowercase().contains("error"),
+        "mujoco-compile rejected the scene: {text}"
+    );
+    let printed = std::fs::read_to_string(dir.join("scene.txt")).unwrap();
+    assert!(
+        printed.contains("panda_joint7") && printed.contains("cube"),
+        "compiled model lists the robot and the cube"
+    );
+    // Unknown robot: a clear error listing the valid ones, non-zero exit.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["export-mjcf", "--robot", "ur5"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("ur5") && err.contains("panda"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
