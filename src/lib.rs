@@ -18,3 +18,7 @@ pub mod models;
 pub mod mujoco;
 pub mod robots;
 pub mod tasks;
+
+pub use env::{
+    make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, Step,
+};

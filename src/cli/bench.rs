@@ -21,13 +21,27 @@ pub struct BenchReport {
     pub steps: usize,
     /// Physics steps per env step.
     pub substeps: usize,
-    /// Env steps per second (random actions, resets at truncation).
+    /// Env steps per second (uniform random actions, one continuous rollout from seed 0).
     pub env_steps_per_s: f64,
-    /// Env-step equivalents per second of raw `mj_step` on the same model (same substeps,
-    /// no env logic, controls held).
+    /// Env-step equivalents per second of raw `mj_step` replaying the env's own drive
+    /// commands on the same model from the same state (identical trajectory, no env logic).
     pub physics_steps_per_s: f64,
     /// Raw `mj_step` calls per second.
     pub mj_step_per_s: f64,
+    /// Whether the raw replay reproduced the env's trajectory bitwise (same physics work).
+    pub replay_identical: bool,
+    /// VecEnv size (with `--envs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub envs: Option<usize>,
+    /// VecEnv threads (with `--envs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
+    /// Env steps per second summed over the VecEnv's envs (with `--envs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vec_env_steps_per_s: Option<f64>,
+    /// vec_env_steps_per_s / env_steps_per_s (with `--envs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scaling: Option<f64>,
     /// env_steps_per_s / physics_steps_per_s.
     pub ratio: f64,
     /// Env overhead on top of physics, in percent: (1/ratio − 1)·100.
@@ -40,48 +54,79 @@ pub fn run(
     robot: Option<String>,
     control_mode: Option<String>,
     steps: usize,
+    vec: Option<(usize, usize)>,
 ) -> Result<BenchReport, String> {
     let steps = steps.max(1);
-    let mut env = make(
-        env_id,
-        EnvConfig {
-            robot,
-            control_mode,
-            ..EnvConfig::default()
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    let config = EnvConfig {
+        robot,
+        control_mode,
+        ..EnvConfig::default()
+    };
+    let mut env = make(env_id, config.clone()).map_err(|e| e.to_string())?;
     let dim = env.action_space().shape[0];
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);
-    let mut actions = vec![0f32; dim * 64];
-    for a in actions.iter_mut() {
-        *a = rng.random_range(-1.0..1.0);
-    }
+    let actions: Vec<f32> = (0..dim * steps)
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
     env.reset(Some(0));
-    let timed = |n: usize, env: &mut crate::env::Env| -> Result<f64, String> {
+    let start = env.get_state();
+    // Untimed pass: record the drive commands the env writes, so that raw physics can replay
+    // the identical trajectory (same contacts, same solver work). The episode is not reset
+    // at truncation (ManiSkill keeps stepping too), so both runs are one continuous rollout.
+    let nu = env.model().nu();
+    let mut ctrls = vec![0.0; nu * steps];
+    for i in 0..steps {
+        env.step(&actions[i * dim..(i + 1) * dim])
+            .map_err(|e| e.to_string())?;
+        ctrls[i * nu..(i + 1) * nu].copy_from_slice(env.data().ctrl());
+    }
+    // Timed passes, alternating env and raw physics three times; the best of each counts.
+    let (mut env_rate, mut mj_rate, mut replay_identical) = (0.0f64, 0.0f64, false);
+    for _ in 0..3 {
+        env.set_state(&start).map_err(|e| e.to_string())?;
         let t = Instant::now();
-        for i in 0..n {
-            let a = &actions[(i % 64) * dim..(i % 64 + 1) * dim];
-            let s = env.step(a).map_err(|e| e.to_string())?;
-            if s.truncated {
-                env.reset(None);
+        for i in 0..steps {
+            env.step(&actions[i * dim..(i + 1) * dim])
+                .map_err(|e| e.to_string())?;
+        }
+        env_rate = env_rate.max(steps as f64 / t.elapsed().as_secs_f64());
+        let (env_qpos, env_qvel) = (env.data().qpos().to_vec(), env.data().qvel().to_vec());
+
+        env.set_state(&start).map_err(|e| e.to_string())?;
+        let mut data: Data = env.data().clone();
+        let t = Instant::now();
+        for i in 0..steps {
+            data.ctrl_mut()
+                .copy_from_slice(&ctrls[i * nu..(i + 1) * nu]);
+            for _ in 0..SUBSTEPS {
+                data.step();
             }
         }
-        Ok(n as f64 / t.elapsed().as_secs_f64())
-    };
-    timed(steps / 10 + 1, &mut env)?;
-    let env_rate = timed(steps, &mut env)?;
-    // Raw physics: a copy of the env's current simulation state, stepped with no env logic.
-    let mut data: Data = env.data().clone();
-    for _ in 0..(steps / 10 + 1) * SUBSTEPS {
-        data.step();
+        mj_rate = mj_rate.max((steps * SUBSTEPS) as f64 / t.elapsed().as_secs_f64());
+        replay_identical = data.qpos() == env_qpos.as_slice() && data.qvel() == env_qvel.as_slice();
     }
-    let t = Instant::now();
-    for _ in 0..steps * SUBSTEPS {
-        data.step();
-    }
-    let mj_rate = (steps * SUBSTEPS) as f64 / t.elapsed().as_secs_f64();
     let phys = mj_rate / SUBSTEPS as f64;
+    let vec_rate = match vec {
+        None => None,
+        Some((n, t)) => {
+            let mut v = crate::env::VecEnv::new(env_id, config, n, t).map_err(|e| e.to_string())?;
+            let vsteps = (steps / n).max(1);
+            let acts: Vec<f32> = (0..n * dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+            v.reset(Some(0));
+            for _ in 0..vsteps / 10 + 1 {
+                v.step(&acts).map_err(|e| e.to_string())?;
+            }
+            let mut best = 0.0f64;
+            for _ in 0..3 {
+                let t0 = Instant::now();
+                for _ in 0..vsteps {
+                    v.step(&acts).map_err(|e| e.to_string())?;
+                }
+                best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());
+            }
+            Some(best)
+        }
+    };
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
@@ -92,6 +137,11 @@ pub fn run(
         env_steps_per_s: env_rate,
         physics_steps_per_s: phys,
         mj_step_per_s: mj_rate,
+        replay_identical,
+        envs: vec.map(|v| v.0),
+        threads: vec.map(|v| v.1),
+        vec_env_steps_per_s: vec_rate,
+        scaling: vec_rate.map(|r| r / env_rate),
         ratio,
         overhead_percent: (1.0 / ratio - 1.0) * 100.0,
     })

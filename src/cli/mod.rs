@@ -44,6 +44,12 @@ pub enum Command {
         /// Env steps to time (after a warm-up of a tenth as many).
         #[arg(long, default_value_t = 2000)]
         steps: usize,
+        /// Also time a VecEnv of this many envs (reports vec_env_steps_per_s and scaling).
+        #[arg(long)]
+        envs: Option<usize>,
+        /// VecEnv threads, the calling thread included (default: available cores).
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
     /// `<collision>` elements, with their volume and the mesh volume they cover.
@@ -88,8 +94,17 @@ fn run(cli: Cli) -> Result<(), String> {
             robot,
             control_mode,
             steps,
+            envs,
+            threads,
         } => {
-            let report = bench::run(&env, robot, control_mode, steps)?;
+            let cores = std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1);
+            let vec = match (envs, threads) {
+                (None, None) => None,
+                (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
+            };
+            let report = bench::run(&env, robot, control_mode, steps, vec)?;
             println!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?

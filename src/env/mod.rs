@@ -6,6 +6,8 @@
 //! running after either — nothing stops further `step` calls (`elapsed_steps` keeps
 //! counting, `truncated` stays true), exactly as upstream.
 pub mod rng;
+pub mod vec;
+pub use vec::VecEnv;
 
 use std::sync::Arc;
 

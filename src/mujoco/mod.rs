@@ -1020,6 +1020,10 @@ impl Data {
         take(self.mocap_pos_mut());
         take(self.mocap_quat_mut());
         self.forward();
+        // mj_forward normalises free-joint quaternions in qpos in place; put back the exact
+        // captured values so that a restored state steps exactly like the original.
+        let nq = self.qpos().len();
+        self.qpos_mut().copy_from_slice(&s[1..1 + nq]);
         Ok(())
     }
 }

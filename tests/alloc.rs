@@ -1,0 +1,89 @@
+//! `Env::step` allocates nothing: a counting global allocator watches every control mode.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+struct Counting;
+
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::SeqCst) {
+            ALLOCS.fetch_add(1, Ordering::SeqCst);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::SeqCst) {
+            ALLOCS.fetch_add(1, Ordering::SeqCst);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// The one test in this binary, so no other thread allocates while counting.
+#[test]
+fn step_allocates_nothing_in_any_env_and_control_mode() {
+    // The counter works: one Vec is one allocation.
+    COUNTING.store(true, Ordering::SeqCst);
+    let v = std::hint::black_box(vec![1u8; 10]);
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!((ALLOCS.swap(0, Ordering::SeqCst), v.len()), (1, 10));
+    for info in mjskill::registry() {
+        for (robot, modes) in &info.robots {
+            for mode in modes {
+                let config = mjskill::EnvConfig {
+                    robot: Some(robot.to_string()),
+                    control_mode: Some(mode.to_string()),
+                    ..Default::default()
+                };
+                let mut env = mjskill::make(info.id, config).unwrap();
+                let dim = env.action_space().shape[0];
+                let actions: Vec<Vec<f32>> = (0..20)
+                    .map(|k| (0..dim).map(|i| ((k * 5 + i) as f32 * 0.7).sin()).collect())
+                    .collect();
+                // Warm up (first-touch paths), then count.
+                env.step(&actions[0]).unwrap();
+                ALLOCS.store(0, Ordering::SeqCst);
+                COUNTING.store(true, Ordering::SeqCst);
+                let mut sum = 0.0f32;
+                for a in &actions {
+                    let s = env.step(a).unwrap();
+                    sum += s.reward + s.obs[0];
+                }
+                COUNTING.store(false, Ordering::SeqCst);
+                let n = ALLOCS.load(Ordering::SeqCst);
+                assert!(sum.is_finite());
+                assert_eq!(
+                    n, 0,
+                    "{} / {robot} / {mode}: {n} allocations in 20 steps",
+                    info.id
+                );
+            }
+        }
+    }
+    // The VecEnv's steady-state step (workers included: the counter is process-wide).
+    let mut v =
+        mjskill::env::VecEnv::new("PickCube-v1", mjskill::EnvConfig::default(), 4, 2).unwrap();
+    let acts: Vec<f32> = (0..32).map(|i| (i as f32 * 0.3).sin()).collect();
+    v.step(&acts).unwrap();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    for _ in 0..20 {
+        v.step(&acts).unwrap();
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(ALLOCS.load(Ordering::SeqCst), 0, "VecEnv::step allocated");
+    assert!(v.rewards().iter().all(|r| r.is_finite()));
+}
