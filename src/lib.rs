@@ -13,6 +13,7 @@
 pub mod cli;
 pub mod controllers;
 pub mod env;
+pub mod solvers;
 pub mod mjcf;
 pub mod models;
 pub mod mujoco;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod eval;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
 #[derive(Debug, Parser)]
@@ -70,6 +71,27 @@ pub enum Command {
         #[arg(long)]
         crop: Option<String>,
     },
+    /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
+    Eval {
+        /// Env id.
+        #[arg(long, default_value = "PickCube-v1")]
+        env: String,
+        /// Robot uid (default: the env's default robot).
+        #[arg(long)]
+        robot: Option<String>,
+        /// Control mode (default: the policy's, else the robot's default).
+        #[arg(long)]
+        control_mode: Option<String>,
+        /// Policy: solver, random or zero.
+        #[arg(long, default_value = "solver")]
+        policy: String,
+        /// Episodes (seeds seed, seed+1, ...).
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
 }
@@ -118,6 +140,26 @@ fn run(cli: Cli) -> Result<(), String> {
             segments,
             crop,
         } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref()),
+        Command::Eval {
+            env,
+            robot,
+            control_mode,
+            policy,
+            episodes,
+            seed,
+        } => {
+            let config = crate::env::EnvConfig {
+                robot,
+                control_mode,
+                ..Default::default()
+            };
+            let report = eval::run(&env, config, &policy, episodes, seed)?;
+            println!(
+                "{}",
+                serde_json::to_string(&report).map_err(|e| e.to_string())?
+            );
+            Ok(())
+        }
         Command::Envs => {
             println!(
                 "{}",

@@ -688,6 +688,9 @@ impl Env {
         for _ in 0..SUBSTEPS {
             self.data.step();
         }
+        // mj_step leaves poses at the start of its last substep; observations, rewards and
+        // success must see the poses of the final state.
+        self.data.update_kinematics();
         self.elapsed_steps += 1;
         finger_forces(
             &self.model,

@@ -144,12 +144,24 @@ pub fn actuator_name(joint: &str) -> String {
     format!("drive_{joint}")
 }
 
-/// contype/conaffinity of ordinary collision geoms: bit 0 (everything) and bit 1 (ground).
-pub const CONTACT_ALL: i32 = 3;
-/// contype/conaffinity of the ground plane: only bit 1.
+// Collision bits (contype = conaffinity for every geom): 1 = general, 2 = ground,
+// 4 = table top plane (props only), 8 = table box (robots only). Two geoms collide when
+// they share a bit. The table top is split this way because MuJoCo 2.2's box–box collider
+// produces bogus metre-deep contacts between small boxes (the 4 cm cube) and the 2.4 m
+// table box; props meet an infinite plane at z = 0 instead, robots keep the box.
+
+/// Bits of props and kinematic obstacles: general, ground and the table-top plane.
+pub const CONTACT_PROP: i32 = 1 | 2 | 4;
+/// Bits of robot collision geoms: general, ground and the table box.
+pub const CONTACT_ROBOT: i32 = 1 | 2 | 8;
+/// Bits of robot geoms that ignore the ground (Fetch's wheels).
+pub const CONTACT_NOT_GROUND: i32 = 1 | 8;
+/// Bits of the ground plane.
 pub const CONTACT_GROUND: i32 = 2;
-/// contype/conaffinity of geoms that ignore the ground (Fetch's wheels): only bit 0.
-pub const CONTACT_NOT_GROUND: i32 = 1;
+/// Bits of the table-top plane (props only).
+pub const CONTACT_TABLE_PLANE: i32 = 4;
+/// Bits of the table box (robots only).
+pub const CONTACT_TABLE_BOX: i32 = 8;
 
 /// Name of the ground plane geom.
 pub const GROUND: &str = "ground";
@@ -212,8 +224,8 @@ impl Scene {
                     .attr_nums("friction", &friction)
                     .attr_nums("solref", &CONTACT_SOLREF)
                     .attr_nums("solimp", &CONTACT_SOLIMP)
-                    .attr("contype", CONTACT_ALL)
-                    .attr("conaffinity", CONTACT_ALL),
+                    .attr("contype", CONTACT_PROP)
+                    .attr("conaffinity", CONTACT_PROP),
             ),
         );
         root.push(Element::new("asset"));
@@ -424,10 +436,13 @@ impl Scene {
             g.set("name", collision_geom_name(&l.name, k));
             g.set("group", GROUP_COLLISION);
             g.set("rgba", "0.5 0.5 0.5 0.3");
-            if opts.no_ground_contact.contains(&l.name) {
-                g.set("contype", CONTACT_NOT_GROUND);
-                g.set("conaffinity", CONTACT_NOT_GROUND);
-            }
+            let bits = if opts.no_ground_contact.contains(&l.name) {
+                CONTACT_NOT_GROUND
+            } else {
+                CONTACT_ROBOT
+            };
+            g.set("contype", bits);
+            g.set("conaffinity", bits);
             if let Some(mu) = friction {
                 g.set(
                     "friction",

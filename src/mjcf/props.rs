@@ -6,12 +6,17 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::xml::{nums, Element};
-use super::{pose_attrs, Scene, CONTACT_GROUND, DENSITY, GROUND, GROUP_HIDDEN, TABLE};
+use super::{
+    pose_attrs, Scene, CONTACT_GROUND, CONTACT_TABLE_BOX, CONTACT_TABLE_PLANE, DENSITY, GROUND,
+    GROUP_HIDDEN, TABLE,
+};
 
 /// Half extents of the table-workspace box in its actor frame (tasks.md §0.1).
 pub const TABLE_HALF: [f64; 3] = [1.209, 0.6045, 0.45982145];
 /// Table actor position (its box centre is `TABLE_HALF[2]` above it).
 pub const TABLE_POS: [f64; 3] = [-0.12, 0.0, -0.9196429];
+/// Name of the table-top plane geom that props rest on.
+pub const TABLE_TOP_PLANE: &str = "table-top";
 /// Height of the ground plane (= −table height).
 pub const GROUND_Z: f64 = -0.91964293;
 
@@ -59,7 +64,21 @@ impl Scene {
                 .attr("name", TABLE)
                 .attr("type", "box")
                 .attr_nums("size", &TABLE_HALF)
+                .attr("contype", CONTACT_TABLE_BOX)
+                .attr("conaffinity", CONTACT_TABLE_BOX)
                 .attr("rgba", "0.82 0.72 0.58 1"),
+        );
+        // The table top as props feel it (see the collision bits in the parent module).
+        wb.push(
+            Element::new("geom")
+                .attr("name", TABLE_TOP_PLANE)
+                .attr("type", "plane")
+                .attr_nums("pos", &[0.0, 0.0, 0.0])
+                .attr("size", "0 0 1")
+                .attr("contype", CONTACT_TABLE_PLANE)
+                .attr("conaffinity", CONTACT_TABLE_PLANE)
+                .attr("group", GROUP_HIDDEN)
+                .attr("rgba", "0 0 0 0"),
         );
         wb.push(
             Element::new("geom")

@@ -845,6 +845,17 @@ impl Data {
         // SAFETY: as step.
         unsafe { sys::mj_kinematics(self.model.ptr, self.ptr) }
     }
+    /// Brings poses and velocities derived from qpos/qvel up to date after `step` (which
+    /// leaves them at the start of the step): `mj_kinematics`, `mj_comPos`, `mj_comVel`.
+    /// Touches nothing that influences the next step.
+    pub fn update_kinematics(&mut self) {
+        // SAFETY: as step.
+        unsafe {
+            sys::mj_kinematics(self.model.ptr, self.ptr);
+            sys::mj_comPos(self.model.ptr, self.ptr);
+            sys::mj_comVel(self.model.ptr, self.ptr);
+        }
+    }
     /// Resets to the model's reference state (`mj_resetData`); clears applied forces too.
     pub fn reset(&mut self) {
         // SAFETY: as step.

@@ -1,0 +1,143 @@
+//! `mjskill eval`: success rate and mean return of a policy over seeded episodes.
+use serde::Serialize;
+
+use crate::env::{make, Env, EnvConfig};
+use crate::solvers::{make_policy, required_control_mode, Policy};
+
+/// Result of one episode.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct EpisodeResult {
+    /// Reset seed.
+    pub seed: u64,
+    /// Steps taken (the episode runs to truncation).
+    pub steps: u32,
+    /// Sum of rewards.
+    pub ret: f64,
+    /// Success at any step.
+    pub success_once: bool,
+    /// Success on the last step.
+    pub success_at_end: bool,
+    /// First step with success.
+    pub first_success: Option<u32>,
+}
+
+/// The eval summary printed as JSON.
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalReport {
+    /// Env id.
+    pub env: String,
+    /// Robot uid.
+    pub robot: String,
+    /// Control mode.
+    pub control_mode: String,
+    /// Policy name.
+    pub policy: String,
+    /// Episodes run (seeds `seed .. seed + episodes`).
+    pub episodes: usize,
+    /// Episodes that succeeded at some step.
+    pub successes: usize,
+    /// successes / episodes.
+    pub success_rate: f64,
+    /// Fraction of episodes successful on their last step.
+    pub success_at_end_rate: f64,
+    /// Mean undiscounted return.
+    pub mean_return: f64,
+    /// Mean first-success step over successful episodes.
+    pub mean_first_success_step: Option<f64>,
+}
+
+/// Builds the env for a policy: the solver dictates its control mode.
+pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env, String> {
+    if let Some(required) = required_control_mode(policy) {
+        match config.control_mode.as_deref() {
+            None => config.control_mode = Some(required.to_string()),
+            Some(m) if m == required => {}
+            Some(m) => {
+                return Err(format!(
+                    "policy {policy:?} needs control mode {required}, not {m}"
+                ))
+            }
+        }
+    }
+    make(env_id, config).map_err(|e| e.to_string())
+}
+
+/// Runs one seeded episode to truncation, calling `on_step` after every step.
+pub fn run_episode(
+    env: &mut Env,
+    policy: &mut dyn Policy,
+    seed: Option<u64>,
+    action: &mut [f32],
+    mut on_step: impl FnMut(&Env, &[f32], f32, bool, bool) -> Result<(), String>,
+) -> Result<EpisodeResult, String> {
+    env.reset(seed);
+    policy.reset(env);
+    let mut r = EpisodeResult {
+        seed: seed.unwrap_or(0),
+        steps: 0,
+        ret: 0.0,
+        success_once: false,
+        success_at_end: false,
+        first_success: None,
+    };
+    loop {
+        policy.act(env, action);
+        let (reward, terminated, truncated) = {
+            let s = env.step(action).map_err(|e| e.to_string())?;
+            (s.reward, s.terminated, s.truncated)
+        };
+        r.steps += 1;
+        r.ret += reward as f64;
+        if terminated && r.first_success.is_none() {
+            r.first_success = Some(r.steps);
+        }
+        r.success_once |= terminated;
+        r.success_at_end = terminated;
+        on_step(env, action, reward, terminated, truncated)?;
+        if truncated {
+            return Ok(r);
+        }
+    }
+}
+
+/// Runs `episodes` episodes with seeds `seed..seed + episodes`.
+pub fn run(
+    env_id: &str,
+    config: EnvConfig,
+    policy: &str,
+    episodes: usize,
+    seed: u64,
+) -> Result<EvalReport, String> {
+    let mut env = make_env(env_id, config, policy)?;
+    let mut pol = make_policy(policy, &env, seed)?;
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    let mut results = Vec::with_capacity(episodes);
+    for k in 0..episodes as u64 {
+        results.push(run_episode(
+            &mut env,
+            pol.as_mut(),
+            Some(seed + k),
+            &mut action,
+            |_, _, _, _, _| Ok(()),
+        )?);
+    }
+    let n = results.len().max(1) as f64;
+    let successes = results.iter().filter(|r| r.success_once).count();
+    let firsts: Vec<f64> = results
+        .iter()
+        .filter_map(|r| r.first_success.map(|s| s as f64))
+        .collect();
+    Ok(EvalReport {
+        env: env_id.to_string(),
+        robot: env.robot_spec().uid.to_string(),
+        control_mode: env.config().control_mode.clone().unwrap_or_default(),
+        policy: policy.to_string(),
+        episodes,
+        successes,
+        success_rate: successes as f64 / n,
+        success_at_end_rate: results.iter().filter(|r| r.success_at_end).count() as f64 / n,
+        mean_return: results.iter().map(|r| r.ret).sum::<f64>() / n,
+        mean_first_success_step: (!firsts.is_empty())
+            .then(|| firsts.iter().sum::<f64>() / firsts.len() as f64),
+    })
+}
