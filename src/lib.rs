@@ -13,11 +13,12 @@
 pub mod cli;
 pub mod controllers;
 pub mod env;
-pub mod solvers;
 pub mod mjcf;
 pub mod models;
 pub mod mujoco;
+pub mod record;
 pub mod robots;
+pub mod solvers;
 pub mod tasks;
 
 pub use env::{

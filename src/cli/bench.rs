@@ -101,6 +101,8 @@ pub fn run(
             for _ in 0..SUBSTEPS {
                 data.step();
             }
+            // As the env does after its substeps (poses for reading; normalises quaternions).
+            data.update_kinematics();
         }
         mj_rate = mj_rate.max((steps * SUBSTEPS) as f64 / t.elapsed().as_secs_f64());
         replay_identical = data.qpos() == env_qpos.as_slice() && data.qvel() == env_qvel.as_slice();
@@ -110,16 +112,26 @@ pub fn run(
         None => None,
         Some((n, t)) => {
             let mut v = crate::env::VecEnv::new(env_id, config, n, t).map_err(|e| e.to_string())?;
+            // Every env follows the single env's action sequence (same workload per env step).
             let vsteps = (steps / n).max(1);
-            let acts: Vec<f32> = (0..n * dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut acts = vec![0.0f32; n * dim];
+            let fill = |t: usize, acts: &mut [f32]| {
+                let row = &actions[(t % steps) * dim..(t % steps + 1) * dim];
+                for chunk in acts.chunks_mut(dim) {
+                    chunk.copy_from_slice(row);
+                }
+            };
             v.reset(Some(0));
-            for _ in 0..vsteps / 10 + 1 {
+            for t in 0..vsteps / 10 + 1 {
+                fill(t, &mut acts);
                 v.step(&acts).map_err(|e| e.to_string())?;
             }
             let mut best = 0.0f64;
             for _ in 0..3 {
+                v.reset(Some(0));
                 let t0 = Instant::now();
-                for _ in 0..vsteps {
+                for t in 0..vsteps {
+                    fill(t, &mut acts);
                     v.step(&acts).map_err(|e| e.to_string())?;
                 }
                 best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod bench;
 pub mod eval;
+pub mod rollout;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
 #[derive(Debug, Parser)]
@@ -92,6 +93,51 @@ pub enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
     },
+    /// Record seeded episodes of a policy to an MCAP file; prints a JSON summary. With no
+    /// arguments: PickCube-v1, panda, the scripted solver, 10 episodes, rollout.mcap.
+    Rollout {
+        /// Env id.
+        #[arg(long, default_value = "PickCube-v1")]
+        env: String,
+        /// Robot uid (default: the env's default robot).
+        #[arg(long)]
+        robot: Option<String>,
+        /// Control mode (default: the policy's, else the robot's default).
+        #[arg(long)]
+        control_mode: Option<String>,
+        /// Observation mode: state, state_dict or none.
+        #[arg(long, default_value = "state")]
+        obs_mode: String,
+        /// Reward mode: normalized_dense, dense, sparse or none.
+        #[arg(long, default_value = "normalized_dense")]
+        reward_mode: String,
+        /// Policy: solver, random or zero.
+        #[arg(long, default_value = "solver")]
+        policy: String,
+        /// Episodes.
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        /// Seed of the first episode (episode k uses seed + k).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output MCAP file.
+        #[arg(long, default_value = "rollout.mcap")]
+        out: PathBuf,
+    },
+    /// Summarise a recording (JSON); says whether it was cut short.
+    Info {
+        /// The .mcap file.
+        file: PathBuf,
+    },
+    /// Re-simulate every episode of a recording from its seed and actions and compare each
+    /// step; prints the largest deviations (JSON) and fails beyond the tolerance.
+    Replay {
+        /// The .mcap file.
+        file: PathBuf,
+        /// Largest allowed absolute deviation of observations, rewards and info values.
+        #[arg(long, default_value_t = 1e-6)]
+        tolerance: f64,
+    },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
 }
@@ -159,6 +205,59 @@ fn run(cli: Cli) -> Result<(), String> {
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
             );
             Ok(())
+        }
+        Command::Rollout {
+            env,
+            robot,
+            control_mode,
+            obs_mode,
+            reward_mode,
+            policy,
+            episodes,
+            seed,
+            out,
+        } => {
+            use std::io::IsTerminal;
+            let config = crate::env::EnvConfig {
+                robot,
+                control_mode,
+                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+                reward_mode: crate::env::RewardMode::parse(&reward_mode)
+                    .map_err(|e| e.to_string())?,
+                ..Default::default()
+            };
+            let args = rollout::RolloutArgs {
+                env,
+                config,
+                policy,
+                episodes,
+                seed,
+                out,
+                progress: std::io::stderr().is_terminal(),
+            };
+            let summary = rollout::rollout(&args)?;
+            println!(
+                "{}",
+                serde_json::to_string(&summary).map_err(|e| e.to_string())?
+            );
+            Ok(())
+        }
+        Command::Info { file } => {
+            let s = rollout::info(&file)?;
+            println!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            Ok(())
+        }
+        Command::Replay { file, tolerance } => {
+            let r = rollout::replay(&file, tolerance)?;
+            println!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            if r.ok {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{}: replay deviates beyond the tolerance {tolerance}",
+                    file.display()
+                ))
+            }
         }
         Command::Envs => {
             println!(

@@ -41,6 +41,12 @@ pub const TORSIONAL_ROLLING: [f64; 2] = [0.005, 0.0001];
 pub const CONTACT_SOLREF: [f64; 2] = [2.0 * TIMESTEP, 1.0];
 /// Contact `solimp` (impedance 0.95 → 0.99 over 1 mm of penetration).
 pub const CONTACT_SOLIMP: [f64; 3] = [0.95, 0.99, 0.001];
+/// Constraint rows MuJoCo preallocates per `mjData` (contacts × condim plus limits and
+/// equalities). The tabletop scenes use well under 200; keeping `mjData` small keeps many
+/// envs in cache (VecEnv). Overflow is reported as a MuJoCo warning in `info.warnings`.
+pub const NJMAX: usize = 600;
+/// Contacts MuJoCo preallocates per `mjData`.
+pub const NCONMAX: usize = 150;
 /// Density of every prop and of robot links without URDF inertials (kg/m³).
 pub const DENSITY: f64 = 1000.0;
 /// Mass and principal inertia SAPIEN gives a link with neither inertial nor shapes.
@@ -205,8 +211,8 @@ impl Scene {
         );
         root.push(
             Element::new("size")
-                .attr("njmax", 2000)
-                .attr("nconmax", 500),
+                .attr("njmax", NJMAX)
+                .attr("nconmax", NCONMAX),
         );
         root.push(
             Element::new("visual")

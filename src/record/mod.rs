@@ -1,0 +1,934 @@
+//! Episode recording to [MCAP](https://mcap.dev) files, and reading them back.
+//!
+//! A [`Recorder`] writes one file per run: a `Metadata` record named `"mjskill"` describing
+//! the env (see [`Meta`]) and these channels, all JSON (`message_encoding` `"json"`, schema
+//! encoding `"jsonschema"`), so any MCAP tool can decode them:
+//!
+//! | topic | schema | when |
+//! |---|---|---|
+//! | `/episode` | `mjskill.Episode` | once per episode, after reset: index, seed, initial [`EnvState`], obs, info |
+//! | `/step` | `mjskill.Step` | every step: action, obs, reward, flags, info and the [`EnvState`] *before* the step |
+//! | `/episode_end` | `mjskill.EpisodeEnd` | once per finished episode: steps, return, success |
+//! | `/tf` | `foxglove.FrameTransforms` | after reset and every step: the world pose of every body |
+//! | `/scene` | `foxglove.SceneUpdate` | once per episode: the drawn geoms of every body, in the body frame |
+//!
+//! Because `/step` carries the state before the step, `env.set_state(&step.state)` followed
+//! by `env.step(&step.action)` reproduces the recorded step bitwise.
+//!
+//! Log times are simulated time in nanoseconds: an episode starts one control step
+//! (`TIMESTEP × SUBSTEPS`) after the previous message, so times never go backwards across
+//! episodes.
+//!
+//! Float encoding: observations, actions, rewards and info values are JSON numbers in their
+//! shortest round-trip form (read back bitwise); a non-finite value is written as `null` and
+//! read back as NaN. Space bounds in the metadata are written as numbers or the strings
+//! `"inf"`, `"-inf"`, `"nan"`.
+//!
+//! Durability: messages go into zstd-compressed chunks that are buffered in memory and
+//! written whole. [`Recorder::end_episode`] closes the chunk and `fsync`s the file, so every
+//! finished episode survives a later crash or `SIGKILL`; [`read`] recovers such a file (no
+//! summary or footer) and reports [`Recording::complete`]` == false`.
+
+mod num;
+mod schema;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use mcap::records::{MessageHeader, Metadata, Record};
+use mcap::{Compression, WriteOptions};
+use serde::{Deserialize, Serialize};
+
+use crate::env::{Env, EnvError, EnvState, Info};
+
+/// MCAP header profile of mjskill recordings.
+pub const PROFILE: &str = "mjskill";
+/// Name of the file-level metadata record.
+pub const METADATA_NAME: &str = "mjskill";
+/// Version of the recording layout, stored as metadata key `format`.
+pub const FORMAT_VERSION: u32 = 1;
+/// Topic of the per-episode start message.
+pub const TOPIC_EPISODE: &str = "/episode";
+/// Topic of the per-step message.
+pub const TOPIC_STEP: &str = "/step";
+/// Topic of the per-episode end message.
+pub const TOPIC_EPISODE_END: &str = "/episode_end";
+/// Topic of the body poses (`foxglove.FrameTransforms`).
+pub const TOPIC_TF: &str = "/tf";
+/// Topic of the scene geometry (`foxglove.SceneUpdate`).
+pub const TOPIC_SCENE: &str = "/scene";
+
+/// Errors of recording and reading; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// Creating, writing, syncing or reading the file failed.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The MCAP writer or parser failed.
+    #[error("{}: MCAP error: {source}", .path.display())]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: mcap::McapError,
+    },
+    /// The file is not an mjskill MCAP recording.
+    #[error("{}: not an mjskill recording: {reason}", .path.display())]
+    NotRecording {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// A record or message of the file does not decode.
+    #[error("{}: bad {what}: {reason}", .path.display())]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// Which record or message.
+        what: String,
+        /// The decoding error.
+        reason: String,
+    },
+    /// The recorder was used out of order (e.g. a step without an episode).
+    #[error("{}: {msg}", .path.display())]
+    Usage {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        msg: String,
+    },
+    /// The env rejected a step made through [`Recorder::step`].
+    #[error("{}: env error: {source}", .path.display())]
+    Env {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: EnvError,
+    },
+}
+
+/// A box space as stored in the metadata.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Space {
+    /// Shape.
+    pub shape: Vec<usize>,
+    /// Lower bounds (flattened).
+    #[serde(with = "num::bounds")]
+    pub low: Vec<f32>,
+    /// Upper bounds (flattened).
+    #[serde(with = "num::bounds")]
+    pub high: Vec<f32>,
+}
+
+/// One named slice of the flat observation.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObsSlice {
+    /// Key, e.g. `"agent/qpos"`.
+    pub name: String,
+    /// Start index.
+    pub start: usize,
+    /// End index (exclusive).
+    pub end: usize,
+}
+
+/// The file-level metadata (`Metadata` record `"mjskill"`). In the file every field is one
+/// string value: strings as themselves, everything else as JSON text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Meta {
+    /// Layout version ([`FORMAT_VERSION`]).
+    pub format: u32,
+    /// Env id.
+    pub env_id: String,
+    /// Robot uid.
+    pub robot: String,
+    /// Observation mode name.
+    pub obs_mode: String,
+    /// Reward mode name.
+    pub reward_mode: String,
+    /// Control mode in effect (the robot's default when none was configured).
+    pub control_mode: String,
+    /// Std-dev of the initial joint noise.
+    pub robot_init_qpos_noise: f64,
+    /// Episode length for truncation.
+    pub max_episode_steps: u32,
+    /// Physics timestep (s).
+    pub timestep: f64,
+    /// Physics steps per control step.
+    pub substeps: usize,
+    /// mjskill version that wrote the file.
+    pub version: String,
+    /// Action space.
+    pub action_space: Space,
+    /// Observation space.
+    pub observation_space: Space,
+    /// Observation layout.
+    pub obs_layout: Vec<ObsSlice>,
+}
+
+const STRING_KEYS: &[&str] = &[
+    "env_id",
+    "robot",
+    "obs_mode",
+    "reward_mode",
+    "control_mode",
+    "version",
+];
+
+impl Meta {
+    /// The metadata of `env`.
+    pub fn of(env: &Env) -> Meta {
+        let space = |b: &crate::env::BoxSpace| Space {
+            shape: b.shape.clone(),
+            low: b.low.clone(),
+            high: b.high.clone(),
+        };
+        let cfg = env.config();
+        Meta {
+            format: FORMAT_VERSION,
+            env_id: env.id().to_string(),
+            robot: env.robot_spec().uid.to_string(),
+            obs_mode: cfg.obs_mode.name().to_string(),
+            reward_mode: cfg.reward_mode.name().to_string(),
+            control_mode: env.get_state().control_mode,
+            robot_init_qpos_noise: cfg.robot_init_qpos_noise,
+            max_episode_steps: env.max_episode_steps(),
+            timestep: crate::mjcf::TIMESTEP,
+            substeps: crate::mjcf::SUBSTEPS,
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            action_space: space(env.action_space()),
+            observation_space: space(env.observation_space()),
+            obs_layout: env
+                .obs_layout()
+                .iter()
+                .map(|(name, r)| ObsSlice {
+                    name: name.clone(),
+                    start: r.start,
+                    end: r.end,
+                })
+                .collect(),
+        }
+    }
+
+    /// The string map stored in the MCAP `Metadata` record.
+    pub fn to_map(&self) -> BTreeMap<String, String> {
+        let v = serde_json::to_value(self).expect("Meta serializes");
+        let obj = v.as_object().expect("Meta is an object");
+        obj.iter()
+            .map(|(k, v)| {
+                let s = match v {
+                    serde_json::Value::String(s) => s.clone(),
+                    other => other.to_string(),
+                };
+                (k.clone(), s)
+            })
+            .collect()
+    }
+
+    /// Parses the string map of the MCAP `Metadata` record.
+    pub fn from_map(map: &BTreeMap<String, String>) -> Result<Meta, String> {
+        let mut obj = serde_json::Map::new();
+        for (k, v) in map {
+            let value = if STRING_KEYS.contains(&k.as_str()) {
+                serde_json::Value::String(v.clone())
+            } else {
+                serde_json::from_str(v).map_err(|e| format!("metadata {k:?} = {v:?}: {e}"))?
+            };
+            obj.insert(k.clone(), value);
+        }
+        serde_json::from_value(serde_json::Value::Object(obj)).map_err(|e| e.to_string())
+    }
+
+    /// Duration of one control step in nanoseconds.
+    pub fn control_dt_ns(&self) -> u64 {
+        (self.timestep * self.substeps as f64 * 1e9).round() as u64
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Messages
+
+fn info_pairs(info: &Info) -> Vec<(String, f64)> {
+    std::iter::once(("elapsed_steps".to_string(), info.elapsed_steps as f64))
+        .chain(
+            info.keys
+                .iter()
+                .zip(&info.values)
+                .map(|(k, v)| (k.to_string(), *v)),
+        )
+        .collect()
+}
+
+#[derive(Serialize, Deserialize)]
+struct EpisodeMsg {
+    episode: u64,
+    seed: Option<u64>,
+    state: EnvState,
+    #[serde(with = "num::f32s")]
+    obs: Vec<f32>,
+    #[serde(with = "num::ordered_map")]
+    info: Vec<(String, f64)>,
+}
+
+#[derive(Serialize)]
+struct StepMsgOut<'a> {
+    episode: u64,
+    step: u32,
+    #[serde(serialize_with = "num::f32s::serialize")]
+    action: &'a [f32],
+    #[serde(serialize_with = "num::f32s::serialize")]
+    obs: &'a [f32],
+    #[serde(with = "num::f32n")]
+    reward: f32,
+    terminated: bool,
+    truncated: bool,
+    #[serde(serialize_with = "num::ordered_map::serialize")]
+    info: &'a [(String, f64)],
+    state_before: &'a EnvState,
+}
+
+#[derive(Deserialize)]
+struct StepMsgIn {
+    episode: u64,
+    step: u32,
+    #[serde(with = "num::f32s")]
+    action: Vec<f32>,
+    #[serde(with = "num::f32s")]
+    obs: Vec<f32>,
+    #[serde(with = "num::f32n")]
+    reward: f32,
+    terminated: bool,
+    truncated: bool,
+    #[serde(with = "num::ordered_map")]
+    info: Vec<(String, f64)>,
+    state_before: EnvState,
+}
+
+#[derive(Serialize, Deserialize)]
+struct EpisodeEndMsg {
+    episode: u64,
+    steps: u32,
+    #[serde(rename = "return", with = "num::f64n")]
+    ret: f64,
+    success: bool,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writer
+
+#[derive(Debug, Clone, Copy)]
+struct Channels {
+    episode: u16,
+    step: u16,
+    episode_end: u16,
+    tf: u16,
+    scene: u16,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Open {
+    index: u64,
+    start_ns: u64,
+    steps: u32,
+    ret: f64,
+}
+
+/// Writes episodes of one env to an MCAP file (see the [module docs](self)).
+///
+/// Typical use: [`Recorder::reset`] (or `env.reset` + [`Recorder::begin_episode`]), then
+/// [`Recorder::step`] (or `get_state` + `env.step` + [`Recorder::record_step`]) until the
+/// episode is over, then [`Recorder::end_episode`]; finally [`Recorder::finish`]. Dropping a
+/// recorder without `finish` still writes the summary (errors are then ignored).
+pub struct Recorder {
+    writer: mcap::Writer<BufWriter<File>>,
+    file: File,
+    path: PathBuf,
+    ch: Channels,
+    frames: Vec<String>,
+    dt_ns: u64,
+    seq: u32,
+    /// Log time of the last message written (None before the first).
+    last_ns: Option<u64>,
+    next_episode: u64,
+    open: Option<Open>,
+    info_buf: Vec<(String, f64)>,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder")
+            .field("path", &self.path)
+            .field("next_episode", &self.next_episode)
+            .field("open", &self.open)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Recorder {
+    /// Creates (truncates) `path` and writes the MCAP header (profile `"mjskill"`), the
+    /// metadata of `env` and the channel definitions, flushed to disk before returning.
+    pub fn create(path: &Path, env: &Env) -> Result<Recorder, RecordError> {
+        let io = |source| RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mcap_err = |source| RecordError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = File::create(path).map_err(io)?;
+        let sync_handle = file.try_clone().map_err(io)?;
+        let opts = WriteOptions::new()
+            .profile(PROFILE)
+            .library(format!("mjskill {}", env!("CARGO_PKG_VERSION")))
+            .compression(Some(Compression::Zstd))
+            .compression_threads(0)
+            // Buffer each chunk in memory and write it whole: the file never holds a
+            // half-written chunk whose lengths are yet to be patched.
+            .disable_seeking(true);
+        let mut writer = opts.create(BufWriter::new(file)).map_err(mcap_err)?;
+        let meta = Meta::of(env);
+        writer
+            .write_metadata(&Metadata {
+                name: METADATA_NAME.to_string(),
+                metadata: meta.to_map(),
+            })
+            .map_err(mcap_err)?;
+        let no_meta = BTreeMap::new();
+        let mut add = |name: &str, schema: serde_json::Value, topic: &str| {
+            let text = serde_json::to_vec(&schema).expect("schema serializes");
+            let sid = writer.add_schema(name, "jsonschema", &text)?;
+            writer.add_channel(sid, topic, "json", &no_meta)
+        };
+        let ch = (|| -> mcap::McapResult<Channels> {
+            Ok(Channels {
+                episode: add("mjskill.Episode", schema::episode(), TOPIC_EPISODE)?,
+                step: add("mjskill.Step", schema::step(), TOPIC_STEP)?,
+                episode_end: add(
+                    "mjskill.EpisodeEnd",
+                    schema::episode_end(),
+                    TOPIC_EPISODE_END,
+                )?,
+                tf: add(
+                    "foxglove.FrameTransforms",
+                    schema::frame_transforms(),
+                    TOPIC_TF,
+                )?,
+                scene: add("foxglove.SceneUpdate", schema::scene_update(), TOPIC_SCENE)?,
+            })
+        })()
+        .map_err(mcap_err)?;
+        let mut rec = Recorder {
+            writer,
+            file: sync_handle,
+            path: path.to_path_buf(),
+            ch,
+            frames: schema::body_frames(env.model()),
+            dt_ns: meta.control_dt_ns(),
+            seq: 0,
+            last_ns: None,
+            next_episode: 0,
+            open: None,
+            info_buf: Vec::new(),
+        };
+        rec.sync()?;
+        Ok(rec)
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Number of episodes begun so far.
+    pub fn episodes(&self) -> u64 {
+        self.next_episode
+    }
+
+    fn mcap_err(&self, source: mcap::McapError) -> RecordError {
+        RecordError::Mcap {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    fn write(&mut self, channel_id: u16, ns: u64, data: &[u8]) -> Result<(), RecordError> {
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.seq,
+            log_time: ns,
+            publish_time: ns,
+        };
+        self.seq = self.seq.wrapping_add(1);
+        self.last_ns = Some(self.last_ns.map_or(ns, |t| t.max(ns)));
+        self.writer
+            .write_to_known_channel(&header, data)
+            .map_err(|e| self.mcap_err(e))
+    }
+
+    fn write_json<T: Serialize>(
+        &mut self,
+        channel_id: u16,
+        ns: u64,
+        msg: &T,
+    ) -> Result<(), RecordError> {
+        let data = serde_json::to_vec(msg).map_err(|e| RecordError::Decode {
+            path: self.path.clone(),
+            what: "message to write".into(),
+            reason: e.to_string(),
+        })?;
+        self.write(channel_id, ns, &data)
+    }
+
+    /// Ends the current chunk and forces the file to disk.
+    fn sync(&mut self) -> Result<(), RecordError> {
+        self.writer.flush().map_err(|e| self.mcap_err(e))?;
+        self.file.sync_data().map_err(|source| RecordError::Io {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
+    /// Starts an episode; call right after `env.reset(seed)`. Writes `/episode`, `/scene`
+    /// and `/tf`. An episode still open is left unfinished (no `/episode_end`).
+    pub fn begin_episode(&mut self, env: &Env, seed: Option<u64>) -> Result<(), RecordError> {
+        let start_ns = self.last_ns.map_or(0, |t| t + self.dt_ns);
+        let index = self.next_episode;
+        self.next_episode += 1;
+        self.open = Some(Open {
+            index,
+            start_ns,
+            steps: 0,
+            ret: 0.0,
+        });
+        let msg = EpisodeMsg {
+            episode: index,
+            seed,
+            state: env.get_state(),
+            obs: env.obs().to_vec(),
+            info: info_pairs(env.info()),
+        };
+        self.write_json(self.ch.episode, start_ns, &msg)?;
+        let scene = schema::scene_update_msg(env.model(), &self.frames, start_ns);
+        self.write_json(self.ch.scene, start_ns, &scene)?;
+        let tf = schema::frame_transforms_msg(env.data(), &self.frames, start_ns);
+        self.write_json(self.ch.tf, start_ns, &tf)
+    }
+
+    /// Records one step that has just been made: `action` and the step's `reward`,
+    /// `terminated` and `truncated`, with obs, info and body poses read from `env` (after the
+    /// step), and `state_before`, the [`Env::get_state`] taken right before the step.
+    pub fn record_step(
+        &mut self,
+        env: &Env,
+        action: &[f32],
+        reward: f32,
+        terminated: bool,
+        truncated: bool,
+        state_before: &EnvState,
+    ) -> Result<(), RecordError> {
+        let Some(mut open) = self.open else {
+            return Err(RecordError::Usage {
+                path: self.path.clone(),
+                msg: "record_step called outside an episode (call begin_episode first)".into(),
+            });
+        };
+        let info = env.info();
+        let ns = open.start_ns + self.dt_ns * info.elapsed_steps.max(open.steps + 1) as u64;
+        let mut pairs = std::mem::take(&mut self.info_buf);
+        pairs.clear();
+        pairs.push(("elapsed_steps".to_string(), info.elapsed_steps as f64));
+        pairs.extend(
+            info.keys
+                .iter()
+                .zip(&info.values)
+                .map(|(k, v)| (k.to_string(), *v)),
+        );
+        let msg = StepMsgOut {
+            episode: open.index,
+            step: open.steps,
+            action,
+            obs: env.obs(),
+            reward,
+            terminated,
+            truncated,
+            info: &pairs,
+            state_before,
+        };
+        let r = self.write_json(self.ch.step, ns, &msg);
+        self.info_buf = pairs;
+        r?;
+        let tf = schema::frame_transforms_msg(env.data(), &self.frames, ns);
+        self.write_json(self.ch.tf, ns, &tf)?;
+        open.steps += 1;
+        open.ret += reward as f64;
+        self.open = Some(open);
+        Ok(())
+    }
+
+    /// Resets `env` with `seed` and begins an episode.
+    pub fn reset(&mut self, env: &mut Env, seed: Option<u64>) -> Result<(), RecordError> {
+        env.reset(seed);
+        self.begin_episode(env, seed)
+    }
+
+    /// Steps `env` with `action` and records the step (state before it included). Returns
+    /// `(reward, terminated, truncated)`. An action the env rejects is returned as
+    /// [`RecordError::Env`] and nothing is written.
+    pub fn step(
+        &mut self,
+        env: &mut Env,
+        action: &[f32],
+    ) -> Result<(f32, bool, bool), RecordError> {
+        let before = env.get_state();
+        let s = env.step(action).map_err(|source| RecordError::Env {
+            path: self.path.clone(),
+            source,
+        })?;
+        let out = (s.reward, s.terminated, s.truncated);
+        self.record_step(env, action, out.0, out.1, out.2, &before)?;
+        Ok(out)
+    }
+
+    /// Ends the open episode: writes `/episode_end` (steps, return = sum of rewards,
+    /// `success`), closes the chunk and syncs the file, so the episode survives a crash.
+    pub fn end_episode(&mut self, success: bool) -> Result<(), RecordError> {
+        let Some(open) = self.open.take() else {
+            return Err(RecordError::Usage {
+                path: self.path.clone(),
+                msg: "end_episode called outside an episode".into(),
+            });
+        };
+        let ns = self.last_ns.unwrap_or(open.start_ns);
+        let msg = EpisodeEndMsg {
+            episode: open.index,
+            steps: open.steps,
+            ret: open.ret,
+            success,
+        };
+        self.write_json(self.ch.episode_end, ns, &msg)?;
+        self.sync()
+    }
+
+    /// Writes the summary and footer and syncs the file. An open episode stays unfinished.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        self.writer.finish().map_err(|e| self.mcap_err(e))?;
+        let path = self.path.clone();
+        let io = |source| RecordError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut buf = self.writer.into_inner();
+        buf.flush().map_err(io)?;
+        self.file.sync_all().map_err(io)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reader
+
+/// One recorded step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepRec {
+    /// Action.
+    pub action: Vec<f32>,
+    /// Observation after the step.
+    pub obs: Vec<f32>,
+    /// Reward.
+    pub reward: f32,
+    /// Terminated flag.
+    pub terminated: bool,
+    /// Truncated flag.
+    pub truncated: bool,
+    /// Info after the step: `elapsed_steps`, then the task keys in env order.
+    pub info: Vec<(String, f64)>,
+    /// Env state *before* the step: `set_state` + `step(action)` replays it.
+    pub state: EnvState,
+}
+
+/// One recorded episode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeRec {
+    /// Episode index in the file (0-based).
+    pub index: u64,
+    /// Reset seed.
+    pub seed: Option<u64>,
+    /// State right after reset.
+    pub initial_state: EnvState,
+    /// Observation right after reset.
+    pub initial_obs: Vec<f32>,
+    /// Info right after reset.
+    pub initial_info: Vec<(String, f64)>,
+    /// Steps in order.
+    pub steps: Vec<StepRec>,
+    /// Whether the episode has its `/episode_end` message.
+    pub finished: bool,
+    /// Return (sum of rewards): from `/episode_end`, or summed over the steps if unfinished.
+    pub ret: f64,
+    /// Success flag of `/episode_end` (false if unfinished).
+    pub success: bool,
+}
+
+/// A recording read back by [`read`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// File metadata.
+    pub meta: Meta,
+    /// Episodes in order, including an unfinished last one.
+    pub episodes: Vec<EpisodeRec>,
+    /// Whether the file ended with its footer (false: cut short, e.g. a killed recorder).
+    pub complete: bool,
+}
+
+impl Recording {
+    /// The episodes that have their `/episode_end`.
+    pub fn finished(&self) -> impl Iterator<Item = &EpisodeRec> {
+        self.episodes.iter().filter(|e| e.finished)
+    }
+}
+
+/// One message of any channel, undecoded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawMessage {
+    /// Channel topic.
+    pub topic: String,
+    /// Schema name of the channel (empty if none).
+    pub schema: String,
+    /// Message encoding of the channel.
+    pub encoding: String,
+    /// Log time (ns).
+    pub log_time: u64,
+    /// Payload.
+    pub data: Vec<u8>,
+}
+
+/// The records of an MCAP file read by [`read_raw`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawRecording {
+    /// Header profile.
+    pub profile: String,
+    /// Header library.
+    pub library: String,
+    /// The `"mjskill"` metadata map (empty if absent).
+    pub metadata: BTreeMap<String, String>,
+    /// All messages in file order.
+    pub messages: Vec<RawMessage>,
+    /// Whether the file was read to its footer without error.
+    pub complete: bool,
+}
+
+/// Reads every complete record of an MCAP file, tolerating a file cut short (no summary or
+/// footer, a partial last record): records up to the damage are returned with
+/// `complete == false`. Errors if the file is unreadable, not MCAP, or damaged before its
+/// header.
+pub fn read_raw(path: &Path) -> Result<RawRecording, RecordError> {
+    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let not = |reason: &str| RecordError::NotRecording {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    };
+    if bytes.is_empty() {
+        return Err(not("the file is empty"));
+    }
+    if !bytes.starts_with(mcap::MAGIC) {
+        return Err(not("not an MCAP file (bad magic)"));
+    }
+    // The mcap parser returns errors for damaged input; the catch is a last line of defence
+    // so that a damaged file can never take the caller down.
+    let parsed = std::panic::catch_unwind(|| parse(&bytes));
+    let parsed = match parsed {
+        Ok(r) => r,
+        Err(_) => Err(ParseError::Fatal("the MCAP parser panicked".into())),
+    };
+    match parsed {
+        Ok(raw) => Ok(raw),
+        Err(ParseError::Fatal(reason)) => Err(RecordError::Decode {
+            path: path.to_path_buf(),
+            what: "MCAP file".into(),
+            reason,
+        }),
+        Err(ParseError::Mcap(source)) => Err(RecordError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
+}
+
+enum ParseError {
+    Mcap(mcap::McapError),
+    Fatal(String),
+}
+
+fn parse(bytes: &[u8]) -> Result<RawRecording, ParseError> {
+    let reader = mcap::read::ChunkFlattener::new_with_options(
+        bytes,
+        mcap::read::Options::IgnoreEndMagic.into(),
+    )
+    .map_err(ParseError::Mcap)?;
+    let mut header: Option<(String, String)> = None;
+    let mut metadata = BTreeMap::new();
+    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
+    let mut channels: BTreeMap<u16, (String, u16, String)> = BTreeMap::new();
+    let mut messages = Vec::new();
+    let mut footer = false;
+    let mut damaged = false;
+    for rec in reader {
+        let rec = match rec {
+            Ok(r) => r,
+            Err(e) => {
+                if header.is_none() {
+                    return Err(ParseError::Mcap(e));
+                }
+                damaged = true;
+                break;
+            }
+        };
+        match rec {
+            Record::Header(h) => header = Some((h.profile, h.library)),
+            Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
+            Record::Schema { header: h, .. } => {
+                schemas.insert(h.id, h.name);
+            }
+            Record::Channel(c) => {
+                channels.insert(c.id, (c.topic, c.schema_id, c.message_encoding));
+            }
+            Record::Message { header: h, data } => {
+                let Some((topic, sid, enc)) = channels.get(&h.channel_id) else {
+                    return Err(ParseError::Fatal(format!(
+                        "message on unknown channel {}",
+                        h.channel_id
+                    )));
+                };
+                messages.push(RawMessage {
+                    topic: topic.clone(),
+                    schema: schemas.get(sid).cloned().unwrap_or_default(),
+                    encoding: enc.clone(),
+                    log_time: h.log_time,
+                    data: data.into_owned(),
+                });
+            }
+            Record::Footer(_) => footer = true,
+            _ => {}
+        }
+        if header.is_none() {
+            return Err(ParseError::Fatal("the first record is not a header".into()));
+        }
+    }
+    let Some((profile, library)) = header else {
+        return Err(ParseError::Fatal("no MCAP header".into()));
+    };
+    Ok(RawRecording {
+        profile,
+        library,
+        metadata,
+        messages,
+        complete: footer && !damaged && mcap::read::footer(bytes).is_ok(),
+    })
+}
+
+/// Reads an mjskill recording. A file cut short (e.g. the recorder was killed) is read up to
+/// its last complete chunk, with [`Recording::complete`]` == false`; only episodes with an
+/// `/episode_end` message are [`EpisodeRec::finished`]. Errors name the file: unreadable,
+/// empty, not MCAP, not an mjskill recording (profile or metadata missing), or a message that
+/// does not decode.
+pub fn read(path: &Path) -> Result<Recording, RecordError> {
+    let raw = read_raw(path)?;
+    let not = |reason: String| RecordError::NotRecording {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if raw.profile != PROFILE {
+        return Err(not(format!(
+            "MCAP profile is {:?}, expected {PROFILE:?}",
+            raw.profile
+        )));
+    }
+    if raw.metadata.is_empty() {
+        return Err(not(format!("no {METADATA_NAME:?} metadata record")));
+    }
+    let meta = Meta::from_map(&raw.metadata).map_err(|reason| RecordError::Decode {
+        path: path.to_path_buf(),
+        what: "metadata".into(),
+        reason,
+    })?;
+    let mut episodes: Vec<EpisodeRec> = Vec::new();
+    for (n, m) in raw.messages.iter().enumerate() {
+        let bad = |reason: String| RecordError::Decode {
+            path: path.to_path_buf(),
+            what: format!("{} message #{n}", m.topic),
+            reason,
+        };
+        let current = |episodes: &mut Vec<EpisodeRec>, ep: u64| -> Result<usize, RecordError> {
+            match episodes.last() {
+                Some(e) if e.index == ep && !e.finished => Ok(episodes.len() - 1),
+                _ => Err(bad(format!("episode {ep} is not open"))),
+            }
+        };
+        match m.topic.as_str() {
+            TOPIC_EPISODE => {
+                let e: EpisodeMsg =
+                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
+                episodes.push(EpisodeRec {
+                    index: e.episode,
+                    seed: e.seed,
+                    initial_state: e.state,
+                    initial_obs: e.obs,
+                    initial_info: e.info,
+                    steps: Vec::new(),
+                    finished: false,
+                    ret: 0.0,
+                    success: false,
+                });
+            }
+            TOPIC_STEP => {
+                let s: StepMsgIn =
+                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
+                let i = current(&mut episodes, s.episode)?;
+                let ep = &mut episodes[i];
+                if s.step as usize != ep.steps.len() {
+                    return Err(bad(format!(
+                        "step {} of episode {} follows {} steps",
+                        s.step,
+                        s.episode,
+                        ep.steps.len()
+                    )));
+                }
+                ep.ret += s.reward as f64;
+                ep.steps.push(StepRec {
+                    action: s.action,
+                    obs: s.obs,
+                    reward: s.reward,
+                    terminated: s.terminated,
+                    truncated: s.truncated,
+                    info: s.info,
+                    state: s.state_before,
+                });
+            }
+            TOPIC_EPISODE_END => {
+                let e: EpisodeEndMsg =
+                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
+                let i = current(&mut episodes, e.episode)?;
+                let ep = &mut episodes[i];
+                ep.finished = true;
+                ep.ret = e.ret;
+                ep.success = e.success;
+            }
+            _ => {}
+        }
+    }
+    Ok(Recording {
+        meta,
+        episodes,
+        complete: raw.complete,
+    })
+}
