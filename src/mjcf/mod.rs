@@ -44,9 +44,9 @@ pub const CONTACT_SOLIMP: [f64; 3] = [0.95, 0.99, 0.001];
 /// Constraint rows MuJoCo preallocates per `mjData` (contacts × condim plus limits and
 /// equalities). The tabletop scenes use well under 200; keeping `mjData` small keeps many
 /// envs in cache (VecEnv). Overflow is reported as a MuJoCo warning in `info.warnings`.
-pub const NJMAX: usize = 600;
+pub const NJMAX: usize = 300;
 /// Contacts MuJoCo preallocates per `mjData`.
-pub const NCONMAX: usize = 150;
+pub const NCONMAX: usize = 100;
 /// Density of every prop and of robot links without URDF inertials (kg/m³).
 pub const DENSITY: f64 = 1000.0;
 /// Mass and principal inertia SAPIEN gives a link with neither inertial nor shapes.
