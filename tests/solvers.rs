@@ -45,17 +45,26 @@ fn policy_errors_name_the_problem() {
 #[test]
 fn sparse_reward_is_success_and_dense_reaches_its_maximum_stage() {
     use mjskill::solvers::make_policy;
-    let config = EnvConfig { reward_mode: mjskill::RewardMode::Sparse, ..Default::default() };
+    let config = EnvConfig {
+        reward_mode: mjskill::RewardMode::Sparse,
+        ..Default::default()
+    };
     let mut env = eval::make_env("PickCube-v1", config, "solver").unwrap();
     let mut policy = make_policy("solver", &env, 0).unwrap();
     let mut action = vec![0.0f32; 4];
     let (mut successes, mut dense_max) = (0, 0.0f64);
-    eval::run_episode(&mut env, policy.as_mut(), Some(1), &mut action, |e, _, reward, terminated, _| {
-        assert_eq!(reward, if terminated { 1.0 } else { 0.0 });
-        successes += terminated as usize;
-        dense_max = dense_max.max(e.dense_reward());
-        Ok(())
-    })
+    eval::run_episode(
+        &mut env,
+        policy.as_mut(),
+        Some(1),
+        &mut action,
+        |e, _, reward, terminated, _| {
+            assert_eq!(reward, if terminated { 1.0 } else { 0.0 });
+            successes += terminated as usize;
+            dense_max = dense_max.max(e.dense_reward());
+            Ok(())
+        },
+    )
     .unwrap();
     assert!(successes > 0);
     // Success with a static robot earns the full dense reward of 5 (tasks.md §1.7).

@@ -848,7 +848,10 @@ impl Data {
     /// Memory MuJoCo allocated for this `mjData`: (main buffer bytes, stack bytes).
     pub fn memory_bytes(&self) -> (usize, usize) {
         let d = self.raw();
-        (d.nbuffer as usize, d.nstack as usize * std::mem::size_of::<f64>())
+        (
+            d.nbuffer as usize,
+            d.nstack as usize * std::mem::size_of::<f64>(),
+        )
     }
     /// Brings poses and velocities derived from qpos/qvel up to date after `step` (which
     /// leaves them at the start of the step): `mj_kinematics`, `mj_comPos`, `mj_comVel`.
