@@ -473,3 +473,38 @@ fn registry_lists_envs_robots_and_modes() {
     let json = serde_json::to_string(&r).unwrap();
     assert!(json.contains("pd_ee_target_delta_pose") && json.contains("normalized_dense"));
 }
+
+#[test]
+fn ee_delta_pose_rotation_follows_maniskills_sign_and_root_axes() {
+    // rot_lower = −0.1 ⇒ a positive normalised rotation action turns by −0.1·a rad about the
+    // root-frame axis through the EE (controllers.md §1, §3.2).
+    let mut env = env_with("pd_ee_delta_pose");
+    env.reset(Some(2));
+    let q0 = quat(env.obs_part("extra/tcp_pose").unwrap());
+    let p0 = env.obs_part("extra/tcp_pose").unwrap()[..3].to_vec();
+    for _ in 0..4 {
+        env.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0]).unwrap();
+    }
+    let q1 = quat(env.obs_part("extra/tcp_pose").unwrap());
+    // Rotation in the world (= root orientation) frame: q1 = Δ ⊗ q0.
+    let delta = q1 * q0.inverse();
+    let axis = delta.axis().unwrap().into_inner() * delta.angle();
+    assert!(axis.z < -0.1, "turned about −z of the root frame: {axis:?}");
+    assert!(axis.x.abs() < 0.03 && axis.y.abs() < 0.03, "{axis:?}");
+    let p1 = &env.obs_part("extra/tcp_pose").unwrap()[..3];
+    for k in 0..3 {
+        assert!(
+            (p1[k] - p0[k]).abs() < 0.01,
+            "the EE stays in place while turning"
+        );
+    }
+}
+
+fn quat(pose: &[f32]) -> nalgebra::UnitQuaternion<f64> {
+    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        pose[3] as f64,
+        pose[4] as f64,
+        pose[5] as f64,
+        pose[6] as f64,
+    ))
+}
