@@ -24,3 +24,8 @@ pub mod tasks;
 pub use env::{
     make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, Step,
 };
+
+/// The README's examples, compiled and run as doc tests.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
