@@ -224,12 +224,24 @@ fn pick_cube(robot: &'static str) -> Box<dyn Task> {
     Box::new(crate::tasks::pick_cube::PickCube::new(robot))
 }
 
-static REGISTRY: [EnvSpec; 1] = [EnvSpec {
-    id: "PickCube-v1",
-    robots: &["panda"],
-    max_episode_steps: MAX_EPISODE_STEPS,
-    make_task: pick_cube,
-}];
+fn place_sphere(_robot: &'static str) -> Box<dyn Task> {
+    Box::new(crate::tasks::place_sphere::PlaceSphere::new())
+}
+
+static REGISTRY: [EnvSpec; 2] = [
+    EnvSpec {
+        id: "PickCube-v1",
+        robots: &["panda"],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: pick_cube,
+    },
+    EnvSpec {
+        id: "PlaceSphere-v1",
+        robots: &["panda"],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: place_sphere,
+    },
+];
 
 fn env_spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
     REGISTRY.iter().find(|e| e.id == id).ok_or_else(|| {

@@ -3,6 +3,7 @@
 //! what they share: the [`Task`] trait, the per-step [`TaskCtx`], the grasp check and pose
 //! helpers.
 pub mod pick_cube;
+pub mod place_sphere;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 

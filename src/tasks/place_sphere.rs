@@ -1,0 +1,211 @@
+//! PlaceSphere-v1 (tasks.md §3): grasp a small blue sphere and release it in a shallow bin.
+use nalgebra::Vector3;
+
+use super::{
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
+    CameraDef, Task, TaskCtx,
+};
+use crate::env::rng::TorchGenerator;
+use crate::mjcf::Scene;
+use crate::mujoco::{Data, Model};
+
+// ---- constants (tasks.md §3) ---------------------------------------------------------------
+/// Maximum dense reward.
+pub const MAX_REWARD: f64 = 13.0;
+/// Sphere radius (m).
+pub const RADIUS: f64 = 0.02;
+/// Bin floor half thickness (m); the bin frame sits at this height.
+pub const SHORT_SIDE_HALF: f64 = 0.0025;
+/// Bin floor half extents.
+pub const BLOCK_HALF: [f64; 3] = [0.0025, 0.025, 0.025];
+/// Bin wall half extents (along the wall's short axis first).
+pub const EDGE_BLOCK_HALF: [f64; 3] = [0.0025, 0.025, 0.005];
+/// Sphere colour (12, 42, 160)/255.
+pub const SPHERE_RGBA: [f64; 4] = [12.0 / 255.0, 42.0 / 255.0, 160.0 / 255.0, 1.0];
+/// Bin colour (ManiSkill's default white material).
+pub const BIN_RGBA: [f64; 4] = [1.0, 1.0, 1.0, 1.0];
+/// `is_obj_on_bin`: horizontal tolerance (m).
+const ON_BIN_XY: f64 = 0.005;
+/// `is_obj_on_bin`: vertical tolerance (m).
+const ON_BIN_Z: f64 = 0.005;
+/// `is_obj_static` thresholds: linear (m/s) and angular (rad/s).
+const STATIC_LIN: f64 = 1e-2;
+const STATIC_ANG: f64 = 0.5;
+/// The `ungrasp` term when the sphere is not grasped.
+const UNGRASP_FREE: f64 = 16.0;
+
+/// `evaluate()` keys in upstream order.
+pub const INFO_KEYS: [&str; 4] = [
+    "is_obj_grasped",
+    "is_obj_on_bin",
+    "is_obj_static",
+    "success",
+];
+const IS_OBJ_GRASPED: usize = 0;
+const IS_OBJ_ON_BIN: usize = 1;
+const IS_OBJ_STATIC: usize = 2;
+const SUCCESS: usize = 3;
+
+/// The five bin boxes (centre, half extents) in the bin frame: floor, walls −x, +x, −y, +y.
+pub fn bin_boxes() -> [([f64; 3], [f64; 3]); 5] {
+    let d = BLOCK_HALF[1] - EDGE_BLOCK_HALF[0]; // 0.0225
+    let z = EDGE_BLOCK_HALF[2] + BLOCK_HALF[0]; // 0.0075
+    let floor = [BLOCK_HALF[1], BLOCK_HALF[2], BLOCK_HALF[0]];
+    let wall_x = [EDGE_BLOCK_HALF[0], EDGE_BLOCK_HALF[1], EDGE_BLOCK_HALF[2]];
+    let wall_y = [EDGE_BLOCK_HALF[1], EDGE_BLOCK_HALF[0], EDGE_BLOCK_HALF[2]];
+    [
+        ([0.0, 0.0, 0.0], floor),
+        ([-d, 0.0, z], wall_x),
+        ([d, 0.0, z], wall_x),
+        ([0.0, -d, z], wall_y),
+        ([0.0, d, z], wall_y),
+    ]
+}
+
+/// PlaceSphere-v1.
+#[derive(Debug, Clone, Default)]
+pub struct PlaceSphere {
+    sphere: usize,
+    sphere_qadr: usize,
+    bin: usize,
+}
+
+impl PlaceSphere {
+    /// The task (panda and fetch share every constant).
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+impl Task for PlaceSphere {
+    fn max_reward(&self) -> f64 {
+        MAX_REWARD
+    }
+
+    // ---- scene -------------------------------------------------------------------------
+    fn build(&self, scene: &mut Scene) {
+        scene.add_sphere("sphere", RADIUS, SPHERE_RGBA, [0.0, 0.0, RADIUS]);
+        scene.add_kinematic_boxes("bin", &bin_boxes(), BIN_RGBA);
+        add_cameras(scene, self.cameras());
+    }
+
+    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+        self.sphere = body_id(model, "sphere")?;
+        self.sphere_qadr = free_joint_qpos(model, "sphere")?;
+        self.bin = body_id(model, "bin")?;
+        Ok(())
+    }
+
+    fn grasp_object(&self) -> usize {
+        self.sphere
+    }
+
+    // ---- episode initialisation (torch draws: rand(1) × 4) -------------------------------
+    fn initialize_episode(&mut self, data: &mut Data, torch: &mut TorchGenerator) {
+        let mut u = [0f32; 4];
+        for x in u.iter_mut() {
+            *x = torch.rand_f32();
+        }
+        let sphere = [
+            (u[0] * 0.05 - 0.1) as f64,
+            (u[1] * 0.2 - 0.1) as f64,
+            RADIUS as f32 as f64,
+        ];
+        set_free_pose(data, self.sphere_qadr, sphere, [1.0, 0.0, 0.0, 0.0]);
+        let bin = [
+            (u[2] * 0.1) as f64,
+            (u[3] * 0.2 - 0.1) as f64,
+            SHORT_SIDE_HALF as f32 as f64,
+        ];
+        let model = data.model().clone();
+        set_mocap_pose(&model, data, self.bin, bin, [1.0, 0.0, 0.0, 0.0]);
+    }
+
+    // ---- evaluate ------------------------------------------------------------------------
+    fn info_keys(&self) -> &'static [&'static str] {
+        &INFO_KEYS
+    }
+
+    fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
+        let o = ctx.body_pos(self.sphere) - ctx.body_pos(self.bin);
+        let on_bin =
+            o.xy().norm() <= ON_BIN_XY && (o.z - RADIUS - SHORT_SIDE_HALF).abs() <= ON_BIN_Z;
+        let (lin, ang) = ctx.body_velocity(self.sphere);
+        let stat = lin.norm() <= STATIC_LIN && ang.norm() <= STATIC_ANG;
+        let grasped = ctx.is_grasping();
+        info[IS_OBJ_GRASPED] = grasped as u8 as f64;
+        info[IS_OBJ_ON_BIN] = on_bin as u8 as f64;
+        info[IS_OBJ_STATIC] = stat as u8 as f64;
+        info[SUCCESS] = (on_bin && stat && !grasped) as u8 as f64;
+    }
+
+    // ---- observation extras ------------------------------------------------------------------
+    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
+        let mut v = vec![("is_grasped", 1), ("tcp_pose", 7), ("bin_pos", 3)];
+        if state {
+            v.extend([("obj_pose", 7), ("tcp_to_obj_pos", 3)]);
+        }
+        v
+    }
+
+    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]) {
+        let tcp = ctx.tcp_link_pos();
+        let sphere = ctx.body_pos(self.sphere);
+        out[0] = info[IS_OBJ_GRASPED] as f32;
+        write_pose(&mut out[1..8], tcp, ctx.tcp_quat);
+        write_vec(&mut out[8..11], ctx.body_pos(self.bin));
+        if state {
+            write_pose(&mut out[11..18], sphere, ctx.body_quat(self.sphere));
+            write_vec(&mut out[18..21], sphere - tcp);
+        }
+    }
+
+    // ---- dense reward (max 13) -----------------------------------------------------------------
+    fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
+        let tcp = ctx.tcp_link_pos();
+        let (sphere, bin) = (ctx.body_pos(self.sphere), ctx.body_pos(self.bin));
+        let grasped = info[IS_OBJ_GRASPED] > 0.0;
+        let mut r = 2.0 * (1.0 - (5.0 * (tcp - sphere).norm()).tanh());
+        let bin_top = bin + Vector3::new(0.0, 0.0, SHORT_SIDE_HALF + RADIUS);
+        let place = 1.0 - (5.0 * (bin_top - sphere).norm()).tanh();
+        if grasped {
+            r = 4.0 + place;
+        }
+        let gripper_width = 2.0 * ctx.robot.limits.last().map_or(0.0, |l| l.1);
+        let n = ctx.qpos.len();
+        let ungrasp = if grasped {
+            (ctx.qpos[n - 2] + ctx.qpos[n - 1]) / gripper_width
+        } else {
+            UNGRASP_FREE
+        };
+        let (lin, ang) = ctx.body_velocity(self.sphere);
+        let stat = 1.0 - (10.0 * lin.norm() + ang.norm()).tanh();
+        let robot_static = ctx.is_robot_static() as u8 as f64;
+        if info[IS_OBJ_ON_BIN] > 0.0 {
+            r = 6.0 + (ungrasp + stat + robot_static) / 3.0;
+        }
+        if info[SUCCESS] > 0.0 {
+            r = MAX_REWARD;
+        }
+        r
+    }
+
+    fn cameras(&self) -> (CameraDef, CameraDef) {
+        (
+            CameraDef {
+                name: "base_camera",
+                eye: [0.3, 0.0, 0.2],
+                target: [-0.1, 0.0, 0.0],
+                fovy: std::f64::consts::FRAC_PI_2,
+                size: (128, 128),
+            },
+            CameraDef {
+                name: "render_camera",
+                eye: [0.6, -0.2, 0.2],
+                target: [0.0, 0.0, 0.2],
+                fovy: 1.0,
+                size: (512, 512),
+            },
+        )
+    }
+}
