@@ -51,17 +51,11 @@ pub struct BenchReport {
 /// Runs the benchmark.
 pub fn run(
     env_id: &str,
-    robot: Option<String>,
-    control_mode: Option<String>,
+    config: EnvConfig,
     steps: usize,
     vec: Option<(usize, usize)>,
 ) -> Result<BenchReport, String> {
     let steps = steps.max(1);
-    let config = EnvConfig {
-        robot,
-        control_mode,
-        ..EnvConfig::default()
-    };
     let mut env = make(env_id, config.clone()).map_err(|e| e.to_string())?;
     let dim = env.action_space().shape[0];
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);

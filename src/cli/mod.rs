@@ -17,6 +17,31 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// Which env, robot and control mode a command runs.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EnvArgs {
+    /// Env id.
+    #[arg(long, default_value = "PickCube-v1")]
+    pub env: String,
+    /// Robot uid (default: the env's default robot).
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// Control mode (default: the policy's if it needs one, else the robot's default).
+    #[arg(long)]
+    pub control_mode: Option<String>,
+}
+
+impl EnvArgs {
+    /// The env configuration (other fields at their defaults).
+    pub fn config(&self) -> crate::env::EnvConfig {
+        crate::env::EnvConfig {
+            robot: self.robot.clone(),
+            control_mode: self.control_mode.clone(),
+            ..Default::default()
+        }
+    }
+}
+
 /// mjskill's commands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -34,15 +59,9 @@ pub enum Command {
     },
     /// Measure env steps/s against raw MuJoCo stepping of the same model; prints one JSON line.
     Bench {
-        /// Env id.
-        #[arg(long, default_value = "PickCube-v1")]
-        env: String,
-        /// Robot uid (default: the env's default robot).
-        #[arg(long)]
-        robot: Option<String>,
-        /// Control mode (default: the robot's default).
-        #[arg(long)]
-        control_mode: Option<String>,
+        /// Env, robot and control mode.
+        #[command(flatten)]
+        target: EnvArgs,
         /// Env steps to time (after a warm-up of a tenth as many).
         #[arg(long, default_value_t = 2000)]
         steps: usize,
@@ -74,15 +93,9 @@ pub enum Command {
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
     Eval {
-        /// Env id.
-        #[arg(long, default_value = "PickCube-v1")]
-        env: String,
-        /// Robot uid (default: the env's default robot).
-        #[arg(long)]
-        robot: Option<String>,
-        /// Control mode (default: the policy's, else the robot's default).
-        #[arg(long)]
-        control_mode: Option<String>,
+        /// Env, robot and control mode.
+        #[command(flatten)]
+        target: EnvArgs,
         /// Policy: solver, random or zero.
         #[arg(long, default_value = "solver")]
         policy: String,
@@ -96,15 +109,9 @@ pub enum Command {
     /// Record seeded episodes of a policy to an MCAP file; prints a JSON summary. With no
     /// arguments: PickCube-v1, panda, the scripted solver, 10 episodes, rollout.mcap.
     Rollout {
-        /// Env id.
-        #[arg(long, default_value = "PickCube-v1")]
-        env: String,
-        /// Robot uid (default: the env's default robot).
-        #[arg(long)]
-        robot: Option<String>,
-        /// Control mode (default: the policy's, else the robot's default).
-        #[arg(long)]
-        control_mode: Option<String>,
+        /// Env, robot and control mode.
+        #[command(flatten)]
+        target: EnvArgs,
         /// Observation mode: state, state_dict or none.
         #[arg(long, default_value = "state")]
         obs_mode: String,
@@ -158,9 +165,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
         Command::ExportMjcf { robot, env, output } => export_mjcf(&robot, env.as_deref(), output),
         Command::Bench {
-            env,
-            robot,
-            control_mode,
+            target,
             steps,
             envs,
             threads,
@@ -172,7 +177,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 (None, None) => None,
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
-            let report = bench::run(&env, robot, control_mode, steps, vec)?;
+            let report = bench::run(&target.env, target.config(), steps, vec)?;
             println!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
@@ -187,19 +192,12 @@ fn run(cli: Cli) -> Result<(), String> {
             crop,
         } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref()),
         Command::Eval {
-            env,
-            robot,
-            control_mode,
+            target,
             policy,
             episodes,
             seed,
         } => {
-            let config = crate::env::EnvConfig {
-                robot,
-                control_mode,
-                ..Default::default()
-            };
-            let report = eval::run(&env, config, &policy, episodes, seed)?;
+            let report = eval::run(&target.env, target.config(), &policy, episodes, seed)?;
             println!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
@@ -207,9 +205,7 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Command::Rollout {
-            env,
-            robot,
-            control_mode,
+            target,
             obs_mode,
             reward_mode,
             policy,
@@ -219,15 +215,13 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             use std::io::IsTerminal;
             let config = crate::env::EnvConfig {
-                robot,
-                control_mode,
                 obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
                 reward_mode: crate::env::RewardMode::parse(&reward_mode)
                     .map_err(|e| e.to_string())?,
-                ..Default::default()
+                ..target.config()
             };
             let args = rollout::RolloutArgs {
-                env,
+                env: target.env,
                 config,
                 policy,
                 episodes,

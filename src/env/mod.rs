@@ -92,24 +92,11 @@ impl ObsMode {
     ];
     /// Parses a mode name.
     pub fn parse(s: &str) -> Result<ObsMode, EnvError> {
-        Self::ALL
-            .iter()
-            .find(|(n, _)| *n == s)
-            .map(|(_, m)| *m)
-            .ok_or_else(|| {
-                EnvError::UnknownMode(format!(
-                    "unknown obs_mode {s:?}; valid obs modes: {}",
-                    names(&Self::ALL)
-                ))
-            })
+        parse_named(&Self::ALL, s, "obs_mode")
     }
     /// The mode's name.
     pub fn name(self) -> &'static str {
-        Self::ALL
-            .iter()
-            .find(|(_, m)| *m == self)
-            .map(|(n, _)| *n)
-            .unwrap_or("state")
+        name_of(&Self::ALL, self)
     }
 }
 
@@ -136,25 +123,31 @@ impl RewardMode {
     ];
     /// Parses a mode name.
     pub fn parse(s: &str) -> Result<RewardMode, EnvError> {
-        Self::ALL
-            .iter()
-            .find(|(n, _)| *n == s)
-            .map(|(_, m)| *m)
-            .ok_or_else(|| {
-                EnvError::UnknownMode(format!(
-                    "unknown reward_mode {s:?}; valid reward modes: {}",
-                    names(&Self::ALL)
-                ))
-            })
+        parse_named(&Self::ALL, s, "reward_mode")
     }
     /// The mode's name.
     pub fn name(self) -> &'static str {
-        Self::ALL
-            .iter()
-            .find(|(_, m)| *m == self)
-            .map(|(n, _)| *n)
-            .unwrap_or("normalized_dense")
+        name_of(&Self::ALL, self)
     }
+}
+
+/// Looks `s` up in a (name, value) table; the error lists the valid names.
+fn parse_named<T: Copy>(all: &[(&'static str, T)], s: &str, what: &str) -> Result<T, EnvError> {
+    all.iter()
+        .find(|(n, _)| *n == s)
+        .map(|(_, m)| *m)
+        .ok_or_else(|| {
+            EnvError::UnknownMode(format!(
+                "unknown {what} {s:?}; valid {}s: {}",
+                what.replace('_', " "),
+                names(all)
+            ))
+        })
+}
+
+/// The name of `m` in a (name, value) table (every value is listed, so the lookup succeeds).
+fn name_of<T: PartialEq>(all: &[(&'static str, T)], m: T) -> &'static str {
+    all.iter().find(|(_, v)| *v == m).map_or("", |(n, _)| *n)
 }
 
 fn names<T>(v: &[(&str, T)]) -> String {

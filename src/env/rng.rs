@@ -472,18 +472,7 @@ mod tests {
     /// Panda rest qpos + N(0, 0.02) noise on all 9 entries (fingers then reset to 0.04),
     /// float64 sum then the float32 round trip of PhysX.
     fn panda_qpos(seed: u64) -> Vec<f64> {
-        use std::f64::consts::PI;
-        let rest = [
-            0.0,
-            PI / 8.0,
-            0.0,
-            -5.0 * PI / 8.0,
-            0.0,
-            3.0 * PI / 4.0,
-            PI / 4.0,
-            0.04,
-            0.04,
-        ];
+        let rest = crate::robots::panda::REST;
         let mut noise = [0.0; 9];
         NumpyRandomState::new(seed).fill_normal(0.0, 0.02, &mut noise);
         let mut q: Vec<f64> = rest.iter().zip(&noise).map(|(r, n)| r + n).collect();

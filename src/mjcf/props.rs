@@ -96,15 +96,20 @@ impl Scene {
 
     /// A dynamic box (free joint named `name`) with half extents `half`, at `pos`.
     pub fn add_box(&mut self, name: &str, half: [f64; 3], rgba: Rgba, pos: [f64; 3]) {
+        let geom = Element::new("geom")
+            .attr("type", "box")
+            .attr_nums("size", &half);
+        self.add_free_body(name, pos, rgba, geom);
+    }
+
+    /// A body with a free joint and one geom, all named `name`, with the props' density.
+    fn add_free_body(&mut self, name: &str, pos: [f64; 3], rgba: Rgba, geom: Element) {
         let body = Element::new("body")
             .attr("name", name)
             .attr_nums("pos", &pos)
             .child(Element::new("freejoint").attr("name", name))
             .child(
-                Element::new("geom")
-                    .attr("name", name)
-                    .attr("type", "box")
-                    .attr_nums("size", &half)
+                geom.attr("name", name)
                     .attr("density", DENSITY)
                     .attr("rgba", nums(&rgba)),
             );
@@ -113,19 +118,10 @@ impl Scene {
 
     /// A dynamic sphere (free joint named `name`) of radius `r`.
     pub fn add_sphere(&mut self, name: &str, r: f64, rgba: Rgba, pos: [f64; 3]) {
-        let body = Element::new("body")
-            .attr("name", name)
-            .attr_nums("pos", &pos)
-            .child(Element::new("freejoint").attr("name", name))
-            .child(
-                Element::new("geom")
-                    .attr("name", name)
-                    .attr("type", "sphere")
-                    .attr_nums("size", &[r])
-                    .attr("density", DENSITY)
-                    .attr("rgba", nums(&rgba)),
-            );
-        self.worldbody().push(body);
+        let geom = Element::new("geom")
+            .attr("type", "sphere")
+            .attr_nums("size", &[r]);
+        self.add_free_body(name, pos, rgba, geom);
     }
 
     /// PokeCube's peg (tasks.md §2.1): one collision box of half extents
