@@ -64,6 +64,34 @@ pub enum InitNoise {
     None,
 }
 
+/// `agent.is_static(threshold)` per robot (env.md §10).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StaticRule {
+    /// max |qvel[..n]| ≤ threshold over the first `n` dofs (the arm).
+    Arm(usize),
+    /// Fetch, as upstream: `qvel[3..n_dof−2] ≤ threshold` and `qvel[0..3] ≤ base_threshold`
+    /// element-wise with a **signed** comparison (large negative velocities count as static;
+    /// an upstream bug kept for parity).
+    FetchSigned {
+        /// Threshold of the base dofs (0.05).
+        base_threshold: f64,
+    },
+}
+
+impl StaticRule {
+    /// Whether the robot with velocities `qvel` (ManiSkill order) is static.
+    pub fn is_static(&self, qvel: &[f64], threshold: f64) -> bool {
+        match *self {
+            StaticRule::Arm(n) => qvel[..n].iter().all(|v| v.abs() <= threshold),
+            StaticRule::FetchSigned { base_threshold } => {
+                let n = qvel.len();
+                qvel[3..n - 2].iter().all(|&v| v <= threshold)
+                    && qvel[..3].iter().all(|&v| v <= base_threshold)
+            }
+        }
+    }
+}
+
 /// Everything mjskill knows about one robot besides its URDF.
 #[derive(Debug, Clone)]
 pub struct RobotSpec {
@@ -89,8 +117,8 @@ pub struct RobotSpec {
     pub tcp_link: Option<&'static str>,
     /// Grasp check parameters.
     pub grasp: GraspDef,
-    /// Number of leading qvel entries checked by `is_static` (the arm).
-    pub static_dofs: usize,
+    /// The `is_static` rule.
+    pub static_rule: StaticRule,
     /// Root pose in the table scene: position and quaternion (w, x, y, z).
     pub table_pose: ([f64; 3], [f64; 4]),
     /// Initial qpos in the table scene (ManiSkill order).
@@ -101,6 +129,10 @@ pub struct RobotSpec {
     pub control_modes: &'static [&'static str],
     /// The parts of a control mode (None for an unknown mode).
     pub parts: fn(&str) -> Option<Vec<PartSpec>>,
+    /// Robot-specific scene options on top of [`RobotSpec::options`]' defaults: loop
+    /// closures, extra collision exclusions, links that ignore the ground, per-joint armature
+    /// or damping of undriven joints.
+    pub customize: fn(&mut RobotOptions),
 }
 
 impl RobotSpec {
@@ -126,7 +158,7 @@ impl RobotSpec {
         if let Some(l) = self.tcp_link {
             sites.push(("tcp".to_string(), l.to_string(), [0.0; 3]));
         }
-        RobotOptions {
+        let mut opts = RobotOptions {
             base,
             drives,
             default_armature: ARMATURE,
@@ -138,7 +170,9 @@ impl RobotSpec {
                 .collect(),
             sites,
             ..RobotOptions::default()
-        }
+        };
+        (self.customize)(&mut opts);
+        opts
     }
 
     /// The parts of `mode`; the error lists this robot's control modes.

@@ -1,7 +1,7 @@
 //! Franka Emika Panda (robots.md §2): 7 arm joints, two mimic-coupled prismatic fingers.
 use std::f64::consts::PI;
 
-use super::{GraspDef, InitNoise, RobotSpec, TcpDef};
+use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
 use crate::controllers::{PartKind, PartSpec};
 
 /// The Panda's rest keyframe (ManiSkill order).
@@ -176,10 +176,11 @@ pub static PANDA: RobotSpec = RobotSpec {
         min_force: 0.5,
         max_angle_deg: 85.0,
     },
-    static_dofs: 7,
+    static_rule: StaticRule::Arm(7),
     table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &REST,
     init_noise: InitNoise::AllButLast(2),
     control_modes: &CONTROL_MODES,
     parts,
+    customize: |_| {},
 };

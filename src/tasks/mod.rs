@@ -12,6 +12,9 @@ use crate::mjcf::Scene;
 use crate::mujoco::{Data, Model, ObjType};
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
 
+/// Threshold of `agent.is_static` as every task calls it (rad/s or m/s).
+pub const ROBOT_STATIC_THRESHOLD: f64 = 0.2;
+
 /// A camera defined like ManiSkill's `look_at(eye, target)` with a vertical field of view.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraDef {
@@ -59,11 +62,11 @@ impl TaskCtx<'_> {
             self.finger_forces,
         )
     }
-    /// `agent.is_static(0.2)`: max |qvel| over the arm dofs ≤ 0.2 (env.md §10).
+    /// `agent.is_static(0.2)` with the robot's rule (env.md §10).
     pub fn is_robot_static(&self) -> bool {
-        self.qvel[..self.spec.static_dofs]
-            .iter()
-            .all(|v| v.abs() <= 0.2)
+        self.spec
+            .static_rule
+            .is_static(self.qvel, ROBOT_STATIC_THRESHOLD)
     }
     /// Position of a body.
     pub fn body_pos(&self, body: usize) -> Vector3<f64> {
