@@ -48,7 +48,13 @@ pub struct EvalReport {
 
 /// Builds the env for a policy: the solver dictates its control mode.
 pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env, String> {
-    if let Some(required) = required_control_mode(policy) {
+    let robot = match &config.robot {
+        Some(r) => r.clone(),
+        None => crate::env::default_robot(env_id)
+            .map_err(|e| e.to_string())?
+            .to_string(),
+    };
+    if let Some(required) = required_control_mode(policy, &robot) {
         match config.control_mode.as_deref() {
             None => config.control_mode = Some(required.to_string()),
             Some(m) if m == required => {}

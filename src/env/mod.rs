@@ -245,6 +245,11 @@ fn env_spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
     })
 }
 
+/// The default robot of a registered env.
+pub fn default_robot(env_id: &str) -> Result<&'static str, EnvError> {
+    Ok(env_spec(env_id)?.robots[0])
+}
+
 /// Every registered env id with its robots, their control modes, and the modes.
 pub fn registry() -> Vec<EnvInfo> {
     REGISTRY

@@ -24,9 +24,18 @@ pub trait Policy: std::fmt::Debug {
     fn act(&mut self, env: &Env, action: &mut [f32]);
 }
 
-/// The control mode a policy needs (`None`: any).
-pub fn required_control_mode(policy: &str) -> Option<&'static str> {
-    (policy == "solver").then_some("pd_ee_delta_pos")
+/// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
+/// the end effector (`pd_ee_delta_pos`) where the robot has EE controllers; SO100 and
+/// WidowX AI have none upstream, so their solvers command joint positions (`pd_joint_pos`)
+/// from an IK of their own.
+pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> {
+    if policy != "solver" {
+        return None;
+    }
+    Some(match robot {
+        "so100" | "widowxai" => "pd_joint_pos",
+        _ => "pd_ee_delta_pos",
+    })
 }
 
 /// Builds a policy by name for `env` (random: seeded with `seed`).
@@ -80,9 +89,10 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         .control_mode
         .as_deref()
         .unwrap_or("pd_joint_delta_pos");
-    if mode != "pd_ee_delta_pos" {
+    let required = required_control_mode("solver", robot).unwrap_or(mode);
+    if mode != required {
         return Err(format!(
-            "the scripted solver drives pd_ee_delta_pos, but the env uses {mode}"
+            "the scripted solver for {robot} drives {required}, but the env uses {mode}"
         ));
     }
     match (env.id(), robot) {
