@@ -221,7 +221,11 @@ fn place_sphere(_robot: &'static str) -> Box<dyn Task> {
     Box::new(crate::tasks::place_sphere::PlaceSphere::new())
 }
 
-static REGISTRY: [EnvSpec; 2] = [
+fn poke_cube(_robot: &'static str) -> Box<dyn Task> {
+    Box::new(crate::tasks::poke_cube::PokeCube::new())
+}
+
+static REGISTRY: [EnvSpec; 3] = [
     EnvSpec {
         id: "PickCube-v1",
         robots: &["panda"],
@@ -233,6 +237,12 @@ static REGISTRY: [EnvSpec; 2] = [
         robots: &["panda"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: place_sphere,
+    },
+    EnvSpec {
+        id: "PokeCube-v1",
+        robots: &["panda"],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: poke_cube,
     },
 ];
 

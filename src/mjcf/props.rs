@@ -198,17 +198,28 @@ impl Scene {
         self.worldbody().push(body);
     }
 
-    /// A visual-only marker made of coaxial cylinders `(radius, half length, colour)`, axis
-    /// along the body's local z (PokeCube's red/white target).
+    /// A visual-only marker made of coaxial cylinders `(radius, half length, colour)` with
+    /// their axis along the body's local **x**, as SAPIEN builds cylinders (each MuJoCo
+    /// cylinder, natively along z, is turned by +90° about y), so a body pose copied from
+    /// ManiSkill places it identically (PokeCube's red/white target). Seen by sensor cameras.
     pub fn add_marker_target(&mut self, name: &str, rings: &[(f64, f64, Rgba)]) {
+        // Massless geoms: MuJoCo cannot place the centre of mass of several of them, so the
+        // (kinematic, never simulated) body gets a token inertial like SAPIEN's shapeless links.
         let mut body = Element::new("body")
             .attr("name", name)
-            .attr("mocap", "true");
+            .attr("mocap", "true")
+            .child(
+                Element::new("inertial")
+                    .attr("pos", "0 0 0")
+                    .attr("mass", super::xml::num(super::MASSLESS))
+                    .attr_nums("diaginertia", &[super::MASSLESS; 3]),
+            );
         for (k, (r, hl, rgba)) in rings.iter().enumerate() {
             body.push(visual(
                 Element::new("geom")
                     .attr("name", format!("{name}_{k}"))
                     .attr("type", "cylinder")
+                    .attr_nums("quat", &[0.7071068, 0.0, 0.7071068, 0.0])
                     .attr_nums("size", &[*r, *hl]),
                 rgba,
                 0,

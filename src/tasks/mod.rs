@@ -4,6 +4,7 @@
 //! helpers.
 pub mod pick_cube;
 pub mod place_sphere;
+pub mod poke_cube;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 

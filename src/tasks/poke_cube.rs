@@ -1,0 +1,301 @@
+//! PokeCube-v1 (tasks.md §2): grasp a blue peg and push a red cube with the peg's head onto
+//! a red/white target on the table.
+//!
+//! Robot-generic: every robot-dependent quantity goes through the robot spec — `agent.tcp`
+//! is the robot's TCP link (panda `panda_hand_tcp`, fetch `gripper_link`), the grasp check is
+//! the robot's, and the static reward term uses `qvel[:-2]` for every robot, as upstream.
+//!
+//! Upstream quirks kept for parity: the observation key `goal_pos` holds the **peg**
+//! position; the peg head is `peg.p + (0.12, 0, 0)` in world axes (not rotated with the
+//! peg); `angle_diff` is the unwrapped difference of the two yaw angles.
+//!
+//! The goal region is a mocap body whose pose is upstream's exactly: position
+//! (cube.x + 0.1, cube.y, 0.001) and quaternion [`GOAL_QUAT`] = `euler2quat(0, π/2, 0)`.
+//! Its cylinders are built with their axis along the body's local x, as SAPIEN's cylinders
+//! are (MuJoCo's are along local z; `Scene::add_marker_target` rotates each geom), so that
+//! quaternion turns them vertical and the target lies flat, as upstream. Only the goal's
+//! position enters observations, `evaluate()` and the reward.
+use std::f64::consts::{FRAC_PI_3, FRAC_PI_6};
+
+use nalgebra::Vector3;
+
+use super::{
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
+    yaw_quat_f32, CameraDef, Task, TaskCtx,
+};
+use crate::env::rng::TorchGenerator;
+use crate::mjcf::props::Rgba;
+use crate::mjcf::Scene;
+use crate::mujoco::{Data, Model};
+
+// ---- constants (tasks.md §2) ---------------------------------------------------------------
+/// Maximum dense reward.
+pub const MAX_REWARD: f64 = 10.0;
+/// Cube half edge (m).
+pub const CUBE_HALF_SIZE: f64 = 0.02;
+/// Peg half width (m): its cross-section is 0.05 × 0.05.
+pub const PEG_HALF_WIDTH: f64 = 0.025;
+/// Peg half length (m), along its local x.
+pub const PEG_HALF_LENGTH: f64 = 0.12;
+/// Radius of the goal region (and of `is_cube_placed`).
+pub const GOAL_RADIUS: f64 = 0.05;
+/// Height of the goal region's frame.
+pub const GOAL_Z: f64 = 0.001;
+/// The goal region's quaternion `euler2quat(0, π/2, 0)` (w, x, y, z).
+pub const GOAL_QUAT: [f64; 4] = [0.7071068, 0.0, 0.7071068, 0.0];
+/// Cube colour.
+pub const CUBE_RGBA: Rgba = [1.0, 0.0, 0.0, 1.0];
+/// Peg colour (both halves): (12, 42, 160)/255.
+pub const PEG_RGBA: Rgba = [12.0 / 255.0, 42.0 / 255.0, 160.0 / 255.0, 1.0];
+/// Red of the target: (194, 19, 22)/255.
+pub const TARGET_RED: Rgba = [194.0 / 255.0, 19.0 / 255.0, 22.0 / 255.0, 1.0];
+/// White of the target.
+pub const TARGET_WHITE: Rgba = [1.0, 1.0, 1.0, 1.0];
+/// Half thickness of the target's outermost ring; each inner ring is 1e-5 thicker.
+const TARGET_HALF_THICKNESS: f64 = 0.5e-5;
+/// `is_peg_cube_fit`: angle tolerance (rad).
+const FIT_ANGLE: f64 = 0.05;
+/// `is_peg_cube_fit`: head-to-cube distance tolerance (cube half size + 5 mm).
+const FIT_DIST: f64 = 0.02 + 0.005;
+/// `reached`: TCP-to-peg-centre distance (m).
+const REACHED_DIST: f64 = 0.01;
+/// Trailing qvel entries the static reward term ignores (both supported robots).
+const STATIC_DROP: usize = 2;
+
+/// `evaluate()` keys in upstream order.
+pub const INFO_KEYS: [&str; 6] = [
+    "success",
+    "is_cube_placed",
+    "is_peg_cube_fit",
+    "is_peg_grasped",
+    "angle_diff",
+    "head_to_cube_dist",
+];
+const SUCCESS: usize = 0;
+const IS_CUBE_PLACED: usize = 1;
+const IS_PEG_CUBE_FIT: usize = 2;
+const IS_PEG_GRASPED: usize = 3;
+const ANGLE_DIFF: usize = 4;
+const HEAD_TO_CUBE_DIST: usize = 5;
+
+/// The target's rings `(radius, half thickness, colour)`, outermost first:
+/// radii 0.05·{1, 4/5, 3/5, 2/5, 1/5}, alternating red and white.
+pub fn target_rings() -> [(f64, f64, Rgba); 5] {
+    std::array::from_fn(|k| {
+        let r = GOAL_RADIUS * (5 - k) as f64 / 5.0;
+        let colour = if k % 2 == 0 { TARGET_RED } else { TARGET_WHITE };
+        (r, TARGET_HALF_THICKNESS + k as f64 * 1e-5, colour)
+    })
+}
+
+/// The peg head offset `peg_head_offsets.p` (world axes, not rotated: upstream quirk).
+pub fn peg_head(peg: Vector3<f64>) -> Vector3<f64> {
+    peg + Vector3::new(PEG_HALF_LENGTH, 0.0, 0.0)
+}
+
+/// Yaw as upstream extracts it: the third angle of the intrinsic XYZ Euler decomposition,
+/// `atan2(−R₀₁, R₀₀)` of the rotation matrix of `q` (w, x, y, z).
+pub fn yaw_xyz(q: [f64; 4]) -> f64 {
+    let [w, x, y, z] = q;
+    let r00 = 1.0 - 2.0 * (y * y + z * z);
+    let r01 = 2.0 * (x * y - w * z);
+    (-r01).atan2(r00)
+}
+
+/// PokeCube-v1.
+#[derive(Debug, Clone, Default)]
+pub struct PokeCube {
+    cube: usize,
+    cube_qadr: usize,
+    peg: usize,
+    peg_qadr: usize,
+    goal: usize,
+}
+
+impl PokeCube {
+    /// The task (panda and fetch share every constant).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `agent.tcp.pose`: the TCP link's position and raw quaternion.
+    fn tcp(&self, ctx: &TaskCtx) -> (Vector3<f64>, [f64; 4]) {
+        match ctx.robot.tcp_body {
+            Some(b) => (ctx.body_pos(b), ctx.body_quat(b)),
+            None => (Vector3::from(ctx.tcp_pos), ctx.tcp_quat),
+        }
+    }
+}
+
+impl Task for PokeCube {
+    fn max_reward(&self) -> f64 {
+        MAX_REWARD
+    }
+
+    // ---- scene (build order: cube, peg, goal_region) ---------------------------------------
+    fn build(&self, scene: &mut Scene) {
+        let h = CUBE_HALF_SIZE;
+        scene.add_box("cube", [h; 3], CUBE_RGBA, [1.0, 0.0, h]);
+        let w = PEG_HALF_WIDTH;
+        scene.add_peg("peg", PEG_HALF_LENGTH, w, PEG_RGBA, [0.0, 0.0, w]);
+        // Not hidden: the sensor camera sees the target.
+        scene.add_marker_target("goal_region", &target_rings());
+        add_cameras(scene, self.cameras());
+    }
+
+    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+        self.cube = body_id(model, "cube")?;
+        self.cube_qadr = free_joint_qpos(model, "cube")?;
+        self.peg = body_id(model, "peg")?;
+        self.peg_qadr = free_joint_qpos(model, "peg")?;
+        self.goal = body_id(model, "goal_region")?;
+        Ok(())
+    }
+
+    fn grasp_object(&self) -> usize {
+        self.peg
+    }
+
+    // ---- episode initialisation (torch draws: rand(3) × 3), in float32 as upstream ---------
+    fn initialize_episode(&mut self, data: &mut Data, torch: &mut TorchGenerator) {
+        // 1. Peg: xy ∈ U(−0.1, 0.1), yaw 0.
+        let mut u1 = [0f32; 3];
+        torch.fill_rand(&mut u1);
+        let peg = [u1[0] * 0.2 - 0.1, u1[1] * 0.2 - 0.1, PEG_HALF_WIDTH as f32];
+        // 2. Cube: y ∈ U(−0.1, 0.1), x = peg.x + half length + 0.1 (u2[0], u2[2] unused).
+        let mut u2 = [0f32; 3];
+        torch.fill_rand(&mut u2);
+        let cube = [
+            peg[0] + PEG_HALF_LENGTH as f32 + 0.1,
+            u2[1] * 0.2 - 0.1,
+            CUBE_HALF_SIZE as f32,
+        ];
+        // 3. Cube yaw ∈ U(−π/6, π/6): rand·(b1 − b0) + b0 with the bounds computed in
+        //    Python floats (b1 − b0 = π/3 exactly) and rounded to f32 by torch.
+        let mut u3 = [0f32; 3];
+        torch.fill_rand(&mut u3);
+        let yaw = u3[2] * (FRAC_PI_3 as f32) + (-FRAC_PI_6 as f32);
+        // 4. Goal: cube + (goal_radius + 0.05, 0, 0), z := 0.001.
+        let goal = [cube[0] + (GOAL_RADIUS + 0.05) as f32, cube[1], GOAL_Z as f32];
+
+        let f64s = |v: [f32; 3]| v.map(|x| x as f64);
+        set_free_pose(data, self.peg_qadr, f64s(peg), [1.0, 0.0, 0.0, 0.0]);
+        set_free_pose(data, self.cube_qadr, f64s(cube), yaw_quat_f32(yaw));
+        let model = data.model().clone();
+        set_mocap_pose(&model, data, self.goal, f64s(goal), GOAL_QUAT);
+    }
+
+    // ---- evaluate ------------------------------------------------------------------------
+    fn info_keys(&self) -> &'static [&'static str] {
+        &INFO_KEYS
+    }
+
+    fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
+        let (cube, peg, goal) = (
+            ctx.body_pos(self.cube),
+            ctx.body_pos(self.peg),
+            ctx.body_pos(self.goal),
+        );
+        let placed = (cube.xy() - goal.xy()).norm() < GOAL_RADIUS;
+        // The head pose's rotation is the peg's.
+        let angle_diff =
+            (yaw_xyz(ctx.body_quat(self.peg)) - yaw_xyz(ctx.body_quat(self.cube))).abs();
+        let head_to_cube = (peg_head(peg).xy() - cube.xy()).norm();
+        let fit = angle_diff < FIT_ANGLE && head_to_cube <= FIT_DIST;
+        info[SUCCESS] = (placed && ctx.is_robot_static()) as u8 as f64;
+        info[IS_CUBE_PLACED] = placed as u8 as f64;
+        info[IS_PEG_CUBE_FIT] = fit as u8 as f64;
+        info[IS_PEG_GRASPED] = ctx.is_grasping() as u8 as f64;
+        info[ANGLE_DIFF] = angle_diff;
+        info[HEAD_TO_CUBE_DIST] = head_to_cube;
+    }
+
+    // ---- observation extras ------------------------------------------------------------------
+    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
+        let mut v = vec![("tcp_pose", 7)];
+        if state {
+            v.extend([
+                ("cube_pose", 7),
+                ("peg_pose", 7),
+                ("goal_pos", 3),
+                ("tcp_to_peg_pos", 3),
+                ("peg_to_cube_pos", 3),
+                ("cube_to_goal_pos", 3),
+                ("peghead_to_cube_pos", 3),
+            ]);
+        }
+        v
+    }
+
+    fn write_extra(&self, ctx: &TaskCtx, _info: &[f64], state: bool, out: &mut [f32]) {
+        let (tcp, tcp_q) = self.tcp(ctx);
+        write_pose(&mut out[0..7], tcp, tcp_q);
+        if state {
+            let (cube, peg, goal) = (
+                ctx.body_pos(self.cube),
+                ctx.body_pos(self.peg),
+                ctx.body_pos(self.goal),
+            );
+            write_pose(&mut out[7..14], cube, ctx.body_quat(self.cube));
+            write_pose(&mut out[14..21], peg, ctx.body_quat(self.peg));
+            write_vec(&mut out[21..24], peg); // `goal_pos` = peg position (upstream quirk)
+            write_vec(&mut out[24..27], peg - tcp);
+            write_vec(&mut out[27..30], cube - peg);
+            write_vec(&mut out[30..33], goal - cube);
+            write_vec(&mut out[33..36], peg_head(peg) - cube);
+        }
+    }
+
+    // ---- dense reward (max 10) -----------------------------------------------------------------
+    fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
+        if info[SUCCESS] > 0.0 {
+            return MAX_REWARD;
+        }
+        let (tcp, _) = self.tcp(ctx);
+        let (cube, peg, goal) = (
+            ctx.body_pos(self.cube),
+            ctx.body_pos(self.peg),
+            ctx.body_pos(self.goal),
+        );
+        // Reaching the peg centre.
+        let d = (tcp - peg).norm();
+        let mut r = 2.0 * (1.0 - (5.0 * d).tanh());
+        // Grasped (and reached): head close to the cube and aligned with it.
+        let grasped_reached = info[IS_PEG_GRASPED] > 0.0 && d < REACHED_DIST;
+        if grasped_reached {
+            let close = 1.0 - (5.0 * info[HEAD_TO_CUBE_DIST]).tanh();
+            let align = 1.0 - (5.0 * info[ANGLE_DIFF]).tanh();
+            r = 4.0 + close + align;
+        }
+        // Fitted: cube towards the goal (3-D distance).
+        if info[IS_PEG_CUBE_FIT] > 0.0 && grasped_reached {
+            r = 7.0 + (1.0 - (5.0 * (goal - cube).norm()).tanh());
+        }
+        // Placed: robot at rest.
+        if info[IS_CUBE_PLACED] > 0.0 {
+            let n = ctx.qvel.len().saturating_sub(STATIC_DROP);
+            let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
+            r += 1.0 - (5.0 * qv).tanh();
+        }
+        r
+    }
+
+    fn cameras(&self) -> (CameraDef, CameraDef) {
+        (
+            CameraDef {
+                name: "base_camera",
+                eye: [0.3, 0.0, 0.6],
+                target: [-0.1, 0.0, 0.1],
+                fovy: std::f64::consts::FRAC_PI_2,
+                size: (128, 128),
+            },
+            CameraDef {
+                name: "render_camera",
+                eye: [0.6, 0.7, 0.6],
+                target: [0.2, 0.2, 0.35],
+                fovy: 1.0,
+                size: (512, 512),
+            },
+        )
+    }
+}
