@@ -70,3 +70,57 @@ fn sparse_reward_is_success_and_dense_reaches_its_maximum_stage() {
     // Success with a static robot earns the full dense reward of 5 (tasks.md §1.7).
     assert!((dense_max - 5.0).abs() < 1e-9, "{dense_max}");
 }
+
+#[test]
+fn placesphere_panda_solver_succeeds_on_seeds_0_to_19() {
+    let r = eval::run("PlaceSphere-v1", EnvConfig::default(), "solver", 20, 0).unwrap();
+    assert_eq!(r.control_mode, "pd_ee_delta_pos");
+    assert!(r.successes >= 19, "{r:?}");
+    // Released in the bin, the sphere stays there (success is kept to the last step).
+    assert!(r.success_at_end_rate >= 0.95, "{r:?}");
+    let first = r.mean_first_success_step.unwrap();
+    assert!((20.0..48.0).contains(&first), "{first}");
+}
+
+#[test]
+fn pokecube_panda_solver_succeeds_on_seeds_0_to_19() {
+    let r = eval::run("PokeCube-v1", EnvConfig::default(), "solver", 20, 0).unwrap();
+    assert_eq!(r.control_mode, "pd_ee_delta_pos");
+    assert!(r.successes >= 19, "{r:?}");
+    assert!(r.success_at_end_rate >= 0.95, "{r:?}");
+    let first = r.mean_first_success_step.unwrap();
+    assert!((20.0..48.0).contains(&first), "{first}");
+}
+
+#[test]
+fn pokecube_solver_pushes_with_the_peg_and_earns_the_full_dense_reward() {
+    use mjskill::solvers::make_policy;
+    let config = EnvConfig {
+        reward_mode: mjskill::RewardMode::Dense,
+        ..Default::default()
+    };
+    let mut env = eval::make_env("PokeCube-v1", config, "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; 4];
+    let (mut grasped_steps, mut fit, mut last) = (0, false, 0.0f32);
+    let r = eval::run_episode(
+        &mut env,
+        policy.as_mut(),
+        Some(5),
+        &mut action,
+        |e, _, reward, _, _| {
+            grasped_steps += e.info().flag("is_peg_grasped") as usize;
+            fit |= e.info().flag("is_peg_cube_fit");
+            last = reward;
+            Ok(())
+        },
+    )
+    .unwrap();
+    assert!(r.success_at_end, "{r:?}");
+    // The peg is held throughout the push, and its head ends against the cube, aligned
+    // (`is_peg_cube_fit`: the flat head face turned the cube).
+    assert!(grasped_steps >= 20, "{grasped_steps}");
+    assert!(fit && env.info().flag("is_peg_cube_fit"), "{:?}", env.info());
+    assert!(env.info().get("angle_diff").unwrap() < 0.05);
+    assert_eq!(last, 10.0);
+}

@@ -7,6 +7,9 @@
 //! that phase, counting the step on which it was entered (the spec's [audited] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
+pub mod place_sphere;
+pub mod poke_cube;
+
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -97,8 +100,17 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     }
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(env, PANDA_GRIPPER)?)),
+        ("PlaceSphere-v1", "panda") => Ok(Box::new(place_sphere::PlaceSphereSolver::new(
+            env,
+            PANDA_GRIPPER,
+        )?)),
+        ("PokeCube-v1", "panda") => Ok(Box::new(poke_cube::PokeCubeSolver::new(
+            env,
+            PANDA_GRIPPER,
+        )?)),
         (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: PickCube-v1 with panda"
+            "no scripted solver for {id} with {r}; available: PickCube-v1, PlaceSphere-v1 and \
+             PokeCube-v1 with panda"
         )),
     }
 }
@@ -172,6 +184,15 @@ impl PickCubeSolver {
 
 fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
     Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
+}
+
+/// `agent.tcp.pose.p`: the TCP link's position (PlaceSphere, PokeCube), or `tcp_pose` for a
+/// robot without a TCP link.
+fn tcp_link_xyz(env: &Env) -> Vector3<f64> {
+    match env.robot().tcp_body {
+        Some(b) => body_xyz(env, b),
+        None => Vector3::from(env.robot().tcp_pose(env.data()).0),
+    }
 }
 
 impl Policy for PickCubeSolver {

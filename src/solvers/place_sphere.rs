@@ -1,0 +1,111 @@
+//! solvers.md §7.2: the EE-space scripted PlaceSphere policy (`pd_ee_delta_pos`).
+//!
+//! Above the sphere, down to it, close, lift to 8 cm, carry the sphere over the bin, lower
+//! it until it is just above the floor, open, retreat. Positions are the TCP **link**
+//! (`agent.tcp.pose.p`, the task's TCP) and the sphere and bin centres, read before each
+//! step. Robot-generic: the gripper commands are a parameter and the TCP is the robot's TCP
+//! link, so the same phases drive any two-finger robot with an EE controller.
+//!
+//! Thresholds and step counts are the spec's; MuJoCo needs no deviation from them.
+use nalgebra::Vector3;
+
+use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
+use crate::env::Env;
+use crate::tasks::body_id;
+
+/// Approach height above the sphere (m).
+const APPROACH_HEIGHT: f64 = 0.05;
+/// Approach tolerance (m).
+const APPROACH_TOL: f64 = 0.01;
+/// Descent tolerance (m).
+const DESCEND_TOL: f64 = 0.004;
+/// Steps the gripper closes before lifting.
+const CLOSE_STEPS: usize = 3;
+/// Carrying height of the TCP (m) and its tolerance.
+const LIFT_Z: f64 = 0.08;
+const LIFT_TOL: f64 = 0.01;
+/// Height of the sphere centre over the bin origin while carrying (m).
+const CARRY_ABOVE_BIN: f64 = 0.06;
+/// Horizontal alignment of sphere and bin before lowering (m).
+const ALIGN_TOL: f64 = 0.003;
+/// Lowering target of the sphere centre above the bin origin (m), and the height at which
+/// the sphere is released.
+const LOWER_TO: f64 = 0.0255;
+const RELEASE_BELOW: f64 = 0.0285;
+/// Steps the gripper opens while holding still.
+const OPEN_STEPS: usize = 4;
+/// Retreat height above the release pose (m).
+const RETREAT: f64 = 0.03;
+
+/// The PlaceSphere policy.
+#[derive(Debug)]
+pub struct PlaceSphereSolver {
+    sphere: usize,
+    bin: usize,
+    gripper: Gripper,
+    phase: usize,
+    steps_in_phase: usize,
+}
+
+impl PlaceSphereSolver {
+    /// Resolves the sphere and bin bodies of a PlaceSphere env.
+    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+        Ok(PlaceSphereSolver {
+            sphere: body_id(env.model(), "sphere")?,
+            bin: body_id(env.model(), "bin")?,
+            gripper,
+            phase: 0,
+            steps_in_phase: 0,
+        })
+    }
+}
+
+impl Policy for PlaceSphereSolver {
+    fn reset(&mut self, _env: &Env) {
+        self.phase = 0;
+        self.steps_in_phase = 0;
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let sphere = body_xyz(env, self.sphere);
+        let bin = body_xyz(env, self.bin);
+        let (open, close) = (self.gripper.open, self.gripper.close);
+        loop {
+            let (target, grip, done) = match self.phase {
+                0 => {
+                    let t = sphere + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                    (t, open, (t - tcp).norm() < APPROACH_TOL)
+                }
+                1 => (sphere, open, (sphere - tcp).norm() < DESCEND_TOL),
+                2 => (sphere, close, self.steps_in_phase >= CLOSE_STEPS),
+                3 => (
+                    Vector3::new(tcp.x, tcp.y, LIFT_Z),
+                    close,
+                    (tcp.z - LIFT_Z).abs() < LIFT_TOL,
+                ),
+                4 => {
+                    let mut grip_offset = tcp - sphere;
+                    grip_offset.z = 0.0;
+                    let t = bin + Vector3::new(0.0, 0.0, CARRY_ABOVE_BIN) + grip_offset;
+                    (t, close, (sphere.xy() - bin.xy()).norm() < ALIGN_TOL)
+                }
+                5 => (
+                    tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
+                    close,
+                    sphere.z - bin.z < RELEASE_BELOW,
+                ),
+                6 => (tcp, open, self.steps_in_phase >= OPEN_STEPS),
+                _ => (tcp + Vector3::new(0.0, 0.0, RETREAT), open, false),
+            };
+            if done {
+                self.phase += 1;
+                self.steps_in_phase = 0;
+                continue;
+            }
+            self.steps_in_phase += 1;
+            ee_action(target, tcp, 1.0, grip, action);
+            return;
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! solvers.md §7.3: the EE-space scripted PokeCube policy (`pd_ee_delta_pos`).
+//!
+//! Grasp the peg top-down 8 cm behind its centre (its head then reaches the far goals),
+//! slide it on the table — never lift it — until the head sits just behind the cube, push
+//! slowly (action limit 0.3) until the head is 2 cm short of the goal, then hold still so
+//! the robot becomes static. The flat head face turns the cube into alignment.
+//! Robot-generic: the TCP is the robot's TCP link (`agent.tcp.pose.p`) and the gripper
+//! commands are a parameter.
+//!
+//! Thresholds and step counts are the spec's; MuJoCo needs no deviation from them.
+use nalgebra::Vector3;
+
+use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
+use crate::env::Env;
+use crate::tasks::body_id;
+use crate::tasks::poke_cube::peg_head;
+
+/// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
+const GRASP_OFFSET_X: f64 = -0.08;
+/// Approach height above the grasp point (m).
+const APPROACH_HEIGHT: f64 = 0.05;
+/// Approach tolerance (m).
+const APPROACH_TOL: f64 = 0.01;
+/// Descent tolerance (m).
+const DESCEND_TOL: f64 = 0.004;
+/// Steps the gripper closes before moving.
+const CLOSE_STEPS: usize = 3;
+/// Half diagonal of the cube's footprint (m): clears the cube at any yaw.
+const CUBE_HALF_DIAGONAL: f64 = 0.0283;
+/// Gap between the head and the cube before the push (m).
+const PRE_PUSH_GAP: f64 = 0.015;
+/// Pre-push tolerance (m).
+const PRE_PUSH_TOL: f64 = 0.005;
+/// The push stops with the head this far short of the goal centre (m).
+const PUSH_SHORT_OF_GOAL: f64 = 0.02;
+/// Push tolerance (m).
+const PUSH_TOL: f64 = 0.004;
+/// Action limit while pushing (a fast push launches the cube).
+const PUSH_LIMIT: f64 = 0.3;
+
+/// The PokeCube policy.
+#[derive(Debug)]
+pub struct PokeCubeSolver {
+    cube: usize,
+    peg: usize,
+    goal: usize,
+    gripper: Gripper,
+    /// Cube and goal positions at the episode start.
+    cube0: Vector3<f64>,
+    goal0: Vector3<f64>,
+    phase: usize,
+    steps_in_phase: usize,
+}
+
+impl PokeCubeSolver {
+    /// Resolves the cube, peg and goal bodies of a PokeCube env.
+    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+        Ok(PokeCubeSolver {
+            cube: body_id(env.model(), "cube")?,
+            peg: body_id(env.model(), "peg")?,
+            goal: body_id(env.model(), "goal_region")?,
+            gripper,
+            cube0: Vector3::zeros(),
+            goal0: Vector3::zeros(),
+            phase: 0,
+            steps_in_phase: 0,
+        })
+    }
+}
+
+/// A target that moves the TCP horizontally by `want − have` (xy only).
+fn shift_xy(tcp: Vector3<f64>, want: Vector3<f64>, have: Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(tcp.x + want.x - have.x, tcp.y + want.y - have.y, tcp.z)
+}
+
+impl Policy for PokeCubeSolver {
+    fn reset(&mut self, env: &Env) {
+        self.cube0 = body_xyz(env, self.cube);
+        self.goal0 = body_xyz(env, self.goal);
+        self.phase = 0;
+        self.steps_in_phase = 0;
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let cube = body_xyz(env, self.cube);
+        let peg = body_xyz(env, self.peg);
+        let head = peg_head(peg);
+        let grasp = peg + Vector3::new(GRASP_OFFSET_X, 0.0, 0.0);
+        let (open, close) = (self.gripper.open, self.gripper.close);
+        loop {
+            let mut limit = 1.0;
+            let (target, grip, done) = match self.phase {
+                0 => {
+                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                    (t, open, (t - tcp).norm() < APPROACH_TOL)
+                }
+                1 => (grasp, open, (grasp - tcp).norm() < DESCEND_TOL),
+                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
+                3 => {
+                    let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
+                    let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;
+                    (shift_xy(tcp, pre, head), close, done)
+                }
+                4 => {
+                    limit = PUSH_LIMIT;
+                    let push =
+                        Vector3::new(self.goal0.x - PUSH_SHORT_OF_GOAL, self.cube0.y, 0.0);
+                    let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
+                    (shift_xy(tcp, push, head), close, done)
+                }
+                _ => (tcp, close, false),
+            };
+            if done {
+                self.phase += 1;
+                self.steps_in_phase = 0;
+                continue;
+            }
+            self.steps_in_phase += 1;
+            ee_action(target, tcp, limit, grip, action);
+            return;
+        }
+    }
+}
