@@ -1,6 +1,8 @@
 //! PokeCube-v1 with the Panda: seeding, layout, the goal target, the upstream quirks of the
 //! observation and `evaluate()`, and every dense-reward stage on constructed states.
 
+use std::f64::consts::FRAC_1_SQRT_2;
+
 use mjskill::mujoco::ObjType;
 use mjskill::{make, Env, EnvConfig, RewardMode};
 
@@ -84,10 +86,20 @@ fn seeded_resets_reproduce_maniskills_initial_states() {
             .iter()
             .map(|&x| x as f32)
             .collect();
-        close(&q, &[0.7071068, 0.0, 0.7071068, 0.0], 1e-6, "goal q");
+        close(
+            &q,
+            &[FRAC_1_SQRT_2, 0.0, FRAC_1_SQRT_2, 0.0],
+            1e-6,
+            "goal q",
+        );
         // cube_to_goal_pos = goal − cube.
         let c2g: Vec<f64> = goal.iter().zip(cube).map(|(g, c)| g - c).collect();
-        close(e.obs_part("extra/cube_to_goal_pos").unwrap(), &c2g, 4e-6, "c2g");
+        close(
+            e.obs_part("extra/cube_to_goal_pos").unwrap(),
+            &c2g,
+            4e-6,
+            "c2g",
+        );
     }
 }
 
@@ -265,32 +277,51 @@ fn reward_stages_follow_the_spec() {
     let (peg_q, cube_q) = (part(&e, "extra/peg_pose"), part(&e, "extra/cube_pose"));
     assert!((angle - (yaw_of(&peg_q[3..]) - yaw_of(&cube_q[3..])).abs()).abs() < 1e-5);
     let want = 4.0 + (1.0 - (5.0 * h2c).tanh()) + (1.0 - (5.0 * angle).tanh());
-    assert!((e.dense_reward() - want).abs() < 1e-9, "{}", e.dense_reward());
+    assert!(
+        (e.dense_reward() - want).abs() < 1e-9,
+        "{}",
+        e.dense_reward()
+    );
     assert!(e.dense_reward() > 4.0 && e.dense_reward() < 6.0);
 
     // Stage 3: the cube fitted against the (still grasped) peg's head, away from the goal
     // ⇒ 7 + place, place = 1 − tanh(5·‖goal − cube‖) (3-D).
     let peg = part(&e, "extra/peg_pose");
     let goal: Vec<f64> = {
-        let (c, c2g) = (part(&e, "extra/cube_pose"), part(&e, "extra/cube_to_goal_pos"));
+        let (c, c2g) = (
+            part(&e, "extra/cube_pose"),
+            part(&e, "extra/cube_to_goal_pos"),
+        );
         (0..3).map(|k| c[k] + c2g[k]).collect()
     };
     let peg_yaw = yaw_of(&peg[3..]);
     let cube = [peg[0] + 0.12 + 0.01, peg[1], 0.02];
     put(&mut e, "cube", cube, rotz(peg_yaw + 0.03));
     let info = e.info().clone();
-    assert!(info.flag("is_peg_grasped") && info.flag("is_peg_cube_fit"), "{info:?}");
+    assert!(
+        info.flag("is_peg_grasped") && info.flag("is_peg_cube_fit"),
+        "{info:?}"
+    );
     assert!(!info.flag("is_cube_placed"));
     assert!((info.get("head_to_cube_dist").unwrap() - 0.01).abs() < 1e-6);
     assert!((info.get("angle_diff").unwrap() - 0.03).abs() < 1e-6);
     let dist = norm(&[goal[0] - cube[0], goal[1] - cube[1], goal[2] - cube[2]]);
     let want = 7.0 + (1.0 - (5.0 * dist).tanh());
-    assert!((e.dense_reward() - want).abs() < 1e-6, "{} vs {want}", e.dense_reward());
+    assert!(
+        (e.dense_reward() - want).abs() < 1e-6,
+        "{} vs {want}",
+        e.dense_reward()
+    );
 
     // Fit needs angle_diff < 0.05 strictly and head_to_cube ≤ 0.025.
     put(&mut e, "cube", cube, rotz(peg_yaw + 0.06));
     assert!(!e.info().flag("is_peg_cube_fit"));
-    put(&mut e, "cube", [peg[0] + 0.12 + 0.026, peg[1], 0.02], rotz(peg_yaw));
+    put(
+        &mut e,
+        "cube",
+        [peg[0] + 0.12 + 0.026, peg[1], 0.02],
+        rotz(peg_yaw),
+    );
     assert!(!e.info().flag("is_peg_cube_fit"));
 
     // Stage 4: cube within 5 cm (xy) of the goal while the peg is held and fitted but the
@@ -332,8 +363,16 @@ fn reward_stages_follow_the_spec() {
 fn placed_cube_with_a_resting_robot_succeeds_after_a_step() {
     let mut e = env_with(None);
     e.reset(Some(2));
-    let (c, c2g) = (part(&e, "extra/cube_pose"), part(&e, "extra/cube_to_goal_pos"));
-    put(&mut e, "cube", [c[0] + c2g[0], c[1] + c2g[1], 0.02], rotz(0.1));
+    let (c, c2g) = (
+        part(&e, "extra/cube_pose"),
+        part(&e, "extra/cube_to_goal_pos"),
+    );
+    put(
+        &mut e,
+        "cube",
+        [c[0] + c2g[0], c[1] + c2g[1], 0.02],
+        rotz(0.1),
+    );
     let mut s_last = None;
     for _ in 0..3 {
         let s = e.step(&[0.0; 8]).unwrap();
@@ -348,39 +387,67 @@ fn upstream_quirks_goal_pos_is_the_peg_head_is_unrotated_angle_is_unwrapped() {
     e.reset(Some(0));
     // goal_pos holds the peg position.
     let peg = part(&e, "extra/peg_pose");
-    close(e.obs_part("extra/goal_pos").unwrap(), &peg[..3], 1e-7, "goal_pos");
+    close(
+        e.obs_part("extra/goal_pos").unwrap(),
+        &peg[..3],
+        1e-7,
+        "goal_pos",
+    );
 
     // Rotate the peg by 0.5 rad: the head stays at peg.p + (0.12, 0, 0) in world axes.
     let p = [0.0, 0.05, 0.025];
     put(&mut e, "peg", p, rotz(0.5));
     let cube = part(&e, "extra/cube_pose");
     let want = [p[0] + 0.12 - cube[0], p[1] - cube[1], p[2] - cube[2]];
-    close(e.obs_part("extra/peghead_to_cube_pos").unwrap(), &want, 1e-6, "head");
+    close(
+        e.obs_part("extra/peghead_to_cube_pos").unwrap(),
+        &want,
+        1e-6,
+        "head",
+    );
     let h = e.info().get("head_to_cube_dist").unwrap();
     assert!((h - norm(&want[..2])).abs() < 1e-6);
 
     // Yaws of +170° and −170°: upstream reports 340°, not 20° (no wrapping).
     put(&mut e, "peg", p, rotz(-170f64.to_radians()));
-    put(&mut e, "cube", [cube[0], cube[1], 0.02], rotz(170f64.to_radians()));
+    put(
+        &mut e,
+        "cube",
+        [cube[0], cube[1], 0.02],
+        rotz(170f64.to_radians()),
+    );
     let a = e.info().get("angle_diff").unwrap();
     assert!((a - 340f64.to_radians()).abs() < 1e-9, "{a}");
     // No 90° cube symmetry either: a cube turned by 90° is 90° off.
     put(&mut e, "peg", p, rotz(0.0));
-    put(&mut e, "cube", [cube[0], cube[1], 0.02], rotz(90f64.to_radians()));
+    put(
+        &mut e,
+        "cube",
+        [cube[0], cube[1], 0.02],
+        rotz(90f64.to_radians()),
+    );
     let a = e.info().get("angle_diff").unwrap();
     assert!((a - 90f64.to_radians()).abs() < 1e-9, "{a}");
     // tcp_pose is the TCP link pose (panda_hand_tcp).
     let m = e.model().clone();
     let tcp = m.require_id(ObjType::Body, "panda_hand_tcp").unwrap();
     let want: Vec<f64> = e.data().xpos()[3 * tcp..3 * tcp + 3].to_vec();
-    close(&e.obs_part("extra/tcp_pose").unwrap()[..3], &want, 1e-6, "tcp");
+    close(
+        &e.obs_part("extra/tcp_pose").unwrap()[..3],
+        &want,
+        1e-6,
+        "tcp",
+    );
 }
 
 #[test]
 fn export_and_determinism() {
     let mjcf = mjskill::env::scene_mjcf("PokeCube-v1", "panda").unwrap();
     for name in ["\"cube\"", "\"peg\"", "\"goal_region\"", "\"base_camera\""] {
-        assert!(mjcf.xml.contains(name), "{name} missing from the exported MJCF");
+        assert!(
+            mjcf.xml.contains(name),
+            "{name} missing from the exported MJCF"
+        );
     }
     // Bad robot: the error names it and the valid choices.
     let err = mjskill::env::scene_mjcf("PokeCube-v1", "so100").unwrap_err();

@@ -120,7 +120,11 @@ fn pokecube_solver_pushes_with_the_peg_and_earns_the_full_dense_reward() {
     // The peg is held throughout the push, and its head ends against the cube, aligned
     // (`is_peg_cube_fit`: the flat head face turned the cube).
     assert!(grasped_steps >= 20, "{grasped_steps}");
-    assert!(fit && env.info().flag("is_peg_cube_fit"), "{:?}", env.info());
+    assert!(
+        fit && env.info().flag("is_peg_cube_fit"),
+        "{:?}",
+        env.info()
+    );
     assert!(env.info().get("angle_diff").unwrap() < 0.05);
     assert_eq!(last, 10.0);
 }

@@ -3,6 +3,8 @@
 //! Dynamic props are free bodies with density [`DENSITY`] (mass from volume, as SAPIEN's
 //! `add_*_collision(density=1000)`); kinematic props are MuJoCo mocap bodies (moved by
 //! writing `mocap_pos`/`mocap_quat`); visual-only markers have no collision.
+use std::f64::consts::FRAC_1_SQRT_2;
+
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::xml::{nums, Element};
@@ -219,7 +221,7 @@ impl Scene {
                 Element::new("geom")
                     .attr("name", format!("{name}_{k}"))
                     .attr("type", "cylinder")
-                    .attr_nums("quat", &[0.7071068, 0.0, 0.7071068, 0.0])
+                    .attr_nums("quat", &[FRAC_1_SQRT_2, 0.0, FRAC_1_SQRT_2, 0.0])
                     .attr_nums("size", &[*r, *hl]),
                 rgba,
                 0,

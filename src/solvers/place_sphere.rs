@@ -7,6 +7,11 @@
 //! link, so the same phases drive any two-finger robot with an EE controller.
 //!
 //! Thresholds and step counts are the spec's; MuJoCo needs no deviation from them.
+//! Measured: 99/100 on seeds 0–99 (first success at step 34.7 on average), 20/20 on 0–19.
+//! The one failure (seed 61) is a released sphere that keeps rolling to and fro between the
+//! wall edges at ≈ 0.6 rad/s, above `is_obj_static`'s 0.5 rad/s, until the episode ends:
+//! MuJoCo's condim-3 contacts have no rolling resistance and PhysX's angular damping of free
+//! bodies is not emulated (README, Physics).
 use nalgebra::Vector3;
 
 use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};

@@ -7,7 +7,10 @@
 //! Robot-generic: the TCP is the robot's TCP link (`agent.tcp.pose.p`) and the gripper
 //! commands are a parameter.
 //!
-//! Thresholds and step counts are the spec's; MuJoCo needs no deviation from them.
+//! Thresholds, step counts and the push limit are the spec's; MuJoCo needs no deviation
+//! from them. Measured: 100/100 on seeds 0–99 (first success at step 30.4 on average).
+//! The TCP stays 8 cm from the peg centre, so the dense reward never reaches its "grasped
+//! and reached" stages before success (upstream's `reached` measures to the peg centre).
 use nalgebra::Vector3;
 
 use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
@@ -104,8 +107,7 @@ impl Policy for PokeCubeSolver {
                 }
                 4 => {
                     limit = PUSH_LIMIT;
-                    let push =
-                        Vector3::new(self.goal0.x - PUSH_SHORT_OF_GOAL, self.cube0.y, 0.0);
+                    let push = Vector3::new(self.goal0.x - PUSH_SHORT_OF_GOAL, self.cube0.y, 0.0);
                     let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
                     (shift_xy(tcp, push, head), close, done)
                 }

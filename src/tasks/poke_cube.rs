@@ -15,7 +15,7 @@
 //! are (MuJoCo's are along local z; `Scene::add_marker_target` rotates each geom), so that
 //! quaternion turns them vertical and the target lies flat, as upstream. Only the goal's
 //! position enters observations, `evaluate()` and the reward.
-use std::f64::consts::{FRAC_PI_3, FRAC_PI_6};
+use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_3, FRAC_PI_6};
 
 use nalgebra::Vector3;
 
@@ -41,8 +41,8 @@ pub const PEG_HALF_LENGTH: f64 = 0.12;
 pub const GOAL_RADIUS: f64 = 0.05;
 /// Height of the goal region's frame.
 pub const GOAL_Z: f64 = 0.001;
-/// The goal region's quaternion `euler2quat(0, π/2, 0)` (w, x, y, z).
-pub const GOAL_QUAT: [f64; 4] = [0.7071068, 0.0, 0.7071068, 0.0];
+/// The goal region's quaternion `euler2quat(0, π/2, 0)` = (√½, 0, √½, 0) (w, x, y, z).
+pub const GOAL_QUAT: [f64; 4] = [FRAC_1_SQRT_2, 0.0, FRAC_1_SQRT_2, 0.0];
 /// Cube colour.
 pub const CUBE_RGBA: Rgba = [1.0, 0.0, 0.0, 1.0];
 /// Peg colour (both halves): (12, 42, 160)/255.
@@ -176,7 +176,11 @@ impl Task for PokeCube {
         torch.fill_rand(&mut u3);
         let yaw = u3[2] * (FRAC_PI_3 as f32) + (-FRAC_PI_6 as f32);
         // 4. Goal: cube + (goal_radius + 0.05, 0, 0), z := 0.001.
-        let goal = [cube[0] + (GOAL_RADIUS + 0.05) as f32, cube[1], GOAL_Z as f32];
+        let goal = [
+            cube[0] + (GOAL_RADIUS + 0.05) as f32,
+            cube[1],
+            GOAL_Z as f32,
+        ];
 
         let f64s = |v: [f32; 3]| v.map(|x| x as f64);
         set_free_pose(data, self.peg_qadr, f64s(peg), [1.0, 0.0, 0.0, 0.0]);
