@@ -127,6 +127,8 @@ fn state_layout_is_54_long_in_maniskills_order() {
             ("extra/peghead_to_cube_pos", 3),
         ]
     );
+    // Without state only the TCP pose is an extra (the other keys are privileged).
+    assert_eq!(e.task().extra_layout(false), vec![("tcp_pose", 7)]);
     assert_eq!(
         e.info().keys,
         &[
