@@ -167,3 +167,92 @@ fn reward_stages_follow_the_spec() {
         assert!(r > 6.0 + 16.0 / 3.0 && r <= 6.0 + 18.0 / 3.0 + 1e-9, "{r}");
     }
 }
+
+/// The dense reward recomputed independently (tasks.md §3.5) from the observation, the info
+/// flags and the sphere's velocity.
+fn spec_dense_reward(e: &mjskill::Env, sphere_body: usize) -> f64 {
+    let part = |k: &str| -> Vec<f64> { e.obs_part(k).unwrap().iter().map(|&x| x as f64).collect() };
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (qpos, qvel) = (part("agent/qpos"), part("agent/qvel"));
+    let (sphere, bin) = (part("extra/obj_pose"), part("extra/bin_pos"));
+    let info = e.info();
+    let grasped = info.flag("is_obj_grasped");
+    let mut r = 2.0 * (1.0 - (5.0 * norm(&part("extra/tcp_to_obj_pos"))).tanh());
+    let to_top = [
+        bin[0] - sphere[0],
+        bin[1] - sphere[1],
+        bin[2] + 0.0025 + 0.02 - sphere[2],
+    ];
+    if grasped {
+        r = 4.0 + 1.0 - (5.0 * norm(&to_top)).tanh();
+    }
+    let ungrasp = if grasped {
+        (qpos[7] + qpos[8]) / 0.08
+    } else {
+        16.0
+    };
+    let v = e.data().body_velocity(sphere_body); // (angular, linear), world frame
+    let stat = 1.0 - (10.0 * norm(&v[3..]) + norm(&v[..3])).tanh();
+    let robot_static = qvel[..7].iter().all(|x| x.abs() <= 0.2) as u8 as f64;
+    if info.flag("is_obj_on_bin") {
+        r = 6.0 + (ungrasp + stat + robot_static) / 3.0;
+    }
+    if info.success() {
+        r = 13.0;
+    }
+    r
+}
+
+#[test]
+fn every_reward_stage_of_a_solved_episode_matches_the_spec_formula() {
+    use mjskill::cli::eval;
+    let config = EnvConfig {
+        reward_mode: mjskill::RewardMode::Dense,
+        ..Default::default()
+    };
+    let mut e = eval::make_env("PlaceSphere-v1", config, "solver").unwrap();
+    let sphere = e.model().require_id(ObjType::Body, "sphere").unwrap();
+    let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
+    let mut action = vec![0.0f32; e.action_space().shape[0]];
+    // Stages: reaching, grasped in the air, grasped over the bin, released on the bin
+    // (not yet static), success.
+    let mut seen = [false; 5];
+    for seed in 0..4 {
+        e.reset(Some(seed));
+        policy.reset(&e);
+        for _ in 0..50 {
+            policy.act(&e, &mut action);
+            let reward = e.step(&action).unwrap().reward as f64;
+            let want = spec_dense_reward(&e, sphere);
+            assert!(
+                (reward - want).abs() < 1e-5,
+                "seed {seed}: reward {reward} vs spec {want}"
+            );
+            let i = e.info();
+            let stage = match (
+                i.success(),
+                i.flag("is_obj_on_bin"),
+                i.flag("is_obj_grasped"),
+            ) {
+                (true, ..) => 4,
+                (false, true, false) => 3,
+                (false, true, true) => 2,
+                (false, false, true) => 1,
+                (false, false, false) => 0,
+            };
+            seen[stage] = true;
+            let bounds = [
+                (0.0, 2.0),
+                (4.0, 5.0),
+                (6.0, 7.0),
+                (6.0, 12.0),
+                (13.0, 13.0),
+            ];
+            assert!(
+                (bounds[stage].0..=bounds[stage].1).contains(&reward),
+                "stage {stage}: reward {reward}"
+            );
+        }
+    }
+    assert_eq!(seen, [true; 5], "every stage reached: {seen:?}");
+}
