@@ -209,12 +209,25 @@ fn channels_decode_with_any_mcap_reader() {
     // Header profile and metadata through the plain mcap crate.
     let bytes = std::fs::read(&path).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().expect("summary");
-    assert_eq!(summary.metadata_indexes.len(), 1);
+    // One file-level record and one per episode (two episodes).
+    assert_eq!(summary.metadata_indexes.len(), 3);
     let md = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
     assert_eq!(md.name, "mjskill");
     assert_eq!(md.metadata["env_id"], "PickCube-v1");
+    for (k, index) in summary.metadata_indexes[1..].iter().enumerate() {
+        let md = mcap::read::metadata(&bytes, index).unwrap();
+        assert_eq!(md.name, format!("episode-{k}"));
+        assert_eq!(md.metadata["episode"], k.to_string());
+        assert_eq!(md.metadata["env_id"], "PickCube-v1");
+        assert_eq!(md.metadata["control_mode"], "pd_joint_delta_pos");
+        assert!(md.metadata["obs_layout"].contains("extra/tcp_pose"));
+        assert_eq!(md.metadata["timestep"], "0.002");
+    }
     let raw = record::read_raw(&path).unwrap();
     assert_eq!(raw.profile, "mjskill");
+    assert_eq!(raw.episode_metadata.len(), 2);
+    assert_eq!(raw.episode_metadata[0]["seed"], "5");
+    assert_eq!(raw.episode_metadata[1]["seed"], "null", "unseeded reset");
 
     let msgs = messages(&path);
     let count = |t: &str| msgs.iter().filter(|m| m.0 == t).count();

@@ -47,6 +47,8 @@ use crate::env::{Env, EnvError, EnvState, Info};
 pub const PROFILE: &str = "mjskill";
 /// Name of the file-level metadata record.
 pub const METADATA_NAME: &str = "mjskill";
+/// Prefix of the per-episode metadata records (`episode-0`, `episode-1`, ...).
+pub const EPISODE_METADATA_PREFIX: &str = "episode-";
 /// Version of the recording layout, stored as metadata key `format`.
 pub const FORMAT_VERSION: u32 = 1;
 /// Topic of the per-episode start message.
@@ -508,6 +510,17 @@ impl Recorder {
             steps: 0,
             ret: 0.0,
         });
+        // A metadata record per episode: the file's metadata plus the episode index and seed,
+        // so a tool reading only metadata (e.g. `mcap info`) sees how each episode started.
+        let mut meta = Meta::of(env).to_map();
+        meta.insert("episode".into(), index.to_string());
+        meta.insert("seed".into(), seed.map_or("null".into(), |s| s.to_string()));
+        self.writer
+            .write_metadata(&Metadata {
+                name: format!("{EPISODE_METADATA_PREFIX}{index}"),
+                metadata: meta,
+            })
+            .map_err(|e| self.mcap_err(e))?;
         let msg = EpisodeMsg {
             episode: index,
             seed,
@@ -718,6 +731,8 @@ pub struct RawRecording {
     pub library: String,
     /// The `"mjskill"` metadata map (empty if absent).
     pub metadata: BTreeMap<String, String>,
+    /// The per-episode metadata maps (`episode-N` records), in file order.
+    pub episode_metadata: Vec<BTreeMap<String, String>>,
     /// All messages in file order.
     pub messages: Vec<RawMessage>,
     /// Whether the file was read to its footer without error.
@@ -777,6 +792,7 @@ fn parse(bytes: &[u8]) -> Result<RawRecording, ParseError> {
     .map_err(ParseError::Mcap)?;
     let mut header: Option<(String, String)> = None;
     let mut metadata = BTreeMap::new();
+    let mut episode_metadata = Vec::new();
     let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
     let mut channels: BTreeMap<u16, (String, u16, String)> = BTreeMap::new();
     let mut messages = Vec::new();
@@ -796,6 +812,9 @@ fn parse(bytes: &[u8]) -> Result<RawRecording, ParseError> {
         match rec {
             Record::Header(h) => header = Some((h.profile, h.library)),
             Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
+            Record::Metadata(m) if m.name.starts_with(EPISODE_METADATA_PREFIX) => {
+                episode_metadata.push(m.metadata)
+            }
             Record::Schema { header: h, .. } => {
                 schemas.insert(h.id, h.name);
             }
@@ -831,6 +850,7 @@ fn parse(bytes: &[u8]) -> Result<RawRecording, ParseError> {
         profile,
         library,
         metadata,
+        episode_metadata,
         messages,
         complete: footer && !damaged && mcap::read::footer(bytes).is_ok(),
     })
