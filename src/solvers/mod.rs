@@ -7,6 +7,8 @@
 //! that phase, counting the step on which it was entered (the spec's [audited] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
+pub mod joint_ik;
+
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -97,8 +99,15 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     }
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(env, PANDA_GRIPPER)?)),
+        ("PickCube-v1" | "PickCubeSO100-v1", "so100") => Ok(Box::new(
+            joint_ik::JointIkPickCube::new(env, joint_ik::SO100)?,
+        )),
+        ("PickCube-v1" | "PickCubeWidowXAI-v1", "widowxai") => Ok(Box::new(
+            joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
+        )),
         (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: PickCube-v1 with panda"
+            "no scripted solver for {id} with {r}; available: PickCube-v1 with panda, \
+             PickCube-v1 / PickCubeSO100-v1 with so100, PickCube-v1 / PickCubeWidowXAI-v1 with widowxai"
         )),
     }
 }
