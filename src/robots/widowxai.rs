@@ -35,6 +35,11 @@ const JOINT_DELTA: f32 = 0.1;
 /// Carriage opening range of the (normalised, absolute) gripper action (m).
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
+/// `solref` of the carriage coupling (URDF mimic → MuJoCo joint equality): time constant
+/// 2·timestep, the stiffest stable value, standing in for the PhysX tendon of 1e5 N/m that
+/// alone holds the undriven right carriage against the grasp force.
+const MIMIC_SOLREF: [f64; 2] = [2.0 * crate::mjcf::TIMESTEP, 1.0];
+
 /// WidowX AI control modes (robots.md §6), default first.
 pub const CONTROL_MODES: [&str; 3] = [
     "pd_joint_delta_pos",
@@ -116,5 +121,5 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     init_noise: InitNoise::None,
     control_modes: &CONTROL_MODES,
     parts,
-    customize: |_| {},
+    customize: |o| o.mimic_solref = Some(MIMIC_SOLREF),
 };
