@@ -98,12 +98,8 @@ fn holds_the_table_pose_and_tracks_joint_targets() {
 
 #[test]
 fn action_and_observation_shapes_per_control_mode() {
-    let lim = [
-        (-2.0, 2.0),
-        (-1.5708, 1.5708),
-        (-1.5708, 1.5708),
-        (-1.8, 1.8),
-    ];
+    // shoulder_pan limits (the URDF's ±2.0).
+    let lim = [(-2.0, 2.0)];
     for (mode, obs, low0, high0) in [
         ("pd_joint_delta_pos", 36, -1.0, 1.0),
         ("pd_joint_pos", 36, lim[0].0, lim[0].1),

@@ -18,9 +18,6 @@ pub const JOINTS: [&str; 6] = [
 /// Table-scene initial qpos (tasks.md §0.2) before noise.
 pub const TABLE_QPOS: [f64; 6] = [0.0, 0.0, 0.0, FRAC_PI_2, FRAC_PI_2, 0.0];
 
-/// Keyframe `rest` (with the root rotated by rotz(π/2), unused by the tasks).
-pub const REST: [f64; 6] = [0.0, -1.5708, 1.5708, 0.66, 0.0, -1.1];
-
 /// Drive (stiffness, damping, force limit) of every joint.
 const GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
 /// Delta bound (rad) of the arm joints in the joint-delta modes.

@@ -162,8 +162,8 @@ pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
     }
     let mut q = vec![0.0; n];
     ids.qpos(&d, &mut q);
-    for k in 0..n {
-        let sag = (q[k] - spec.table_qpos[k]).abs();
+    for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate() {
+        let sag = (qk - rest).abs();
         assert!(sag < 1e-3, "{} joint {k} drifted {sag} over 5 s", spec.uid);
     }
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
