@@ -278,3 +278,23 @@ fn export_mjcf_writes_a_scene_mujoco_compiles() {
     assert!(m.id(ObjType::Joint, "left_carriage_joint").is_some());
     assert!(m.id(ObjType::Body, "cube").is_some());
 }
+
+#[test]
+fn same_seed_and_actions_give_a_bitwise_identical_trajectory() {
+    let run = || {
+        let mut e = env("PickCubeWidowXAI-v1", "pd_joint_pos");
+        let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
+        let mut a = vec![0.0f32; 8];
+        e.reset(Some(5));
+        policy.reset(&e);
+        let mut trace: Vec<u32> = Vec::new();
+        for _ in 0..30 {
+            policy.act(&e, &mut a);
+            let s = e.step(&a).unwrap();
+            trace.extend(s.obs.iter().map(|x| x.to_bits()));
+            trace.push(s.reward.to_bits());
+        }
+        trace
+    };
+    assert_eq!(run(), run());
+}
