@@ -334,3 +334,33 @@ fn same_seed_and_actions_give_a_bitwise_identical_trajectory() {
     };
     assert_eq!(run(), run());
 }
+
+#[test]
+fn only_the_srdf_default_pairs_are_excluded_besides_parent_child() {
+    let spec = robots::spec("so100").unwrap();
+    let mut pairs = spec.description().unwrap().disabled_pairs;
+    pairs.sort();
+    let mut want: Vec<(String, String)> = [
+        ("Rotation_Pitch", "Lower_Arm"),
+        ("Rotation_Pitch", "Wrist_Pitch_Roll"),
+        ("Upper_Arm", "Wrist_Pitch_Roll"),
+        ("Upper_Arm", "Base"),
+        ("Moving_Jaw", "Wrist_Pitch_Roll"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect();
+    want.sort();
+    assert_eq!(pairs, want);
+    let (_, _, _, mjcf) = robots::table_scene_with(spec, |_| {}).unwrap();
+    assert!(mjcf
+        .xml
+        .contains(r#"<exclude body1="Upper_Arm" body2="Base"/>"#));
+    // Jaw materials: PhysX μ 2.0 against the default 0.3 ⇒ 1.15 under MuJoCo's max rule.
+    assert!(mjcf.xml.contains(r#"name="Fixed_Jaw_collision0""#));
+    assert_eq!(
+        mjcf.xml.matches(r#"friction="1.15"#).count(),
+        7,
+        "3 + 4 jaw boxes"
+    );
+}

@@ -298,3 +298,20 @@ fn same_seed_and_actions_give_a_bitwise_identical_trajectory() {
     };
     assert_eq!(run(), run());
 }
+
+#[test]
+fn only_the_srdf_default_pairs_are_excluded_besides_parent_child() {
+    let spec = robots::spec("widowxai").unwrap();
+    let pairs = spec.description().unwrap().disabled_pairs;
+    assert_eq!(pairs.len(), 13, "{pairs:?}");
+    for (a, b) in [
+        ("base_link", "link_2"),
+        ("link_1", "link_5"),
+        ("carriage_right", "carriage_left"),
+        ("carriage_right", "gripper_left"),
+    ] {
+        assert!(pairs.contains(&(a.to_string(), b.to_string())), "{a}-{b}");
+    }
+    // "Adjacent"/"Fixed"/"ParallelMotion" pairs of the upstream SRDF are not applied.
+    assert!(!pairs.contains(&("base_link".to_string(), "link_1".to_string())));
+}
