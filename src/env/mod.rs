@@ -225,10 +225,22 @@ fn poke_cube(_robot: &'static str) -> Box<dyn Task> {
     Box::new(crate::tasks::poke_cube::PokeCube::new())
 }
 
-static REGISTRY: [EnvSpec; 3] = [
+static REGISTRY: [EnvSpec; 5] = [
     EnvSpec {
         id: "PickCube-v1",
-        robots: &["panda"],
+        robots: &["panda", "so100", "widowxai"],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: pick_cube,
+    },
+    EnvSpec {
+        id: "PickCubeSO100-v1",
+        robots: &["so100"],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: pick_cube,
+    },
+    EnvSpec {
+        id: "PickCubeWidowXAI-v1",
+        robots: &["widowxai"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },

@@ -126,6 +126,10 @@ pub struct RobotOptions {
     pub no_ground_contact: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
+    /// `solref` of the joint equalities made from URDF `<mimic>` tags (None: MuJoCo's
+    /// default, 0.02 s). A stiffer value stands in for PhysX's 1e5 N/m mimic tendon where a
+    /// mimic follower has no drive of its own (WidowX AI).
+    pub mimic_solref: Option<[f64; 2]>,
 }
 
 impl Default for RobotOptions {
@@ -141,6 +145,7 @@ impl Default for RobotOptions {
             extra_excludes: Vec::new(),
             no_ground_contact: Vec::new(),
             connects: Vec::new(),
+            mimic_solref: None,
         }
     }
 }
@@ -316,13 +321,15 @@ impl Scene {
         // Mimic joints → joint equality q_follower = offset + multiplier · q_leader.
         for j in &robot.joints {
             if let Some(m) = &j.mimic {
-                self.section("equality").push(
-                    Element::new("joint")
-                        .attr("name", format!("mimic_{}", j.name))
-                        .attr("joint1", &j.name)
-                        .attr("joint2", &m.leader)
-                        .attr_nums("polycoef", &[m.offset, m.multiplier, 0.0, 0.0, 0.0]),
-                );
+                let mut eq = Element::new("joint")
+                    .attr("name", format!("mimic_{}", j.name))
+                    .attr("joint1", &j.name)
+                    .attr("joint2", &m.leader)
+                    .attr_nums("polycoef", &[m.offset, m.multiplier, 0.0, 0.0, 0.0]);
+                if let Some(sr) = opts.mimic_solref {
+                    eq = eq.attr_nums("solref", &sr);
+                }
+                self.section("equality").push(eq);
             }
         }
         for c in &opts.connects {

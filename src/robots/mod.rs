@@ -2,6 +2,8 @@
 //! drive gains, the TCP, the grasp check, keyframes and the table-scene placement — and the
 //! ids a compiled scene resolves them to ([`RobotIds`]).
 pub mod panda;
+pub mod so100;
+pub mod widowxai;
 
 use std::sync::Arc;
 
@@ -210,6 +212,8 @@ impl RobotSpec {
 pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
     match uid {
         "panda" => Ok(&panda::PANDA),
+        "so100" => Ok(&so100::SO100),
+        "widowxai" => Ok(&widowxai::WIDOWXAI),
         _ => Err(format!(
             "unknown robot {uid:?}; valid robots: {}",
             ROBOT_UIDS.join(", ")

@@ -7,6 +7,7 @@
 //! that phase, counting the step on which it was entered (the spec's [audited] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
+pub mod joint_ik;
 pub mod place_sphere;
 pub mod poke_cube;
 
@@ -84,6 +85,17 @@ impl Policy for Random {
     }
 }
 
+/// The (env id, robot) pairs that have a scripted solver.
+pub const SOLVED: [(&str, &str); 7] = [
+    ("PickCube-v1", "panda"),
+    ("PickCube-v1", "so100"),
+    ("PickCube-v1", "widowxai"),
+    ("PickCubeSO100-v1", "so100"),
+    ("PickCubeWidowXAI-v1", "widowxai"),
+    ("PlaceSphere-v1", "panda"),
+    ("PokeCube-v1", "panda"),
+];
+
 /// Which scripted solver fits an (env, robot) pair.
 fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     let robot = env.robot_spec().uid;
@@ -108,9 +120,19 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
             env,
             PANDA_GRIPPER,
         )?)),
+        ("PickCube-v1" | "PickCubeSO100-v1", "so100") => Ok(Box::new(
+            joint_ik::JointIkPickCube::new(env, joint_ik::SO100)?,
+        )),
+        ("PickCube-v1" | "PickCubeWidowXAI-v1", "widowxai") => Ok(Box::new(
+            joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
+        )),
         (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: PickCube-v1, PlaceSphere-v1 and \
-             PokeCube-v1 with panda"
+            "no scripted solver for {id} with {r}; available: {}",
+            SOLVED
+                .iter()
+                .map(|(e, r)| format!("{e} with {r}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         )),
     }
 }

@@ -1,0 +1,119 @@
+//! SO-100 arm (robots.md §5): 5 arm joints and a revolute moving jaw, all driven by one
+//! joint-position controller (no arm/gripper split).
+use std::f64::consts::FRAC_PI_2;
+
+use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
+use crate::controllers::{PartKind, PartSpec};
+
+/// Joints in ManiSkill order (5 arm joints, then the gripper).
+pub const JOINTS: [&str; 6] = [
+    "shoulder_pan",
+    "shoulder_lift",
+    "elbow_flex",
+    "wrist_flex",
+    "wrist_roll",
+    "gripper",
+];
+
+/// Table-scene initial qpos (tasks.md §0.2) before noise.
+pub const TABLE_QPOS: [f64; 6] = [0.0, 0.0, 0.0, FRAC_PI_2, FRAC_PI_2, 0.0];
+
+/// Drive (stiffness, damping, force limit) of every joint.
+const GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+/// Delta bound (rad) of the arm joints in the joint-delta modes.
+const ARM_DELTA: f32 = 0.05;
+/// Delta bound (rad) of the gripper joint in the joint-delta modes.
+const GRIPPER_DELTA: f32 = 0.2;
+
+/// Fixed_Jaw_tip in the Fixed_Jaw frame.
+pub const FIXED_JAW_TIP: [f64; 3] = [0.01, -0.097, 0.0];
+/// Moving_Jaw_tip in the Moving_Jaw frame.
+pub const MOVING_JAW_TIP: [f64; 3] = [-0.01, -0.073, 0.0];
+
+/// SO100 control modes (robots.md §5), default first.
+pub const CONTROL_MODES: [&str; 3] = [
+    "pd_joint_delta_pos",
+    "pd_joint_pos",
+    "pd_joint_target_delta_pos",
+];
+
+fn delta(use_target: bool) -> PartKind {
+    let mut low = vec![-ARM_DELTA; 5];
+    low.push(-GRIPPER_DELTA);
+    let high = low.iter().map(|x| -x).collect();
+    PartKind::JointPos {
+        use_delta: true,
+        use_target,
+        normalize: true,
+        low: Some(low),
+        high: Some(high),
+    }
+}
+
+/// The parts of an SO100 control mode: always one part over all six joints.
+pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+    let kind = match mode {
+        "pd_joint_delta_pos" => delta(false),
+        "pd_joint_target_delta_pos" => delta(true),
+        "pd_joint_pos" => PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize: false,
+            low: None,
+            high: None,
+        },
+        _ => return None,
+    };
+    Some(vec![PartSpec {
+        name: "arm",
+        joints: JOINTS.to_vec(),
+        followers: vec![],
+        kind,
+        gains: GAINS,
+    }])
+}
+
+/// The SO100 as ManiSkill configures it.
+pub static SO100: RobotSpec = RobotSpec {
+    uid: "so100",
+    urdf: "so100/so100.urdf",
+    srdf: "so100/so100.srdf",
+    arm_joints: &[
+        "shoulder_pan",
+        "shoulder_lift",
+        "elbow_flex",
+        "wrist_flex",
+        "wrist_roll",
+    ],
+    gripper_joints: &["gripper"],
+    arm_gains: GAINS,
+    gripper_gains: GAINS,
+    finger_friction: (&["Fixed_Jaw", "Moving_Jaw"], 2.0),
+    tcp: TcpDef::JawTips {
+        tip1: ("Fixed_Jaw", FIXED_JAW_TIP),
+        tip2: ("Moving_Jaw", MOVING_JAW_TIP),
+        orientation: "Fixed_Jaw",
+    },
+    tcp_link: None,
+    grasp: GraspDef {
+        finger1: ("Fixed_Jaw", 1.0),
+        finger2: ("Moving_Jaw", -1.0),
+        min_force: 0.5,
+        max_angle_deg: 110.0,
+    },
+    static_rule: StaticRule::Arm(5),
+    table_pose: (
+        [-0.725, 0.0, 0.0],
+        [
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ],
+    ),
+    table_qpos: &TABLE_QPOS,
+    init_noise: InitNoise::All,
+    control_modes: &CONTROL_MODES,
+    parts,
+    customize: |_| {},
+};

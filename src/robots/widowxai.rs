@@ -1,0 +1,125 @@
+//! Trossen WidowX AI (robots.md §6): 6 arm joints and two prismatic carriages; the right
+//! carriage follows the left one through the URDF `<mimic>` tag (upstream a stiff PhysX
+//! tendon, here a MuJoCo joint equality) and has no drive of its own.
+use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
+use crate::controllers::{PartKind, PartSpec};
+
+/// Arm joints (ManiSkill order).
+const ARM: [&str; 6] = [
+    "joint_0", "joint_1", "joint_2", "joint_3", "joint_4", "joint_5",
+];
+/// The arm controller's joints: upstream lists the left carriage as a 7th arm joint, whose
+/// target the gripper controller (which runs second) overwrites every step.
+const ARM_PART: [&str; 7] = [
+    "joint_0",
+    "joint_1",
+    "joint_2",
+    "joint_3",
+    "joint_4",
+    "joint_5",
+    "left_carriage_joint",
+];
+/// The gripper controller's joint.
+pub const GRIPPER_JOINT: &str = "left_carriage_joint";
+
+/// Keyframe `ready_to_grasp` = the table-scene qpos (ManiSkill order: right carriage before
+/// left carriage).
+pub const READY_TO_GRASP: [f64; 8] = [0.0, 1.38, 1.04, -1.26, 0.0, 0.0, 0.026, 0.026];
+
+/// Arm drive (stiffness, damping, force limit).
+const ARM_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+/// Gripper drive: the gripper config has no force limit, so PhysX's default 1e10 applies.
+const GRIPPER_GAINS: (f64, f64, f64) = (1e3, 1e2, 1e10);
+/// Delta bound (rad or m) of the arm part in the joint-delta modes.
+const JOINT_DELTA: f32 = 0.1;
+/// Carriage opening range of the (normalised, absolute) gripper action (m).
+const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
+
+/// `solref` of the carriage coupling (URDF mimic → MuJoCo joint equality): time constant
+/// 2·timestep, the stiffest stable value, standing in for the PhysX tendon of 1e5 N/m that
+/// alone holds the undriven right carriage against the grasp force.
+const MIMIC_SOLREF: [f64; 2] = [2.0 * crate::mjcf::TIMESTEP, 1.0];
+
+/// WidowX AI control modes (robots.md §6), default first.
+pub const CONTROL_MODES: [&str; 3] = [
+    "pd_joint_delta_pos",
+    "pd_joint_pos",
+    "pd_joint_target_delta_pos",
+];
+
+fn gripper() -> PartSpec {
+    PartSpec {
+        name: "gripper",
+        joints: vec![GRIPPER_JOINT],
+        followers: vec![],
+        kind: PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize: true,
+            low: Some(vec![GRIPPER_RANGE.0]),
+            high: Some(vec![GRIPPER_RANGE.1]),
+        },
+        gains: GRIPPER_GAINS,
+    }
+}
+
+fn delta(use_target: bool) -> PartKind {
+    PartKind::JointPos {
+        use_delta: true,
+        use_target,
+        normalize: true,
+        low: Some(vec![-JOINT_DELTA; 7]),
+        high: Some(vec![JOINT_DELTA; 7]),
+    }
+}
+
+/// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
+pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+    let kind = match mode {
+        "pd_joint_delta_pos" => delta(false),
+        "pd_joint_target_delta_pos" => delta(true),
+        "pd_joint_pos" => PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize: false,
+            low: None,
+            high: None,
+        },
+        _ => return None,
+    };
+    let arm = PartSpec {
+        name: "arm",
+        joints: ARM_PART.to_vec(),
+        followers: vec![],
+        kind,
+        gains: ARM_GAINS,
+    };
+    Some(vec![arm, gripper()])
+}
+
+/// The WidowX AI as ManiSkill configures it.
+pub static WIDOWXAI: RobotSpec = RobotSpec {
+    uid: "widowxai",
+    urdf: "widowxai/widowxai.urdf",
+    srdf: "widowxai/widowxai.srdf",
+    arm_joints: &ARM,
+    gripper_joints: &[GRIPPER_JOINT],
+    arm_gains: ARM_GAINS,
+    gripper_gains: GRIPPER_GAINS,
+    finger_friction: (&["gripper_left", "gripper_right"], 2.0),
+    tcp: TcpDef::Link("ee_gripper_link"),
+    tcp_link: Some("ee_gripper_link"),
+    grasp: GraspDef {
+        finger1: ("gripper_left", 1.0),
+        finger2: ("gripper_right", -1.0),
+        min_force: 0.2,
+        max_angle_deg: 85.0,
+    },
+    static_rule: StaticRule::Arm(6),
+    table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
+    table_qpos: &READY_TO_GRASP,
+    init_noise: InitNoise::None,
+    control_modes: &CONTROL_MODES,
+    parts,
+    customize: |o| o.mimic_solref = Some(MIMIC_SOLREF),
+};

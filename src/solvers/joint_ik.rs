@@ -1,0 +1,337 @@
+//! Scripted PickCube solver for robots without end-effector controllers (SO100, WidowX AI;
+//! solvers.md §8): an IK of its own on the robot's URDF chain turns the phase targets of
+//! solvers.md §7.1 into `pd_joint_pos` actions.
+//!
+//! The IK works on a *grasp point* fixed in the gripper (the spot between the jaws where the
+//! cube centre ends up) and a top-down grasp frame: it minimises, by damped least squares
+//! with a numerical Jacobian over the arm joints,
+//! `[p − p*; w·(a − (0, 0, −1)); w·(c · n)]` — grasp-point position, approach axis `a` pointing
+//! down, closing axis `c` perpendicular to `n` (the horizontal normal of the chosen cube face
+//! axis) — then refines the position alone with minimum-norm Gauss–Newton steps. Where a
+//! top-down approach is out of reach (SO100's far cubes) the weighted stage settles on the
+//! closest tilt and the position stays exact. Joint values are clamped to their limits.
+//!
+//! Phases (checked in order with fall-through, as §7.1): 0 above the cube (open), 1 down to the
+//! cube (open), 2 close for a few steps, 3 carry: the grasp point goes to
+//! `goal + (grasp point − cube)`, so that the cube centre, not the grasp point, lands on the
+//! goal. Every step the IK target moves at most [`MAX_STEP`] from the current grasp point.
+//! Positions are read from MuJoCo before the step; nothing is allocated per step.
+use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
+
+use super::Policy;
+use crate::controllers::ik::Chain;
+use crate::env::Env;
+use crate::tasks::body_id;
+
+/// Most arm joints an IK chain may have.
+const MAX_ARM: usize = 6;
+/// Rows of the IK error: position 3, approach 3, closing 1.
+const ROWS: usize = 7;
+/// Largest distance (m) between the grasp point and the IK target of one step.
+pub const MAX_STEP: f64 = 0.04;
+/// Weight of the orientation rows against position (m per unit).
+const ORIENTATION_WEIGHT: f64 = 0.05;
+/// Damping of the least-squares steps (Jacobian entries are ~0.1 m/rad).
+const DAMPING: f64 = 1e-4;
+/// Largest joint change of one IK iteration (rad or m).
+const MAX_DQ: f64 = 0.2;
+/// Iterations of the weighted stage and of the position refinement.
+const ITERS: (usize, usize) = (30, 10);
+/// Finite-difference step of the numerical Jacobian (rad or m).
+const FD: f64 = 1e-6;
+
+/// What the solver needs to know about a robot.
+#[derive(Debug, Clone, Copy)]
+pub struct JointIkRobot {
+    /// Link carrying the grasp point.
+    pub link: &'static str,
+    /// Grasp point in that link's frame.
+    pub point: [f64; 3],
+    /// Link axis that should point down (the approach direction).
+    pub approach: [f64; 3],
+    /// Link axis along which the gripper closes.
+    pub closing: [f64; 3],
+    /// Number of arm joints: the first entries of qpos and of the `pd_joint_pos` action.
+    pub n_arm: usize,
+    /// (action index, value) pairs that open the gripper.
+    pub open: &'static [(usize, f32)],
+    /// (action index, value) pairs that close it.
+    pub close: &'static [(usize, f32)],
+    /// Height of the approach point above the cube centre (m).
+    pub approach_height: f64,
+    /// Height of the grasp point above the cube centre when closing (m).
+    pub grasp_height: f64,
+    /// Steps the gripper closes before lifting.
+    pub hold: usize,
+}
+
+/// SO100: the grasp point sits between the jaw tips on Fixed_Jaw (the jaw points along its
+/// local −y and closes along x); gripper joint 0 = open, −0.8 = closed (absolute rad).
+pub const SO100: JointIkRobot = JointIkRobot {
+    link: "Fixed_Jaw",
+    point: [-0.0075, -0.092, 0.0],
+    approach: [0.0, -1.0, 0.0],
+    closing: [1.0, 0.0, 0.0],
+    n_arm: 5,
+    open: &[(5, 0.0)],
+    close: &[(5, -0.8)],
+    approach_height: 0.04,
+    grasp_height: 0.006,
+    hold: 6,
+};
+
+/// WidowX AI: the grasp point is the middle of the fingertip pads, 13 mm behind
+/// ee_gripper_link (the gripper points along link x and closes along y). The arm part's 7th
+/// entry (the left carriage, overridden by the gripper part) repeats the gripper target; the
+/// gripper action is normalised: +1 = 0.044 m open, −1 = 0 m closed.
+pub const WIDOWXAI: JointIkRobot = JointIkRobot {
+    link: "ee_gripper_link",
+    point: [-0.013, 0.0, 0.0],
+    approach: [1.0, 0.0, 0.0],
+    closing: [0.0, 1.0, 0.0],
+    n_arm: 6,
+    open: &[(6, 0.044), (7, 1.0)],
+    close: &[(6, 0.0), (7, -1.0)],
+    approach_height: 0.05,
+    grasp_height: 0.0,
+    hold: 4,
+};
+
+/// Approach tolerance (m).
+const APPROACH_TOL: f64 = 0.01;
+/// Descent tolerance (m).
+const DESCEND_TOL: f64 = 0.004;
+/// Steps after which the descent gives up on the tolerance and closes anyway.
+const DESCEND_MAX_STEPS: usize = 12;
+
+type Jac = SMatrix<f64, ROWS, MAX_ARM>;
+
+/// The PickCube policy for SO100 and WidowX AI in `pd_joint_pos`.
+#[derive(Debug)]
+pub struct JointIkPickCube {
+    robot: JointIkRobot,
+    chain: Chain,
+    base: Isometry3<f64>,
+    limits: [(f64, f64); MAX_ARM],
+    cube: usize,
+    goal: usize,
+    phase: usize,
+    steps_in_phase: usize,
+    /// Horizontal unit normal to the cube face axis the gripper closes along (fixed per
+    /// episode at the first step).
+    closing_normal: Option<Vector3<f64>>,
+    /// Measured qpos and the IK solution (ManiSkill order).
+    q: Vec<f64>,
+    q_ik: Vec<f64>,
+}
+
+impl JointIkPickCube {
+    /// Builds the solver for a PickCube env whose robot is described by `robot`.
+    pub fn new(env: &Env, robot: JointIkRobot) -> Result<Self, String> {
+        let spec = env.robot_spec();
+        let desc = spec.description()?;
+        let arm: Vec<&str> = env.robot().joint_names[..robot.n_arm]
+            .iter()
+            .map(|s| s.as_str())
+            .collect();
+        let chain = Chain::new(&desc, robot.link, &arm)?;
+        let mut limits = [(0.0, 0.0); MAX_ARM];
+        for (l, r) in limits.iter_mut().zip(&env.robot().limits[..robot.n_arm]) {
+            *l = *r;
+        }
+        let n = env.robot().qpos_adr.len();
+        Ok(JointIkPickCube {
+            robot,
+            chain,
+            base: spec.table_base(),
+            limits,
+            cube: body_id(env.model(), "cube")?,
+            goal: body_id(env.model(), "goal_site")?,
+            phase: 0,
+            steps_in_phase: 0,
+            closing_normal: None,
+            q: vec![0.0; n],
+            q_ik: vec![0.0; n],
+        })
+    }
+
+    /// World grasp point, approach axis and closing axis for the full qpos `q`.
+    pub fn frame(&self, q: &[f64]) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+        let t = self.base * self.chain.fk(q);
+        let r = &self.robot;
+        (
+            (t * nalgebra::Point3::from(r.point)).coords,
+            t.rotation * Vector3::from(r.approach),
+            t.rotation * Vector3::from(r.closing),
+        )
+    }
+
+    fn error(&self, q: &[f64], target: &Vector3<f64>, n: &Vector3<f64>) -> SVector<f64, ROWS> {
+        let (p, a, c) = self.frame(q);
+        let dp = p - target;
+        let da = (a - Vector3::new(0.0, 0.0, -1.0)) * ORIENTATION_WEIGHT;
+        SVector::<f64, ROWS>::from_column_slice(&[
+            dp.x,
+            dp.y,
+            dp.z,
+            da.x,
+            da.y,
+            da.z,
+            c.dot(n) * ORIENTATION_WEIGHT,
+        ])
+    }
+
+    fn jacobian(
+        &mut self,
+        target: &Vector3<f64>,
+        n: &Vector3<f64>,
+        e0: &SVector<f64, ROWS>,
+    ) -> Jac {
+        let mut jac = Jac::zeros();
+        for k in 0..self.robot.n_arm {
+            let keep = self.q_ik[k];
+            self.q_ik[k] = keep + FD;
+            let e = self.error(&self.q_ik, target, n);
+            self.q_ik[k] = keep;
+            jac.set_column(k, &((e - e0) / FD));
+        }
+        jac
+    }
+
+    fn clamp(&mut self) {
+        for k in 0..self.robot.n_arm {
+            let (lo, hi) = self.limits[k];
+            self.q_ik[k] = self.q_ik[k].clamp(lo, hi);
+        }
+    }
+
+    /// Solves for the arm joints (written into `q_ik`, starting from `q`) that put the grasp
+    /// point at `target` with the gripper top-down and closing perpendicular to `n`.
+    fn solve(&mut self, target: &Vector3<f64>, n: &Vector3<f64>) {
+        self.q_ik.copy_from_slice(&self.q);
+        let k = self.robot.n_arm;
+        for _ in 0..ITERS.0 {
+            let e = self.error(&self.q_ik, target, n);
+            let jac = self.jacobian(target, n, &e);
+            let jtj =
+                jac.transpose() * jac + SMatrix::<f64, MAX_ARM, MAX_ARM>::identity() * DAMPING;
+            let Some(ch) = jtj.cholesky() else { break };
+            let mut dq = ch.solve(&(jac.transpose() * e));
+            let norm = dq.norm();
+            if norm > MAX_DQ {
+                dq *= MAX_DQ / norm;
+            }
+            for i in 0..k {
+                self.q_ik[i] -= dq[i];
+            }
+            self.clamp();
+            if dq.norm() < 1e-9 {
+                break;
+            }
+        }
+        for _ in 0..ITERS.1 {
+            let e = self.error(&self.q_ik, target, n);
+            let jac = self.jacobian(target, n, &e);
+            let jp = jac.fixed_rows::<3>(0).into_owned();
+            let jjt = jp * jp.transpose() + nalgebra::Matrix3::identity() * DAMPING;
+            let Some(ch) = jjt.cholesky() else { break };
+            let ep = e.fixed_rows::<3>(0).into_owned();
+            let mut dq = jp.transpose() * ch.solve(&ep);
+            let norm = dq.norm();
+            if norm > MAX_DQ {
+                dq *= MAX_DQ / norm;
+            }
+            for i in 0..k {
+                self.q_ik[i] -= dq[i];
+            }
+            self.clamp();
+            if ep.norm() < 1e-6 {
+                break;
+            }
+        }
+    }
+
+    fn gripper(&self, action: &mut [f32], close: bool) {
+        let set = if close {
+            self.robot.close
+        } else {
+            self.robot.open
+        };
+        for &(i, v) in set {
+            action[i] = v;
+        }
+    }
+}
+
+fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
+    Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
+}
+
+/// The cube face axis (world, horizontal) the gripper should close along: of the cube's x
+/// and y axes, the one closer to the current closing axis. Returns its horizontal normal.
+fn closing_normal(env: &Env, cube: usize, closing: &Vector3<f64>) -> Vector3<f64> {
+    let m = &env.data().xmat()[9 * cube..9 * cube + 9];
+    let ax = Vector3::new(m[0], m[3], 0.0).normalize();
+    let ay = Vector3::new(m[1], m[4], 0.0).normalize();
+    let d = if ax.dot(closing).abs() >= ay.dot(closing).abs() {
+        ax
+    } else {
+        ay
+    };
+    Vector3::new(-d.y, d.x, 0.0)
+}
+
+impl Policy for JointIkPickCube {
+    fn reset(&mut self, _env: &Env) {
+        self.phase = 0;
+        self.steps_in_phase = 0;
+        self.closing_normal = None;
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        env.robot().qpos(env.data(), &mut self.q);
+        let (p, _, c) = self.frame(&self.q);
+        let cube = body_xyz(env, self.cube);
+        let goal = body_xyz(env, self.goal);
+        let n = *self
+            .closing_normal
+            .get_or_insert_with(|| closing_normal(env, self.cube, &c));
+        let r = self.robot;
+        let (target, close) = loop {
+            let (target, close) = match self.phase {
+                0 => (cube + Vector3::new(0.0, 0.0, r.approach_height), false),
+                1 => (cube + Vector3::new(0.0, 0.0, r.grasp_height), false),
+                2 => (p, true),
+                _ => (goal + (p - cube), true),
+            };
+            let err = (target - p).norm();
+            let done = match self.phase {
+                0 => err < APPROACH_TOL,
+                1 => err < DESCEND_TOL || self.steps_in_phase >= DESCEND_MAX_STEPS,
+                2 => self.steps_in_phase >= r.hold,
+                _ => false,
+            };
+            if done {
+                self.phase += 1;
+                self.steps_in_phase = 0;
+                continue;
+            }
+            self.steps_in_phase += 1;
+            break (target, close);
+        };
+        let d = target - p;
+        let step = if d.norm() > MAX_STEP {
+            p + d * (MAX_STEP / d.norm())
+        } else {
+            target
+        };
+        // While closing, the arm keeps its last targets.
+        if self.phase != 2 {
+            self.solve(&step, &n);
+        }
+        for (a, q) in action.iter_mut().zip(&self.q_ik).take(r.n_arm) {
+            *a = *q as f32;
+        }
+        self.gripper(action, close);
+    }
+}

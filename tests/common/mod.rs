@@ -1,0 +1,194 @@
+//! Helpers shared by the per-robot test files (so100.rs, widowxai.rs): an independent URDF
+//! forward kinematics (roxmltree, as in foundation.rs) and a table scene with PD targets.
+#![allow(dead_code)]
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+
+use mjskill::mujoco::{Data, Model};
+use mjskill::robots::{self, RobotIds, RobotSpec};
+
+/// (name, type, parent, child, origin, axis) of one URDF joint.
+type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
+
+/// Forward kinematics straight from the URDF text (roxmltree; not urdf-rs, not mjskill's
+/// loader): composes origin · motion along the tree.
+pub struct IndependentFk {
+    joints: Vec<JointRow>,
+}
+
+fn parse_floats(s: Option<&str>, default: [f64; 3]) -> [f64; 3] {
+    match s {
+        None => default,
+        Some(t) => {
+            let v: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2]]
+        }
+    }
+}
+
+impl IndependentFk {
+    pub fn new(urdf: &str) -> Self {
+        let doc = roxmltree::Document::parse(urdf).unwrap();
+        let mut joints = Vec::new();
+        for j in doc
+            .root_element()
+            .children()
+            .filter(|n| n.has_tag_name("joint"))
+        {
+            let child = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
+            let origin = child("origin");
+            let xyz = parse_floats(origin.and_then(|o| o.attribute("xyz")), [0.0; 3]);
+            let rpy = parse_floats(origin.and_then(|o| o.attribute("rpy")), [0.0; 3]);
+            // rpy: fixed-axis roll, pitch, yaw ⇒ R = Rz(y)·Ry(p)·Rx(r)
+            let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rpy[2])
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), rpy[1])
+                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rpy[0]);
+            let axis = Vector3::from(parse_floats(
+                child("axis").and_then(|a| a.attribute("xyz")),
+                [1.0, 0.0, 0.0],
+            ));
+            let link = |tag: &str| child(tag).unwrap().attribute("link").unwrap().to_string();
+            joints.push((
+                j.attribute("name").unwrap().to_string(),
+                j.attribute("type").unwrap().to_string(),
+                link("parent"),
+                link("child"),
+                Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), rot),
+                axis.normalize(),
+            ));
+        }
+        IndependentFk { joints }
+    }
+
+    /// World pose of every link for joint values by name.
+    pub fn links(
+        &self,
+        base: &Isometry3<f64>,
+        root: &str,
+        q: &HashMap<String, f64>,
+    ) -> HashMap<String, Isometry3<f64>> {
+        let mut out = HashMap::from([(root.to_string(), *base)]);
+        loop {
+            let mut added = false;
+            for (name, ty, parent, child, origin, axis) in &self.joints {
+                if out.contains_key(child) || !out.contains_key(parent) {
+                    continue;
+                }
+                let v = q.get(name).copied().unwrap_or(0.0);
+                let motion = match ty.as_str() {
+                    "revolute" | "continuous" => Isometry3::rotation(axis * v),
+                    "prismatic" => Isometry3::translation(axis.x * v, axis.y * v, axis.z * v),
+                    _ => Isometry3::identity(),
+                };
+                let p = out[parent] * origin * motion;
+                out.insert(child.clone(), p);
+                added = true;
+            }
+            if !added {
+                return out;
+            }
+        }
+    }
+}
+
+/// Checks MuJoCo's link poses of `uid` at its table pose against [`IndependentFk`] over
+/// random configurations within the joint limits; calls `extra` with the data and the
+/// independent link poses of each sample.
+pub fn check_fk(
+    uid: &str,
+    samples: usize,
+    mut extra: impl FnMut(&Data, &RobotIds, &HashMap<String, Isometry3<f64>>),
+) {
+    let spec = robots::spec(uid).unwrap();
+    let (model, desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let fk = IndependentFk::new(mjskill::models::text(spec.urdf).unwrap());
+    let mut d = Data::new(model.clone()).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let root = &desc.links[desc.root].name;
+    for _ in 0..samples {
+        let mut q = HashMap::new();
+        let mut qv = vec![0.0; ids.qpos_adr.len()];
+        for (k, name) in ids.joint_names.iter().enumerate() {
+            let (lo, hi) = ids.limits[k];
+            let v = rng.random_range(lo..=hi);
+            q.insert(name.clone(), v);
+            qv[k] = v;
+        }
+        ids.set_qpos(&mut d, &qv);
+        d.forward();
+        let want = fk.links(&spec.table_base(), root, &q);
+        assert_eq!(
+            want.len(),
+            desc.links.len(),
+            "independent FK reached every link"
+        );
+        for (name, b) in &ids.link_bodies {
+            let got = RobotIds::body_pose(&d, *b);
+            let w = want[name];
+            let dp = (got.translation.vector - w.translation.vector).norm();
+            let dr = got.rotation.angle_to(&w.rotation);
+            assert!(dp < 1e-6, "{uid} link {name}: position error {dp}");
+            assert!(dr < 1e-6, "{uid} link {name}: rotation error {dr}");
+        }
+        extra(&d, &ids, &want);
+    }
+}
+
+/// The table scene of `spec` at its (noise-free) table qpos with the drive targets there and
+/// gravity compensation applied.
+pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data) {
+    let (model, _, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let mut d = Data::new(model.clone()).unwrap();
+    ids.set_qpos(&mut d, spec.table_qpos);
+    ids.apply_gravity_compensation(&mut d);
+    for (k, &q) in spec.table_qpos.iter().enumerate() {
+        ids.set_drive_target(&model, &mut d, k, q, 0.0);
+    }
+    d.forward();
+    (model, ids, d)
+}
+
+/// Holds the table pose for 5 s (sag < 1e-3 rad on every driven joint), then tracks a step
+/// of `delta` on the driven joints within `tol` after 1.5 s without touching anything.
+pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
+    let (model, ids, mut d) = table_scene(spec);
+    assert!(model.gravity()[2] < -9.0);
+    let n = ids.qpos_adr.len();
+    for _ in 0..(5.0 / model.timestep()).round() as usize {
+        d.step();
+    }
+    let mut q = vec![0.0; n];
+    ids.qpos(&d, &mut q);
+    for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate() {
+        let sag = (qk - rest).abs();
+        assert!(sag < 1e-3, "{} joint {k} drifted {sag} over 5 s", spec.uid);
+    }
+    assert!(!d.warnings().diverged(), "{:?}", d.warnings());
+    let target: Vec<f64> = spec
+        .table_qpos
+        .iter()
+        .zip(delta)
+        .map(|(q, dq)| q + dq)
+        .collect();
+    for (k, &t) in target.iter().enumerate() {
+        ids.set_drive_target(&model, &mut d, k, t, 0.0);
+    }
+    for _ in 0..(1.5 / model.timestep()) as usize {
+        d.step();
+    }
+    ids.qpos(&d, &mut q);
+    for k in 0..n {
+        if ids.actuator[k].is_some() {
+            let e = (q[k] - target[k]).abs();
+            assert!(
+                e < tol,
+                "{} joint {k}: tracking error {e} after 1.5 s",
+                spec.uid
+            );
+        }
+    }
+    assert!(!d.warnings().diverged(), "{:?}", d.warnings());
+}
