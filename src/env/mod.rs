@@ -224,13 +224,13 @@ fn place_sphere(_robot: &'static str) -> Box<dyn Task> {
 static REGISTRY: [EnvSpec; 2] = [
     EnvSpec {
         id: "PickCube-v1",
-        robots: &["panda"],
+        robots: &["panda", "fetch"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
     EnvSpec {
         id: "PlaceSphere-v1",
-        robots: &["panda"],
+        robots: &["panda", "fetch"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: place_sphere,
     },
