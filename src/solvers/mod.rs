@@ -13,6 +13,8 @@ use rand::{Rng, SeedableRng};
 use crate::env::Env;
 use crate::tasks::body_id;
 
+pub mod fetch;
+
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
 
@@ -34,6 +36,8 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     }
     Some(match robot {
         "so100" | "widowxai" => "pd_joint_pos",
+        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
+        "fetch" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
@@ -97,11 +101,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     }
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(env, PANDA_GRIPPER)?)),
-        ("PickCube-v1", "fetch") => Ok(Box::new(
-            PickCubeSolver::new(env, FETCH_GRIPPER)?
-                .with_hold(PICK_HOLD_FETCH)
-                .with_grasp_height(PICK_GRASP_HEIGHT_FETCH),
-        )),
+        ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: PickCube-v1 with panda, fetch"
         )),
@@ -123,17 +123,10 @@ pub const PANDA_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
-/// Fetch: +1 opens (0.05 m), −1 closes (−0.01 m target).
-pub const FETCH_GRIPPER: Gripper = Gripper {
-    open: 1.0,
-    close: -1.0,
-};
-
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
 
-/// Writes `clip((target − tcp)/0.1, −limit, limit)` and the gripper value; further action
-/// entries (Fetch's body and base) are zero.
+/// Writes `clip((target − tcp)/0.1, −limit, limit)` and the gripper value.
 fn ee_action(
     target: Vector3<f64>,
     tcp: Vector3<f64>,
@@ -145,7 +138,6 @@ fn ee_action(
         action[k] = ((target[k] - tcp[k]) / ACTION_SCALE).clamp(-limit, limit) as f32;
     }
     action[3] = gripper;
-    action[4..].fill(0.0);
 }
 
 /// solvers.md §7.1: above the cube, down to it, close for H steps, carry to the goal.
@@ -156,8 +148,6 @@ pub struct PickCubeSolver {
     gripper: Gripper,
     /// Steps to hold the closing gripper before lifting.
     hold: usize,
-    /// Height of the grasp point above the cube centre (m).
-    grasp_height: f64,
     phase: usize,
     steps_in_phase: usize,
 }
@@ -170,12 +160,6 @@ const PICK_APPROACH_TOL: f64 = 0.01;
 const PICK_DESCEND_TOL: f64 = 0.004;
 /// Panda: steps the gripper closes before lifting.
 const PICK_HOLD_PANDA: usize = 3;
-/// Fetch: steps the gripper closes before lifting.
-const PICK_HOLD_FETCH: usize = 3;
-/// Fetch grasps 1.8 cm above the cube centre: its gripper points 60° below the horizontal
-/// at the table pose, so with the finger midpoint at the cube centre the finger tips would
-/// be 1.3 cm inside the table (the descent could never reach its 4 mm tolerance).
-const PICK_GRASP_HEIGHT_FETCH: f64 = 0.018;
 
 impl PickCubeSolver {
     /// Resolves the cube and goal bodies of a PickCube env.
@@ -185,22 +169,9 @@ impl PickCubeSolver {
             goal: body_id(env.model(), "goal_site")?,
             gripper,
             hold: PICK_HOLD_PANDA,
-            grasp_height: 0.0,
             phase: 0,
             steps_in_phase: 0,
         })
-    }
-
-    /// Sets the number of steps the closing gripper is held before lifting.
-    pub fn with_hold(mut self, steps: usize) -> Self {
-        self.hold = steps;
-        self
-    }
-
-    /// Sets the grasp point's height above the cube centre (approach and descent targets).
-    pub fn with_grasp_height(mut self, dz: f64) -> Self {
-        self.grasp_height = dz;
-        self
     }
 }
 
@@ -216,7 +187,7 @@ impl Policy for PickCubeSolver {
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
         let tcp = Vector3::from(env.robot().tcp_pose(env.data()).0);
-        let cube = body_xyz(env, self.cube) + Vector3::new(0.0, 0.0, self.grasp_height);
+        let cube = body_xyz(env, self.cube);
         let goal = body_xyz(env, self.goal);
         loop {
             let (target, grip) = match self.phase {
