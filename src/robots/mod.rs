@@ -436,8 +436,8 @@ pub fn table_scene_with(
     // The drives of the default control mode (for arm-and-gripper robots these are
     // `default_drives`; Fetch's also cover its body and base).
     let mode = spec.control_modes[0];
-    let drives = crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?
-        .drives(&desc);
+    let drives =
+        crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
     let mut scene = crate::mjcf::Scene::new(spec.uid);
     scene.add_table_scene();
     scene.add_robot(&desc, &spec.options(spec.table_base(), drives), &|_| None)?;

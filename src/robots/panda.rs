@@ -126,7 +126,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
                 pos: EE_POS_ABS,
                 rot: EE_ROT_ABS,
                 ee_link: "panda_hand_tcp",
-        root_link: None,
+                root_link: None,
             },
             ARM_GAINS,
         ),

@@ -160,7 +160,8 @@ impl Policy for FetchPickCube {
         let grasp = cube + Vector3::new(0.0, 0.0, self.grasp_height);
         // Orientation error of gripper_link (world = torso axes: the base keeps yaw 0).
         let g = &data.xquat()[4 * self.gripper_link..4 * self.gripper_link + 4];
-        let cur = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(g[0], g[1], g[2], g[3]));
+        let cur =
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(g[0], g[1], g[2], g[3]));
         let shoulder = xyz(env, self.shoulder);
         let carrying = self.phase >= 3;
         let pitch = if carrying {
