@@ -77,6 +77,9 @@ const BODY_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
 const STIFF_BODY_GAINS: (f64, f64, f64) = (1e5, 1e5, 1e5);
 /// Base velocity drive: stiffness 0, damping 1000, force limit 500.
 const BASE_GAINS: (f64, f64, f64) = (0.0, 1000.0, 500.0);
+/// Base yaw-rate bound (rad/s): upstream's literal 3.14, not π.
+#[allow(clippy::approx_constant)]
+pub const YAW_RATE_MAX: f32 = 3.14;
 /// Arm/body delta bound (rad or m) of the joint-delta modes.
 const JOINT_DELTA: f32 = 0.1;
 /// EE position and rotation delta bounds of the EE-delta modes.
@@ -157,7 +160,7 @@ fn base() -> PartSpec {
         followers: vec![],
         kind: PartKind::BaseForwardVel {
             lin: (-1.0, 1.0),
-            ang: (-3.14, 3.14),
+            ang: (-YAW_RATE_MAX, YAW_RATE_MAX),
         },
         gains: BASE_GAINS,
     }

@@ -228,6 +228,7 @@ impl Policy for FetchPickCube {
         action[9] = ((torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
         // Base: forward speed (±1 m/s) towards BASE_FORWARD, yaw rate (±3.14 rad/s) to 0.
         action[10] = (BASE_GAIN * (BASE_FORWARD - self.q[0])).clamp(-1.0, 1.0) as f32;
-        action[11] = (-BASE_GAIN * self.q[2] / 3.14).clamp(-1.0, 1.0) as f32;
+        action[11] = (-BASE_GAIN * self.q[2] / crate::robots::fetch::YAW_RATE_MAX as f64)
+            .clamp(-1.0, 1.0) as f32;
     }
 }
