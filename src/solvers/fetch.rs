@@ -6,12 +6,19 @@
 //!   60° below the horizontal; with that orientation the arm cannot reach the cube spawn
 //!   area at all (the wrist would need 0.75 m from the shoulder, the arm reaches 0.67 m). So
 //!   the solver uses `pd_ee_delta_pose` and turns the gripper to a flatter pitch (45° for the
-//!   nearest cubes down to 5° for the farthest), lowers the torso to 0.2 m (bringing the
-//!   shoulder down to the table) and drives the base 3 cm forward (its front is 3.8 cm from
-//!   the table).
+//!   nearest cubes down to 5° for the farthest), lowers the torso to 0.25 m while picking
+//!   (bringing the shoulder down towards the table) and raises it again to carry, and drives
+//!   the base 3.3 cm forward (its front is 3.8 cm from the table);
+//! * every position target is pulled back within the arm's reach at the current pitch, so the
+//!   IK keeps solving (an unreachable target makes the EE controller hold the arm still);
+//! * while carrying, the gripper points along the line from the shoulder to the goal (the
+//!   longest reach);
 //! * the grasp point is raised above the cube centre so that the tilted fingers and palm stay
-//!   clear of the table top;
+//!   clear of the table top, and a shortfall along the fingers (≤ 1.2 cm) is accepted;
 //! * the carry target puts the cube centre (not the finger midpoint) at the goal.
+//!
+//! Measured: 96/100 successes on seeds 0–99 (first success at step 41 on average); the misses
+//! are cubes in the far corners (x > 0.09 m), at the edge of the arm's reach.
 //!
 //! All commands are proportional and saturate at the action bounds; the body's head joints and
 //! the base yaw are held.
@@ -50,7 +57,7 @@ const REACH_MARGIN: f64 = 0.012;
 /// Gripper pitch limits while carrying (rad below the horizontal).
 const CARRY_PITCH: (f64, f64) = (-0.2, 0.7);
 /// Base travel towards the table (m).
-const BASE_FORWARD: f64 = 0.035;
+const BASE_FORWARD: f64 = 0.033;
 /// Proportional gain of the base: forward speed (m/s) per metre of error.
 const BASE_GAIN: f64 = 4.0;
 /// Gripper pitch below the horizontal for the nearest (x = −0.1) and farthest (x = 0.1) cubes.
