@@ -34,7 +34,8 @@ struct ChainJoint {
     limits: (f64, f64),
 }
 
-/// A serial chain from the robot root link to an end-effector link.
+/// A serial chain from a root link (the robot's root link unless given) to an end-effector
+/// link. EE poses are expressed in the root link's frame.
 #[derive(Debug, Clone)]
 pub struct Chain {
     joints: Vec<ChainJoint>,
@@ -48,12 +49,36 @@ impl Chain {
     /// The chain from the root link of `robot` to `ee_link`, where `arm` lists the joints the
     /// solver may move (ManiSkill indices are taken from `robot.active_joints()`).
     pub fn new(robot: &RobotDesc, ee_link: &str, arm: &[&str]) -> Result<Chain, String> {
+        Chain::from_root(robot, None, ee_link, arm)
+    }
+
+    /// The chain from `root_link` (None: the robot's root link) to `ee_link`; EE poses are
+    /// then relative to `root_link` (ManiSkill's `root_link_name`, e.g. Fetch's
+    /// `torso_lift_link`). Errors if `root_link` is not an ancestor of `ee_link`.
+    pub fn from_root(
+        robot: &RobotDesc,
+        root_link: Option<&str>,
+        ee_link: &str,
+        arm: &[&str],
+    ) -> Result<Chain, String> {
         let mut link = robot
             .link(ee_link)
             .ok_or_else(|| format!("robot has no link {ee_link:?}"))?;
+        let root = match root_link {
+            Some(r) => robot
+                .link(r)
+                .ok_or_else(|| format!("robot has no link {r:?} (IK root)"))?,
+            None => robot.root,
+        };
         let active_order = robot.active_joints();
         let mut rev = Vec::new();
-        while let Some(j) = robot.parent_joint(link) {
+        while link != root {
+            let Some(j) = robot.parent_joint(link) else {
+                return Err(format!(
+                    "IK root link {:?} is not an ancestor of {ee_link:?}",
+                    robot.links[root].name
+                ));
+            };
             let jd = &robot.joints[j];
             let q_index = active_order.iter().position(|&a| a == j);
             rev.push(ChainJoint {

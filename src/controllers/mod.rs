@@ -41,7 +41,8 @@ pub enum PartKind {
     JointPosVel {
         /// Positions are deltas from the measured position.
         use_delta: bool,
-        /// Whether the action is normalised (both halves).
+        /// Whether the action is normalised (both halves; absolute positions of unlimited
+        /// joints are never normalised).
         normalize: bool,
         /// Delta bounds (ignored for absolute positions, whose bounds are the joint limits).
         pos: (f32, f32),
@@ -62,6 +63,9 @@ pub enum PartKind {
         rot: (f32, f32),
         /// EE link.
         ee_link: &'static str,
+        /// Link whose frame EE poses are expressed in (`root_link_name` upstream; None: the
+        /// robot's root link).
+        root_link: Option<&'static str>,
     },
     /// `PDBaseForwardVelController` (Fetch): [forward speed, yaw rate] → joint velocities of
     /// the virtual x, y, yaw joints.
@@ -195,7 +199,26 @@ impl Controller {
                     ..
                 } => {
                     if *normalize {
-                        (vec![-1.0; 2 * n], vec![1.0; 2 * n])
+                        // Absolute positions are normalised to the joint limits; an unlimited
+                        // (continuous) joint's position is taken as is (upstream scales it by
+                        // ±inf and produces NaN targets), so its bounds stay ±inf.
+                        let mut l: Vec<f32> = idx
+                            .iter()
+                            .map(|&i| match limits(i) {
+                                (lo, _) if !*use_delta && !lo.is_finite() => lo,
+                                _ => -1.0,
+                            })
+                            .collect();
+                        let mut h: Vec<f32> = idx
+                            .iter()
+                            .map(|&i| match limits(i) {
+                                (_, hi) if !*use_delta && !hi.is_finite() => hi,
+                                _ => 1.0,
+                            })
+                            .collect();
+                        l.extend(std::iter::repeat_n(-1.0, n));
+                        h.extend(std::iter::repeat_n(1.0, n));
+                        (l, h)
                     } else {
                         let mut l: Vec<f32> = idx
                             .iter()
@@ -233,7 +256,9 @@ impl Controller {
                 PartKind::BaseForwardVel { .. } => (vec![-1.0; 2], vec![1.0; 2]),
             };
             let chain = match &spec.kind {
-                PartKind::Ee { ee_link, .. } => Some(Chain::new(desc, ee_link, &spec.joints)?),
+                PartKind::Ee {
+                    ee_link, root_link, ..
+                } => Some(Chain::from_root(desc, *root_link, ee_link, &spec.joints)?),
                 _ => None,
             };
             low.extend_from_slice(&pl);
@@ -474,10 +499,15 @@ impl Controller {
                     let n = p.idx.len();
                     for (k, &i) in p.idx.iter().enumerate() {
                         let (x, v) = if *normalize {
-                            (
-                                clip_scale(a[k], pos.0, pos.1),
-                                clip_scale(a[n + k], vel.0, vel.1),
-                            )
+                            let (lo, hi) = robot.limits[i];
+                            let x = if *use_delta {
+                                clip_scale(a[k], pos.0, pos.1)
+                            } else if lo.is_finite() && hi.is_finite() {
+                                clip_scale(a[k], lo as f32, hi as f32)
+                            } else {
+                                a[k]
+                            };
+                            (x, clip_scale(a[n + k], vel.0, vel.1))
                         } else {
                             (a[k], a[n + k])
                         };

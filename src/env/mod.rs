@@ -228,7 +228,7 @@ fn poke_cube(_robot: &'static str) -> Box<dyn Task> {
 static REGISTRY: [EnvSpec; 5] = [
     EnvSpec {
         id: "PickCube-v1",
-        robots: &["panda", "so100", "widowxai"],
+        robots: &["panda", "fetch", "so100", "widowxai"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
@@ -246,7 +246,7 @@ static REGISTRY: [EnvSpec; 5] = [
     },
     EnvSpec {
         id: "PlaceSphere-v1",
-        robots: &["panda"],
+        robots: &["panda", "fetch"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: place_sphere,
     },

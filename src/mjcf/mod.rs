@@ -206,7 +206,11 @@ impl Scene {
         root.push(
             Element::new("compiler")
                 .attr("angle", "radian")
-                .attr("inertiafromgeom", "auto"),
+                .attr("inertiafromgeom", "auto")
+                // PhysX accepts any positive principal inertia; MuJoCo rejects tensors that
+                // break the triangle inequality (Fetch's fingers: 0.002, 0.0002, 0.0002) unless
+                // asked to balance them (all three diagonal entries set to their mean).
+                .attr("balanceinertia", "true"),
         );
         root.push(
             Element::new("option")

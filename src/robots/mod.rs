@@ -1,6 +1,7 @@
 //! Robots: what ManiSkill defines per robot (robots.md) on top of its URDF — joint roles,
 //! drive gains, the TCP, the grasp check, keyframes and the table-scene placement — and the
 //! ids a compiled scene resolves them to ([`RobotIds`]).
+pub mod fetch;
 pub mod panda;
 pub mod so100;
 pub mod widowxai;
@@ -212,6 +213,7 @@ impl RobotSpec {
 pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
     match uid {
         "panda" => Ok(&panda::PANDA),
+        "fetch" => Ok(&fetch::FETCH),
         "so100" => Ok(&so100::SO100),
         "widowxai" => Ok(&widowxai::WIDOWXAI),
         _ => Err(format!(
@@ -427,20 +429,22 @@ impl RobotIds {
     }
 }
 
-/// Builds a scene with the table, this robot at its table pose with default drives, and
-/// returns the compiled model and resolved ids (used by tests and `export-mjcf`).
+/// Builds a scene with the table, this robot at its table pose with the drives of its
+/// default control mode, and returns the compiled model and resolved ids (used by tests and
+/// `export-mjcf`).
 pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
 ) -> Result<(Arc<Model>, RobotDesc, RobotIds, crate::mjcf::Mjcf), String> {
     let desc = spec.description()?;
+    // The drives of the default control mode (for arm-and-gripper robots these are
+    // `default_drives`; Fetch's also cover its body and base).
+    let mode = spec.control_modes[0];
+    let drives =
+        crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
     let mut scene = crate::mjcf::Scene::new(spec.uid);
     scene.add_table_scene();
-    scene.add_robot(
-        &desc,
-        &spec.options(spec.table_base(), spec.default_drives()),
-        &|_| None,
-    )?;
+    scene.add_robot(&desc, &spec.options(spec.table_base(), drives), &|_| None)?;
     extra(&mut scene);
     let mjcf = scene.finish();
     let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);

@@ -95,6 +95,7 @@ fn ee(rotation: bool, use_target: bool) -> PartKind {
         pos: EE_DELTA,
         rot: EE_DELTA,
         ee_link: "panda_hand_tcp",
+        root_link: None,
     }
 }
 
@@ -125,6 +126,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
                 pos: EE_POS_ABS,
                 rot: EE_ROT_ABS,
                 ee_link: "panda_hand_tcp",
+                root_link: None,
             },
             ARM_GAINS,
         ),

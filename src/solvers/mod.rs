@@ -17,6 +17,8 @@ use rand::{Rng, SeedableRng};
 use crate::env::Env;
 use crate::tasks::body_id;
 
+pub mod fetch;
+
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
 
@@ -38,6 +40,8 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     }
     Some(match robot {
         "so100" | "widowxai" => "pd_joint_pos",
+        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
+        "fetch" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
@@ -86,8 +90,9 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver.
-pub const SOLVED: [(&str, &str); 7] = [
+pub const SOLVED: [(&str, &str); 8] = [
     ("PickCube-v1", "panda"),
+    ("PickCube-v1", "fetch"),
     ("PickCube-v1", "so100"),
     ("PickCube-v1", "widowxai"),
     ("PickCubeSO100-v1", "so100"),
@@ -126,6 +131,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ("PickCube-v1" | "PickCubeWidowXAI-v1", "widowxai") => Ok(Box::new(
             joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
         )),
+        ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: {}",
             SOLVED

@@ -1,0 +1,276 @@
+//! Fetch mobile manipulator (robots.md §3): a virtual planar base (x, y, yaw), a torso lift,
+//! a pan/tilt head, a 7-dof arm (three continuous roll joints) and two prismatic fingers.
+//!
+//! Control modes have four parts in upstream order: arm, gripper, body (head pan, head tilt,
+//! torso lift) and base ([forward speed, yaw rate] → velocity drives of the virtual joints).
+//! Two modes differ from upstream on purpose (see the README):
+//! * `pd_joint_pos_vel`: upstream normalises the absolute arm positions to the joint limits,
+//!   which are ±inf for the continuous joints and yields NaN targets; mjskill normalises the
+//!   limited joints and takes the continuous joints' positions as is (not clipped).
+//! * the EE modes fail to construct upstream; mjskill implements the intended controller: IK
+//!   of the 7 arm joints for `gripper_link` with poses relative to `torso_lift_link`.
+use std::f64::consts::PI;
+
+use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
+use crate::controllers::{PartKind, PartSpec};
+use crate::mjcf::RobotOptions;
+
+/// Fetch's initial qpos in the table scene (ManiSkill's breadth-first order, robots.md §3).
+pub const TABLE_QPOS: [f64; 15] = [
+    0.0,
+    0.0,
+    0.0,
+    0.386,
+    0.0,
+    0.0,
+    0.0,
+    -PI / 4.0,
+    0.0,
+    PI / 4.0,
+    0.0,
+    PI / 3.0,
+    0.0,
+    0.015,
+    0.015,
+];
+
+/// Joint names in ManiSkill's qpos order (breadth-first; robots.md §3 table).
+pub const JOINT_ORDER: [&str; 15] = [
+    "root_x_axis_joint",
+    "root_y_axis_joint",
+    "root_z_rotation_joint",
+    "torso_lift_joint",
+    "head_pan_joint",
+    "shoulder_pan_joint",
+    "head_tilt_joint",
+    "shoulder_lift_joint",
+    "upperarm_roll_joint",
+    "elbow_flex_joint",
+    "forearm_roll_joint",
+    "wrist_flex_joint",
+    "wrist_roll_joint",
+    "r_gripper_finger_joint",
+    "l_gripper_finger_joint",
+];
+
+const ARM: [&str; 7] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "upperarm_roll_joint",
+    "elbow_flex_joint",
+    "forearm_roll_joint",
+    "wrist_flex_joint",
+    "wrist_roll_joint",
+];
+/// Body joints in the order of the body controller's action.
+const BODY: [&str; 3] = ["head_pan_joint", "head_tilt_joint", "torso_lift_joint"];
+/// Virtual base joints (x, y, yaw).
+const BASE: [&str; 3] = [
+    "root_x_axis_joint",
+    "root_y_axis_joint",
+    "root_z_rotation_joint",
+];
+const ARM_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+const GRIPPER_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+const BODY_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+/// `pd_joint_delta_pos_stiff_body`'s body drive.
+const STIFF_BODY_GAINS: (f64, f64, f64) = (1e5, 1e5, 1e5);
+/// Base velocity drive: stiffness 0, damping 1000, force limit 500.
+const BASE_GAINS: (f64, f64, f64) = (0.0, 1000.0, 500.0);
+/// Base yaw-rate bound (rad/s): upstream's literal 3.14, not π.
+#[allow(clippy::approx_constant)]
+pub const YAW_RATE_MAX: f32 = 3.14;
+/// Arm/body delta bound (rad or m) of the joint-delta modes.
+const JOINT_DELTA: f32 = 0.1;
+/// EE position and rotation delta bounds of the EE-delta modes.
+const EE_DELTA: (f32, f32) = (-0.1, 0.1);
+/// The EE link and the frame EE poses are expressed in (upstream `root_link_name`).
+const EE_LINK: &str = "gripper_link";
+const EE_ROOT: &str = "torso_lift_link";
+
+/// Fetch control modes (robots.md §3), default first.
+pub const CONTROL_MODES: [&str; 11] = [
+    "pd_joint_delta_pos",
+    "pd_joint_pos",
+    "pd_joint_target_delta_pos",
+    "pd_joint_vel",
+    "pd_joint_pos_vel",
+    "pd_joint_delta_pos_vel",
+    "pd_joint_delta_pos_stiff_body",
+    "pd_ee_delta_pos",
+    "pd_ee_delta_pose",
+    "pd_ee_target_delta_pos",
+    "pd_ee_target_delta_pose",
+];
+
+fn gripper() -> PartSpec {
+    PartSpec {
+        name: "gripper",
+        joints: vec!["l_gripper_finger_joint"],
+        followers: vec![("r_gripper_finger_joint", "l_gripper_finger_joint", 1.0, 0.0)],
+        kind: PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize: true,
+            low: Some(vec![-0.01]),
+            high: Some(vec![0.05]),
+        },
+        gains: GRIPPER_GAINS,
+    }
+}
+
+fn joint_delta(n: usize, use_target: bool) -> PartKind {
+    PartKind::JointPos {
+        use_delta: true,
+        use_target,
+        normalize: true,
+        low: Some(vec![-JOINT_DELTA; n]),
+        high: Some(vec![JOINT_DELTA; n]),
+    }
+}
+
+fn body(stiff: bool) -> PartSpec {
+    let (kind, gains) = if stiff {
+        (
+            PartKind::JointPos {
+                use_delta: false,
+                use_target: false,
+                normalize: false,
+                low: None,
+                high: None,
+            },
+            STIFF_BODY_GAINS,
+        )
+    } else {
+        (joint_delta(3, false), BODY_GAINS)
+    };
+    PartSpec {
+        name: "body",
+        joints: BODY.to_vec(),
+        followers: vec![],
+        kind,
+        gains,
+    }
+}
+
+fn base() -> PartSpec {
+    PartSpec {
+        name: "base",
+        joints: BASE.to_vec(),
+        followers: vec![],
+        kind: PartKind::BaseForwardVel {
+            lin: (-1.0, 1.0),
+            ang: (-YAW_RATE_MAX, YAW_RATE_MAX),
+        },
+        gains: BASE_GAINS,
+    }
+}
+
+fn arm(kind: PartKind, gains: (f64, f64, f64)) -> PartSpec {
+    PartSpec {
+        name: "arm",
+        joints: ARM.to_vec(),
+        followers: vec![],
+        kind,
+        gains,
+    }
+}
+
+fn ee(rotation: bool, use_target: bool) -> PartKind {
+    PartKind::Ee {
+        rotation,
+        use_delta: true,
+        use_target,
+        pos: EE_DELTA,
+        rot: EE_DELTA,
+        ee_link: EE_LINK,
+        root_link: Some(EE_ROOT),
+    }
+}
+
+/// The parts of a Fetch control mode (arm, gripper, body, base).
+pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+    let arm = match mode {
+        "pd_joint_delta_pos" | "pd_joint_delta_pos_stiff_body" => {
+            arm(joint_delta(7, false), ARM_GAINS)
+        }
+        "pd_joint_target_delta_pos" => arm(joint_delta(7, true), ARM_GAINS),
+        "pd_joint_pos" => arm(
+            PartKind::JointPos {
+                use_delta: false,
+                use_target: false,
+                normalize: false,
+                low: None,
+                high: None,
+            },
+            ARM_GAINS,
+        ),
+        "pd_joint_vel" => arm(
+            PartKind::JointVel {
+                low: -1.0,
+                high: 1.0,
+            },
+            (0.0, ARM_GAINS.1, ARM_GAINS.2),
+        ),
+        "pd_joint_pos_vel" => arm(
+            PartKind::JointPosVel {
+                use_delta: false,
+                normalize: true,
+                pos: (0.0, 0.0),
+                vel: (-1.0, 1.0),
+            },
+            ARM_GAINS,
+        ),
+        "pd_joint_delta_pos_vel" => arm(
+            PartKind::JointPosVel {
+                use_delta: true,
+                normalize: true,
+                pos: (-JOINT_DELTA, JOINT_DELTA),
+                vel: (-1.0, 1.0),
+            },
+            ARM_GAINS,
+        ),
+        "pd_ee_delta_pos" => arm(ee(false, false), ARM_GAINS),
+        "pd_ee_delta_pose" => arm(ee(true, false), ARM_GAINS),
+        "pd_ee_target_delta_pos" => arm(ee(false, true), ARM_GAINS),
+        "pd_ee_target_delta_pose" => arm(ee(true, true), ARM_GAINS),
+        _ => return None,
+    };
+    let stiff = mode == "pd_joint_delta_pos_stiff_body";
+    Some(vec![arm, gripper(), body(stiff), base()])
+}
+
+/// Fetch's scene options: the wheels never touch the ground (upstream puts them and the
+/// ground in one collision group, robots.md §3).
+fn customize(opts: &mut RobotOptions) {
+    opts.no_ground_contact = vec!["l_wheel_link".into(), "r_wheel_link".into()];
+}
+
+/// Fetch as ManiSkill configures it.
+pub static FETCH: RobotSpec = RobotSpec {
+    uid: "fetch",
+    urdf: "fetch/fetch.urdf",
+    srdf: "fetch/fetch.srdf",
+    arm_joints: &ARM,
+    gripper_joints: &["l_gripper_finger_joint", "r_gripper_finger_joint"],
+    arm_gains: ARM_GAINS,
+    gripper_gains: GRIPPER_GAINS,
+    finger_friction: (&["l_gripper_finger_link", "r_gripper_finger_link"], 2.0),
+    tcp: TcpDef::FingerMidpoint("l_gripper_finger_link", "r_gripper_finger_link"),
+    tcp_link: Some("gripper_link"),
+    grasp: GraspDef {
+        finger1: ("l_gripper_finger_link", -1.0),
+        finger2: ("r_gripper_finger_link", 1.0),
+        min_force: 0.5,
+        max_angle_deg: 85.0,
+    },
+    static_rule: StaticRule::FetchSigned {
+        base_threshold: 0.05,
+    },
+    table_pose: ([-1.05, 0.0, -0.91964293], [1.0, 0.0, 0.0, 0.0]),
+    table_qpos: &TABLE_QPOS,
+    init_noise: InitNoise::None,
+    control_modes: &CONTROL_MODES,
+    parts,
+    customize,
+};
