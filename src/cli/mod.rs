@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod bench;
 pub mod eval;
+pub mod render;
 pub mod rollout;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
@@ -147,6 +148,23 @@ pub enum Command {
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
+    /// prints a JSON summary.
+    Render {
+        /// Env, robot and control mode.
+        #[command(flatten)]
+        target: EnvArgs,
+        /// Reset seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Camera: the human render camera (render_camera, 512x512) or the sensor camera
+        /// (base_camera, 128x128).
+        #[arg(long, default_value = "render_camera")]
+        camera: String,
+        /// Output PNG file.
+        #[arg(short = 'o', long = "output", default_value = "frame.png")]
+        output: PathBuf,
+    },
 }
 
 /// Runs the command line; returns the process exit code.
@@ -252,6 +270,16 @@ fn run(cli: Cli) -> Result<(), String> {
                     file.display()
                 ))
             }
+        }
+        Command::Render {
+            target,
+            seed,
+            camera,
+            output,
+        } => {
+            let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
+            println!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            Ok(())
         }
         Command::Envs => {
             println!(

@@ -48,7 +48,8 @@ impl Scene {
                 .attr("castshadow", "false")
                 .attr_nums("pos", &[-1.0, -1.0, 2.0])
                 .attr_nums("dir", &[1.0, 1.0, -1.0])
-                .attr_nums("diffuse", &[0.7, 0.7, 0.7]),
+                .attr_nums("diffuse", &[0.5, 0.5, 0.5])
+                .attr_nums("specular", &[0.1, 0.1, 0.1]),
         );
         wb.push(
             Element::new("light")
@@ -57,7 +58,8 @@ impl Scene {
                 .attr("castshadow", "false")
                 .attr_nums("pos", &[0.0, 0.0, 2.0])
                 .attr_nums("dir", &[0.0, 0.0, -1.0])
-                .attr_nums("diffuse", &[0.7, 0.7, 0.7]),
+                .attr_nums("diffuse", &[0.5, 0.5, 0.5])
+                .attr_nums("specular", &[0.1, 0.1, 0.1]),
         );
         wb.push(
             pose_attrs(Element::new("geom"), &table_pose)
@@ -90,8 +92,12 @@ impl Scene {
                 .attr("conaffinity", CONTACT_GROUND)
                 .attr("rgba", "0.9 0.9 0.9 1"),
         );
-        self.section("visual")
-            .push(Element::new("headlight").attr_nums("ambient", &[0.3, 0.3, 0.3]));
+        self.section("visual").push(
+            Element::new("headlight")
+                .attr_nums("ambient", &[0.3, 0.3, 0.3])
+                .attr_nums("diffuse", &[0.0, 0.0, 0.0])
+                .attr_nums("specular", &[0.0, 0.0, 0.0]),
+        );
     }
 
     /// A dynamic box (free joint named `name`) with half extents `half`, at `pos`.

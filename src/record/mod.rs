@@ -29,6 +29,7 @@
 //! finished episode survives a later crash or `SIGKILL`; [`read`] recovers such a file (no
 //! summary or footer) and reports [`Recording::complete`]` == false`.
 
+pub mod image;
 mod num;
 mod schema;
 
