@@ -1,0 +1,261 @@
+//! Headless rendering: sensor images in the rgb/depth/rgbd obs modes and the human render,
+//! checked against projections computed independently from the camera pose and intrinsics.
+
+use mjskill::mujoco::ObjType;
+use mjskill::{make, Env, EnvConfig, ObsMode};
+use nalgebra::{Matrix3, Vector3};
+
+fn env(mode: ObsMode, seed: u64) -> Env {
+    let mut e = make(
+        "PickCube-v1",
+        EnvConfig {
+            obs_mode: mode,
+            ..Default::default()
+        },
+    )
+    .expect("rendering must be available (bash .ci/setup installs EGL/Mesa)");
+    e.reset(Some(seed));
+    e
+}
+
+/// Pinhole camera of a MuJoCo camera: pose from cam_xpos/cam_xmat, vertical fovy.
+struct Pinhole {
+    pos: Vector3<f64>,
+    /// Columns: right, up, backward (MuJoCo cameras look along −z).
+    rot: Matrix3<f64>,
+    f: f64,
+    w: usize,
+    h: usize,
+}
+
+impl Pinhole {
+    fn of(env: &Env, name: &str, size: (usize, usize)) -> Pinhole {
+        let m = env.model();
+        let id = m.require_id(ObjType::Camera, name).unwrap();
+        let d = env.data();
+        let p = &d.cam_xpos()[3 * id..3 * id + 3];
+        let r = &d.cam_xmat()[9 * id..9 * id + 9];
+        let fovy = m.cam_fovy()[id].to_radians();
+        Pinhole {
+            pos: Vector3::new(p[0], p[1], p[2]),
+            rot: Matrix3::from_row_slice(r),
+            f: size.1 as f64 / 2.0 / (fovy / 2.0).tan(),
+            w: size.0,
+            h: size.1,
+        }
+    }
+
+    /// Pixel (column, row) containing the projection of world point `x` (top row 0).
+    fn project(&self, x: Vector3<f64>) -> (usize, usize) {
+        let c = self.rot.transpose() * (x - self.pos);
+        assert!(c.z < 0.0, "point behind the camera");
+        let u = self.w as f64 / 2.0 + self.f * c.x / -c.z;
+        let v = self.h as f64 / 2.0 - self.f * c.y / -c.z;
+        assert!(
+            u >= 0.0 && v >= 0.0 && u < self.w as f64 && v < self.h as f64,
+            "projection ({u}, {v}) outside the image"
+        );
+        (u as usize, v as usize)
+    }
+
+    /// World direction of the ray through the centre of pixel (col, row), scaled so that its
+    /// component along the optical axis is 1.
+    fn ray(&self, col: usize, row: usize) -> Vector3<f64> {
+        let x = (col as f64 + 0.5 - self.w as f64 / 2.0) / self.f;
+        let y = (self.h as f64 / 2.0 - (row as f64 + 0.5)) / self.f;
+        self.rot * Vector3::new(x, y, -1.0)
+    }
+}
+
+fn body(env: &Env, name: &str) -> (Vector3<f64>, Matrix3<f64>) {
+    let b = env.model().require_id(ObjType::Body, name).unwrap();
+    let d = env.data();
+    let p = &d.xpos()[3 * b..3 * b + 3];
+    (
+        Vector3::new(p[0], p[1], p[2]),
+        Matrix3::from_row_slice(&d.xmat()[9 * b..9 * b + 9]),
+    )
+}
+
+fn pixel(rgb: &[u8], w: usize, (col, row): (usize, usize)) -> [u8; 3] {
+    let i = 3 * (row * w + col);
+    [rgb[i], rgb[i + 1], rgb[i + 2]]
+}
+
+fn is_red(p: [u8; 3]) -> bool {
+    p[0] > 100 && p[1] < 60 && p[2] < 60
+}
+
+fn is_green(p: [u8; 3]) -> bool {
+    p[1] > 100 && p[0] < 60 && p[2] < 60
+}
+
+/// Ray parameter where `origin + t·dir` enters the box (centre `c`, rotation `r`, half size `h`).
+fn ray_box(
+    origin: Vector3<f64>,
+    dir: Vector3<f64>,
+    c: Vector3<f64>,
+    r: Matrix3<f64>,
+    h: f64,
+) -> f64 {
+    let (o, d) = (r.transpose() * (origin - c), r.transpose() * dir);
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..3 {
+        let (a, b) = ((-h - o[k]) / d[k], (h - o[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    assert!(t0 <= t1 && t0 > 0.0, "the ray misses the box");
+    t0
+}
+
+#[test]
+fn cube_is_red_at_its_projection_and_depth_matches_the_ray() {
+    let e = env(ObsMode::Rgbd, 0);
+    let cam = e.image("base_camera").expect("sensor camera images");
+    let (w, h) = (cam.width, cam.height);
+    assert_eq!((w, h), (128, 128));
+    let pin = Pinhole::of(&e, "base_camera", (w, h));
+    let (cube, rot) = body(&e, "cube");
+    let px = pin.project(cube);
+    let rgb = cam.rgb.unwrap();
+    assert!(
+        is_red(pixel(rgb, w, px)),
+        "pixel {px:?} = {:?}",
+        pixel(rgb, w, px)
+    );
+    // A pixel well away from the cube is not red (the test is not fooled by a red image).
+    let far = ((px.0 + w / 2) % w, (px.1 + h / 2) % h);
+    assert!(!is_red(pixel(rgb, w, far)));
+    // Depth = distance along the optical axis to where the pixel's ray meets the cube.
+    let t = ray_box(pin.pos, pin.ray(px.0, px.1), cube, rot, 0.02);
+    let depth = cam.depth.unwrap()[px.1 * w + px.0] as f64;
+    assert!((depth - t).abs() < 0.005, "depth {depth} vs ray {t}");
+    // And the table top around it is farther than the cube's face.
+    assert!(t > 0.2 && t < 1.0, "{t}");
+}
+
+#[test]
+fn goal_marker_hidden_from_sensor_but_drawn_for_humans() {
+    let mut e = env(ObsMode::Rgb, 0);
+    // Put the goal where both cameras see it unoccluded (mocap pose in the physics state).
+    let mut s = e.get_state();
+    let n = s.physics.len();
+    s.physics[n - 7..n - 4].copy_from_slice(&[0.1, -0.15, 0.05]);
+    e.set_state(&s).unwrap();
+    let (goal, _) = body(&e, "goal_site");
+    assert!((goal - Vector3::new(0.1, -0.15, 0.05)).norm() < 1e-12);
+
+    let (sensor, human) = e.cameras();
+    let pin = Pinhole::of(&e, sensor.name, sensor.size);
+    let px = pin.project(goal);
+    let rgb = e.sensor_rgb().unwrap();
+    let p = pixel(rgb, sensor.size.0, px);
+    assert!(
+        !is_green(p),
+        "goal visible in the sensor image at {px:?}: {p:?}"
+    );
+    assert!(!rgb.chunks(3).any(|c| is_green([c[0], c[1], c[2]])));
+
+    let pin = Pinhole::of(&e, human.name, human.size);
+    let px = pin.project(goal);
+    let frame = e.render().unwrap();
+    assert_eq!(frame.len(), 512 * 512 * 3);
+    let p = pixel(frame, human.size.0, px);
+    assert!(
+        is_green(p),
+        "goal not drawn in the human render at {px:?}: {p:?}"
+    );
+}
+
+#[test]
+fn same_state_renders_the_same_image() {
+    let mut e = env(ObsMode::Rgbd, 3);
+    let s = e.get_state();
+    let (rgb, depth) = (
+        e.sensor_rgb().unwrap().to_vec(),
+        e.sensor_depth().unwrap().to_vec(),
+    );
+    let human = e.render().unwrap().to_vec();
+    let a = vec![0.5f32; e.action_space().shape[0]];
+    e.step(&a).unwrap();
+    assert_ne!(e.sensor_rgb().unwrap(), &rgb[..], "the arm moved");
+    assert_ne!(e.render().unwrap(), &human[..]);
+    e.set_state(&s).unwrap();
+    assert_eq!(e.sensor_rgb().unwrap(), &rgb[..]);
+    assert_eq!(e.sensor_depth().unwrap(), &depth[..]);
+    assert_eq!(e.render().unwrap(), &human[..]);
+    // A second env of the same seed renders identically too.
+    let mut f = env(ObsMode::Rgbd, 3);
+    assert_eq!(f.sensor_rgb().unwrap(), &rgb[..]);
+    assert_eq!(f.render().unwrap(), &human[..]);
+}
+
+#[test]
+fn visual_obs_modes_have_state_free_vectors_and_images() {
+    let state = env(ObsMode::State, 0);
+    for (mode, rgb, depth) in [
+        (ObsMode::Rgb, true, false),
+        (ObsMode::Depth, false, true),
+        (ObsMode::Rgbd, true, true),
+    ] {
+        let mut e = env(mode, 0);
+        // agent qpos (9), qvel (9), extras is_grasped, tcp_pose, goal_pos: no object pose.
+        assert_eq!(e.obs().len(), 29, "{mode:?}");
+        assert_eq!(e.observation_space().shape, vec![29]);
+        assert!(e.obs_part("extra/obj_pose").is_none());
+        assert_eq!(
+            e.obs_part("extra/tcp_pose"),
+            state.obs_part("extra/tcp_pose")
+        );
+        assert_eq!(
+            e.sensor_rgb().map(|v| v.len()),
+            rgb.then_some(128 * 128 * 3)
+        );
+        assert_eq!(
+            e.sensor_depth().map(|v| v.len()),
+            depth.then_some(128 * 128)
+        );
+        let img = e.image("base_camera").unwrap();
+        assert_eq!((img.width, img.height), (128, 128));
+        assert!(e.image("render_camera").is_none() && e.image("nope").is_none());
+        if let Some(d) = e.sensor_depth() {
+            assert!(d.iter().all(|z| z.is_finite() && *z >= 0.01 && *z <= 100.0));
+        }
+        let a = vec![0.0f32; e.action_space().shape[0]];
+        assert_eq!(e.step(&a).unwrap().obs.len(), 29);
+    }
+    // State modes have no sensor images but can still render for humans.
+    let mut s = env(ObsMode::State, 0);
+    assert!(s.sensor_rgb().is_none() && s.image("base_camera").is_none());
+    assert_eq!(s.render().unwrap().len(), 512 * 512 * 3);
+    assert_eq!(s.render_size(), (512, 512));
+    assert!(ObsMode::parse("rgbd").unwrap().is_visual());
+    assert!(ObsMode::parse("rgb+depth")
+        .unwrap_err()
+        .to_string()
+        .contains("rgbd"));
+}
+
+#[test]
+fn render_options_change_the_image_and_bad_ones_are_rejected() {
+    let mut e = env(ObsMode::Rgb, 0);
+    let plain = e.render().unwrap().to_vec();
+    let mut o = e.render_options();
+    assert!(!o.shadows && o.msaa_samples == 0 && !o.reflections);
+    o.shadows = true;
+    o.msaa_samples = 4;
+    e.set_render_options(o).unwrap();
+    assert_eq!(e.render_options(), o);
+    let fancy = e.render().unwrap().to_vec();
+    assert_ne!(plain, fancy);
+    let bad = mjskill::mujoco::render::RenderOptions {
+        clip: (1.0, 0.5),
+        ..o
+    };
+    let err = e.set_render_options(bad).unwrap_err().to_string();
+    assert!(err.contains("near"), "{err}");
+    // The env keeps working with its previous settings.
+    assert_eq!(e.render_options(), o);
+    assert_eq!(e.sensor_rgb().unwrap().len(), 128 * 128 * 3);
+}
