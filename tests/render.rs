@@ -259,3 +259,159 @@ fn render_options_change_the_image_and_bad_ones_are_rejected() {
     assert_eq!(e.render_options(), o);
     assert_eq!(e.sensor_rgb().unwrap().len(), 128 * 128 * 3);
 }
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("mjskill-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
+    let mut r = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; r.output_buffer_size().unwrap()];
+    let info = r.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    (info.width as usize, info.height as usize, buf)
+}
+
+#[test]
+fn recorded_video_frames_decode_to_the_rendered_images() {
+    use base64::Engine;
+    use mjskill::record::{read_raw, Recorder, TOPIC_RENDER_IMAGE};
+    let path = tmp("video.mcap");
+    let mut e = env(ObsMode::State, 7);
+    let mut rec = Recorder::create(&path, &e).unwrap();
+    assert!(
+        rec.record_frame(&[0; 3], 1, 1).is_err(),
+        "video not enabled yet"
+    );
+    rec.enable_video("render_camera").unwrap();
+    rec.reset(&mut e, Some(7)).unwrap();
+    let mut frames = vec![e.render().unwrap().to_vec()];
+    rec.record_frame(&frames[0], 512, 512).unwrap();
+    let a = vec![0.3f32; e.action_space().shape[0]];
+    for _ in 0..2 {
+        rec.step(&mut e, &a).unwrap();
+        frames.push(e.render().unwrap().to_vec());
+        rec.record_frame(frames.last().unwrap(), 512, 512).unwrap();
+    }
+    rec.end_episode(false).unwrap();
+    assert_eq!(rec.frames(), 3);
+    rec.finish().unwrap();
+
+    let raw = read_raw(&path).unwrap();
+    let imgs: Vec<_> = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == TOPIC_RENDER_IMAGE)
+        .collect();
+    assert_eq!(imgs.len(), 3);
+    let steps: Vec<u64> = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == "/step")
+        .map(|m| m.log_time)
+        .collect();
+    for (k, m) in imgs.iter().enumerate() {
+        assert_eq!(m.schema, "foxglove.CompressedImage");
+        assert_eq!(m.encoding, "json");
+        if k > 0 {
+            assert_eq!(m.log_time, steps[k - 1], "frame stamped with its step");
+        }
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        assert_eq!(v["frame_id"], "render_camera");
+        assert_eq!(v["format"], "png");
+        assert_eq!(
+            v["timestamp"]["nsec"].as_u64().unwrap(),
+            m.log_time % 1_000_000_000
+        );
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(v["data"].as_str().unwrap())
+            .unwrap();
+        let (w, h, rgb) = decode_png(&bytes);
+        assert_eq!((w, h), (512, 512));
+        assert_eq!(rgb, frames[k], "frame {k}");
+    }
+    assert_ne!(frames[0], frames[2]);
+    // The episode itself still reads back.
+    let r = mjskill::record::read(&path).unwrap();
+    assert_eq!(r.episodes[0].steps.len(), 2);
+}
+
+#[test]
+fn render_command_writes_the_human_and_sensor_frames() {
+    let bin = env!("CARGO_BIN_EXE_mjskill");
+    let mut e = env(ObsMode::Rgb, 4);
+    let expect_human = e.render().unwrap().to_vec();
+    let expect_sensor = e.sensor_rgb().unwrap().to_vec();
+    for (camera, size, expect) in [
+        ("render_camera", 512, expect_human),
+        ("base_camera", 128, expect_sensor),
+    ] {
+        let out = tmp(&format!("{camera}.png"));
+        let o = std::process::Command::new(bin)
+            .args([
+                "render",
+                "--env",
+                "PickCube-v1",
+                "--seed",
+                "4",
+                "--camera",
+                camera,
+                "-o",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (w, h, rgb) = decode_png(&std::fs::read(&out).unwrap());
+        assert_eq!((w, h), (size, size));
+        assert_eq!(rgb, expect, "{camera}");
+    }
+    let o = std::process::Command::new(bin)
+        .args(["render", "--camera", "top_camera", "-o"])
+        .arg(tmp("x.png"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("top_camera") && err.contains("render_camera"),
+        "{err}"
+    );
+}
+
+#[test]
+fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
+    let out = tmp("roll.mcap");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["rollout", "--episodes", "1", "--video", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let png_path = out.with_extension("png");
+    assert_eq!(s["frame"], png_path.display().to_string());
+    assert_eq!(s["video_frames"], 51, "reset + 50 steps");
+    let (w, h, rgb) = decode_png(&std::fs::read(&png_path).unwrap());
+    assert_eq!((w, h), (512, 512));
+    // The solver lifted the cube to the goal: both red and green are in view.
+    let px = |f: fn([u8; 3]) -> bool| rgb.chunks(3).filter(|c| f([c[0], c[1], c[2]])).count();
+    assert!(
+        px(is_red) > 20 && px(is_green) > 5,
+        "{} {}",
+        px(is_red),
+        px(is_green)
+    );
+    let raw = mjskill::record::read_raw(&out).unwrap();
+    let n = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == mjskill::record::TOPIC_RENDER_IMAGE)
+        .count();
+    assert_eq!(n, 51);
+}

@@ -113,7 +113,7 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict or none.
+        /// Observation mode: state, state_dict, none, rgb, depth or rgbd.
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Reward mode: normalized_dense, dense, sparse or none.
@@ -128,9 +128,14 @@ pub enum Command {
         /// Seed of the first episode (episode k uses seed + k).
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Output MCAP file.
+        /// Output MCAP file. The human camera's view at the end of the first episode is
+        /// written next to it as PNG (rollout.mcap → rollout.png) when rendering is available.
         #[arg(long, default_value = "rollout.mcap")]
         out: PathBuf,
+        /// Also record the human render camera's frames (512x512 PNG) on
+        /// /render_camera/image (foxglove.CompressedImage).
+        #[arg(long)]
+        video: bool,
     },
     /// Summarise a recording (JSON); says whether it was cut short.
     Info {
@@ -230,6 +235,7 @@ fn run(cli: Cli) -> Result<(), String> {
             episodes,
             seed,
             out,
+            video,
         } => {
             use std::io::IsTerminal;
             let config = crate::env::EnvConfig {
@@ -246,6 +252,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 seed,
                 out,
                 progress: std::io::stderr().is_terminal(),
+                video,
             };
             let summary = rollout::rollout(&args)?;
             println!(
