@@ -72,6 +72,13 @@ pub enum Command {
         /// VecEnv threads, the calling thread included (default: available cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
+        /// render the 128x128 sensor camera every step).
+        #[arg(long, default_value = "state")]
+        obs_mode: String,
+        /// Also time this many human-camera frames (Env::render, 512x512): render_frames_per_s.
+        #[arg(long)]
+        render: Option<usize>,
     },
     /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
     /// `<collision>` elements, with their volume and the mesh volume they cover.
@@ -192,6 +199,8 @@ fn run(cli: Cli) -> Result<(), String> {
             steps,
             envs,
             threads,
+            obs_mode,
+            render,
         } => {
             let cores = std::thread::available_parallelism()
                 .map(|n| n.get())
@@ -200,7 +209,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 (None, None) => None,
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
-            let report = bench::run(&target.env, target.config(), steps, vec)?;
+            let config = crate::env::EnvConfig {
+                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+                ..target.config()
+            };
+            let report = bench::run(&target.env, config, steps, vec, render)?;
             println!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
