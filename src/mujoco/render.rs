@@ -95,7 +95,7 @@ static CREATE: Mutex<()> = Mutex::new(());
 fn init_egl() -> Result<EglDisplay, String> {
     // SAFETY: loads the system libEGL; the symbols are the standard EGL 1.5 entry points,
     // whose signatures khronos-egl declares.
-    let egl = unsafe { EglInstance::load_required() }
+    let egl = unsafe { EglInstance::load_required_from_filename("libEGL.so.1") }
         .map_err(|e| format!("cannot load libEGL.so.1 with EGL 1.5 ({e})"))?;
     let ext = egl
         .query_string(None, egl::EXTENSIONS)
