@@ -58,6 +58,11 @@ pub struct RenderOptions {
     pub reflections: bool,
     /// Near and far clipping distances in metres (ManiSkill's cameras: 0.01 and 100).
     pub clip: (f64, f64),
+    /// Tessellation of spheres, capsules and cylinders: slices around the axis (MuJoCo's
+    /// `quality/numslices`, default 28; stacks are half as many, at least 4). Vertex work
+    /// dominates software rendering: 12 slices draw the 128×128 sensor image about 1.8×
+    /// faster than 28.
+    pub slices: u32,
 }
 
 impl Default for RenderOptions {
@@ -67,6 +72,7 @@ impl Default for RenderOptions {
             msaa_samples: 0,
             reflections: false,
             clip: (0.01, 100.0),
+            slices: 12,
         }
     }
 }
@@ -235,6 +241,12 @@ impl Renderer {
                 "clip planes must satisfy 0 < near < far, got near {near}, far {far}"
             )));
         }
+        if !(3..=100).contains(&options.slices) {
+            return Err(RenderError::Invalid(format!(
+                "slices {} is out of range (3 to 100)",
+                options.slices
+            )));
+        }
         if options.msaa_samples > 16 {
             return Err(RenderError::Invalid(format!(
                 "msaa_samples {} is out of range (0 = off, at most 16)",
@@ -268,6 +280,8 @@ impl Renderer {
             v.quality.shadowsize = if options.shadows { 2048 } else { 0 };
             v.map.znear = (near / extent) as f32;
             v.map.zfar = (far / extent) as f32;
+            v.quality.numslices = options.slices as c_int;
+            v.quality.numstacks = (options.slices as c_int / 2).max(4);
         }
         // Plain C structs, zeroed by Default, then initialised by the mjv_default* calls.
         let mut scn: Box<sys::mjvScene> = Box::default();
