@@ -415,3 +415,26 @@ fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
         .count();
     assert_eq!(n, 51);
 }
+
+#[test]
+fn visual_envs_render_on_vec_env_worker_threads() {
+    // Envs (and their GL contexts) are built on this thread and stepped on a worker thread.
+    let config = EnvConfig {
+        obs_mode: ObsMode::Rgb,
+        ..Default::default()
+    };
+    let mut v = mjskill::env::VecEnv::new("PickCube-v1", config, 2, 2).unwrap();
+    v.reset(Some(5));
+    let dim = v.single_action_space().shape[0];
+    let acts: Vec<f32> = (0..2 * dim).map(|i| (i as f32 * 0.4).sin()).collect();
+    for _ in 0..3 {
+        v.step(&acts).unwrap();
+    }
+    for i in 0..2 {
+        let mut e = env(ObsMode::Rgb, 5 + i as u64);
+        for _ in 0..3 {
+            e.step(&acts[i * dim..(i + 1) * dim]).unwrap();
+        }
+        assert_eq!(v.obs_of(i), e.obs(), "env {i}");
+    }
+}
