@@ -46,7 +46,6 @@ struct Cam {
 }
 
 /// The renderer of an env and its image buffers.
-#[derive(Debug)]
 pub(crate) struct Vision {
     renderer: Renderer,
     sensor: Cam,
@@ -57,6 +56,19 @@ pub(crate) struct Vision {
     pub(crate) sensor_depth: Vec<f32>,
     pub(crate) human_rgb: Vec<u8>,
     human_fresh: bool,
+}
+
+impl std::fmt::Debug for Vision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // Without the image buffers (hundreds of kilobytes).
+        f.debug_struct("Vision")
+            .field("renderer", &self.renderer)
+            .field("sensor", &self.sensor)
+            .field("human", &self.human)
+            .field("rgb_on", &self.rgb_on)
+            .field("depth_on", &self.depth_on)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Vision {
