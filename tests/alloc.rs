@@ -86,4 +86,29 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
     COUNTING.store(false, Ordering::SeqCst);
     assert_eq!(ALLOCS.load(Ordering::SeqCst), 0, "VecEnv::step allocated");
     assert!(v.rewards().iter().all(|r| r.is_finite()));
+    // Visual obs mode: the sensor images are rendered in place every step, and the human
+    // render reuses its buffer (Mesa's own C allocations are not Rust's and not counted).
+    let config = mjskill::EnvConfig {
+        obs_mode: mjskill::ObsMode::Rgbd,
+        ..Default::default()
+    };
+    let mut env = mjskill::make("PickCube-v1", config).unwrap();
+    let a = vec![0.1f32; env.action_space().shape[0]];
+    env.step(&a).unwrap();
+    env.render().unwrap();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    let mut sum = 0u64;
+    for _ in 0..5 {
+        env.step(&a).unwrap();
+        sum += env.sensor_rgb().unwrap()[0] as u64;
+        sum += env.render().unwrap()[0] as u64;
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        0,
+        "rgbd step or render allocated"
+    );
+    std::hint::black_box(sum);
 }

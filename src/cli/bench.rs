@@ -17,6 +17,8 @@ pub struct BenchReport {
     pub robot: String,
     /// Control mode.
     pub control_mode: String,
+    /// Observation mode (rgb/depth/rgbd render the sensor camera every step).
+    pub obs_mode: String,
     /// Timed env steps.
     pub steps: usize,
     /// Physics steps per env step.
@@ -42,6 +44,12 @@ pub struct BenchReport {
     /// vec_env_steps_per_s / env_steps_per_s (with `--envs`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scaling: Option<f64>,
+    /// Human render camera frames per second (`Env::render`, with `--render`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub render_frames_per_s: Option<f64>,
+    /// Size of those frames.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub render_size: Option<(usize, usize)>,
     /// env_steps_per_s / physics_steps_per_s.
     pub ratio: f64,
     /// Env overhead on top of physics, in percent: (1/ratio − 1)·100.
@@ -54,6 +62,7 @@ pub fn run(
     config: EnvConfig,
     steps: usize,
     vec: Option<(usize, usize)>,
+    render_frames: Option<usize>,
 ) -> Result<BenchReport, String> {
     let steps = steps.max(1);
     let mut env = make(env_id, config.clone()).map_err(|e| e.to_string())?;
@@ -133,11 +142,38 @@ pub fn run(
             Some(best)
         }
     };
+    let render_rate = match render_frames {
+        None => None,
+        Some(n) => {
+            let n = n.max(1);
+            env.set_state(&start).map_err(|e| e.to_string())?;
+            let zero = vec![0.0f32; dim];
+            env.render().map_err(|e| e.to_string())?; // warm-up (context creation)
+            let mut best = 0.0f64;
+            for _ in 0..3 {
+                let t = Instant::now();
+                for _ in 0..n {
+                    // A step in between, so that every frame draws a new state.
+                    env.step(&zero).map_err(|e| e.to_string())?;
+                    env.render().map_err(|e| e.to_string())?;
+                }
+                let with_steps = t.elapsed().as_secs_f64();
+                let t = Instant::now();
+                for _ in 0..n {
+                    env.step(&zero).map_err(|e| e.to_string())?;
+                }
+                let steps_only = t.elapsed().as_secs_f64();
+                best = best.max(n as f64 / (with_steps - steps_only).max(1e-9));
+            }
+            Some(best)
+        }
+    };
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
         robot: env.robot_spec().uid.to_string(),
         control_mode: env.config().control_mode.clone().unwrap_or_default(),
+        obs_mode: env.config().obs_mode.name().to_string(),
         steps,
         substeps: SUBSTEPS,
         env_steps_per_s: env_rate,
@@ -148,6 +184,8 @@ pub fn run(
         threads: vec.map(|v| v.1),
         vec_env_steps_per_s: vec_rate,
         scaling: vec_rate.map(|r| r / env_rate),
+        render_frames_per_s: render_rate,
+        render_size: render_rate.map(|_| env.render_size()),
         ratio,
         overhead_percent: (1.0 / ratio - 1.0) * 100.0,
     })

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod bench;
 pub mod eval;
+pub mod render;
 pub mod rollout;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
@@ -71,6 +72,13 @@ pub enum Command {
         /// VecEnv threads, the calling thread included (default: available cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
+        /// render the 128x128 sensor camera every step).
+        #[arg(long, default_value = "state")]
+        obs_mode: String,
+        /// Also time this many human-camera frames (Env::render, 512x512): render_frames_per_s.
+        #[arg(long)]
+        render: Option<usize>,
     },
     /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
     /// `<collision>` elements, with their volume and the mesh volume they cover.
@@ -112,7 +120,7 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict or none.
+        /// Observation mode: state, state_dict, none, rgb, depth or rgbd.
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Reward mode: normalized_dense, dense, sparse or none.
@@ -127,9 +135,14 @@ pub enum Command {
         /// Seed of the first episode (episode k uses seed + k).
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Output MCAP file.
+        /// Output MCAP file. The human camera's view at the end of the first episode is
+        /// written next to it as PNG (rollout.mcap → rollout.png) when rendering is available.
         #[arg(long, default_value = "rollout.mcap")]
         out: PathBuf,
+        /// Also record the human render camera's frames (512x512 PNG) on
+        /// /render_camera/image (foxglove.CompressedImage).
+        #[arg(long)]
+        video: bool,
     },
     /// Summarise a recording (JSON); says whether it was cut short.
     Info {
@@ -147,6 +160,23 @@ pub enum Command {
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
+    /// prints a JSON summary.
+    Render {
+        /// Env, robot and control mode.
+        #[command(flatten)]
+        target: EnvArgs,
+        /// Reset seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Camera: the human render camera (render_camera, 512x512) or the sensor camera
+        /// (base_camera, 128x128).
+        #[arg(long, default_value = "render_camera")]
+        camera: String,
+        /// Output PNG file.
+        #[arg(short = 'o', long = "output", default_value = "frame.png")]
+        output: PathBuf,
+    },
 }
 
 /// Runs the command line; returns the process exit code.
@@ -169,6 +199,8 @@ fn run(cli: Cli) -> Result<(), String> {
             steps,
             envs,
             threads,
+            obs_mode,
+            render,
         } => {
             let cores = std::thread::available_parallelism()
                 .map(|n| n.get())
@@ -177,7 +209,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 (None, None) => None,
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
-            let report = bench::run(&target.env, target.config(), steps, vec)?;
+            let config = crate::env::EnvConfig {
+                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+                ..target.config()
+            };
+            let report = bench::run(&target.env, config, steps, vec, render)?;
             println!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
@@ -212,6 +248,7 @@ fn run(cli: Cli) -> Result<(), String> {
             episodes,
             seed,
             out,
+            video,
         } => {
             use std::io::IsTerminal;
             let config = crate::env::EnvConfig {
@@ -228,6 +265,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 seed,
                 out,
                 progress: std::io::stderr().is_terminal(),
+                video,
             };
             let summary = rollout::rollout(&args)?;
             println!(
@@ -252,6 +290,16 @@ fn run(cli: Cli) -> Result<(), String> {
                     file.display()
                 ))
             }
+        }
+        Command::Render {
+            target,
+            seed,
+            camera,
+            output,
+        } => {
+            let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
+            println!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            Ok(())
         }
         Command::Envs => {
             println!(

@@ -5,6 +5,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::env::{EnvConfig, ObsMode, RewardMode};
+use crate::record::image::write_png;
 use crate::record::{read, Recorder, Recording};
 use crate::solvers::make_policy;
 
@@ -31,6 +32,11 @@ pub struct RolloutSummary {
     pub steps: u64,
     /// Env steps per second, recording included.
     pub steps_per_s: f64,
+    /// PNG of the human render camera at the end of the first episode, written next to the
+    /// recording (None when rendering is unavailable; the reason goes to stderr).
+    pub frame: Option<String>,
+    /// Human-camera frames recorded on `/render_camera/image` (with `--video`).
+    pub video_frames: u64,
 }
 
 /// What `rollout` runs.
@@ -50,6 +56,13 @@ pub struct RolloutArgs {
     pub out: std::path::PathBuf,
     /// Show a progress bar (on a terminal).
     pub progress: bool,
+    /// Record the human render camera's frames (`/render_camera/image`, PNG).
+    pub video: bool,
+}
+
+/// The PNG written next to a recording: `rollout.mcap` → `rollout.png`.
+pub fn frame_path(out: &Path) -> std::path::PathBuf {
+    out.with_extension("png")
 }
 
 /// Records `episodes` seeded episodes; each finished episode is synced to disk before the next
@@ -60,6 +73,14 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
     let mut env = super::eval::make_env(&a.env, a.config.clone(), &a.policy)?;
     let mut policy = make_policy(&a.policy, &env, a.seed)?;
     let mut rec = Recorder::create(&a.out, &env).map_err(|e| e.to_string())?;
+    let (render_w, render_h) = env.render_size();
+    let camera = env.cameras().1.name;
+    if a.video {
+        // Fail before simulating when rendering is unavailable.
+        env.render().map_err(|e| e.to_string())?;
+        rec.enable_video(camera).map_err(|e| e.to_string())?;
+    }
+    let mut frame = None;
     let bar = if a.progress {
         indicatif::ProgressBar::new(a.episodes as u64)
     } else {
@@ -80,6 +101,11 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         policy.reset(&env);
         rec.begin_episode(&env, Some(seed))
             .map_err(|e| e.to_string())?;
+        if a.video {
+            let rgb = env.render().map_err(|e| e.to_string())?;
+            rec.record_frame(rgb, render_w, render_h)
+                .map_err(|e| e.to_string())?;
+        }
         let (mut ret, mut success) = (0.0f64, false);
         loop {
             policy.act(&env, &mut action);
@@ -90,6 +116,11 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
             };
             rec.record_step(&env, &action, reward, terminated, truncated, &before)
                 .map_err(|e| e.to_string())?;
+            if a.video {
+                let rgb = env.render().map_err(|e| e.to_string())?;
+                rec.record_frame(rgb, render_w, render_h)
+                    .map_err(|e| e.to_string())?;
+            }
             ret += reward as f64;
             success |= terminated;
             steps += 1;
@@ -98,11 +129,22 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
             }
         }
         rec.end_episode(success).map_err(|e| e.to_string())?;
+        if k == 0 {
+            let path = frame_path(&a.out);
+            match env.render() {
+                Ok(rgb) => {
+                    write_png(&path, rgb, render_w, render_h)?;
+                    frame = Some(path.display().to_string());
+                }
+                Err(e) => bar.suspend(|| eprintln!("note: no {} written: {e}", path.display())),
+            }
+        }
         successes += success as usize;
         total_return += ret;
         bar.set_message(format!("{successes} successes"));
         bar.inc(1);
     }
+    let video_frames = rec.frames();
     rec.finish().map_err(|e| e.to_string())?;
     bar.finish_and_clear();
     Ok(RolloutSummary {
@@ -120,6 +162,8 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         mean_return: total_return / a.episodes.max(1) as f64,
         steps,
         steps_per_s: steps as f64 / t0.elapsed().as_secs_f64(),
+        frame,
+        video_frames,
     })
 }
 

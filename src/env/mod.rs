@@ -5,8 +5,10 @@
 //! success, `truncated` once `elapsed_steps ≥ max_episode_steps` (50), and the env keeps
 //! running after either — nothing stops further `step` calls (`elapsed_steps` keeps
 //! counting, `truncated` stays true), exactly as upstream.
+pub mod render;
 pub mod rng;
 pub mod vec;
+pub use render::CameraImage;
 pub use vec::VecEnv;
 
 use std::sync::Arc;
@@ -70,9 +72,12 @@ pub enum EnvError {
     /// Building the scene or model failed.
     #[error("{0}")]
     Build(String),
+    /// Rendering is unavailable or failed (the message names what to install).
+    #[error("{0}")]
+    Render(String),
 }
 
-/// Observation modes supported without rendering.
+/// Observation modes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ObsMode {
     /// One flat f32 vector.
@@ -81,15 +86,34 @@ pub enum ObsMode {
     StateDict,
     /// No observation.
     None,
+    /// State-free vector (agent, controller, non-privileged extras) plus the sensor camera's
+    /// colour image ([`Env::sensor_rgb`]).
+    Rgb,
+    /// As `Rgb` with the depth image ([`Env::sensor_depth`]) instead of colour.
+    Depth,
+    /// As `Rgb` with both colour and depth.
+    Rgbd,
 }
 
 impl ObsMode {
     /// All modes, by name.
-    pub const ALL: [(&'static str, ObsMode); 3] = [
+    pub const ALL: [(&'static str, ObsMode); 6] = [
         ("state", ObsMode::State),
         ("state_dict", ObsMode::StateDict),
         ("none", ObsMode::None),
+        ("rgb", ObsMode::Rgb),
+        ("depth", ObsMode::Depth),
+        ("rgbd", ObsMode::Rgbd),
     ];
+    /// Whether the mode renders camera images.
+    pub fn is_visual(self) -> bool {
+        matches!(self, ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd)
+    }
+    /// Whether the observation includes privileged state (object poses): ManiSkill's
+    /// `"state" in obs_mode`.
+    pub fn is_state(self) -> bool {
+        matches!(self, ObsMode::State | ObsMode::StateDict)
+    }
     /// Parses a mode name.
     pub fn parse(s: &str) -> Result<ObsMode, EnvError> {
         parse_named(&Self::ALL, s, "obs_mode")
@@ -463,6 +487,8 @@ pub struct Env {
     action_space: BoxSpace,
     observation_space: BoxSpace,
     scratch_state: Vec<f64>,
+    vision: Option<render::Vision>,
+    render_options: crate::mujoco::render::RenderOptions,
 }
 
 /// Creates an env (gymnasium's `make`). Like ManiSkill, the new env has already been reset
@@ -500,7 +526,7 @@ impl Env {
                 vec![("agent/qpos".into(), n), ("agent/qvel".into(), n)];
             parts.extend(controller.state_layout());
             parts.extend(
-                task.extra_layout(true)
+                task.extra_layout(config.obs_mode.is_state())
                     .into_iter()
                     .map(|(k, l)| (format!("extra/{k}"), l)),
             );
@@ -521,6 +547,20 @@ impl Env {
             high: vec![f32::INFINITY; off],
         };
         let max_episode_steps = config.max_episode_steps.unwrap_or(spec.max_episode_steps);
+        let render_options = crate::mujoco::render::RenderOptions::default();
+        let vision = match config.obs_mode {
+            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(
+                render::Vision::new(
+                    &model,
+                    task.cameras(),
+                    config.obs_mode != ObsMode::Depth,
+                    config.obs_mode != ObsMode::Rgb,
+                    render_options,
+                )
+                .map_err(|e| EnvError::Render(e.to_string()))?,
+            ),
+            _ => None,
+        };
         let mut env = Env {
             id: spec.id,
             spec: rs,
@@ -556,6 +596,8 @@ impl Env {
             action_space,
             observation_space,
             scratch_state: Vec::new(),
+            vision,
+            render_options,
         };
         env.reset(Some(CONSTRUCTION_SEED));
         Ok(env)
@@ -775,6 +817,9 @@ impl Env {
     }
 
     fn write_obs(&mut self) {
+        if let Some(v) = self.vision.as_mut() {
+            v.invalidate();
+        }
         if self.config.obs_mode == ObsMode::None {
             return;
         }
@@ -788,9 +833,29 @@ impl Env {
         }
         let c = self.controller.state_len();
         self.controller.write_state(&mut obs[2 * n..2 * n + c]);
-        self.task
-            .write_extra(&self.ctx(), &self.info.values, true, &mut obs[2 * n + c..]);
+        let privileged = self.config.obs_mode.is_state();
+        self.task.write_extra(
+            &self.ctx(),
+            &self.info.values,
+            privileged,
+            &mut obs[2 * n + c..],
+        );
         self.obs = obs;
+        self.render_sensors();
+    }
+
+    /// Renders the sensor images of a visual obs mode (and marks the human frame stale).
+    ///
+    /// # Panics
+    /// If EGL fails to make the env's GL context current after it was created successfully
+    /// (the context is never left current on another thread, so this indicates a broken GL
+    /// driver).
+    fn render_sensors(&mut self) {
+        if let Some(v) = self.vision.as_mut() {
+            if let Err(e) = v.render_sensor(&mut self.data) {
+                panic!("rendering the sensor camera failed after the renderer was created: {e}");
+            }
+        }
     }
 
     fn reward(&self) -> f32 {
@@ -872,5 +937,99 @@ impl Env {
         self.data.get_state(&mut buf);
         self.scratch_state = buf;
         &self.scratch_state
+    }
+
+    // ---- camera images (rendering: see `render.rs`) ------------------------------------
+
+    /// The sensor camera's colour image of the current state (H×W×3 bytes, top row first),
+    /// rewritten in place by every step; `None` unless the obs mode is `rgb` or `rgbd`.
+    pub fn sensor_rgb(&self) -> Option<&[u8]> {
+        self.vision
+            .as_ref()
+            .filter(|v| v.rgb_on)
+            .map(|v| v.sensor_rgb.as_slice())
+    }
+
+    /// The sensor camera's depth image (H×W×1 metres along the optical axis); `None` unless
+    /// the obs mode is `depth` or `rgbd`.
+    pub fn sensor_depth(&self) -> Option<&[f32]> {
+        self.vision
+            .as_ref()
+            .filter(|v| v.depth_on)
+            .map(|v| v.sensor_depth.as_slice())
+    }
+
+    /// A sensor camera's images by name (ManiSkill's `obs["sensor_data"][name]`), e.g.
+    /// `env.image("base_camera")`; `None` for an unknown name or a non-visual obs mode.
+    pub fn image(&self, camera: &str) -> Option<CameraImage<'_>> {
+        let v = self.vision.as_ref()?;
+        let def = v.sensor_def();
+        (def.name == camera).then(|| CameraImage {
+            name: def.name,
+            width: def.size.0,
+            height: def.size.1,
+            rgb: self.sensor_rgb(),
+            depth: self.sensor_depth(),
+        })
+    }
+
+    /// The task's (sensor, human render) cameras.
+    pub fn cameras(&self) -> (crate::tasks::CameraDef, crate::tasks::CameraDef) {
+        self.task.cameras()
+    }
+
+    /// Renders the human camera (ManiSkill's `render_mode="rgb_array"`, 512×512 for the
+    /// tabletop tasks) and returns its RGB frame, H×W×3 bytes, top row first. The goal
+    /// markers hidden from the sensor are visible here. The first call of an env in a
+    /// non-visual obs mode creates its renderer; an error says what to install.
+    pub fn render(&mut self) -> Result<&[u8], EnvError> {
+        if self.vision.is_none() {
+            self.vision = Some(
+                render::Vision::new(
+                    &self.model,
+                    self.task.cameras(),
+                    false,
+                    false,
+                    self.render_options,
+                )
+                .map_err(|e| EnvError::Render(e.to_string()))?,
+            );
+        }
+        let v = self.vision.as_mut().expect("created above");
+        v.render_human(&mut self.data)
+            .map_err(|e| EnvError::Render(e.to_string()))
+    }
+
+    /// Size (width, height) of [`Env::render`]'s frames.
+    pub fn render_size(&self) -> (usize, usize) {
+        self.task.cameras().1.size
+    }
+
+    /// The render quality settings (defaults favour speed).
+    pub fn render_options(&self) -> crate::mujoco::render::RenderOptions {
+        self.render_options
+    }
+
+    /// Changes the render quality (shadows, multisampling, reflections, clip planes); an
+    /// existing renderer is rebuilt and the sensor images are redrawn.
+    pub fn set_render_options(
+        &mut self,
+        options: crate::mujoco::render::RenderOptions,
+    ) -> Result<(), EnvError> {
+        if let Some(old) = self.vision.as_ref() {
+            // Build the new renderer first: on error the env keeps the old one.
+            let new = render::Vision::new(
+                &self.model,
+                self.task.cameras(),
+                old.rgb_on,
+                old.depth_on,
+                options,
+            )
+            .map_err(|e| EnvError::Render(e.to_string()))?;
+            self.vision = Some(new);
+        }
+        self.render_options = options;
+        self.render_sensors();
+        Ok(())
     }
 }

@@ -10,6 +10,8 @@
 //! printed; they are counted in `mjData.warning` and surfaced through [`Data::warnings`].
 #![allow(unsafe_code)]
 
+pub mod render;
+
 use std::ffi::{CStr, CString};
 use std::os::raw::{c_char, c_int};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -748,6 +750,10 @@ data_arrays! {
     site_xpos = |m: &sys::mjModel| m.nsite * 3;
     /// Site orientations (row-major 3x3), 9 per site.
     site_xmat = |m: &sys::mjModel| m.nsite * 9;
+    /// Camera positions, 3 per camera.
+    cam_xpos = |m: &sys::mjModel| m.ncam * 3;
+    /// Camera orientations (row-major 3x3; columns: right, up, backward), 9 per camera.
+    cam_xmat = |m: &sys::mjModel| m.ncam * 9;
     /// Bias forces (Coriolis, centrifugal, gravity).
     qfrc_bias = |m: &sys::mjModel| m.nv;
     /// Actuator forces of the last step.

@@ -29,6 +29,7 @@
 //! finished episode survives a later crash or `SIGKILL`; [`read`] recovers such a file (no
 //! summary or footer) and reports [`Recording::complete`]` == false`.
 
+pub mod image;
 mod num;
 mod schema;
 
@@ -61,6 +62,9 @@ pub const TOPIC_EPISODE_END: &str = "/episode_end";
 pub const TOPIC_TF: &str = "/tf";
 /// Topic of the scene geometry (`foxglove.SceneUpdate`).
 pub const TOPIC_SCENE: &str = "/scene";
+/// Topic of the human render camera's frames (`foxglove.CompressedImage`, PNG), written when
+/// video is enabled ([`Recorder::enable_video`]).
+pub const TOPIC_RENDER_IMAGE: &str = "/render_camera/image";
 
 /// Errors of recording and reading; every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -361,6 +365,17 @@ pub struct Recorder {
     next_episode: u64,
     open: Option<Open>,
     info_buf: Vec<(String, f64)>,
+    video: Option<Video>,
+}
+
+/// The video channel and its reused encoding buffers.
+#[derive(Debug)]
+struct Video {
+    channel: u16,
+    frame_id: String,
+    png: Vec<u8>,
+    b64: String,
+    frames: u64,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -439,6 +454,7 @@ impl Recorder {
             next_episode: 0,
             open: None,
             info_buf: Vec::new(),
+            video: None,
         };
         rec.sync()?;
         Ok(rec)
@@ -447,6 +463,76 @@ impl Recorder {
     /// The file being written.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Adds the `/render_camera/image` channel (`foxglove.CompressedImage`, PNG) for the
+    /// frames of the camera `frame_id`, written by [`Recorder::record_frame`]. Idempotent.
+    pub fn enable_video(&mut self, frame_id: &str) -> Result<(), RecordError> {
+        if self.video.is_some() {
+            return Ok(());
+        }
+        let text = serde_json::to_vec(&schema::compressed_image()).expect("schema serializes");
+        let channel = (|| -> mcap::McapResult<u16> {
+            let sid = self
+                .writer
+                .add_schema("foxglove.CompressedImage", "jsonschema", &text)?;
+            self.writer
+                .add_channel(sid, TOPIC_RENDER_IMAGE, "json", &BTreeMap::new())
+        })()
+        .map_err(|e| self.mcap_err(e))?;
+        self.video = Some(Video {
+            channel,
+            frame_id: frame_id.to_string(),
+            png: Vec::new(),
+            b64: String::new(),
+            frames: 0,
+        });
+        Ok(())
+    }
+
+    /// Frames written by [`Recorder::record_frame`].
+    pub fn frames(&self) -> u64 {
+        self.video.as_ref().map_or(0, |v| v.frames)
+    }
+
+    /// Writes an RGB frame (H×W×3 bytes, top row first) as a PNG `foxglove.CompressedImage`
+    /// stamped with the time of the last message (call it right after
+    /// [`Recorder::begin_episode`] or [`Recorder::record_step`]).
+    pub fn record_frame(
+        &mut self,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+    ) -> Result<(), RecordError> {
+        use base64::Engine;
+        let Some(mut v) = self.video.take() else {
+            return Err(RecordError::Usage {
+                path: self.path.clone(),
+                msg: "record_frame called without enable_video".into(),
+            });
+        };
+        let ns = self.last_ns.unwrap_or(0);
+        let r = (|| {
+            image::encode_png(rgb, width, height, &mut v.png).map_err(|reason| {
+                RecordError::Decode {
+                    path: self.path.clone(),
+                    what: "frame to write".into(),
+                    reason,
+                }
+            })?;
+            v.b64.clear();
+            base64::engine::general_purpose::STANDARD.encode_string(&v.png, &mut v.b64);
+            let msg = schema::CompressedImageMsg {
+                timestamp: schema::time(ns),
+                frame_id: &v.frame_id,
+                data: &v.b64,
+                format: "png",
+            };
+            self.write_json(v.channel, ns, &msg)
+        })();
+        v.frames += r.is_ok() as u64;
+        self.video = Some(v);
+        r
     }
 
     /// Number of episodes begun so far.

@@ -366,3 +366,35 @@ pub(crate) fn scene_update_msg(model: &Model, frames: &[String], ns: u64) -> Val
         .collect();
     json!({ "deletions": [], "entities": entities })
 }
+
+/// Schema `foxglove.CompressedImage` (JSON encoding: `data` is base64).
+pub(crate) fn compressed_image() -> Value {
+    json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": "foxglove.CompressedImage",
+        "description": "A compressed image",
+        "type": "object",
+        "properties": {
+            "timestamp": time_schema(),
+            "frame_id": {
+                "type": "string",
+                "description": "Frame of reference for the image (the camera's name)"
+            },
+            "data": {
+                "type": "string",
+                "contentEncoding": "base64",
+                "description": "Compressed image data"
+            },
+            "format": { "type": "string", "description": "Image format: png" }
+        }
+    })
+}
+
+/// A `foxglove.CompressedImage` message with base64 `data`.
+#[derive(serde::Serialize, serde::Deserialize)]
+pub(crate) struct CompressedImageMsg<'a> {
+    pub(crate) timestamp: Value,
+    pub(crate) frame_id: &'a str,
+    pub(crate) data: &'a str,
+    pub(crate) format: &'a str,
+}

@@ -1,0 +1,70 @@
+//! `mjskill render`: one camera frame of a seeded initial state, written as PNG.
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::env::{make, EnvConfig, ObsMode};
+use crate::record::image::write_png;
+
+/// The JSON summary of `mjskill render`.
+#[derive(Debug, Clone, Serialize)]
+pub struct RenderSummary {
+    /// Output file.
+    pub out: String,
+    /// Env id.
+    pub env: String,
+    /// Robot uid.
+    pub robot: String,
+    /// Reset seed.
+    pub seed: u64,
+    /// Camera name.
+    pub camera: String,
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+}
+
+/// Resets `env_id` with `seed` and writes the frame of `camera` (the task's human render
+/// camera or its sensor camera, by name) to `out` as PNG.
+pub fn run(
+    env_id: &str,
+    config: EnvConfig,
+    seed: u64,
+    camera: &str,
+    out: &Path,
+) -> Result<RenderSummary, String> {
+    let probe = make(env_id, config.clone()).map_err(|e| e.to_string())?;
+    let (sensor, human) = probe.cameras();
+    drop(probe);
+    let (rgb, (w, h), robot) = if camera == human.name {
+        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        env.reset(Some(seed));
+        let frame = env.render().map_err(|e| e.to_string())?.to_vec();
+        (frame, human.size, env.robot_spec().uid)
+    } else if camera == sensor.name {
+        let config = EnvConfig {
+            obs_mode: ObsMode::Rgb,
+            ..config
+        };
+        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        env.reset(Some(seed));
+        let frame = env.sensor_rgb().expect("rgb obs mode").to_vec();
+        (frame, sensor.size, env.robot_spec().uid)
+    } else {
+        return Err(format!(
+            "unknown camera {camera:?} for {env_id}; valid cameras: {}, {}",
+            human.name, sensor.name
+        ));
+    };
+    write_png(out, &rgb, w, h)?;
+    Ok(RenderSummary {
+        out: out.display().to_string(),
+        env: env_id.to_string(),
+        robot: robot.to_string(),
+        seed,
+        camera: camera.to_string(),
+        width: w,
+        height: h,
+    })
+}

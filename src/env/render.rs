@@ -1,0 +1,151 @@
+//! Camera images of an env: the task's sensor camera (observations in the `rgb`, `depth` and
+//! `rgbd` obs modes) and its human render camera ([`super::Env::render`]), drawn by one
+//! [`Renderer`] into buffers that are reused every step.
+use std::sync::Arc;
+
+use crate::mjcf::{GROUP_COLLISION, GROUP_HIDDEN};
+use crate::mujoco::render::{RenderError, RenderOptions, Renderer};
+use crate::mujoco::{Data, Model, ObjType};
+use crate::tasks::CameraDef;
+
+/// One camera image, borrowed from the env (rewritten in place by every step).
+#[derive(Debug, Clone, Copy)]
+pub struct CameraImage<'a> {
+    /// Camera name.
+    pub name: &'static str,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Colour, H×W×3 bytes, top row first (None unless the obs mode includes rgb).
+    pub rgb: Option<&'a [u8]>,
+    /// Depth in metres along the optical axis, H×W×1 (None unless the obs mode includes depth).
+    pub depth: Option<&'a [f32]>,
+}
+
+/// Geom groups a sensor camera draws: everything but hidden markers and collision shapes.
+pub(crate) fn sensor_groups() -> [bool; 6] {
+    let mut g = [true; 6];
+    g[GROUP_HIDDEN as usize] = false;
+    g[GROUP_COLLISION as usize] = false;
+    g
+}
+
+/// Geom groups the human camera draws: hidden markers too (ManiSkill shows `_hidden_objects`
+/// in human renders), collision shapes not.
+pub(crate) fn human_groups() -> [bool; 6] {
+    let mut g = [true; 6];
+    g[GROUP_COLLISION as usize] = false;
+    g
+}
+
+#[derive(Debug)]
+struct Cam {
+    def: CameraDef,
+    id: usize,
+}
+
+/// The renderer of an env and its image buffers.
+pub(crate) struct Vision {
+    renderer: Renderer,
+    sensor: Cam,
+    human: Cam,
+    pub(crate) rgb_on: bool,
+    pub(crate) depth_on: bool,
+    pub(crate) sensor_rgb: Vec<u8>,
+    pub(crate) sensor_depth: Vec<f32>,
+    pub(crate) human_rgb: Vec<u8>,
+    human_fresh: bool,
+}
+
+impl std::fmt::Debug for Vision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // Without the image buffers (hundreds of kilobytes).
+        f.debug_struct("Vision")
+            .field("renderer", &self.renderer)
+            .field("sensor", &self.sensor)
+            .field("human", &self.human)
+            .field("rgb_on", &self.rgb_on)
+            .field("depth_on", &self.depth_on)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Vision {
+    /// A renderer for the task's two cameras; `rgb`/`depth` select the sensor textures.
+    pub(crate) fn new(
+        model: &Arc<Model>,
+        cams: (CameraDef, CameraDef),
+        rgb: bool,
+        depth: bool,
+        options: RenderOptions,
+    ) -> Result<Vision, RenderError> {
+        let resolve = |def: CameraDef| -> Result<Cam, RenderError> {
+            let id = model
+                .require_id(ObjType::Camera, def.name)
+                .map_err(|e| RenderError::Invalid(e.to_string()))?;
+            Ok(Cam { def, id })
+        };
+        let (sensor, human) = (resolve(cams.0)?, resolve(cams.1)?);
+        let w = sensor.def.size.0.max(human.def.size.0);
+        let h = sensor.def.size.1.max(human.def.size.1);
+        let renderer = Renderer::new(model.clone(), (w, h), options)?;
+        let (sw, sh) = sensor.def.size;
+        let (hw, hh) = human.def.size;
+        Ok(Vision {
+            renderer,
+            rgb_on: rgb,
+            depth_on: depth,
+            sensor_rgb: vec![0; if rgb { sw * sh * 3 } else { 0 }],
+            sensor_depth: vec![0.0; if depth { sw * sh } else { 0 }],
+            human_rgb: vec![0; hw * hh * 3],
+            sensor,
+            human,
+            human_fresh: false,
+        })
+    }
+
+    /// Marks the human frame stale (the state changed).
+    pub(crate) fn invalidate(&mut self) {
+        self.human_fresh = false;
+    }
+
+    /// Renders the sensor camera into the observation buffers.
+    pub(crate) fn render_sensor(&mut self, data: &mut Data) -> Result<(), RenderError> {
+        self.human_fresh = false;
+        if !(self.rgb_on || self.depth_on) {
+            return Ok(());
+        }
+        let rgb = self.rgb_on.then_some(self.sensor_rgb.as_mut_slice());
+        let depth = self.depth_on.then_some(self.sensor_depth.as_mut_slice());
+        self.renderer.render(
+            data,
+            self.sensor.id,
+            self.sensor.def.size,
+            sensor_groups(),
+            rgb,
+            depth,
+        )
+    }
+
+    /// Renders the human camera (once per state) and returns its RGB frame.
+    pub(crate) fn render_human(&mut self, data: &mut Data) -> Result<&[u8], RenderError> {
+        if !self.human_fresh {
+            self.renderer.render(
+                data,
+                self.human.id,
+                self.human.def.size,
+                human_groups(),
+                Some(&mut self.human_rgb),
+                None,
+            )?;
+            self.human_fresh = true;
+        }
+        Ok(&self.human_rgb)
+    }
+
+    /// The sensor camera.
+    pub(crate) fn sensor_def(&self) -> &CameraDef {
+        &self.sensor.def
+    }
+}

@@ -1,0 +1,533 @@
+//! Headless offscreen rendering with MuJoCo's own renderer (`mjv_*` scene, `mjr_*` context)
+//! on an EGL context of Mesa's surfaceless platform (software rasteriser, no display, no GPU).
+//!
+//! * `libEGL.so.1` is loaded at run time (the `khronos-egl` crate over `libloading`), not
+//!   linked: a program that never renders never touches EGL or GL, and a machine without them
+//!   gets a [`RenderError::Unavailable`] naming the packages to install instead of a loader
+//!   failure at start-up.
+//! * One EGL display per process (initialised once, never terminated, because EGL displays
+//!   are shared process-wide); every [`Renderer`] owns its own GL context.
+//! * A GL context is current on at most one thread. A [`Renderer`] makes its context current
+//!   at the start of every call and releases it before returning, so between calls it is
+//!   current nowhere and the renderer can move to another thread (it is `Send`, not `Sync`).
+//! * MuJoCo 2.2 kills the process when `mjr_makeContext` runs without a current context;
+//!   the renderer checks `eglGetCurrentContext` before every `mjr_*` call.
+//! * Frames are read back with `mjr_readPixels` (bottom row first) and flipped to top row
+//!   first. Depth is converted from MuJoCo's non-linear [0, 1] depth buffer to metres along
+//!   the optical axis (the camera-frame −z of the surface point, as ManiSkill's depth).
+use std::ffi::c_int;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use khronos_egl as egl;
+use mujoco_sys as sys;
+
+use super::{Data, Model};
+
+/// The Debian packages headless rendering needs at run time.
+pub const RENDER_PACKAGES: &str = "libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1";
+
+/// `EGL_PLATFORM_SURFACELESS_MESA` (EGL_MESA_platform_surfaceless).
+const PLATFORM_SURFACELESS_MESA: egl::Enum = 0x31DD;
+
+/// Errors of the renderer.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RenderError {
+    /// No usable EGL / OpenGL on this machine.
+    #[error(
+        "headless rendering is unavailable: {0}; install the Debian packages {RENDER_PACKAGES} \
+         (apt-get install -y {RENDER_PACKAGES}) or run `bash .ci/setup`"
+    )]
+    Unavailable(String),
+    /// A bad argument (camera id, image size, buffer length).
+    #[error("{0}")]
+    Invalid(String),
+    /// EGL failed after the context was created.
+    #[error("rendering failed: {0}")]
+    Failed(String),
+}
+
+/// Render quality settings. The defaults favour speed: no shadows, no multisampling, no
+/// reflections (software rasterisation pays heavily for each).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RenderOptions {
+    /// Shadow mapping from the scene's lights (every light casts shadows when on).
+    pub shadows: bool,
+    /// Multisample anti-aliasing samples of the offscreen buffer (0 = off).
+    pub msaa_samples: u32,
+    /// Planar reflections of reflective materials.
+    pub reflections: bool,
+    /// Near and far clipping distances in metres (ManiSkill's cameras: 0.01 and 100).
+    pub clip: (f64, f64),
+    /// Tessellation of spheres, capsules and cylinders: slices around the axis (MuJoCo's
+    /// `quality/numslices`, default 28; stacks are half as many, at least 4). Vertex work
+    /// dominates software rendering: 12 slices draw the 128×128 sensor image about 1.8×
+    /// faster than 28.
+    pub slices: u32,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            shadows: false,
+            msaa_samples: 0,
+            reflections: false,
+            clip: (0.01, 100.0),
+            slices: 12,
+        }
+    }
+}
+
+type EglInstance = egl::DynamicInstance<egl::EGL1_5>;
+
+/// The process-wide EGL library, display and framebuffer configuration.
+struct EglDisplay {
+    egl: EglInstance,
+    display: egl::Display,
+    config: egl::Config,
+}
+
+// SAFETY: EGL display and config handles are process-wide objects that EGL allows to be used
+// from any thread (EGL 1.5 §3: all EGL functions are thread-safe); the loaded library handle
+// is immutable.
+unsafe impl Send for EglDisplay {}
+// SAFETY: see above; nothing in EglDisplay is mutated after initialisation.
+unsafe impl Sync for EglDisplay {}
+
+static EGL: OnceLock<Result<EglDisplay, String>> = OnceLock::new();
+/// Serialises context creation: `mjr_makeContext` (re)loads MuJoCo's process-global GL
+/// function table.
+static CREATE: Mutex<()> = Mutex::new(());
+
+fn init_egl() -> Result<EglDisplay, String> {
+    // SAFETY: loads the system libEGL; the symbols are the standard EGL 1.5 entry points,
+    // whose signatures khronos-egl declares.
+    let egl = unsafe { EglInstance::load_required_from_filename("libEGL.so.1") }
+        .map_err(|e| format!("cannot load libEGL.so.1 with EGL 1.5 ({e})"))?;
+    let ext = egl
+        .query_string(None, egl::EXTENSIONS)
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if !ext.contains("EGL_MESA_platform_surfaceless") {
+        return Err(format!(
+            "EGL offers no surfaceless platform (EGL_MESA_platform_surfaceless missing; Mesa's \
+             EGL driver is not installed?); client extensions: {ext:?}"
+        ));
+    }
+    // SAFETY: the surfaceless platform takes no native display (EGL_DEFAULT_DISPLAY = null).
+    let display = unsafe {
+        egl.get_platform_display(
+            PLATFORM_SURFACELESS_MESA,
+            egl::DEFAULT_DISPLAY,
+            &[egl::ATTRIB_NONE],
+        )
+    }
+    .map_err(|e| format!("eglGetPlatformDisplay(surfaceless) failed: {e}"))?;
+    egl.initialize(display)
+        .map_err(|e| format!("eglInitialize failed: {e} (no Mesa DRI driver?)"))?;
+    let attrs = [
+        egl::SURFACE_TYPE,
+        egl::PBUFFER_BIT,
+        egl::RENDERABLE_TYPE,
+        egl::OPENGL_BIT,
+        egl::RED_SIZE,
+        8,
+        egl::GREEN_SIZE,
+        8,
+        egl::BLUE_SIZE,
+        8,
+        egl::ALPHA_SIZE,
+        8,
+        egl::DEPTH_SIZE,
+        24,
+        egl::STENCIL_SIZE,
+        8,
+        egl::NONE,
+    ];
+    let config = egl
+        .choose_first_config(display, &attrs)
+        .map_err(|e| format!("eglChooseConfig failed: {e}"))?
+        .ok_or("no EGL config with desktop OpenGL, RGBA8, depth 24 and stencil 8")?;
+    Ok(EglDisplay {
+        egl,
+        display,
+        config,
+    })
+}
+
+fn egl_display() -> Result<&'static EglDisplay, RenderError> {
+    EGL.get_or_init(init_egl)
+        .as_ref()
+        .map_err(|e| RenderError::Unavailable(e.clone()))
+}
+
+/// Checks that headless rendering can start here (loads EGL and opens the display, once per
+/// process). `Err` explains what is missing and which packages to install.
+pub fn available() -> Result<(), RenderError> {
+    egl_display().map(|_| ())
+}
+
+/// An offscreen renderer for one model: its own GL context, MuJoCo scene and render context.
+pub struct Renderer {
+    model: Arc<Model>,
+    /// Bitwise copy of the model's `mjModel` header with the visual settings this renderer
+    /// uses (buffer size, samples, shadow map, clip planes); its array pointers alias the
+    /// model's buffer, which `model` keeps alive and which MuJoCo's renderer only reads.
+    vis: Box<sys::mjModel>,
+    egl: &'static EglDisplay,
+    ctx: egl::Context,
+    scn: Box<sys::mjvScene>,
+    con: Box<sys::mjrContext>,
+    opt: sys::mjvOption,
+    cam: sys::mjvCamera,
+    pert: sys::mjvPerturb,
+    options: RenderOptions,
+    row: Vec<u8>,
+    rowf: Vec<f32>,
+}
+
+// SAFETY: the GL context is current on no thread between calls (every method releases it
+// before returning, and `Drop` makes it current on the dropping thread), so the renderer may
+// move between threads. The scene and render context are heap blocks owned exclusively here;
+// `&self` methods touch no GL state, so no `Sync` is claimed.
+unsafe impl Send for Renderer {}
+
+impl std::fmt::Debug for Renderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Renderer")
+            .field("max_size", &self.max_size())
+            .field("options", &self.options)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Makes `ctx` current on this thread and checks that it is.
+fn make_current(e: &EglDisplay, ctx: egl::Context) -> Result<(), String> {
+    // eglBindAPI is per thread; eglGetCurrentContext answers for the bound API.
+    e.egl
+        .bind_api(egl::OPENGL_API)
+        .map_err(|err| format!("eglBindAPI(EGL_OPENGL_API) failed: {err}"))?;
+    e.egl
+        .make_current(e.display, None, None, Some(ctx))
+        .map_err(|err| format!("eglMakeCurrent failed: {err}"))?;
+    match e.egl.get_current_context() {
+        Some(c) if c.as_ptr() == ctx.as_ptr() => Ok(()),
+        _ => Err("the GL context is not current after eglMakeCurrent".into()),
+    }
+}
+
+fn release(e: &EglDisplay) {
+    // Releasing cannot meaningfully fail for a context current on this thread; a failure
+    // would surface at the next make_current.
+    let _ = e.egl.make_current(e.display, None, None, None);
+}
+
+impl Renderer {
+    /// Creates a renderer for `model` whose images may be up to `max_size` (width, height)
+    /// pixels. Errors when EGL/GL is missing (naming the packages to install).
+    pub fn new(
+        model: Arc<Model>,
+        max_size: (usize, usize),
+        options: RenderOptions,
+    ) -> Result<Renderer, RenderError> {
+        let (w, h) = max_size;
+        if w == 0 || h == 0 || w > 8192 || h > 8192 {
+            return Err(RenderError::Invalid(format!(
+                "render size {w}x{h} must be between 1x1 and 8192x8192"
+            )));
+        }
+        let (near, far) = options.clip;
+        if !(near.is_finite() && far.is_finite() && near > 0.0 && far > near) {
+            return Err(RenderError::Invalid(format!(
+                "clip planes must satisfy 0 < near < far, got near {near}, far {far}"
+            )));
+        }
+        if !(3..=100).contains(&options.slices) {
+            return Err(RenderError::Invalid(format!(
+                "slices {} is out of range (3 to 100)",
+                options.slices
+            )));
+        }
+        if options.msaa_samples > 16 {
+            return Err(RenderError::Invalid(format!(
+                "msaa_samples {} is out of range (0 = off, at most 16)",
+                options.msaa_samples
+            )));
+        }
+        super::init().map_err(|e| RenderError::Invalid(e.to_string()))?;
+        let e = egl_display()?;
+        let _guard = CREATE.lock().unwrap_or_else(|p| p.into_inner());
+        e.egl
+            .bind_api(egl::OPENGL_API)
+            .map_err(|err| RenderError::Unavailable(format!("eglBindAPI failed: {err}")))?;
+        let ctx = e
+            .egl
+            .create_context(e.display, e.config, None, &[egl::NONE])
+            .map_err(|err| {
+                RenderError::Unavailable(format!("eglCreateContext (desktop GL) failed: {err}"))
+            })?;
+        if let Err(msg) = make_current(e, ctx) {
+            let _ = e.egl.destroy_context(e.display, ctx);
+            return Err(RenderError::Unavailable(msg));
+        }
+
+        let mut vis = Box::new(*model.raw());
+        let extent = model.raw().stat.extent.max(1e-9);
+        {
+            let v = &mut vis.vis;
+            v.global.offwidth = v.global.offwidth.max(w as c_int);
+            v.global.offheight = v.global.offheight.max(h as c_int);
+            v.quality.offsamples = options.msaa_samples as c_int;
+            v.quality.shadowsize = if options.shadows { 2048 } else { 0 };
+            v.map.znear = (near / extent) as f32;
+            v.map.zfar = (far / extent) as f32;
+            v.quality.numslices = options.slices as c_int;
+            v.quality.numstacks = (options.slices as c_int / 2).max(4);
+        }
+        // Plain C structs, zeroed by Default, then initialised by the mjv_default* calls.
+        let mut scn: Box<sys::mjvScene> = Box::default();
+        let mut con: Box<sys::mjrContext> = Box::default();
+        let mut opt = sys::mjvOption::default();
+        let mut cam = sys::mjvCamera::default();
+        let mut pert = sys::mjvPerturb::default();
+        let maxgeom = (2 * model.ngeom() + 100) as c_int;
+        // SAFETY: `vis` is a valid mjModel header (see the field comment) and the context
+        // made current above is current on this thread, as mjr_makeContext requires.
+        unsafe {
+            sys::mjv_defaultScene(&mut *scn);
+            sys::mjv_defaultOption(&mut opt);
+            sys::mjv_defaultCamera(&mut cam);
+            sys::mjv_defaultPerturb(&mut pert);
+            sys::mjr_defaultContext(&mut *con);
+            sys::mjv_makeScene(&*vis, &mut *scn, maxgeom);
+            sys::mjr_makeContext(&*vis, &mut *con, sys::mjtFontScale__mjFONTSCALE_50 as c_int);
+            sys::mjr_setBuffer(sys::mjtFramebuffer__mjFB_OFFSCREEN as c_int, &mut *con);
+        }
+        release(e);
+        opt.sitegroup = [0; 6];
+        opt.jointgroup = [0; 6];
+        opt.tendongroup = [0; 6];
+        opt.actuatorgroup = [0; 6];
+        cam.type_ = sys::mjtCamera__mjCAMERA_FIXED as c_int;
+        scn.flags[sys::mjtRndFlag__mjRND_SHADOW as usize] = options.shadows as u8;
+        scn.flags[sys::mjtRndFlag__mjRND_REFLECTION as usize] = options.reflections as u8;
+        scn.flags[sys::mjtRndFlag__mjRND_SKYBOX as usize] = 0;
+        let r = Renderer {
+            model,
+            vis,
+            egl: e,
+            ctx,
+            scn,
+            con,
+            opt,
+            cam,
+            pert,
+            options,
+            row: vec![0; 3 * w],
+            rowf: vec![0.0; w],
+        };
+        if r.con.currentBuffer != sys::mjtFramebuffer__mjFB_OFFSCREEN as c_int
+            || r.con.offWidth < w as c_int
+            || r.con.offHeight < h as c_int
+        {
+            return Err(RenderError::Unavailable(format!(
+                "MuJoCo could not create a {w}x{h} offscreen framebuffer (got {}x{})",
+                r.con.offWidth, r.con.offHeight
+            )));
+        }
+        Ok(r)
+    }
+
+    /// The largest image (width, height) this renderer can produce.
+    pub fn max_size(&self) -> (usize, usize) {
+        (self.con.offWidth as usize, self.con.offHeight as usize)
+    }
+
+    /// The quality settings.
+    pub fn options(&self) -> &RenderOptions {
+        &self.options
+    }
+
+    /// The model rendered.
+    pub fn model(&self) -> &Arc<Model> {
+        &self.model
+    }
+
+    /// Renders the state in `data` through model camera `camera` into `rgb` (H·W·3 bytes,
+    /// top row first) and/or `depth` (H·W metres along the optical axis; the far plane where
+    /// nothing was drawn). `geom_groups[g]` says whether geoms of group g are drawn.
+    /// Allocates nothing.
+    pub fn render(
+        &mut self,
+        data: &mut Data,
+        camera: usize,
+        size: (usize, usize),
+        geom_groups: [bool; 6],
+        rgb: Option<&mut [u8]>,
+        depth: Option<&mut [f32]>,
+    ) -> Result<(), RenderError> {
+        let (w, h) = size;
+        let (mw, mh) = self.max_size();
+        if !Arc::ptr_eq(data.model(), &self.model) {
+            return Err(RenderError::Invalid(
+                "the data belongs to another model than the renderer".into(),
+            ));
+        }
+        if camera >= self.model.ncam() {
+            return Err(RenderError::Invalid(format!(
+                "camera id {camera} out of range (the model has {} cameras)",
+                self.model.ncam()
+            )));
+        }
+        if w == 0 || h == 0 || w > mw || h > mh {
+            return Err(RenderError::Invalid(format!(
+                "image size {w}x{h} exceeds this renderer's {mw}x{mh} (or is empty)"
+            )));
+        }
+        if rgb.as_ref().is_some_and(|b| b.len() != w * h * 3)
+            || depth.as_ref().is_some_and(|b| b.len() != w * h)
+        {
+            return Err(RenderError::Invalid(format!(
+                "image buffers must hold {w}x{h}x3 bytes (rgb) and {w}x{h} floats (depth)"
+            )));
+        }
+        make_current(self.egl, self.ctx).map_err(RenderError::Failed)?;
+        for (g, on) in self.opt.geomgroup.iter_mut().zip(geom_groups) {
+            *g = on as u8;
+        }
+        self.cam.fixedcamid = camera as c_int;
+        let viewport = sys::mjrRect {
+            left: 0,
+            bottom: 0,
+            width: w as c_int,
+            height: h as c_int,
+        };
+        let mut rgb = rgb;
+        let mut depth = depth;
+        let rgb_ptr = rgb
+            .as_deref_mut()
+            .map_or(std::ptr::null_mut(), |b| b.as_mut_ptr());
+        let depth_ptr = depth
+            .as_deref_mut()
+            .map_or(std::ptr::null_mut(), |b| b.as_mut_ptr());
+        // SAFETY: model header, data, scene and context are valid and belong together; the
+        // renderer's context is current on this thread (checked above); the buffers hold
+        // w·h·3 bytes / w·h floats (checked above) and the viewport lies inside the offscreen
+        // buffer. The pointers come from the exclusive borrows `rgb`/`depth`, which outlive
+        // the call.
+        unsafe {
+            sys::mjv_updateScene(
+                &*self.vis,
+                data.ptr,
+                &self.opt,
+                &self.pert,
+                &mut self.cam,
+                sys::mjtCatBit__mjCAT_ALL as c_int,
+                &mut *self.scn,
+            );
+            if self.options.shadows {
+                let n = self.scn.nlight.max(0) as usize;
+                for l in self.scn.lights.iter_mut().take(n) {
+                    l.castshadow = 1;
+                }
+            }
+            sys::mjr_setBuffer(sys::mjtFramebuffer__mjFB_OFFSCREEN as c_int, &mut *self.con);
+            sys::mjr_render(viewport, &mut *self.scn, &*self.con);
+            sys::mjr_readPixels(rgb_ptr, depth_ptr, viewport, &*self.con);
+        }
+        release(self.egl);
+        if let Some(buf) = rgb {
+            flip_rows(buf, 3 * w, &mut self.row);
+        }
+        if let Some(buf) = depth {
+            flip_rows(buf, w, &mut self.rowf);
+            let c = &self.scn.camera[0];
+            let (n, f) = (c.frustum_near as f64, c.frustum_far as f64);
+            for d in buf.iter_mut() {
+                *d = linear_depth(*d as f64, n, f) as f32;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Metres along the optical axis from a perspective depth-buffer value `d` in [0, 1] with
+/// near/far planes `n`/`f` (OpenGL's default depth range).
+pub fn linear_depth(d: f64, n: f64, f: f64) -> f64 {
+    n * f / (f - d * (f - n))
+}
+
+/// Reverses the order of the rows (`stride` elements each) of `buf` in place.
+fn flip_rows<T: Copy>(buf: &mut [T], stride: usize, tmp: &mut [T]) {
+    let rows = buf.len() / stride;
+    let tmp = &mut tmp[..stride];
+    for r in 0..rows / 2 {
+        let (a, b) = (r * stride, (rows - 1 - r) * stride);
+        tmp.copy_from_slice(&buf[a..a + stride]);
+        buf.copy_within(b..b + stride, a);
+        buf[b..b + stride].copy_from_slice(tmp);
+    }
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        // SAFETY: the scene was made by mjv_makeScene and is freed once; it holds no GL state.
+        unsafe { sys::mjv_freeScene(&mut *self.scn) };
+        if make_current(self.egl, self.ctx).is_ok() {
+            // SAFETY: the context that owns these GL objects is current on this thread.
+            unsafe { sys::mjr_freeContext(&mut *self.con) };
+            release(self.egl);
+        }
+        // Destroying the context frees its GL objects even if they were not freed above.
+        let _ = self.egl.egl.destroy_context(self.egl.display, self.ctx);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_linearisation_hits_the_planes() {
+        assert!((linear_depth(0.0, 0.01, 100.0) - 0.01).abs() < 1e-12);
+        assert!((linear_depth(1.0, 0.01, 100.0) - 100.0).abs() < 1e-9);
+        // A point at z metres maps to d = f (z − n) / (z (f − n)); invert it back.
+        let (n, f, z) = (0.01, 100.0, 0.7);
+        let d = f * (z - n) / (z * (f - n));
+        assert!((linear_depth(d, n, f) - z).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rows_flip_in_place() {
+        let mut v = [1, 2, 3, 4, 5, 6];
+        flip_rows(&mut v, 2, &mut [0; 2]);
+        assert_eq!(v, [5, 6, 3, 4, 1, 2]);
+    }
+
+    #[test]
+    fn unavailable_error_names_the_packages() {
+        let msg = RenderError::Unavailable("cannot load libEGL.so.1".into()).to_string();
+        for p in [
+            "libegl1",
+            "libegl-mesa0",
+            "libgl1-mesa-dri",
+            "libgbm1",
+            "libEGL.so.1",
+        ] {
+            assert!(msg.contains(p), "{msg}");
+        }
+    }
+
+    #[test]
+    fn bad_options_are_rejected_before_touching_gl() {
+        let m =
+            Arc::new(Model::from_xml_string("<mujoco><worldbody/></mujoco>", &[]).expect("model"));
+        let bad = RenderOptions {
+            clip: (0.0, 1.0),
+            ..Default::default()
+        };
+        let err = Renderer::new(m.clone(), (64, 64), bad).unwrap_err();
+        assert!(err.to_string().contains("near"), "{err}");
+        let err = Renderer::new(m, (0, 64), RenderOptions::default()).unwrap_err();
+        assert!(err.to_string().contains("0x64"), "{err}");
+    }
+}

@@ -1,0 +1,440 @@
+//! Headless rendering: sensor images in the rgb/depth/rgbd obs modes and the human render,
+//! checked against projections computed independently from the camera pose and intrinsics.
+
+use mjskill::mujoco::ObjType;
+use mjskill::{make, Env, EnvConfig, ObsMode};
+use nalgebra::{Matrix3, Vector3};
+
+fn env(mode: ObsMode, seed: u64) -> Env {
+    let mut e = make(
+        "PickCube-v1",
+        EnvConfig {
+            obs_mode: mode,
+            ..Default::default()
+        },
+    )
+    .expect("rendering must be available (bash .ci/setup installs EGL/Mesa)");
+    e.reset(Some(seed));
+    e
+}
+
+/// Pinhole camera of a MuJoCo camera: pose from cam_xpos/cam_xmat, vertical fovy.
+struct Pinhole {
+    pos: Vector3<f64>,
+    /// Columns: right, up, backward (MuJoCo cameras look along −z).
+    rot: Matrix3<f64>,
+    f: f64,
+    w: usize,
+    h: usize,
+}
+
+impl Pinhole {
+    fn of(env: &Env, name: &str, size: (usize, usize)) -> Pinhole {
+        let m = env.model();
+        let id = m.require_id(ObjType::Camera, name).unwrap();
+        let d = env.data();
+        let p = &d.cam_xpos()[3 * id..3 * id + 3];
+        let r = &d.cam_xmat()[9 * id..9 * id + 9];
+        let fovy = m.cam_fovy()[id].to_radians();
+        Pinhole {
+            pos: Vector3::new(p[0], p[1], p[2]),
+            rot: Matrix3::from_row_slice(r),
+            f: size.1 as f64 / 2.0 / (fovy / 2.0).tan(),
+            w: size.0,
+            h: size.1,
+        }
+    }
+
+    /// Pixel (column, row) containing the projection of world point `x` (top row 0).
+    fn project(&self, x: Vector3<f64>) -> (usize, usize) {
+        let c = self.rot.transpose() * (x - self.pos);
+        assert!(c.z < 0.0, "point behind the camera");
+        let u = self.w as f64 / 2.0 + self.f * c.x / -c.z;
+        let v = self.h as f64 / 2.0 - self.f * c.y / -c.z;
+        assert!(
+            u >= 0.0 && v >= 0.0 && u < self.w as f64 && v < self.h as f64,
+            "projection ({u}, {v}) outside the image"
+        );
+        (u as usize, v as usize)
+    }
+
+    /// World direction of the ray through the centre of pixel (col, row), scaled so that its
+    /// component along the optical axis is 1.
+    fn ray(&self, col: usize, row: usize) -> Vector3<f64> {
+        let x = (col as f64 + 0.5 - self.w as f64 / 2.0) / self.f;
+        let y = (self.h as f64 / 2.0 - (row as f64 + 0.5)) / self.f;
+        self.rot * Vector3::new(x, y, -1.0)
+    }
+}
+
+fn body(env: &Env, name: &str) -> (Vector3<f64>, Matrix3<f64>) {
+    let b = env.model().require_id(ObjType::Body, name).unwrap();
+    let d = env.data();
+    let p = &d.xpos()[3 * b..3 * b + 3];
+    (
+        Vector3::new(p[0], p[1], p[2]),
+        Matrix3::from_row_slice(&d.xmat()[9 * b..9 * b + 9]),
+    )
+}
+
+fn pixel(rgb: &[u8], w: usize, (col, row): (usize, usize)) -> [u8; 3] {
+    let i = 3 * (row * w + col);
+    [rgb[i], rgb[i + 1], rgb[i + 2]]
+}
+
+fn is_red(p: [u8; 3]) -> bool {
+    p[0] > 100 && p[1] < 60 && p[2] < 60
+}
+
+fn is_green(p: [u8; 3]) -> bool {
+    p[1] > 100 && p[0] < 60 && p[2] < 60
+}
+
+/// Ray parameter where `origin + t·dir` enters the box (centre `c`, rotation `r`, half size `h`).
+fn ray_box(
+    origin: Vector3<f64>,
+    dir: Vector3<f64>,
+    c: Vector3<f64>,
+    r: Matrix3<f64>,
+    h: f64,
+) -> f64 {
+    let (o, d) = (r.transpose() * (origin - c), r.transpose() * dir);
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..3 {
+        let (a, b) = ((-h - o[k]) / d[k], (h - o[k]) / d[k]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    assert!(t0 <= t1 && t0 > 0.0, "the ray misses the box");
+    t0
+}
+
+#[test]
+fn cube_is_red_at_its_projection_and_depth_matches_the_ray() {
+    let e = env(ObsMode::Rgbd, 0);
+    let cam = e.image("base_camera").expect("sensor camera images");
+    let (w, h) = (cam.width, cam.height);
+    assert_eq!((w, h), (128, 128));
+    let pin = Pinhole::of(&e, "base_camera", (w, h));
+    let (cube, rot) = body(&e, "cube");
+    let px = pin.project(cube);
+    let rgb = cam.rgb.unwrap();
+    assert!(
+        is_red(pixel(rgb, w, px)),
+        "pixel {px:?} = {:?}",
+        pixel(rgb, w, px)
+    );
+    // A pixel well away from the cube is not red (the test is not fooled by a red image).
+    let far = ((px.0 + w / 2) % w, (px.1 + h / 2) % h);
+    assert!(!is_red(pixel(rgb, w, far)));
+    // Depth = distance along the optical axis to where the pixel's ray meets the cube.
+    let t = ray_box(pin.pos, pin.ray(px.0, px.1), cube, rot, 0.02);
+    let depth = cam.depth.unwrap()[px.1 * w + px.0] as f64;
+    assert!((depth - t).abs() < 0.005, "depth {depth} vs ray {t}");
+    // And the table top around it is farther than the cube's face.
+    assert!(t > 0.2 && t < 1.0, "{t}");
+}
+
+#[test]
+fn goal_marker_hidden_from_sensor_but_drawn_for_humans() {
+    let mut e = env(ObsMode::Rgb, 0);
+    // Put the goal where both cameras see it unoccluded (mocap pose in the physics state).
+    let mut s = e.get_state();
+    let n = s.physics.len();
+    s.physics[n - 7..n - 4].copy_from_slice(&[0.1, -0.15, 0.05]);
+    e.set_state(&s).unwrap();
+    let (goal, _) = body(&e, "goal_site");
+    assert!((goal - Vector3::new(0.1, -0.15, 0.05)).norm() < 1e-12);
+
+    let (sensor, human) = e.cameras();
+    let pin = Pinhole::of(&e, sensor.name, sensor.size);
+    let px = pin.project(goal);
+    let rgb = e.sensor_rgb().unwrap();
+    let p = pixel(rgb, sensor.size.0, px);
+    assert!(
+        !is_green(p),
+        "goal visible in the sensor image at {px:?}: {p:?}"
+    );
+    assert!(!rgb.chunks(3).any(|c| is_green([c[0], c[1], c[2]])));
+
+    let pin = Pinhole::of(&e, human.name, human.size);
+    let px = pin.project(goal);
+    let frame = e.render().unwrap();
+    assert_eq!(frame.len(), 512 * 512 * 3);
+    let p = pixel(frame, human.size.0, px);
+    assert!(
+        is_green(p),
+        "goal not drawn in the human render at {px:?}: {p:?}"
+    );
+}
+
+#[test]
+fn same_state_renders_the_same_image() {
+    let mut e = env(ObsMode::Rgbd, 3);
+    let s = e.get_state();
+    let (rgb, depth) = (
+        e.sensor_rgb().unwrap().to_vec(),
+        e.sensor_depth().unwrap().to_vec(),
+    );
+    let human = e.render().unwrap().to_vec();
+    let a = vec![0.5f32; e.action_space().shape[0]];
+    e.step(&a).unwrap();
+    assert_ne!(e.sensor_rgb().unwrap(), &rgb[..], "the arm moved");
+    assert_ne!(e.render().unwrap(), &human[..]);
+    e.set_state(&s).unwrap();
+    assert_eq!(e.sensor_rgb().unwrap(), &rgb[..]);
+    assert_eq!(e.sensor_depth().unwrap(), &depth[..]);
+    assert_eq!(e.render().unwrap(), &human[..]);
+    // A second env of the same seed renders identically too.
+    let mut f = env(ObsMode::Rgbd, 3);
+    assert_eq!(f.sensor_rgb().unwrap(), &rgb[..]);
+    assert_eq!(f.render().unwrap(), &human[..]);
+}
+
+#[test]
+fn visual_obs_modes_have_state_free_vectors_and_images() {
+    let state = env(ObsMode::State, 0);
+    for (mode, rgb, depth) in [
+        (ObsMode::Rgb, true, false),
+        (ObsMode::Depth, false, true),
+        (ObsMode::Rgbd, true, true),
+    ] {
+        let mut e = env(mode, 0);
+        // agent qpos (9), qvel (9), extras is_grasped, tcp_pose, goal_pos: no object pose.
+        assert_eq!(e.obs().len(), 29, "{mode:?}");
+        assert_eq!(e.observation_space().shape, vec![29]);
+        assert!(e.obs_part("extra/obj_pose").is_none());
+        assert_eq!(
+            e.obs_part("extra/tcp_pose"),
+            state.obs_part("extra/tcp_pose")
+        );
+        assert_eq!(
+            e.sensor_rgb().map(|v| v.len()),
+            rgb.then_some(128 * 128 * 3)
+        );
+        assert_eq!(
+            e.sensor_depth().map(|v| v.len()),
+            depth.then_some(128 * 128)
+        );
+        let img = e.image("base_camera").unwrap();
+        assert_eq!((img.width, img.height), (128, 128));
+        assert!(e.image("render_camera").is_none() && e.image("nope").is_none());
+        if let Some(d) = e.sensor_depth() {
+            assert!(d.iter().all(|z| z.is_finite() && *z >= 0.01 && *z <= 100.0));
+        }
+        let a = vec![0.0f32; e.action_space().shape[0]];
+        assert_eq!(e.step(&a).unwrap().obs.len(), 29);
+    }
+    // State modes have no sensor images but can still render for humans.
+    let mut s = env(ObsMode::State, 0);
+    assert!(s.sensor_rgb().is_none() && s.image("base_camera").is_none());
+    assert_eq!(s.render().unwrap().len(), 512 * 512 * 3);
+    assert_eq!(s.render_size(), (512, 512));
+    assert!(ObsMode::parse("rgbd").unwrap().is_visual());
+    assert!(ObsMode::parse("rgb+depth")
+        .unwrap_err()
+        .to_string()
+        .contains("rgbd"));
+}
+
+#[test]
+fn render_options_change_the_image_and_bad_ones_are_rejected() {
+    let mut e = env(ObsMode::Rgb, 0);
+    let plain = e.render().unwrap().to_vec();
+    let mut o = e.render_options();
+    assert!(!o.shadows && o.msaa_samples == 0 && !o.reflections);
+    o.shadows = true;
+    o.msaa_samples = 4;
+    e.set_render_options(o).unwrap();
+    assert_eq!(e.render_options(), o);
+    let fancy = e.render().unwrap().to_vec();
+    assert_ne!(plain, fancy);
+    let bad = mjskill::mujoco::render::RenderOptions {
+        clip: (1.0, 0.5),
+        ..o
+    };
+    let err = e.set_render_options(bad).unwrap_err().to_string();
+    assert!(err.contains("near"), "{err}");
+    // The env keeps working with its previous settings.
+    assert_eq!(e.render_options(), o);
+    assert_eq!(e.sensor_rgb().unwrap().len(), 128 * 128 * 3);
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("mjskill-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
+    let mut r = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; r.output_buffer_size().unwrap()];
+    let info = r.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    (info.width as usize, info.height as usize, buf)
+}
+
+#[test]
+fn recorded_video_frames_decode_to_the_rendered_images() {
+    use base64::Engine;
+    use mjskill::record::{read_raw, Recorder, TOPIC_RENDER_IMAGE};
+    let path = tmp("video.mcap");
+    let mut e = env(ObsMode::State, 7);
+    let mut rec = Recorder::create(&path, &e).unwrap();
+    assert!(
+        rec.record_frame(&[0; 3], 1, 1).is_err(),
+        "video not enabled yet"
+    );
+    rec.enable_video("render_camera").unwrap();
+    rec.reset(&mut e, Some(7)).unwrap();
+    let mut frames = vec![e.render().unwrap().to_vec()];
+    rec.record_frame(&frames[0], 512, 512).unwrap();
+    let a = vec![0.3f32; e.action_space().shape[0]];
+    for _ in 0..2 {
+        rec.step(&mut e, &a).unwrap();
+        frames.push(e.render().unwrap().to_vec());
+        rec.record_frame(frames.last().unwrap(), 512, 512).unwrap();
+    }
+    rec.end_episode(false).unwrap();
+    assert_eq!(rec.frames(), 3);
+    rec.finish().unwrap();
+
+    let raw = read_raw(&path).unwrap();
+    let imgs: Vec<_> = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == TOPIC_RENDER_IMAGE)
+        .collect();
+    assert_eq!(imgs.len(), 3);
+    let steps: Vec<u64> = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == "/step")
+        .map(|m| m.log_time)
+        .collect();
+    for (k, m) in imgs.iter().enumerate() {
+        assert_eq!(m.schema, "foxglove.CompressedImage");
+        assert_eq!(m.encoding, "json");
+        if k > 0 {
+            assert_eq!(m.log_time, steps[k - 1], "frame stamped with its step");
+        }
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        assert_eq!(v["frame_id"], "render_camera");
+        assert_eq!(v["format"], "png");
+        assert_eq!(
+            v["timestamp"]["nsec"].as_u64().unwrap(),
+            m.log_time % 1_000_000_000
+        );
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(v["data"].as_str().unwrap())
+            .unwrap();
+        let (w, h, rgb) = decode_png(&bytes);
+        assert_eq!((w, h), (512, 512));
+        assert_eq!(rgb, frames[k], "frame {k}");
+    }
+    assert_ne!(frames[0], frames[2]);
+    // The episode itself still reads back.
+    let r = mjskill::record::read(&path).unwrap();
+    assert_eq!(r.episodes[0].steps.len(), 2);
+}
+
+#[test]
+fn render_command_writes_the_human_and_sensor_frames() {
+    let bin = env!("CARGO_BIN_EXE_mjskill");
+    let mut e = env(ObsMode::Rgb, 4);
+    let expect_human = e.render().unwrap().to_vec();
+    let expect_sensor = e.sensor_rgb().unwrap().to_vec();
+    for (camera, size, expect) in [
+        ("render_camera", 512, expect_human),
+        ("base_camera", 128, expect_sensor),
+    ] {
+        let out = tmp(&format!("{camera}.png"));
+        let o = std::process::Command::new(bin)
+            .args([
+                "render",
+                "--env",
+                "PickCube-v1",
+                "--seed",
+                "4",
+                "--camera",
+                camera,
+                "-o",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (w, h, rgb) = decode_png(&std::fs::read(&out).unwrap());
+        assert_eq!((w, h), (size, size));
+        assert_eq!(rgb, expect, "{camera}");
+    }
+    let o = std::process::Command::new(bin)
+        .args(["render", "--camera", "top_camera", "-o"])
+        .arg(tmp("x.png"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("top_camera") && err.contains("render_camera"),
+        "{err}"
+    );
+}
+
+#[test]
+fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
+    let out = tmp("roll.mcap");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["rollout", "--episodes", "1", "--video", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let png_path = out.with_extension("png");
+    assert_eq!(s["frame"], png_path.display().to_string());
+    assert_eq!(s["video_frames"], 51, "reset + 50 steps");
+    let (w, h, rgb) = decode_png(&std::fs::read(&png_path).unwrap());
+    assert_eq!((w, h), (512, 512));
+    // The solver lifted the cube to the goal: both red and green are in view.
+    let px = |f: fn([u8; 3]) -> bool| rgb.chunks(3).filter(|c| f([c[0], c[1], c[2]])).count();
+    assert!(
+        px(is_red) > 20 && px(is_green) > 5,
+        "{} {}",
+        px(is_red),
+        px(is_green)
+    );
+    let raw = mjskill::record::read_raw(&out).unwrap();
+    let n = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == mjskill::record::TOPIC_RENDER_IMAGE)
+        .count();
+    assert_eq!(n, 51);
+}
+
+#[test]
+fn visual_envs_render_on_vec_env_worker_threads() {
+    // Envs (and their GL contexts) are built on this thread and stepped on a worker thread.
+    let config = EnvConfig {
+        obs_mode: ObsMode::Rgb,
+        ..Default::default()
+    };
+    let mut v = mjskill::env::VecEnv::new("PickCube-v1", config, 2, 2).unwrap();
+    v.reset(Some(5));
+    let dim = v.single_action_space().shape[0];
+    let acts: Vec<f32> = (0..2 * dim).map(|i| (i as f32 * 0.4).sin()).collect();
+    for _ in 0..3 {
+        v.step(&acts).unwrap();
+    }
+    for i in 0..2 {
+        let mut e = env(ObsMode::Rgb, 5 + i as u64);
+        for _ in 0..3 {
+            e.step(&acts[i * dim..(i + 1) * dim]).unwrap();
+        }
+        assert_eq!(v.obs_of(i), e.obs(), "env {i}");
+    }
+}
