@@ -224,7 +224,7 @@ fn place_sphere(_robot: &'static str) -> Box<dyn Task> {
 static REGISTRY: [EnvSpec; 2] = [
     EnvSpec {
         id: "PickCube-v1",
-        robots: &["panda"],
+        robots: &["panda", "xarm6_robotiq"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },

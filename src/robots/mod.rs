@@ -2,6 +2,7 @@
 //! drive gains, the TCP, the grasp check, keyframes and the table-scene placement — and the
 //! ids a compiled scene resolves them to ([`RobotIds`]).
 pub mod panda;
+pub mod xarm6_robotiq;
 
 use std::sync::Arc;
 
@@ -210,6 +211,7 @@ impl RobotSpec {
 pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
     match uid {
         "panda" => Ok(&panda::PANDA),
+        "xarm6_robotiq" => Ok(&xarm6_robotiq::XARM6_ROBOTIQ),
         _ => Err(format!(
             "unknown robot {uid:?}; valid robots: {}",
             ROBOT_UIDS.join(", ")

@@ -1,0 +1,53 @@
+use mjskill::mujoco::Data;
+use mjskill::robots::{self, RobotIds};
+
+#[test]
+fn explore() {
+    let spec = robots::spec("xarm6_robotiq").unwrap();
+    let (model, _desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    println!("{:?}", ids.joint_names);
+    let mut d = Data::new(model.clone()).unwrap();
+    ids.set_qpos(&mut d, spec.table_qpos);
+    ids.apply_gravity_compensation(&mut d);
+    for (k, &q) in spec.table_qpos.iter().enumerate() {
+        ids.set_drive_target(&model, &mut d, k, q, 0.0);
+    }
+    d.forward();
+    let pad = ids.body("right_inner_finger_pad").unwrap();
+    let base = ids.body("robotiq_arg2f_base_link").unwrap();
+    let tcp = ids.tcp_pose(&d);
+    println!("tcp {:?}", tcp);
+    let mut q = vec![0.0; 12];
+    for t in [0.0, 0.81] {
+        ids.set_drive_target(&model, &mut d, 6, t, 0.0);
+        ids.set_drive_target(&model, &mut d, 8, t, 0.0);
+        for s in 0..500 {
+            d.step();
+            if s % 25 == 0 {
+                ids.qpos(&d, &mut q);
+                let b = RobotIds::body_pose(&d, base);
+                let p = b.inverse() * RobotIds::body_pose(&d, pad);
+                let gap = |l1: &str, a1: [f64; 3], l2: &str, a2: [f64; 3]| {
+                    let w1 =
+                        RobotIds::body_pose(&d, ids.body(l1).unwrap()) * nalgebra::Point3::from(a1);
+                    let w2 =
+                        RobotIds::body_pose(&d, ids.body(l2).unwrap()) * nalgebra::Point3::from(a2);
+                    (w1 - w2).norm()
+                };
+                let g: Vec<f64> = mjskill::robots::xarm6_robotiq::LOOP_CLOSURES
+                    .iter()
+                    .map(|c| gap(c.0, c.1, c.2, c.3))
+                    .collect();
+                println!(
+                    "{s} q {:.4?} pad {:.4?} ncon {} gap {:.6?} f {:.3?}",
+                    &q[6..],
+                    p.translation.vector,
+                    d.ncon(),
+                    g,
+                    &d.actuator_force()[6..]
+                );
+            }
+        }
+        println!("{:?}", d.warnings());
+    }
+}
