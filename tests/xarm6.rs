@@ -51,3 +51,59 @@ fn explore() {
         println!("{:?}", d.warnings());
     }
 }
+
+#[test]
+fn explore_solver() {
+    use mjskill::cli::eval;
+    let config = mjskill::EnvConfig {
+        robot: Some("xarm6_robotiq".into()),
+        control_mode: Some("pd_ee_delta_pos".into()),
+        ..Default::default()
+    };
+    let mut env = eval::make_env("PickCube-v1", config, "solver").unwrap();
+    let mut policy = mjskill::solvers::make_policy("solver", &env, 0).unwrap();
+    let seed: u64 = std::env::var("SEED")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(0);
+    env.reset(Some(seed));
+    policy.reset(&env);
+    let cube = env
+        .model()
+        .require_id(mjskill::mujoco::ObjType::Body, "cube")
+        .unwrap();
+    let mut a = vec![0.0f32; 4];
+    let mut q = vec![0.0; 12];
+    for t in 0..50 {
+        policy.act(&env, &mut a);
+        let s = env.step(&a).unwrap();
+        let (_, info) = (s.reward, s.info.clone());
+        env.robot().qpos(env.data(), &mut q);
+        let tcp = env.robot().tcp_pose(env.data()).0;
+        let c = &env.data().xpos()[3 * cube..3 * cube + 3];
+        println!(
+            "{t} a {:.2?} tcp {:.3?} cube {:.3?} g {:.3?} grasp {} succ {} {:?}",
+            a,
+            tcp,
+            c,
+            &q[6..],
+            info.flag("is_grasped"),
+            info.success(),
+            env.data().warnings()
+        );
+        let d = env.data();
+        let gb = env.model().geom_bodyid();
+        for i in 0..d.ncon() {
+            let (g1, g2) = d.contact_geoms(i);
+            let (b1, b2) = (gb[g1] as usize, gb[g2] as usize);
+            if b1 == cube || b2 == cube {
+                let o = if b1 == cube { b2 } else { b1 };
+                println!(
+                    "   contact {} f {:.3?} dist {:.5}",
+                    env.model().name(mjskill::mujoco::ObjType::Body, o),
+                    d.contact_force(i),
+                    d.contact(i).dist
+                );
+            }
+        }
+    }
+}

@@ -126,6 +126,8 @@ pub struct RobotOptions {
     pub no_ground_contact: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
+    /// `solref` of the loop closures (None: MuJoCo's default, time constant 0.02 s).
+    pub connect_solref: Option<[f64; 2]>,
 }
 
 impl Default for RobotOptions {
@@ -141,6 +143,7 @@ impl Default for RobotOptions {
             extra_excludes: Vec::new(),
             no_ground_contact: Vec::new(),
             connects: Vec::new(),
+            connect_solref: None,
         }
     }
 }
@@ -326,13 +329,15 @@ impl Scene {
             }
         }
         for c in &opts.connects {
-            self.section("equality").push(
-                Element::new("connect")
-                    .attr("name", format!("loop_{}_{}", c.link1, c.link2))
-                    .attr("body1", &c.link1)
-                    .attr("body2", &c.link2)
-                    .attr_nums("anchor", &c.anchor),
-            );
+            let mut e = Element::new("connect")
+                .attr("name", format!("loop_{}_{}", c.link1, c.link2))
+                .attr("body1", &c.link1)
+                .attr("body2", &c.link2)
+                .attr_nums("anchor", &c.anchor);
+            if let Some(r) = opts.connect_solref {
+                e = e.attr_nums("solref", &r);
+            }
+            self.section("equality").push(e);
         }
         for d in &opts.drives {
             self.section("actuator").push(

@@ -251,6 +251,7 @@ fn customize(opts: &mut RobotOptions) {
             anchor: a1,
         });
     }
+    opts.connect_solref = Some(crate::mjcf::CONTACT_SOLREF);
     for (i, a) in NO_SELF_COLLISION.iter().enumerate() {
         for b in &NO_SELF_COLLISION[i + 1..] {
             opts.extra_excludes.push((a.to_string(), b.to_string()));

@@ -96,9 +96,18 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ));
     }
     match (env.id(), robot) {
-        ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(env, PANDA_GRIPPER)?)),
+        ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(
+            env,
+            PANDA_GRIPPER,
+            PICK_HOLD_PANDA,
+        )?)),
+        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(PickCubeSolver::new(
+            env,
+            XARM6_GRIPPER,
+            PICK_HOLD_XARM6,
+        )?)),
         (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: PickCube-v1 with panda"
+            "no scripted solver for {id} with {r}; available: PickCube-v1 with panda or xarm6_robotiq"
         )),
     }
 }
@@ -116,6 +125,13 @@ pub struct Gripper {
 pub const PANDA_GRIPPER: Gripper = Gripper {
     open: 1.0,
     close: -1.0,
+};
+
+/// xArm6 + Robotiq: the gripper action is a ±0.15 rad knuckle delta, so −1 opens and +1
+/// closes (solvers.md §7.1).
+pub const XARM6_GRIPPER: Gripper = Gripper {
+    open: -1.0,
+    close: 1.0,
 };
 
 /// Position error scale of the EE-space policies (m per unit action).
@@ -154,16 +170,19 @@ const PICK_APPROACH_TOL: f64 = 0.01;
 /// Descent tolerance (m).
 const PICK_DESCEND_TOL: f64 = 0.004;
 /// Panda: steps the gripper closes before lifting.
-const PICK_HOLD_PANDA: usize = 3;
+pub const PICK_HOLD_PANDA: usize = 3;
+/// xArm6 + Robotiq: steps the gripper closes before lifting (0.15 rad per step).
+pub const PICK_HOLD_XARM6: usize = 8;
 
 impl PickCubeSolver {
-    /// Resolves the cube and goal bodies of a PickCube env.
-    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+    /// Resolves the cube and goal bodies of a PickCube env; `hold` is the number of steps the
+    /// gripper closes before the lift.
+    pub fn new(env: &Env, gripper: Gripper, hold: usize) -> Result<Self, String> {
         Ok(PickCubeSolver {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,
             gripper,
-            hold: PICK_HOLD_PANDA,
+            hold,
             phase: 0,
             steps_in_phase: 0,
         })
