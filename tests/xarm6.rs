@@ -65,6 +65,8 @@ fn explore_solver() {
     let seed: u64 = std::env::var("SEED")
         .map(|s| s.parse().unwrap())
         .unwrap_or(0);
+    let quiet = std::env::var("QUIET").is_ok();
+    for seed in seed..seed + if quiet { 30 } else { 1 } {
     env.reset(Some(seed));
     policy.reset(&env);
     let cube = env
@@ -80,6 +82,7 @@ fn explore_solver() {
         env.robot().qpos(env.data(), &mut q);
         let tcp = env.robot().tcp_pose(env.data()).0;
         let c = &env.data().xpos()[3 * cube..3 * cube + 3];
+        if quiet { if t == 49 || t == 19 || t == 25 { let goal = env.model().require_id(mjskill::mujoco::ObjType::Body, "goal_site").unwrap(); let gp = &env.data().xpos()[3*goal..3*goal+3]; println!("seed {seed} t {t} tcp {:.3?} cube {:.3?} goal {:.3?} g {:.3?} grasp {} succ {}", tcp, c, gp, &q[6..], info.flag("is_grasped"), info.success()); } continue; }
         println!(
             "{t} a {:.2?} tcp {:.3?} cube {:.3?} g {:.3?} grasp {} succ {} {:?}",
             a,
@@ -106,4 +109,5 @@ fn explore_solver() {
             }
         }
     }
+}
 }

@@ -126,6 +126,9 @@ pub struct RobotOptions {
     pub no_ground_contact: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
+    /// Links whose collision shapes get torsional friction (condim 4) with this coefficient
+    /// (m): MuJoCo's analogue of a PhysX material `patch_radius` (torque ≤ μ·r·N).
+    pub torsional_friction: Vec<(String, f64)>,
     /// `solref` of the loop closures (None: MuJoCo's default, time constant 0.02 s).
     pub connect_solref: Option<[f64; 2]>,
 }
@@ -144,6 +147,7 @@ impl Default for RobotOptions {
             no_ground_contact: Vec::new(),
             connects: Vec::new(),
             connect_solref: None,
+            torsional_friction: Vec::new(),
         }
     }
 }
@@ -454,11 +458,18 @@ impl Scene {
             };
             g.set("contype", bits);
             g.set("conaffinity", bits);
-            if let Some(mu) = friction {
-                g.set(
-                    "friction",
-                    nums(&[mu, TORSIONAL_ROLLING[0], TORSIONAL_ROLLING[1]]),
-                );
+            let torsional = opts
+                .torsional_friction
+                .iter()
+                .find(|(n, _)| *n == l.name)
+                .map(|(_, t)| *t);
+            if friction.is_some() || torsional.is_some() {
+                let mu = friction.unwrap_or(DEFAULT_FRICTION);
+                let t = torsional.unwrap_or(TORSIONAL_ROLLING[0]);
+                g.set("friction", nums(&[mu, t, TORSIONAL_ROLLING[1]]));
+            }
+            if torsional.is_some() {
+                g.set("condim", 4);
             }
             body.push(g);
         }

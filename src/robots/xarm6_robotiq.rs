@@ -88,6 +88,13 @@ pub const GRIPPER_ARMATURE: f64 = 1e-3;
 /// from ringing under the stiff connect constraints at dt = 0.002 s.
 pub const PASSIVE_DAMPING: f64 = 1e-3;
 
+/// The finger pads (material friction 2.0, PhysX patch radius 0.1 m).
+const PADS: [&str; 2] = ["left_inner_finger_pad", "right_inner_finger_pad"];
+/// PhysX torsional patch radius of the pad material (m).
+const PAD_PATCH_RADIUS: f64 = 0.1;
+/// The pads' friction against default-material objects (PhysX average of 2.0 and 0.3).
+const PAD_FRICTION_AVG: f64 = (2.0 + crate::mjcf::DEFAULT_FRICTION) / 2.0;
+
 /// xArm6 control modes (robots.md §4), default first.
 pub const CONTROL_MODES: [&str; 11] = [
     "pd_joint_delta_pos",
@@ -252,6 +259,10 @@ fn customize(opts: &mut RobotOptions) {
         });
     }
     opts.connect_solref = Some(crate::mjcf::CONTACT_SOLREF);
+    for pad in PADS {
+        opts.torsional_friction
+            .push((pad.to_string(), PAD_FRICTION_AVG * PAD_PATCH_RADIUS));
+    }
     for (i, a) in NO_SELF_COLLISION.iter().enumerate() {
         for b in &NO_SELF_COLLISION[i + 1..] {
             opts.extra_excludes.push((a.to_string(), b.to_string()));
@@ -274,7 +285,7 @@ pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
     gripper_joints: &[GRIPPER_FOLLOWER, GRIPPER_CONTROL],
     arm_gains: ARM_GAINS,
     gripper_gains: GRIPPER_GAINS,
-    finger_friction: (&["left_inner_finger_pad", "right_inner_finger_pad"], 2.0),
+    finger_friction: (&PADS, 2.0),
     tcp: TcpDef::Link(EE_LINK),
     tcp_link: Some(EE_LINK),
     grasp: GraspDef {
