@@ -30,9 +30,9 @@ pub const MANISKILL_GRIPPER_GAINS: (f64, f64, f64) = (1e5, 2000.0, 0.1);
 /// saturate at 0.1 N·m except within kp/F of the target (1e-6 rad upstream, 2 mrad here).
 const GRIPPER_GAINS: (f64, f64, f64) = (GRIPPER_KP, GRIPPER_KD, MANISKILL_GRIPPER_GAINS.2);
 /// Knuckle drive stiffness in MuJoCo (N·m/rad).
-pub const GRIPPER_KP: f64 = 50.0;
+pub const GRIPPER_KP: f64 = 1.5;
 /// Knuckle drive damping in MuJoCo (N·m·s/rad): near-critical with [`GRIPPER_KP`].
-pub const GRIPPER_KD: f64 = 1.0;
+pub const GRIPPER_KD: f64 = 0.03;
 /// Arm delta bound (rad) of the joint-delta modes.
 const JOINT_DELTA: f32 = 0.1;
 /// Gripper delta bound (rad) of the delta modes.
@@ -83,7 +83,7 @@ pub const LOOP_CLOSURES: [(&str, [f64; 3], &str, [f64; 3]); 2] = [
 /// Armature (kg·m²) of the gripper joints. The linkage links weigh 5–27 g (rotational
 /// inertia ~1e-5 kg·m²); the robot-wide 0.1 would make the 0.1 N·m knuckle drive close the
 /// gripper in ~1.3 s instead of a few control steps. See the README's "Physics".
-pub const GRIPPER_ARMATURE: f64 = 1e-3;
+pub const GRIPPER_ARMATURE: f64 = 3e-5;
 /// Passive damping (N·m·s/rad) on the undriven linkage joints, which keeps the closed chain
 /// from ringing under the stiff connect constraints at dt = 0.002 s.
 pub const PASSIVE_DAMPING: f64 = 1e-3;
