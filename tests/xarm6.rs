@@ -432,7 +432,8 @@ fn gripper_action_semantics_absolute_and_delta() {
         "{:?}",
         &q[6..]
     );
-    // Delta: +1 moves the knuckle at most 0.15 rad from its measured position per step.
+    // Delta: +1 sets the target 0.15 rad beyond the measured position (the drive may
+    // overshoot it by a few mrad).
     let mut env = pickcube("pd_joint_delta_pos");
     env.reset(Some(3));
     env.robot().qpos(env.data(), &mut q);

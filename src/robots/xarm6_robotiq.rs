@@ -24,15 +24,18 @@ const ARM_GAINS: (f64, f64, f64) = (1e4, 1e3, 100.0);
 /// ManiSkill's active-gripper drive: stiffness, damping, force limit (robots.md §4).
 pub const MANISKILL_GRIPPER_GAINS: (f64, f64, f64) = (1e5, 2000.0, 0.1);
 /// The drive mjskill installs on the knuckles: ManiSkill's force limit with a stiffness and
-/// damping MuJoCo's integrator can resolve on a ~3e-4 kg·m² linkage (README "Physics": the
+/// damping MuJoCo's integrator can resolve on a ~1e-4 kg·m² linkage (README "Physics": the
 /// implicit integrator linearises the drive's damping without its force clamp, so D = 2000
-/// would act as a 4 kg·m² inertia and the gripper would take minutes to close). Both drives
-/// saturate at 0.1 N·m except within kp/F of the target (1e-6 rad upstream, 2 mrad here).
+/// would add dt·D = 4 kg·m² of inertia and the gripper would take minutes to close). Both
+/// drives push with the full 0.1 N·m except within F/kp of the target (1e-6 rad upstream,
+/// 0.02 rad here), so the squeeze of a ±0.15 rad delta command is the same.
 const GRIPPER_GAINS: (f64, f64, f64) = (GRIPPER_KP, GRIPPER_KD, MANISKILL_GRIPPER_GAINS.2);
 /// Knuckle drive stiffness in MuJoCo (N·m/rad).
-pub const GRIPPER_KP: f64 = 1.5;
-/// Knuckle drive damping in MuJoCo (N·m·s/rad): near-critical with [`GRIPPER_KP`].
-pub const GRIPPER_KD: f64 = 0.03;
+pub const GRIPPER_KP: f64 = 5.0;
+/// Knuckle drive damping in MuJoCo (N·m·s/rad). Its implicit share dt·kd = 6e-5 kg·m² stays
+/// below the linkage inertia, so the gripper closes in ~3 control steps (measured: faster
+/// closing grasps PickCube's cube more reliably).
+pub const GRIPPER_KD: f64 = 0.05;
 /// Arm delta bound (rad) of the joint-delta modes.
 const JOINT_DELTA: f32 = 0.1;
 /// Gripper delta bound (rad) of the delta modes.
@@ -80,7 +83,7 @@ pub const LOOP_CLOSURES: [(&str, [f64; 3], &str, [f64; 3]); 2] = [
     ),
 ];
 
-/// Armature (kg·m²) of the gripper joints. The linkage links weigh 5–27 g (rotational
+/// Armature (kg·m²) of the six linkage joints. The linkage links weigh 5–27 g (rotational
 /// inertia ~1e-5 kg·m²); the robot-wide 0.1 would make the 0.1 N·m knuckle drive close the
 /// gripper in ~1.3 s instead of a few control steps. See the README's "Physics".
 pub const GRIPPER_ARMATURE: f64 = 3e-5;
