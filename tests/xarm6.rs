@@ -558,6 +558,9 @@ fn fit_primitives_scales_millimetre_meshes() {
     let out = run("0");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--scale must be a positive number, got 0"), "{err}");
+    assert!(
+        err.contains("--scale must be a positive number, got 0"),
+        "{err}"
+    );
     std::fs::remove_file(&path).ok();
 }
