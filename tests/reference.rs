@@ -89,7 +89,9 @@ fn reference_trajectories_replay_within_tolerance() {
 fn regenerate_reference_trajectories() {
     for (name, env, robot, policy, episodes) in references() {
         let out = Command::new(env!("CARGO_BIN_EXE_mjskill"))
-            .args(["rollout", "--env", env, "--robot", robot, "--policy", policy])
+            .args([
+                "rollout", "--env", env, "--robot", robot, "--policy", policy,
+            ])
             .args(["--episodes", &episodes.to_string(), "--seed", "0", "--out"])
             .arg(dir().join(&name))
             .output()

@@ -137,4 +137,3 @@ fn a_rollout_killed_with_sigkill_keeps_every_finished_episode() {
 fn a_rollout_interrupted_with_sigint_keeps_every_finished_episode() {
     kill_mid_run("-INT", "interrupted.mcap");
 }
-

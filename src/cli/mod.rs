@@ -98,6 +98,10 @@ pub enum Command {
         /// Keep only the mesh surface inside this box: "xmin,ymin,zmin,xmax,ymax,zmax" (mesh frame).
         #[arg(long)]
         crop: Option<String>,
+        /// Uniform scale applied to the mesh vertices first (the URDF `<mesh scale>`, e.g. 0.001
+        /// for meshes in millimetres); crop boxes are in the scaled frame.
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
     Eval {
@@ -226,7 +230,8 @@ fn run(cli: Cli) -> Result<(), String> {
             parts,
             segments,
             crop,
-        } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref()),
+            scale,
+        } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref(), scale),
         Command::Eval {
             target,
             policy,
@@ -350,15 +355,22 @@ fn fit_primitives(
     parts: Option<usize>,
     segments: usize,
     crop: Option<&str>,
+    scale: f64,
 ) -> Result<(), String> {
     use crate::mjcf::mesh_fit;
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(format!("--scale must be a positive number, got {scale}"));
+    }
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())
         .collect::<Result<_, _>>()?;
     let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
-    let tris =
+    let mut tris =
         mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
+    for t in tris.iter_mut().flatten() {
+        *t *= scale;
+    }
     let crop = match crop {
         None => None,
         Some(s) => {

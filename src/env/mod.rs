@@ -252,7 +252,7 @@ fn poke_cube(_robot: &'static str) -> Box<dyn Task> {
 static REGISTRY: [EnvSpec; 5] = [
     EnvSpec {
         id: "PickCube-v1",
-        robots: &["panda", "fetch", "so100", "widowxai"],
+        robots: &["panda", "fetch", "xarm6_robotiq", "so100", "widowxai"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },

@@ -130,6 +130,11 @@ pub struct RobotOptions {
     /// default, 0.02 s). A stiffer value stands in for PhysX's 1e5 N/m mimic tendon where a
     /// mimic follower has no drive of its own (WidowX AI).
     pub mimic_solref: Option<[f64; 2]>,
+    /// Links whose collision shapes get torsional friction (condim 4) with this coefficient
+    /// (m): MuJoCo's analogue of a PhysX material `patch_radius` (torque ≤ μ·r·N).
+    pub torsional_friction: Vec<(String, f64)>,
+    /// `solref` of the loop closures (None: MuJoCo's default, time constant 0.02 s).
+    pub connect_solref: Option<[f64; 2]>,
 }
 
 impl Default for RobotOptions {
@@ -146,6 +151,8 @@ impl Default for RobotOptions {
             no_ground_contact: Vec::new(),
             connects: Vec::new(),
             mimic_solref: None,
+            connect_solref: None,
+            torsional_friction: Vec::new(),
         }
     }
 }
@@ -337,13 +344,15 @@ impl Scene {
             }
         }
         for c in &opts.connects {
-            self.section("equality").push(
-                Element::new("connect")
-                    .attr("name", format!("loop_{}_{}", c.link1, c.link2))
-                    .attr("body1", &c.link1)
-                    .attr("body2", &c.link2)
-                    .attr_nums("anchor", &c.anchor),
-            );
+            let mut e = Element::new("connect")
+                .attr("name", format!("loop_{}_{}", c.link1, c.link2))
+                .attr("body1", &c.link1)
+                .attr("body2", &c.link2)
+                .attr_nums("anchor", &c.anchor);
+            if let Some(r) = opts.connect_solref {
+                e = e.attr_nums("solref", &r);
+            }
+            self.section("equality").push(e);
         }
         for d in &opts.drives {
             self.section("actuator").push(
@@ -460,11 +469,18 @@ impl Scene {
             };
             g.set("contype", bits);
             g.set("conaffinity", bits);
-            if let Some(mu) = friction {
-                g.set(
-                    "friction",
-                    nums(&[mu, TORSIONAL_ROLLING[0], TORSIONAL_ROLLING[1]]),
-                );
+            let torsional = opts
+                .torsional_friction
+                .iter()
+                .find(|(n, _)| *n == l.name)
+                .map(|(_, t)| *t);
+            if friction.is_some() || torsional.is_some() {
+                let mu = friction.unwrap_or(DEFAULT_FRICTION);
+                let t = torsional.unwrap_or(TORSIONAL_ROLLING[0]);
+                g.set("friction", nums(&[mu, t, TORSIONAL_ROLLING[1]]));
+            }
+            if torsional.is_some() {
+                g.set("condim", 4);
             }
             body.push(g);
         }

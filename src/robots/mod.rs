@@ -5,6 +5,7 @@ pub mod fetch;
 pub mod panda;
 pub mod so100;
 pub mod widowxai;
+pub mod xarm6_robotiq;
 
 use std::sync::Arc;
 
@@ -214,6 +215,7 @@ pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
     match uid {
         "panda" => Ok(&panda::PANDA),
         "fetch" => Ok(&fetch::FETCH),
+        "xarm6_robotiq" => Ok(&xarm6_robotiq::XARM6_ROBOTIQ),
         "so100" => Ok(&so100::SO100),
         "widowxai" => Ok(&widowxai::WIDOWXAI),
         _ => Err(format!(

@@ -90,9 +90,10 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver.
-pub const SOLVED: [(&str, &str); 8] = [
+pub const SOLVED: [(&str, &str); 9] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
+    ("PickCube-v1", "xarm6_robotiq"),
     ("PickCube-v1", "so100"),
     ("PickCube-v1", "widowxai"),
     ("PickCubeSO100-v1", "so100"),
@@ -116,7 +117,16 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ));
     }
     match (env.id(), robot) {
-        ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(env, PANDA_GRIPPER)?)),
+        ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(
+            env,
+            PANDA_GRIPPER,
+            PICK_HOLD_PANDA,
+        )?)),
+        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(PickCubeSolver::new(
+            env,
+            XARM6_GRIPPER,
+            PICK_HOLD_XARM6,
+        )?)),
         ("PlaceSphere-v1", "panda") => Ok(Box::new(place_sphere::PlaceSphereSolver::new(
             env,
             PANDA_GRIPPER,
@@ -158,6 +168,13 @@ pub const PANDA_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
+/// xArm6 + Robotiq: the gripper action is a ±0.15 rad knuckle delta, so −1 opens and +1
+/// closes (solvers.md §7.1).
+pub const XARM6_GRIPPER: Gripper = Gripper {
+    open: -1.0,
+    close: 1.0,
+};
+
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
 
@@ -194,16 +211,19 @@ const PICK_APPROACH_TOL: f64 = 0.01;
 /// Descent tolerance (m).
 const PICK_DESCEND_TOL: f64 = 0.004;
 /// Panda: steps the gripper closes before lifting.
-const PICK_HOLD_PANDA: usize = 3;
+pub const PICK_HOLD_PANDA: usize = 3;
+/// xArm6 + Robotiq: steps the gripper closes before lifting (0.15 rad per step).
+pub const PICK_HOLD_XARM6: usize = 8;
 
 impl PickCubeSolver {
-    /// Resolves the cube and goal bodies of a PickCube env.
-    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+    /// Resolves the cube and goal bodies of a PickCube env; `hold` is the number of steps the
+    /// gripper closes before the lift.
+    pub fn new(env: &Env, gripper: Gripper, hold: usize) -> Result<Self, String> {
         Ok(PickCubeSolver {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,
             gripper,
-            hold: PICK_HOLD_PANDA,
+            hold,
             phase: 0,
             steps_in_phase: 0,
         })
