@@ -1,110 +1,14 @@
 //! Issue 2: the foundation — safe layer errors, generated-robot kinematics against an
 //! independent URDF implementation, PD drives under gravity, grasping, and `export-mjcf`
 //! accepted by Debian's independent MuJoCo front end.
-use std::collections::HashMap;
 use std::sync::Arc;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+use nalgebra::Vector3;
 
 use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::{self, RobotIds};
 
-/// An independent URDF forward-kinematics implementation: parses the XML with roxmltree
-/// (not urdf-rs, not mjskill's loader) and composes origin · motion along the chain.
-/// (name, type, parent, child, origin, axis) of one URDF joint.
-type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
-
-struct IndependentFk {
-    joints: Vec<JointRow>,
-}
-
-fn parse_floats(s: Option<&str>, default: [f64; 3]) -> [f64; 3] {
-    match s {
-        None => default,
-        Some(t) => {
-            let v: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        }
-    }
-}
-
-impl IndependentFk {
-    fn new(urdf: &str) -> Self {
-        let doc = roxmltree::Document::parse(urdf).unwrap();
-        let mut joints = Vec::new();
-        for j in doc
-            .root_element()
-            .children()
-            .filter(|n| n.has_tag_name("joint"))
-        {
-            let child = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
-            let origin = child("origin");
-            let xyz = parse_floats(origin.and_then(|o| o.attribute("xyz")), [0.0; 3]);
-            let rpy = parse_floats(origin.and_then(|o| o.attribute("rpy")), [0.0; 3]);
-            // rpy: fixed-axis roll, pitch, yaw ⇒ R = Rz(y)·Ry(p)·Rx(r)
-            let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rpy[2])
-                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), rpy[1])
-                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rpy[0]);
-            let axis = Vector3::from(parse_floats(
-                child("axis").and_then(|a| a.attribute("xyz")),
-                [1.0, 0.0, 0.0],
-            ));
-            joints.push((
-                j.attribute("name").unwrap().to_string(),
-                j.attribute("type").unwrap().to_string(),
-                child("parent")
-                    .unwrap()
-                    .attribute("link")
-                    .unwrap()
-                    .to_string(),
-                child("child")
-                    .unwrap()
-                    .attribute("link")
-                    .unwrap()
-                    .to_string(),
-                Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), rot),
-                axis.normalize(),
-            ));
-        }
-        IndependentFk { joints }
-    }
-
-    /// World pose of every link for joint values by name.
-    fn links(
-        &self,
-        base: &Isometry3<f64>,
-        root: &str,
-        q: &HashMap<String, f64>,
-    ) -> HashMap<String, Isometry3<f64>> {
-        let mut out = HashMap::from([(root.to_string(), *base)]);
-        // Repeat until every reachable link is placed (no ordering assumptions).
-        loop {
-            let mut added = false;
-            for (name, ty, parent, child, origin, axis) in &self.joints {
-                if out.contains_key(child) || !out.contains_key(parent) {
-                    continue;
-                }
-                let v = q.get(name).copied().unwrap_or(0.0);
-                let motion = match ty.as_str() {
-                    "revolute" | "continuous" => Isometry3::rotation(axis * v),
-                    "prismatic" => Isometry3::translation(axis.x * v, axis.y * v, axis.z * v),
-                    _ => Isometry3::identity(),
-                };
-                let p = out[parent] * origin * motion;
-                out.insert(child.clone(), p);
-                added = true;
-            }
-            if !added {
-                return out;
-            }
-        }
-    }
-}
-
-fn body_pose(d: &Data, b: usize) -> Isometry3<f64> {
-    RobotIds::body_pose(d, b)
-}
+mod common;
 
 #[test]
 fn generated_scene_with_a_mistake_returns_mujoco_error_text() {
@@ -125,44 +29,9 @@ fn generated_scene_with_a_mistake_returns_mujoco_error_text() {
 
 #[test]
 fn panda_forward_kinematics_matches_independent_urdf_fk() {
-    let spec = robots::spec("panda").unwrap();
-    let (model, desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
-    let urdf = mjskill::models::text(spec.urdf).unwrap();
-    let fk = IndependentFk::new(urdf);
-    let mut d = Data::new(model.clone()).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-    let root = &desc.links[desc.root].name;
-    let mut worst: f64 = 0.0;
-    for _ in 0..200 {
-        let mut q = HashMap::new();
-        let mut qv = vec![0.0; ids.qpos_adr.len()];
-        for (k, name) in ids.joint_names.iter().enumerate() {
-            let (lo, hi) = ids.limits[k];
-            let v = rng.random_range(lo..=hi);
-            q.insert(name.clone(), v);
-            qv[k] = v;
-        }
-        // The mimic finger follows the leader in the model only through the equality
-        // constraint; FK compares the configuration as written.
-        ids.set_qpos(&mut d, &qv);
-        d.forward();
-        let expect = fk.links(&spec.table_base(), root, &q);
-        assert_eq!(
-            expect.len(),
-            desc.links.len(),
-            "independent FK reached every link"
-        );
-        for (name, b) in &ids.link_bodies {
-            let got = body_pose(&d, *b);
-            let want = expect[name];
-            let dp = (got.translation.vector - want.translation.vector).norm();
-            let dr = got.rotation.angle_to(&want.rotation);
-            worst = worst.max(dp);
-            assert!(dp < 1e-6, "link {name}: position error {dp}");
-            assert!(dr < 1e-6, "link {name}: rotation error {dr}");
-        }
-    }
-    assert!(worst < 1e-6);
+    // The mimic finger follows the leader in the model only through the equality
+    // constraint; FK compares the configuration as written.
+    common::check_fk("panda", 200, |_, _, _| {});
 }
 
 /// Steps `n` times keeping robot gravity compensation on.

@@ -1,5 +1,5 @@
-//! Helpers shared by the per-robot test files (so100.rs, widowxai.rs): an independent URDF
-//! forward kinematics (roxmltree, as in foundation.rs) and a table scene with PD targets.
+//! Helpers shared by the robot test files: an independent URDF forward kinematics (roxmltree,
+//! not urdf-rs and not mjskill's loader) and a table scene with PD targets.
 #![allow(dead_code)]
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -94,12 +94,30 @@ impl IndependentFk {
     }
 }
 
+/// Uniform joint values within the limits (ManiSkill order).
+pub fn uniform_q(rng: &mut rand::rngs::StdRng, ids: &RobotIds) -> Vec<f64> {
+    ids.limits
+        .iter()
+        .map(|&(lo, hi)| rng.random_range(lo..=hi))
+        .collect()
+}
+
 /// Checks MuJoCo's link poses of `uid` at its table pose against [`IndependentFk`] over
 /// random configurations within the joint limits; calls `extra` with the data and the
 /// independent link poses of each sample.
 pub fn check_fk(
     uid: &str,
     samples: usize,
+    extra: impl FnMut(&Data, &RobotIds, &HashMap<String, Isometry3<f64>>),
+) {
+    check_fk_with(uid, samples, uniform_q, extra)
+}
+
+/// [`check_fk`] with configurations drawn by `sample` (ManiSkill order).
+pub fn check_fk_with(
+    uid: &str,
+    samples: usize,
+    mut sample: impl FnMut(&mut rand::rngs::StdRng, &RobotIds) -> Vec<f64>,
     mut extra: impl FnMut(&Data, &RobotIds, &HashMap<String, Isometry3<f64>>),
 ) {
     let spec = robots::spec(uid).unwrap();
@@ -109,14 +127,8 @@ pub fn check_fk(
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let root = &desc.links[desc.root].name;
     for _ in 0..samples {
-        let mut q = HashMap::new();
-        let mut qv = vec![0.0; ids.qpos_adr.len()];
-        for (k, name) in ids.joint_names.iter().enumerate() {
-            let (lo, hi) = ids.limits[k];
-            let v = rng.random_range(lo..=hi);
-            q.insert(name.clone(), v);
-            qv[k] = v;
-        }
+        let qv = sample(&mut rng, &ids);
+        let q: HashMap<String, f64> = ids.joint_names.iter().cloned().zip(qv.clone()).collect();
         ids.set_qpos(&mut d, &qv);
         d.forward();
         let want = fk.links(&spec.table_base(), root, &q);
