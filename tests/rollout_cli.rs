@@ -137,3 +137,19 @@ fn a_rollout_killed_with_sigkill_keeps_every_finished_episode() {
 fn a_rollout_interrupted_with_sigint_keeps_every_finished_episode() {
     kill_mid_run("-INT", "interrupted.mcap");
 }
+
+#[test]
+fn a_closed_stdout_is_not_a_crash() {
+    // `mjskill envs | head -c 1`: the reader goes away before the listing is written.
+    let mut child = mjskill()
+        .arg("envs")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -4,6 +4,25 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
+/// Writes one line to standard output. A closed pipe (e.g. `mjskill envs | head`) is not an
+/// error: the reader has what it wanted.
+fn emit(line: std::fmt::Arguments) -> Result<(), String> {
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{line}").and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(format!("cannot write to stdout: {e}"))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// `println!` through [`emit`], returning its error from the enclosing function.
+macro_rules! out {
+    ($($t:tt)*) => {
+        emit(format_args!($($t)*))?
+    };
+}
+
 pub mod bench;
 pub mod eval;
 pub mod render;
@@ -218,7 +237,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 ..target.config()
             };
             let report = bench::run(&target.env, config, steps, vec, render)?;
-            println!(
+            out!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
             );
@@ -239,7 +258,7 @@ fn run(cli: Cli) -> Result<(), String> {
             seed,
         } => {
             let report = eval::run(&target.env, target.config(), &policy, episodes, seed)?;
-            println!(
+            out!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
             );
@@ -273,7 +292,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 video,
             };
             let summary = rollout::rollout(&args)?;
-            println!(
+            out!(
                 "{}",
                 serde_json::to_string(&summary).map_err(|e| e.to_string())?
             );
@@ -281,12 +300,12 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Command::Info { file } => {
             let s = rollout::info(&file)?;
-            println!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
             Ok(())
         }
         Command::Replay { file, tolerance } => {
             let r = rollout::replay(&file, tolerance)?;
-            println!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())
             } else {
@@ -303,11 +322,11 @@ fn run(cli: Cli) -> Result<(), String> {
             output,
         } => {
             let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
-            println!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
             Ok(())
         }
         Command::Envs => {
-            println!(
+            out!(
                 "{}",
                 serde_json::to_string_pretty(&crate::env::registry()).map_err(|e| e.to_string())?
             );
@@ -406,9 +425,9 @@ fn fit_primitives(
     .map_err(|e| e.to_string())?;
     let total: f64 = prims.iter().map(|p| p.volume()).sum();
     for p in &prims {
-        println!("{}", p.to_urdf());
+        out!("{}", p.to_urdf());
     }
-    println!(
+    out!(
         "<!-- primitives volume {total:.3e} m^3, mesh volume {:.3e} m^3 -->",
         mesh_fit::mesh_volume(&tris)
     );
