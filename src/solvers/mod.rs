@@ -10,6 +10,7 @@
 pub mod joint_ik;
 pub mod place_sphere;
 pub mod poke_cube;
+pub mod xarm6;
 
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
@@ -42,6 +43,8 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
         "so100" | "widowxai" => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
         "fetch" => "pd_ee_delta_pose",
+        // The xArm6 turns its gripper to the cube's faces (solvers/xarm6.rs).
+        "xarm6_robotiq" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
@@ -122,11 +125,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
             PANDA_GRIPPER,
             PICK_HOLD_PANDA,
         )?)),
-        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(PickCubeSolver::new(
-            env,
-            XARM6_GRIPPER,
-            PICK_HOLD_XARM6,
-        )?)),
+        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(xarm6::Xarm6PickCube::new(env)?)),
         ("PlaceSphere-v1", "panda") => Ok(Box::new(place_sphere::PlaceSphereSolver::new(
             env,
             PANDA_GRIPPER,
