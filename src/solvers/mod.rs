@@ -32,7 +32,8 @@ pub trait Policy: std::fmt::Debug {
 }
 
 /// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
-/// the end effector (`pd_ee_delta_pos`) where the robot has EE controllers; SO100 and
+/// the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the gripper, in
+/// `pd_ee_delta_pose`) where the robot has EE controllers; SO100 and
 /// WidowX AI have none upstream, so their solvers command joint positions (`pd_joint_pos`)
 /// from an IK of their own.
 pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> {
@@ -167,8 +168,8 @@ pub const PANDA_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
-/// xArm6 + Robotiq: the gripper action is a ±0.15 rad knuckle delta, so −1 opens and +1
-/// closes (solvers.md §7.1).
+/// xArm6 + Robotiq in `pd_ee_delta_pos`: the gripper action is a ±0.15 rad knuckle delta, so
+/// −1 opens and +1 closes (solvers.md §7.1; the `solver` policy uses `xarm6::Xarm6PickCube`).
 pub const XARM6_GRIPPER: Gripper = Gripper {
     open: -1.0,
     close: 1.0,

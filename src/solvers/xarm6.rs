@@ -6,7 +6,7 @@
 //! closing axis is perpendicular to a cube face (the smallest turn, at most 45°). The Robotiq's
 //! closing drive is limited to 0.1 N·m (ManiSkill's force limit): a cube lying at 25–65° to the
 //! pads is pinched on two vertical edges and squeezes out when lifted, whereas a face-on grasp
-//! holds. The first steps of the lift are slow, so the fresh grasp is not jerked sideways.
+//! holds.
 //!
 //! The rotation part of the action is scaled by upstream's rot_lower = −0.1 (controllers.md §1),
 //! so +1 turns −0.1 rad. The absolute gripper of this mode (robots.md §4) takes 0 (open) and
@@ -23,8 +23,9 @@ pub const XARM6_ABS_GRIPPER: Gripper = Gripper {
     close: 0.81,
 };
 
-/// Steps the gripper closes before lifting.
-const HOLD: usize = 8;
+/// Steps the gripper closes before lifting (the absolute target closes it in ~3 steps; the
+/// delta gripper of `pd_ee_delta_pos` needs 8).
+const HOLD: usize = 4;
 /// Height of the approach point above the cube (m).
 const APPROACH_HEIGHT: f64 = 0.05;
 /// Approach and descent tolerances (m).
@@ -32,9 +33,6 @@ const APPROACH_TOL: f64 = 0.01;
 const DESCEND_TOL: f64 = 0.004;
 /// Orientation tolerance before descending (rad).
 const ROT_TOL: f64 = 0.03;
-/// Lift: action limit for the first `SLOW_LIFT_STEPS` steps after the hold.
-const SLOW_LIFT_LIMIT: f64 = 0.3;
-const SLOW_LIFT_STEPS: usize = 3;
 /// Position error scale (m per unit action).
 const POS_SCALE: f64 = 0.1;
 /// Rotation per unit action (rad; upstream scales by rot_lower = −0.1, hence the sign).
@@ -108,7 +106,7 @@ impl Policy for Xarm6PickCube {
         let cube = xyz(env, self.cube);
         let goal = xyz(env, self.goal);
         let rot_err = (self.want * quat(env, self.eef).inverse()).scaled_axis();
-        let (target, grip, limit) = loop {
+        let (target, grip) = loop {
             let (target, grip) = match self.phase {
                 0 => (
                     cube + Vector3::new(0.0, 0.0, APPROACH_HEIGHT),
@@ -130,15 +128,10 @@ impl Policy for Xarm6PickCube {
                 continue;
             }
             self.steps_in_phase += 1;
-            let limit = if self.phase == 3 && self.steps_in_phase <= SLOW_LIFT_STEPS {
-                SLOW_LIFT_LIMIT
-            } else {
-                1.0
-            };
-            break (target, grip, limit);
+            break (target, grip);
         };
         for k in 0..3 {
-            action[k] = ((target[k] - tcp[k]) / POS_SCALE).clamp(-limit, limit) as f32;
+            action[k] = ((target[k] - tcp[k]) / POS_SCALE).clamp(-1.0, 1.0) as f32;
         }
         let mut r = rot_err / ROT_SCALE;
         if r.norm() > 1.0 {
