@@ -487,15 +487,15 @@ fn seeded_reset_reproduces_maniskills_noise() {
 }
 
 #[test]
-fn pickcube_solver_picks_the_cube_with_the_delta_gripper() {
+fn pickcube_solver_turns_the_gripper_to_the_cube_faces() {
     let config = EnvConfig {
         robot: Some("xarm6_robotiq".into()),
         ..Default::default()
     };
     let r = mjskill::cli::eval::run("PickCube-v1", config, "solver", 20, 0).unwrap();
-    assert_eq!(r.control_mode, "pd_ee_delta_pos");
-    // Measured 18/20 on seeds 0–19 (76/100 on seeds 0–99; README "Physics").
-    assert!(r.successes >= 16, "{r:?}");
+    assert_eq!(r.control_mode, "pd_ee_delta_pose");
+    // Measured 20/20 on seeds 0–19 (100/100 on seeds 0–99; README).
+    assert!(r.successes >= 18, "{r:?}");
     let first = r.mean_first_success_step.unwrap();
     assert!((20.0..40.0).contains(&first), "{first}");
 }

@@ -10,6 +10,7 @@
 pub mod joint_ik;
 pub mod place_sphere;
 pub mod poke_cube;
+pub mod xarm6;
 
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
@@ -31,7 +32,8 @@ pub trait Policy: std::fmt::Debug {
 }
 
 /// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
-/// the end effector (`pd_ee_delta_pos`) where the robot has EE controllers; SO100 and
+/// the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the gripper, in
+/// `pd_ee_delta_pose`) where the robot has EE controllers; SO100 and
 /// WidowX AI have none upstream, so their solvers command joint positions (`pd_joint_pos`)
 /// from an IK of their own.
 pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> {
@@ -42,6 +44,8 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
         "so100" | "widowxai" => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
         "fetch" => "pd_ee_delta_pose",
+        // The xArm6 turns its gripper to the cube's faces (solvers/xarm6.rs).
+        "xarm6_robotiq" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
@@ -122,11 +126,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
             PANDA_GRIPPER,
             PICK_HOLD_PANDA,
         )?)),
-        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(PickCubeSolver::new(
-            env,
-            XARM6_GRIPPER,
-            PICK_HOLD_XARM6,
-        )?)),
+        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(xarm6::Xarm6PickCube::new(env)?)),
         ("PlaceSphere-v1", "panda") => Ok(Box::new(place_sphere::PlaceSphereSolver::new(
             env,
             PANDA_GRIPPER,
@@ -168,8 +168,8 @@ pub const PANDA_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
-/// xArm6 + Robotiq: the gripper action is a ±0.15 rad knuckle delta, so −1 opens and +1
-/// closes (solvers.md §7.1).
+/// xArm6 + Robotiq in `pd_ee_delta_pos`: the gripper action is a ±0.15 rad knuckle delta, so
+/// −1 opens and +1 closes (solvers.md §7.1; the `solver` policy uses `xarm6::Xarm6PickCube`).
 pub const XARM6_GRIPPER: Gripper = Gripper {
     open: -1.0,
     close: 1.0,
