@@ -92,6 +92,148 @@ pub struct PartSpec {
     pub gains: (f64, f64, f64),
 }
 
+impl PartKind {
+    /// Normalised delta position targets, ±`bound` for each of `n` joints.
+    pub fn joint_delta(n: usize, bound: f32, use_target: bool) -> PartKind {
+        PartKind::joint_delta_per(vec![bound; n], use_target)
+    }
+
+    /// Normalised delta position targets, ±`bounds[i]` for joint i.
+    pub fn joint_delta_per(bounds: Vec<f32>, use_target: bool) -> PartKind {
+        PartKind::JointPos {
+            use_delta: true,
+            use_target,
+            normalize: true,
+            low: Some(bounds.iter().map(|b| -b).collect()),
+            high: Some(bounds),
+        }
+    }
+
+    /// Absolute position targets bounded by the joint limits, not normalised.
+    pub fn joint_absolute() -> PartKind {
+        PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize: false,
+            low: None,
+            high: None,
+        }
+    }
+
+    /// Absolute position targets in `[low, high]` for each of `n` joints (`normalize`: the
+    /// action is clipped to [−1, 1] and rescaled to the range).
+    pub fn joint_range(n: usize, (low, high): (f32, f32), normalize: bool) -> PartKind {
+        PartKind::JointPos {
+            use_delta: false,
+            use_target: false,
+            normalize,
+            low: Some(vec![low; n]),
+            high: Some(vec![high; n]),
+        }
+    }
+
+    /// Velocity targets in ±`bound`.
+    pub fn joint_vel(bound: f32) -> PartKind {
+        PartKind::JointVel {
+            low: -bound,
+            high: bound,
+        }
+    }
+
+    /// Absolute positions then velocities in ±`vel`.
+    pub fn joint_pos_vel(normalize: bool, vel: f32) -> PartKind {
+        PartKind::JointPosVel {
+            use_delta: false,
+            normalize,
+            pos: (0.0, 0.0),
+            vel: (-vel, vel),
+        }
+    }
+
+    /// Normalised position deltas in ±`bound` then velocities in ±`vel`.
+    pub fn joint_delta_pos_vel(bound: f32, vel: f32) -> PartKind {
+        PartKind::JointPosVel {
+            use_delta: true,
+            normalize: true,
+            pos: (-bound, bound),
+            vel: (-vel, vel),
+        }
+    }
+
+    /// Normalised EE delta targets of `ee_link` (position, plus rotation with `rotation`),
+    /// position and rotation bounds both `bounds`.
+    pub fn ee_delta(
+        ee_link: &'static str,
+        root_link: Option<&'static str>,
+        rotation: bool,
+        use_target: bool,
+        bounds: (f32, f32),
+    ) -> PartKind {
+        PartKind::Ee {
+            rotation,
+            use_delta: true,
+            use_target,
+            pos: bounds,
+            rot: bounds,
+            ee_link,
+            root_link,
+        }
+    }
+
+    /// Absolute (not normalised) EE pose targets of `ee_link`.
+    pub fn ee_pose(
+        ee_link: &'static str,
+        root_link: Option<&'static str>,
+        pos: (f32, f32),
+        rot: (f32, f32),
+    ) -> PartKind {
+        PartKind::Ee {
+            rotation: true,
+            use_delta: false,
+            use_target: false,
+            pos,
+            rot,
+            ee_link,
+            root_link,
+        }
+    }
+}
+
+impl PartSpec {
+    /// A part without mimic followers. A [`PartKind::JointVel`] part gets stiffness 0 (a pure
+    /// velocity drive, as upstream's `PDJointVelController`), whatever `gains.0` says.
+    pub fn new(
+        name: &'static str,
+        joints: &[&'static str],
+        kind: PartKind,
+        gains: (f64, f64, f64),
+    ) -> PartSpec {
+        let gains = match kind {
+            PartKind::JointVel { .. } => (0.0, gains.1, gains.2),
+            _ => gains,
+        };
+        PartSpec {
+            name,
+            joints: joints.to_vec(),
+            followers: vec![],
+            kind,
+            gains,
+        }
+    }
+
+    /// Adds a mimic follower: `follower` tracks `multiplier · control + offset`.
+    pub fn with_follower(
+        mut self,
+        follower: &'static str,
+        control: &'static str,
+        multiplier: f32,
+        offset: f32,
+    ) -> PartSpec {
+        self.followers.push((follower, control, multiplier, offset));
+        self
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Part {
     spec: PartSpec,

@@ -87,6 +87,8 @@ const EE_DELTA: (f32, f32) = (-0.1, 0.1);
 /// The EE link and the frame EE poses are expressed in (upstream `root_link_name`).
 const EE_LINK: &str = "gripper_link";
 const EE_ROOT: &str = "torso_lift_link";
+/// Finger range (m) of the normalised absolute gripper action.
+const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.05);
 
 /// Fetch control modes (robots.md §3), default first.
 pub const CONTROL_MODES: [&str; 11] = [
@@ -103,141 +105,49 @@ pub const CONTROL_MODES: [&str; 11] = [
     "pd_ee_target_delta_pose",
 ];
 
-fn gripper() -> PartSpec {
-    PartSpec {
-        name: "gripper",
-        joints: vec!["l_gripper_finger_joint"],
-        followers: vec![("r_gripper_finger_joint", "l_gripper_finger_joint", 1.0, 0.0)],
-        kind: PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: true,
-            low: Some(vec![-0.01]),
-            high: Some(vec![0.05]),
-        },
-        gains: GRIPPER_GAINS,
-    }
-}
-
-fn joint_delta(n: usize, use_target: bool) -> PartKind {
-    PartKind::JointPos {
-        use_delta: true,
-        use_target,
-        normalize: true,
-        low: Some(vec![-JOINT_DELTA; n]),
-        high: Some(vec![JOINT_DELTA; n]),
-    }
-}
-
-fn body(stiff: bool) -> PartSpec {
-    let (kind, gains) = if stiff {
-        (
-            PartKind::JointPos {
-                use_delta: false,
-                use_target: false,
-                normalize: false,
-                low: None,
-                high: None,
-            },
-            STIFF_BODY_GAINS,
-        )
-    } else {
-        (joint_delta(3, false), BODY_GAINS)
-    };
-    PartSpec {
-        name: "body",
-        joints: BODY.to_vec(),
-        followers: vec![],
-        kind,
-        gains,
-    }
-}
-
-fn base() -> PartSpec {
-    PartSpec {
-        name: "base",
-        joints: BASE.to_vec(),
-        followers: vec![],
-        kind: PartKind::BaseForwardVel {
-            lin: (-1.0, 1.0),
-            ang: (-YAW_RATE_MAX, YAW_RATE_MAX),
-        },
-        gains: BASE_GAINS,
-    }
-}
-
-fn arm(kind: PartKind, gains: (f64, f64, f64)) -> PartSpec {
-    PartSpec {
-        name: "arm",
-        joints: ARM.to_vec(),
-        followers: vec![],
-        kind,
-        gains,
-    }
-}
-
-fn ee(rotation: bool, use_target: bool) -> PartKind {
-    PartKind::Ee {
-        rotation,
-        use_delta: true,
-        use_target,
-        pos: EE_DELTA,
-        rot: EE_DELTA,
-        ee_link: EE_LINK,
-        root_link: Some(EE_ROOT),
-    }
-}
-
 /// The parts of a Fetch control mode (arm, gripper, body, base).
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
-    let arm = match mode {
+    let ee = |rotation, use_target| {
+        PartKind::ee_delta(EE_LINK, Some(EE_ROOT), rotation, use_target, EE_DELTA)
+    };
+    let kind = match mode {
         "pd_joint_delta_pos" | "pd_joint_delta_pos_stiff_body" => {
-            arm(joint_delta(7, false), ARM_GAINS)
+            PartKind::joint_delta(7, JOINT_DELTA, false)
         }
-        "pd_joint_target_delta_pos" => arm(joint_delta(7, true), ARM_GAINS),
-        "pd_joint_pos" => arm(
-            PartKind::JointPos {
-                use_delta: false,
-                use_target: false,
-                normalize: false,
-                low: None,
-                high: None,
-            },
-            ARM_GAINS,
-        ),
-        "pd_joint_vel" => arm(
-            PartKind::JointVel {
-                low: -1.0,
-                high: 1.0,
-            },
-            (0.0, ARM_GAINS.1, ARM_GAINS.2),
-        ),
-        "pd_joint_pos_vel" => arm(
-            PartKind::JointPosVel {
-                use_delta: false,
-                normalize: true,
-                pos: (0.0, 0.0),
-                vel: (-1.0, 1.0),
-            },
-            ARM_GAINS,
-        ),
-        "pd_joint_delta_pos_vel" => arm(
-            PartKind::JointPosVel {
-                use_delta: true,
-                normalize: true,
-                pos: (-JOINT_DELTA, JOINT_DELTA),
-                vel: (-1.0, 1.0),
-            },
-            ARM_GAINS,
-        ),
-        "pd_ee_delta_pos" => arm(ee(false, false), ARM_GAINS),
-        "pd_ee_delta_pose" => arm(ee(true, false), ARM_GAINS),
-        "pd_ee_target_delta_pos" => arm(ee(false, true), ARM_GAINS),
-        "pd_ee_target_delta_pose" => arm(ee(true, true), ARM_GAINS),
+        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
+        "pd_joint_pos" => PartKind::joint_absolute(),
+        "pd_joint_vel" => PartKind::joint_vel(1.0),
+        "pd_joint_pos_vel" => PartKind::joint_pos_vel(true, 1.0),
+        "pd_joint_delta_pos_vel" => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
+        "pd_ee_delta_pos" => ee(false, false),
+        "pd_ee_delta_pose" => ee(true, false),
+        "pd_ee_target_delta_pos" => ee(false, true),
+        "pd_ee_target_delta_pose" => ee(true, true),
         _ => return None,
     };
-    let stiff = mode == "pd_joint_delta_pos_stiff_body";
-    Some(vec![arm, gripper(), body(stiff), base()])
+    let gripper = PartSpec::new(
+        "gripper",
+        &["l_gripper_finger_joint"],
+        PartKind::joint_range(1, GRIPPER_RANGE, true),
+        GRIPPER_GAINS,
+    )
+    .with_follower("r_gripper_finger_joint", "l_gripper_finger_joint", 1.0, 0.0);
+    let body = if mode == "pd_joint_delta_pos_stiff_body" {
+        PartSpec::new("body", &BODY, PartKind::joint_absolute(), STIFF_BODY_GAINS)
+    } else {
+        let kind = PartKind::joint_delta(3, JOINT_DELTA, false);
+        PartSpec::new("body", &BODY, kind, BODY_GAINS)
+    };
+    let base = PartKind::BaseForwardVel {
+        lin: (-1.0, 1.0),
+        ang: (-YAW_RATE_MAX, YAW_RATE_MAX),
+    };
+    Some(vec![
+        PartSpec::new("arm", &ARM, kind, ARM_GAINS),
+        gripper,
+        body,
+        PartSpec::new("base", &BASE, base, BASE_GAINS),
+    ])
 }
 
 /// Fetch's scene options: the wheels never touch the ground (upstream puts them and the

@@ -35,6 +35,10 @@ const EE_DELTA: (f32, f32) = (-0.1, 0.1);
 /// Bounds of the absolute `pd_ee_pose` mode.
 const EE_POS_ABS: (f32, f32) = (-2.0, 2.0);
 const EE_ROT_ABS: (f32, f32) = (-2.0 * std::f32::consts::PI, 2.0 * std::f32::consts::PI);
+/// Gripper range (m) of the normalised absolute finger action.
+const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.04);
+/// The TCP / EE link.
+const TCP: &str = "panda_hand_tcp";
 
 /// Panda control modes (robots.md §2), default first.
 pub const CONTROL_MODES: [&str; 11] = [
@@ -51,113 +55,31 @@ pub const CONTROL_MODES: [&str; 11] = [
     "pd_joint_delta_pos_vel",
 ];
 
-fn gripper() -> PartSpec {
-    PartSpec {
-        name: "gripper",
-        joints: vec!["panda_finger_joint1"],
-        followers: vec![("panda_finger_joint2", "panda_finger_joint1", 1.0, 0.0)],
-        kind: PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: true,
-            low: Some(vec![-0.01]),
-            high: Some(vec![0.04]),
-        },
-        gains: GRIPPER_GAINS,
-    }
-}
-
-fn arm(kind: PartKind, gains: (f64, f64, f64)) -> PartSpec {
-    PartSpec {
-        name: "arm",
-        joints: ARM.to_vec(),
-        followers: vec![],
-        kind,
-        gains,
-    }
-}
-
-fn joint_delta(use_target: bool) -> PartKind {
-    PartKind::JointPos {
-        use_delta: true,
-        use_target,
-        normalize: true,
-        low: Some(vec![-JOINT_DELTA; 7]),
-        high: Some(vec![JOINT_DELTA; 7]),
-    }
-}
-
-fn ee(rotation: bool, use_target: bool) -> PartKind {
-    PartKind::Ee {
-        rotation,
-        use_delta: true,
-        use_target,
-        pos: EE_DELTA,
-        rot: EE_DELTA,
-        ee_link: "panda_hand_tcp",
-        root_link: None,
-    }
-}
-
-/// The parts of a Panda control mode.
+/// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
-    let arm = match mode {
-        "pd_joint_delta_pos" => arm(joint_delta(false), ARM_GAINS),
-        "pd_joint_target_delta_pos" => arm(joint_delta(true), ARM_GAINS),
-        "pd_joint_pos" => arm(
-            PartKind::JointPos {
-                use_delta: false,
-                use_target: false,
-                normalize: false,
-                low: None,
-                high: None,
-            },
-            ARM_GAINS,
-        ),
-        "pd_ee_delta_pos" => arm(ee(false, false), ARM_GAINS),
-        "pd_ee_delta_pose" => arm(ee(true, false), ARM_GAINS),
-        "pd_ee_target_delta_pos" => arm(ee(false, true), ARM_GAINS),
-        "pd_ee_target_delta_pose" => arm(ee(true, true), ARM_GAINS),
-        "pd_ee_pose" => arm(
-            PartKind::Ee {
-                rotation: true,
-                use_delta: false,
-                use_target: false,
-                pos: EE_POS_ABS,
-                rot: EE_ROT_ABS,
-                ee_link: "panda_hand_tcp",
-                root_link: None,
-            },
-            ARM_GAINS,
-        ),
-        "pd_joint_vel" => arm(
-            PartKind::JointVel {
-                low: -1.0,
-                high: 1.0,
-            },
-            (0.0, ARM_GAINS.1, ARM_GAINS.2),
-        ),
-        "pd_joint_pos_vel" => arm(
-            PartKind::JointPosVel {
-                use_delta: false,
-                normalize: false,
-                pos: (0.0, 0.0),
-                vel: (-1.0, 1.0),
-            },
-            ARM_GAINS,
-        ),
-        "pd_joint_delta_pos_vel" => arm(
-            PartKind::JointPosVel {
-                use_delta: true,
-                normalize: true,
-                pos: (-JOINT_DELTA, JOINT_DELTA),
-                vel: (-1.0, 1.0),
-            },
-            ARM_GAINS,
-        ),
+    let ee = |rotation, use_target| PartKind::ee_delta(TCP, None, rotation, use_target, EE_DELTA);
+    let kind = match mode {
+        "pd_joint_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, false),
+        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
+        "pd_joint_pos" => PartKind::joint_absolute(),
+        "pd_ee_delta_pos" => ee(false, false),
+        "pd_ee_delta_pose" => ee(true, false),
+        "pd_ee_target_delta_pos" => ee(false, true),
+        "pd_ee_target_delta_pose" => ee(true, true),
+        "pd_ee_pose" => PartKind::ee_pose(TCP, None, EE_POS_ABS, EE_ROT_ABS),
+        "pd_joint_vel" => PartKind::joint_vel(1.0),
+        "pd_joint_pos_vel" => PartKind::joint_pos_vel(false, 1.0),
+        "pd_joint_delta_pos_vel" => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
         _ => return None,
     };
-    Some(vec![arm, gripper()])
+    let gripper = PartSpec::new(
+        "gripper",
+        &["panda_finger_joint1"],
+        PartKind::joint_range(1, GRIPPER_RANGE, true),
+        GRIPPER_GAINS,
+    )
+    .with_follower("panda_finger_joint2", "panda_finger_joint1", 1.0, 0.0);
+    Some(vec![PartSpec::new("arm", &ARM, kind, ARM_GAINS), gripper])
 }
 
 /// The Panda as ManiSkill configures it.
@@ -170,8 +92,8 @@ pub static PANDA: RobotSpec = RobotSpec {
     arm_gains: ARM_GAINS,
     gripper_gains: GRIPPER_GAINS,
     finger_friction: (&["panda_leftfinger", "panda_rightfinger"], 2.0),
-    tcp: TcpDef::Link("panda_hand_tcp"),
-    tcp_link: Some("panda_hand_tcp"),
+    tcp: TcpDef::Link(TCP),
+    tcp_link: Some(TCP),
     grasp: GraspDef {
         finger1: ("panda_leftfinger", 1.0),
         finger2: ("panda_rightfinger", -1.0),

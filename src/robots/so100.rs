@@ -37,40 +37,19 @@ pub const CONTROL_MODES: [&str; 3] = [
     "pd_joint_target_delta_pos",
 ];
 
-fn delta(use_target: bool) -> PartKind {
-    let mut low = vec![-ARM_DELTA; 5];
-    low.push(-GRIPPER_DELTA);
-    let high = low.iter().map(|x| -x).collect();
-    PartKind::JointPos {
-        use_delta: true,
-        use_target,
-        normalize: true,
-        low: Some(low),
-        high: Some(high),
-    }
-}
-
 /// The parts of an SO100 control mode: always one part over all six joints.
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+    let delta = |use_target| {
+        let bounds = [[ARM_DELTA; 5].as_slice(), &[GRIPPER_DELTA]].concat();
+        PartKind::joint_delta_per(bounds, use_target)
+    };
     let kind = match mode {
         "pd_joint_delta_pos" => delta(false),
         "pd_joint_target_delta_pos" => delta(true),
-        "pd_joint_pos" => PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: false,
-            low: None,
-            high: None,
-        },
+        "pd_joint_pos" => PartKind::joint_absolute(),
         _ => return None,
     };
-    Some(vec![PartSpec {
-        name: "arm",
-        joints: JOINTS.to_vec(),
-        followers: vec![],
-        kind,
-        gains: GAINS,
-    }])
+    Some(vec![PartSpec::new("arm", &JOINTS, kind, GAINS)])
 }
 
 /// The SO100 as ManiSkill configures it.
@@ -78,14 +57,8 @@ pub static SO100: RobotSpec = RobotSpec {
     uid: "so100",
     urdf: "so100/so100.urdf",
     srdf: "so100/so100.srdf",
-    arm_joints: &[
-        "shoulder_pan",
-        "shoulder_lift",
-        "elbow_flex",
-        "wrist_flex",
-        "wrist_roll",
-    ],
-    gripper_joints: &["gripper"],
+    arm_joints: JOINTS.split_at(5).0,
+    gripper_joints: JOINTS.split_at(5).1,
     arm_gains: GAINS,
     gripper_gains: GAINS,
     finger_friction: (&["Fixed_Jaw", "Moving_Jaw"], 2.0),

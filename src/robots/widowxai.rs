@@ -11,13 +11,13 @@ const ARM: [&str; 6] = [
 /// The arm controller's joints: upstream lists the left carriage as a 7th arm joint, whose
 /// target the gripper controller (which runs second) overwrites every step.
 const ARM_PART: [&str; 7] = [
-    "joint_0",
-    "joint_1",
-    "joint_2",
-    "joint_3",
-    "joint_4",
-    "joint_5",
-    "left_carriage_joint",
+    ARM[0],
+    ARM[1],
+    ARM[2],
+    ARM[3],
+    ARM[4],
+    ARM[5],
+    GRIPPER_JOINT,
 ];
 /// The gripper controller's joint.
 pub const GRIPPER_JOINT: &str = "left_carriage_joint";
@@ -47,54 +47,19 @@ pub const CONTROL_MODES: [&str; 3] = [
     "pd_joint_target_delta_pos",
 ];
 
-fn gripper() -> PartSpec {
-    PartSpec {
-        name: "gripper",
-        joints: vec![GRIPPER_JOINT],
-        followers: vec![],
-        kind: PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: true,
-            low: Some(vec![GRIPPER_RANGE.0]),
-            high: Some(vec![GRIPPER_RANGE.1]),
-        },
-        gains: GRIPPER_GAINS,
-    }
-}
-
-fn delta(use_target: bool) -> PartKind {
-    PartKind::JointPos {
-        use_delta: true,
-        use_target,
-        normalize: true,
-        low: Some(vec![-JOINT_DELTA; 7]),
-        high: Some(vec![JOINT_DELTA; 7]),
-    }
-}
-
 /// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
     let kind = match mode {
-        "pd_joint_delta_pos" => delta(false),
-        "pd_joint_target_delta_pos" => delta(true),
-        "pd_joint_pos" => PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: false,
-            low: None,
-            high: None,
-        },
+        "pd_joint_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, false),
+        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
+        "pd_joint_pos" => PartKind::joint_absolute(),
         _ => return None,
     };
-    let arm = PartSpec {
-        name: "arm",
-        joints: ARM_PART.to_vec(),
-        followers: vec![],
-        kind,
-        gains: ARM_GAINS,
-    };
-    Some(vec![arm, gripper()])
+    let gripper = PartKind::joint_range(1, GRIPPER_RANGE, true);
+    Some(vec![
+        PartSpec::new("arm", &ARM_PART, kind, ARM_GAINS),
+        PartSpec::new("gripper", &[GRIPPER_JOINT], gripper, GRIPPER_GAINS),
+    ])
 }
 
 /// The WidowX AI as ManiSkill configures it.

@@ -113,144 +113,45 @@ pub const CONTROL_MODES: [&str; 11] = [
     "pd_joint_delta_pos_vel",
 ];
 
-/// The active gripper: the right outer knuckle takes the action, the left one mimics it
-/// (×1 + 0). `absolute`: target in radians [0, 0.81], not normalised, not clipped; otherwise
-/// a normalised ±0.15 rad delta from the measured position.
-fn gripper(absolute: bool) -> PartSpec {
-    let kind = if absolute {
-        PartKind::JointPos {
-            use_delta: false,
-            use_target: false,
-            normalize: false,
-            low: Some(vec![GRIPPER_RANGE.0]),
-            high: Some(vec![GRIPPER_RANGE.1]),
-        }
-    } else {
-        PartKind::JointPos {
-            use_delta: true,
-            use_target: false,
-            normalize: true,
-            low: Some(vec![-GRIPPER_DELTA]),
-            high: Some(vec![GRIPPER_DELTA]),
-        }
-    };
-    PartSpec {
-        name: "gripper_active",
-        joints: vec![GRIPPER_CONTROL],
-        followers: vec![(GRIPPER_FOLLOWER, GRIPPER_CONTROL, 1.0, 0.0)],
-        kind,
-        gains: GRIPPER_GAINS,
-    }
-}
-
-fn arm(kind: PartKind, gains: (f64, f64, f64)) -> PartSpec {
-    PartSpec {
-        name: "arm",
-        joints: ARM.to_vec(),
-        followers: vec![],
-        kind,
-        gains,
-    }
-}
-
-fn joint_delta(use_target: bool) -> PartKind {
-    PartKind::JointPos {
-        use_delta: true,
-        use_target,
-        normalize: true,
-        low: Some(vec![-JOINT_DELTA; 6]),
-        high: Some(vec![JOINT_DELTA; 6]),
-    }
-}
-
-fn ee(rotation: bool, use_target: bool) -> PartKind {
-    PartKind::Ee {
-        rotation,
-        use_delta: true,
-        use_target,
-        pos: EE_DELTA,
-        rot: EE_DELTA,
-        ee_link: EE_LINK,
-        root_link: None,
-    }
-}
-
-/// The parts of an xArm6 control mode. The passive linkage joints (ManiSkill's 0-dim
-/// `gripper_passive`: stiffness 0, damping 0) take no action and get no drive.
+/// The parts of an xArm6 control mode: the arm, then the active gripper (the right outer
+/// knuckle takes the action, the left one mimics it ×1 + 0). The passive linkage joints
+/// (ManiSkill's 0-dim `gripper_passive`: stiffness 0, damping 0) take no action and get no
+/// drive. The gripper is absolute (radians in [0, 0.81], not normalised, not clipped) or a
+/// normalised ±0.15 rad delta from the measured position, as upstream pairs it per mode.
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
-    let (arm, absolute_gripper) = match mode {
-        "pd_joint_delta_pos" => (arm(joint_delta(false), ARM_GAINS), false),
-        "pd_joint_target_delta_pos" => (arm(joint_delta(true), ARM_GAINS), false),
-        "pd_joint_pos" => (
-            arm(
-                PartKind::JointPos {
-                    use_delta: false,
-                    use_target: false,
-                    normalize: false,
-                    low: None,
-                    high: None,
-                },
-                ARM_GAINS,
-            ),
-            true,
-        ),
-        "pd_ee_delta_pos" => (arm(ee(false, false), ARM_GAINS), false),
+    let ee =
+        |rotation, use_target| PartKind::ee_delta(EE_LINK, None, rotation, use_target, EE_DELTA);
+    let (kind, absolute_gripper) = match mode {
+        "pd_joint_delta_pos" => (PartKind::joint_delta(6, JOINT_DELTA, false), false),
+        "pd_joint_target_delta_pos" => (PartKind::joint_delta(6, JOINT_DELTA, true), false),
+        "pd_joint_pos" => (PartKind::joint_absolute(), true),
+        "pd_ee_delta_pos" => (ee(false, false), false),
         // Upstream pairs the EE delta pose with the absolute gripper (robots.md §4).
-        "pd_ee_delta_pose" => (arm(ee(true, false), ARM_GAINS), true),
-        "pd_ee_target_delta_pos" => (arm(ee(false, true), ARM_GAINS), false),
-        "pd_ee_target_delta_pose" => (arm(ee(true, true), ARM_GAINS), false),
+        "pd_ee_delta_pose" => (ee(true, false), true),
+        "pd_ee_target_delta_pos" => (ee(false, true), false),
+        "pd_ee_target_delta_pose" => (ee(true, true), false),
         "pd_ee_pose" => (
-            arm(
-                PartKind::Ee {
-                    rotation: true,
-                    use_delta: false,
-                    use_target: false,
-                    pos: EE_POS_ABS,
-                    rot: EE_ROT_ABS,
-                    ee_link: EE_LINK,
-                    root_link: None,
-                },
-                ARM_GAINS,
-            ),
+            PartKind::ee_pose(EE_LINK, None, EE_POS_ABS, EE_ROT_ABS),
             true,
         ),
-        "pd_joint_vel" => (
-            arm(
-                PartKind::JointVel {
-                    low: -1.0,
-                    high: 1.0,
-                },
-                (0.0, ARM_GAINS.1, ARM_GAINS.2),
-            ),
-            true,
-        ),
-        "pd_joint_pos_vel" => (
-            arm(
-                PartKind::JointPosVel {
-                    use_delta: false,
-                    normalize: false,
-                    pos: (0.0, 0.0),
-                    vel: (-1.0, 1.0),
-                },
-                ARM_GAINS,
-            ),
-            true,
-        ),
-        "pd_joint_delta_pos_vel" => (
-            arm(
-                PartKind::JointPosVel {
-                    use_delta: true,
-                    normalize: true,
-                    pos: (-JOINT_DELTA, JOINT_DELTA),
-                    vel: (-1.0, 1.0),
-                },
-                ARM_GAINS,
-            ),
-            false,
-        ),
+        "pd_joint_vel" => (PartKind::joint_vel(1.0), true),
+        "pd_joint_pos_vel" => (PartKind::joint_pos_vel(false, 1.0), true),
+        "pd_joint_delta_pos_vel" => (PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0), false),
         _ => return None,
     };
-    Some(vec![arm, gripper(absolute_gripper)])
+    let gripper_kind = if absolute_gripper {
+        PartKind::joint_range(1, GRIPPER_RANGE, false)
+    } else {
+        PartKind::joint_delta(1, GRIPPER_DELTA, false)
+    };
+    let gripper = PartSpec::new(
+        "gripper_active",
+        &[GRIPPER_CONTROL],
+        gripper_kind,
+        GRIPPER_GAINS,
+    )
+    .with_follower(GRIPPER_FOLLOWER, GRIPPER_CONTROL, 1.0, 0.0);
+    Some(vec![PartSpec::new("arm", &ARM, kind, ARM_GAINS), gripper])
 }
 
 /// Scene options of the xArm6: loop closures, the bit-31 exclusion group, and the linkage's
