@@ -1,97 +1,14 @@
 //! Fetch (robots.md §3): generated kinematics against an independent URDF implementation,
 //! ManiSkill's joint order, holding and tracking, every control mode's spaces, the EE modes,
 //! base velocity drives, the scripted PickCube grasp, seeding, PlaceSphere, export-mjcf.
-use std::collections::HashMap;
+use nalgebra::{Isometry3, Vector3};
+use rand::Rng;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+mod common;
 
 use mjskill::controllers::ik::Chain;
-use mjskill::mujoco::Data;
 use mjskill::robots::{self, fetch, RobotIds};
 use mjskill::{make, EnvConfig};
-
-/// (name, type, parent, child, origin, axis) of one URDF joint.
-type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
-
-/// Independent URDF forward kinematics: roxmltree (not urdf-rs, not mjskill's loader),
-/// composing origin · motion along the chain (same construction as tests/foundation.rs).
-struct IndependentFk {
-    joints: Vec<JointRow>,
-}
-
-fn parse_floats(s: Option<&str>, default: [f64; 3]) -> [f64; 3] {
-    match s {
-        None => default,
-        Some(t) => {
-            let v: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        }
-    }
-}
-
-impl IndependentFk {
-    fn new(urdf: &str) -> Self {
-        let doc = roxmltree::Document::parse(urdf).unwrap();
-        let mut joints = Vec::new();
-        for j in doc
-            .root_element()
-            .children()
-            .filter(|n| n.has_tag_name("joint"))
-        {
-            let child = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
-            let origin = child("origin");
-            let xyz = parse_floats(origin.and_then(|o| o.attribute("xyz")), [0.0; 3]);
-            let rpy = parse_floats(origin.and_then(|o| o.attribute("rpy")), [0.0; 3]);
-            let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rpy[2])
-                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), rpy[1])
-                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rpy[0]);
-            let axis = Vector3::from(parse_floats(
-                child("axis").and_then(|a| a.attribute("xyz")),
-                [1.0, 0.0, 0.0],
-            ));
-            let link = |tag: &str| child(tag).unwrap().attribute("link").unwrap().to_string();
-            joints.push((
-                j.attribute("name").unwrap().to_string(),
-                j.attribute("type").unwrap().to_string(),
-                link("parent"),
-                link("child"),
-                Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), rot),
-                axis.normalize(),
-            ));
-        }
-        IndependentFk { joints }
-    }
-
-    fn links(
-        &self,
-        base: &Isometry3<f64>,
-        root: &str,
-        q: &HashMap<String, f64>,
-    ) -> HashMap<String, Isometry3<f64>> {
-        let mut out = HashMap::from([(root.to_string(), *base)]);
-        loop {
-            let mut added = false;
-            for (name, ty, parent, child, origin, axis) in &self.joints {
-                if out.contains_key(child) || !out.contains_key(parent) {
-                    continue;
-                }
-                let v = q.get(name).copied().unwrap_or(0.0);
-                let motion = match ty.as_str() {
-                    "revolute" | "continuous" => Isometry3::rotation(axis * v),
-                    "prismatic" => Isometry3::translation(axis.x * v, axis.y * v, axis.z * v),
-                    _ => Isometry3::identity(),
-                };
-                let p = out[parent] * origin * motion;
-                out.insert(child.clone(), p);
-                added = true;
-            }
-            if !added {
-                return out;
-            }
-        }
-    }
-}
 
 fn env(task: &str, mode: &str) -> mjskill::Env {
     make(
@@ -118,42 +35,24 @@ fn gripper_action(q: f64) -> f32 {
 
 #[test]
 fn forward_kinematics_matches_independent_urdf_fk() {
-    let spec = robots::spec("fetch").unwrap();
-    let (model, desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
-    let fk = IndependentFk::new(mjskill::models::text(spec.urdf).unwrap());
-    let mut d = Data::new(model.clone()).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-    let root = &desc.links[desc.root].name;
-    for _ in 0..200 {
-        let mut q = HashMap::new();
+    // Continuous joints: several turns; the planar base: a few metres.
+    let sample = |rng: &mut rand::rngs::StdRng, ids: &RobotIds| {
         let mut qv = vec![0.0; 15];
         for (k, name) in ids.joint_names.iter().enumerate() {
             let (lo, hi) = ids.limits[k];
-            // Continuous joints: several turns; the planar base: a few metres.
             let (lo, hi) = (lo.max(-7.0), hi.min(7.0));
             let (lo, hi) = if name.starts_with("root_") && !name.contains("rotation") {
                 (lo.max(-2.0), hi.min(2.0))
             } else {
                 (lo, hi)
             };
-            let v = rng.random_range(lo..=hi);
-            q.insert(name.clone(), v);
-            qv[k] = v;
+            qv[k] = rng.random_range(lo..=hi);
         }
-        ids.set_qpos(&mut d, &qv);
-        d.forward();
-        let expect = fk.links(&spec.table_base(), root, &q);
-        assert_eq!(expect.len(), desc.links.len(), "every link reached");
+        qv
+    };
+    common::check_fk_with("fetch", 200, sample, |_, ids, _| {
         assert_eq!(ids.link_bodies.len(), 29, "all 29 links are bodies");
-        for (name, b) in &ids.link_bodies {
-            let got = RobotIds::body_pose(&d, *b);
-            let want = expect[name];
-            let dp = (got.translation.vector - want.translation.vector).norm();
-            let dr = got.rotation.angle_to(&want.rotation);
-            assert!(dp < 1e-6, "link {name}: position error {dp}");
-            assert!(dr < 1e-6, "link {name}: rotation error {dr}");
-        }
-    }
+    });
 }
 
 #[test]

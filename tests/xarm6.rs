@@ -1,98 +1,17 @@
 //! xarm6_robotiq: joint order, kinematics against an independent URDF computation, the
 //! four-bar linkage (loop closures, closure width), drives, grasping, control-mode shapes and
 //! ManiSkill's seeded initial-pose noise.
-use std::collections::HashMap;
 use std::sync::Arc;
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use rand::Rng;
+
+mod common;
 
 use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::xarm6_robotiq::{LOOP_CLOSURES, REST};
 use mjskill::robots::{self, RobotIds};
 use mjskill::EnvConfig;
-
-/// (name, type, parent, child, origin, axis) of one URDF joint.
-type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
-
-/// Independent URDF forward kinematics (roxmltree, not mjskill's loader), as in
-/// tests/foundation.rs.
-struct IndependentFk {
-    joints: Vec<JointRow>,
-}
-
-fn parse_floats(s: Option<&str>, default: [f64; 3]) -> [f64; 3] {
-    match s {
-        None => default,
-        Some(t) => {
-            let v: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        }
-    }
-}
-
-impl IndependentFk {
-    fn new(urdf: &str) -> Self {
-        let doc = roxmltree::Document::parse(urdf).unwrap();
-        let mut joints = Vec::new();
-        for j in doc
-            .root_element()
-            .children()
-            .filter(|n| n.has_tag_name("joint"))
-        {
-            let child = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
-            let origin = child("origin");
-            let xyz = parse_floats(origin.and_then(|o| o.attribute("xyz")), [0.0; 3]);
-            let rpy = parse_floats(origin.and_then(|o| o.attribute("rpy")), [0.0; 3]);
-            let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rpy[2])
-                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), rpy[1])
-                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rpy[0]);
-            let axis = Vector3::from(parse_floats(
-                child("axis").and_then(|a| a.attribute("xyz")),
-                [1.0, 0.0, 0.0],
-            ));
-            let link = |tag: &str| child(tag).unwrap().attribute("link").unwrap().to_string();
-            joints.push((
-                j.attribute("name").unwrap().to_string(),
-                j.attribute("type").unwrap().to_string(),
-                link("parent"),
-                link("child"),
-                Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), rot),
-                axis.normalize(),
-            ));
-        }
-        IndependentFk { joints }
-    }
-
-    fn links(
-        &self,
-        base: &Isometry3<f64>,
-        root: &str,
-        q: &HashMap<String, f64>,
-    ) -> HashMap<String, Isometry3<f64>> {
-        let mut out = HashMap::from([(root.to_string(), *base)]);
-        loop {
-            let mut added = false;
-            for (name, ty, parent, child, origin, axis) in &self.joints {
-                if out.contains_key(child) || !out.contains_key(parent) {
-                    continue;
-                }
-                let v = q.get(name).copied().unwrap_or(0.0);
-                let motion = match ty.as_str() {
-                    "revolute" | "continuous" => Isometry3::rotation(axis * v),
-                    "prismatic" => Isometry3::translation(axis.x * v, axis.y * v, axis.z * v),
-                    _ => Isometry3::identity(),
-                };
-                let p = out[parent] * origin * motion;
-                out.insert(child.clone(), p);
-                added = true;
-            }
-            if !added {
-                return out;
-            }
-        }
-    }
-}
 
 fn spec() -> &'static robots::RobotSpec {
     robots::spec("xarm6_robotiq").unwrap()
@@ -165,14 +84,7 @@ fn qpos_order_is_maniskills_breadth_first_order() {
 
 #[test]
 fn forward_kinematics_matches_independent_urdf_fk() {
-    let s = spec();
-    let (model, desc, ids, _) = robots::table_scene_with(s, |_| {}).unwrap();
-    let fk = IndependentFk::new(mjskill::models::text(s.urdf).unwrap());
-    let mut d = Data::new(model.clone()).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-    let root = &desc.links[desc.root].name;
-    for _ in 0..200 {
-        let mut q = HashMap::new();
+    let sample = |rng: &mut rand::rngs::StdRng, ids: &RobotIds| {
         let mut qv = vec![0.0; 12];
         for (v, &(lo, hi)) in qv.iter_mut().zip(&ids.limits).take(6) {
             *v = rng.random_range(lo..=hi);
@@ -184,29 +96,20 @@ fn forward_kinematics_matches_independent_urdf_fk() {
             qv[knuckles[1]] = t;
             qv[finger] = -t;
         }
-        for (k, name) in ids.joint_names.iter().enumerate() {
-            q.insert(name.clone(), qv[k]);
-        }
-        ids.set_qpos(&mut d, &qv);
-        d.forward();
-        let expect = fk.links(&s.table_base(), root, &q);
-        assert_eq!(expect.len(), desc.links.len());
-        for (name, b) in &ids.link_bodies {
-            let got = RobotIds::body_pose(&d, *b);
-            let want = expect[name];
-            let dp = (got.translation.vector - want.translation.vector).norm();
-            let dr = got.rotation.angle_to(&want.rotation);
-            assert!(dp < 1e-6, "link {name}: position error {dp}");
-            assert!(dr < 1e-6, "link {name}: rotation error {dr}");
-        }
+        qv
+    };
+    common::check_fk_with("xarm6_robotiq", 200, sample, |d, ids, _| {
         // The parallelogram linkage keeps the loop-closure anchors together.
-        for g in anchor_gaps(&ids, &d) {
-            assert!(g < 1e-5, "loop closure gap {g} at {qv:?}");
+        for g in anchor_gaps(ids, d) {
+            assert!(g < 1e-5, "loop closure gap {g} at {:?}", {
+                let mut q = vec![0.0; 12];
+                ids.qpos(d, &mut q);
+                q
+            });
         }
-    }
+    });
+    let (_, ids, d) = setup(|_| {});
     // The TCP at rest (robots.md §4, measured upstream): p (−0.00044, 0, 0.16943), q (0, −1, 0, 0).
-    ids.set_qpos(&mut d, &REST);
-    d.forward();
     let (p, q) = ids.tcp_pose(&d);
     let want = [-0.00044, 0.0, 0.16943];
     for k in 0..3 {
