@@ -441,29 +441,8 @@ fn place_sphere_runs_with_fetch() {
 
 #[test]
 fn export_mjcf_of_fetch_is_accepted_by_debians_mujoco_compile() {
-    let dir = std::env::temp_dir().join(format!("mjskill-fetch-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let xml = dir.join("fetch.xml");
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args(["export-mjcf", "--robot", "fetch", "-o"])
-        .arg(&xml)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let out = std::process::Command::new("mujoco-compile")
-        .arg(&xml)
-        .arg(dir.join("scene.txt"))
-        .output()
-        .expect("mujoco-compile (Debian package libmujoco-samples) must be installed");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success() && !text.to_lowercase().contains("error"),
-        "{text}"
-    );
-    let printed = std::fs::read_to_string(dir.join("scene.txt")).unwrap();
+    let printed = common::export_and_mujoco_compile("fetch", &["export-mjcf", "--robot", "fetch"]);
     assert!(
         printed.contains("root_z_rotation_joint") && printed.contains("drive_root_x_axis_joint")
     );
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -9,6 +9,7 @@ use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::{self, RobotIds};
 
 mod common;
+use common::run;
 
 #[test]
 fn generated_scene_with_a_mistake_returns_mujoco_error_text() {
@@ -34,24 +35,8 @@ fn panda_forward_kinematics_matches_independent_urdf_fk() {
     common::check_fk("panda", 200, |_, _, _| {});
 }
 
-/// Steps `n` times keeping robot gravity compensation on.
-fn run(d: &mut Data, n: usize) {
-    for _ in 0..n {
-        d.step();
-    }
-}
-
 fn setup_panda(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data) {
-    let spec = robots::spec("panda").unwrap();
-    let (model, _, ids, _) = robots::table_scene_with(spec, extra).unwrap();
-    let mut d = Data::new(model.clone()).unwrap();
-    ids.set_qpos(&mut d, spec.table_qpos);
-    ids.apply_gravity_compensation(&mut d);
-    for (k, &q) in spec.table_qpos.iter().enumerate() {
-        ids.set_drive_target(&model, &mut d, k, q, 0.0);
-    }
-    d.forward();
-    (model, ids, d)
+    common::table_scene_with(robots::spec("panda").unwrap(), extra)
 }
 
 #[test]
@@ -139,34 +124,10 @@ fn panda_fingers_close_on_a_4cm_box_and_hold_it_while_the_arm_moves() {
 
 #[test]
 fn export_mjcf_is_accepted_by_debians_mujoco_compile() {
-    let dir = std::env::temp_dir().join(format!("mjskill-export-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let xml = dir.join("pickcube_panda.xml");
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args([
-            "export-mjcf",
-            "--robot",
-            "panda",
-            "--env",
-            "PickCube-v1",
-            "-o",
-        ])
-        .arg(&xml)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let out = std::process::Command::new("mujoco-compile")
-        .arg(&xml)
-        .arg(dir.join("scene.txt"))
-        .output()
-        .expect("mujoco-compile (Debian package libmujoco-samples) must be installed");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success() && !text.to_lowercase().contains("error"),
-        "mujoco-compile rejected the scene: {text}"
+    let printed = common::export_and_mujoco_compile(
+        "pickcube_panda",
+        &["export-mjcf", "--robot", "panda", "--env", "PickCube-v1"],
     );
-    let printed = std::fs::read_to_string(dir.join("scene.txt")).unwrap();
     assert!(
         printed.contains("panda_joint7") && printed.contains("cube"),
         "compiled model lists the robot and the cube"
@@ -179,5 +140,4 @@ fn export_mjcf_is_accepted_by_debians_mujoco_compile() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("ur5") && err.contains("panda"), "{err}");
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -5,19 +5,9 @@ mod common;
 
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 
+use common::env;
 use mjskill::robots::{self, so100};
 use mjskill::{make, EnvConfig};
-
-fn env(id: &str, mode: &str) -> mjskill::Env {
-    make(
-        id,
-        EnvConfig {
-            control_mode: Some(mode.into()),
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
 
 #[test]
 fn qpos_order_is_maniskills() {
@@ -264,15 +254,7 @@ fn scripted_grasp_closes_on_the_cube_and_lifts_it() {
 
 #[test]
 fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
-    let with = |id: &str, robot: &str| {
-        make(
-            id,
-            EnvConfig {
-                robot: Some(robot.into()),
-                ..Default::default()
-            },
-        )
-    };
+    let with = common::env_with_robot;
     let err = with("PickCubeSO100-v1", "panda").unwrap_err().to_string();
     assert!(err.contains("\"panda\"") && err.contains("so100"), "{err}");
     let err = with("PlaceSphere-v1", "so100").unwrap_err().to_string();
@@ -292,23 +274,7 @@ fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
 
 #[test]
 fn export_mjcf_writes_a_scene_mujoco_compiles() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args([
-            "export-mjcf",
-            "--robot",
-            "so100",
-            "--env",
-            "PickCubeSO100-v1",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let xml = String::from_utf8(out.stdout).unwrap();
-    let m = mjskill::mujoco::Model::from_xml_string(&xml, &[]).unwrap();
+    let m = common::export_mjcf_model("so100", "PickCubeSO100-v1");
     assert!(m
         .id(mjskill::mujoco::ObjType::Joint, "wrist_roll")
         .is_some());
@@ -317,22 +283,7 @@ fn export_mjcf_writes_a_scene_mujoco_compiles() {
 
 #[test]
 fn same_seed_and_actions_give_a_bitwise_identical_trajectory() {
-    let run = || {
-        let mut e = env("PickCubeSO100-v1", "pd_joint_pos");
-        let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
-        let mut a = vec![0.0f32; 6];
-        e.reset(Some(5));
-        policy.reset(&e);
-        let mut trace: Vec<u32> = Vec::new();
-        for _ in 0..30 {
-            policy.act(&e, &mut a);
-            let s = e.step(&a).unwrap();
-            trace.extend(s.obs.iter().map(|x| x.to_bits()));
-            trace.push(s.reward.to_bits());
-        }
-        trace
-    };
-    assert_eq!(run(), run());
+    common::assert_solver_rollout_is_deterministic("PickCubeSO100-v1", "pd_joint_pos");
 }
 
 #[test]

@@ -5,20 +5,10 @@ mod common;
 
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 
+use common::env;
 use mjskill::mujoco::ObjType;
 use mjskill::robots::{self, widowxai};
 use mjskill::{make, EnvConfig};
-
-fn env(id: &str, mode: &str) -> mjskill::Env {
-    make(
-        id,
-        EnvConfig {
-            control_mode: Some(mode.into()),
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
 
 #[test]
 fn qpos_order_is_maniskills() {
@@ -226,15 +216,7 @@ fn scripted_grasp_closes_on_the_cube_and_lifts_it() {
 
 #[test]
 fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
-    let with = |id: &str, robot: &str| {
-        make(
-            id,
-            EnvConfig {
-                robot: Some(robot.into()),
-                ..Default::default()
-            },
-        )
-    };
+    let with = common::env_with_robot;
     let err = with("PickCubeWidowXAI-v1", "so100")
         .unwrap_err()
         .to_string();
@@ -258,45 +240,14 @@ fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
 
 #[test]
 fn export_mjcf_writes_a_scene_mujoco_compiles() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args([
-            "export-mjcf",
-            "--robot",
-            "widowxai",
-            "--env",
-            "PickCubeWidowXAI-v1",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let xml = String::from_utf8(out.stdout).unwrap();
-    let m = mjskill::mujoco::Model::from_xml_string(&xml, &[]).unwrap();
+    let m = common::export_mjcf_model("widowxai", "PickCubeWidowXAI-v1");
     assert!(m.id(ObjType::Joint, "left_carriage_joint").is_some());
     assert!(m.id(ObjType::Body, "cube").is_some());
 }
 
 #[test]
 fn same_seed_and_actions_give_a_bitwise_identical_trajectory() {
-    let run = || {
-        let mut e = env("PickCubeWidowXAI-v1", "pd_joint_pos");
-        let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
-        let mut a = vec![0.0f32; 8];
-        e.reset(Some(5));
-        policy.reset(&e);
-        let mut trace: Vec<u32> = Vec::new();
-        for _ in 0..30 {
-            policy.act(&e, &mut a);
-            let s = e.step(&a).unwrap();
-            trace.extend(s.obs.iter().map(|x| x.to_bits()));
-            trace.push(s.reward.to_bits());
-        }
-        trace
-    };
-    assert_eq!(run(), run());
+    common::assert_solver_rollout_is_deterministic("PickCubeWidowXAI-v1", "pd_joint_pos");
 }
 
 #[test]

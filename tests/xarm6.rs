@@ -7,6 +7,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rand::Rng;
 
 mod common;
+use common::run;
 
 use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::xarm6_robotiq::{LOOP_CLOSURES, REST};
@@ -17,23 +18,10 @@ fn spec() -> &'static robots::RobotSpec {
     robots::spec("xarm6_robotiq").unwrap()
 }
 
-/// Table scene at rest with drives on their rest targets and gravity compensation.
+/// Table scene at rest (`REST` is the table qpos) with drives on their rest targets and
+/// gravity compensation.
 fn setup(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data) {
-    let (model, _, ids, _) = robots::table_scene_with(spec(), extra).unwrap();
-    let mut d = Data::new(model.clone()).unwrap();
-    ids.set_qpos(&mut d, &REST);
-    ids.apply_gravity_compensation(&mut d);
-    for (k, &q) in REST.iter().enumerate() {
-        ids.set_drive_target(&model, &mut d, k, q, 0.0);
-    }
-    d.forward();
-    (model, ids, d)
-}
-
-fn run(d: &mut Data, n: usize) {
-    for _ in 0..n {
-        d.step();
-    }
+    common::table_scene_with(spec(), extra)
 }
 
 /// World distance between the two anchors of each loop closure.

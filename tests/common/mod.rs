@@ -1,5 +1,6 @@
 //! Helpers shared by the robot test files: an independent URDF forward kinematics (roxmltree,
-//! not urdf-rs and not mjskill's loader) and a table scene with PD targets.
+//! not urdf-rs and not mjskill's loader), a table scene with PD targets, env construction,
+//! `export-mjcf` runs and a determinism check.
 #![allow(dead_code)]
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -9,6 +10,7 @@ use rand::{Rng, SeedableRng};
 
 use mjskill::mujoco::{Data, Model};
 use mjskill::robots::{self, RobotIds, RobotSpec};
+use mjskill::{make, EnvConfig};
 
 /// (name, type, parent, child, origin, axis) of one URDF joint.
 type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
@@ -152,7 +154,15 @@ pub fn check_fk_with(
 /// The table scene of `spec` at its (noise-free) table qpos with the drive targets there and
 /// gravity compensation applied.
 pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data) {
-    let (model, _, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    table_scene_with(spec, |_| {})
+}
+
+/// [`table_scene`] with `extra` adding objects to the scene.
+pub fn table_scene_with(
+    spec: &RobotSpec,
+    extra: impl FnOnce(&mut mjskill::mjcf::Scene),
+) -> (Arc<Model>, RobotIds, Data) {
+    let (model, _, ids, _) = robots::table_scene_with(spec, extra).unwrap();
     let mut d = Data::new(model.clone()).unwrap();
     ids.set_qpos(&mut d, spec.table_qpos);
     ids.apply_gravity_compensation(&mut d);
@@ -203,4 +213,101 @@ pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
         }
     }
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
+}
+
+/// Steps `n` times.
+pub fn run(d: &mut Data, n: usize) {
+    for _ in 0..n {
+        d.step();
+    }
+}
+
+/// `id` with its default robot in control mode `mode`.
+pub fn env(id: &str, mode: &str) -> mjskill::Env {
+    make(
+        id,
+        EnvConfig {
+            control_mode: Some(mode.into()),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+/// `id` with `robot` (default control mode), or the error.
+pub fn env_with_robot(id: &str, robot: &str) -> Result<mjskill::Env, mjskill::env::EnvError> {
+    make(
+        id,
+        EnvConfig {
+            robot: Some(robot.into()),
+            ..Default::default()
+        },
+    )
+}
+
+/// Runs `mjskill export-mjcf --robot ROBOT --env ENV` to stdout (success asserted) and
+/// compiles the printed scene with mjskill's MuJoCo.
+pub fn export_mjcf_model(robot: &str, env_id: &str) -> Model {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["export-mjcf", "--robot", robot, "--env", env_id])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let xml = String::from_utf8(out.stdout).unwrap();
+    Model::from_xml_string(&xml, &[]).unwrap()
+}
+
+/// Runs `mjskill export-mjcf ARGS -o FILE` (success asserted), compiles FILE with Debian's
+/// independent `mujoco-compile` (success and no "error" in its output asserted) and returns
+/// the model it printed. `tag` names the temporary directory.
+pub fn export_and_mujoco_compile(tag: &str, args: &[&str]) -> String {
+    let dir = std::env::temp_dir().join(format!("mjskill-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let xml = dir.join(format!("{tag}.xml"));
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(args)
+        .arg("-o")
+        .arg(&xml)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = std::process::Command::new("mujoco-compile")
+        .arg(&xml)
+        .arg(dir.join("scene.txt"))
+        .output()
+        .expect("mujoco-compile (Debian package libmujoco-samples) must be installed");
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && !text.to_lowercase().contains("error"),
+        "mujoco-compile rejected the scene: {text}"
+    );
+    let printed = std::fs::read_to_string(dir.join("scene.txt")).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    printed
+}
+
+/// Two 30-step runs of the scripted solver on `id` in `mode` from seed 5 give bitwise
+/// identical observations and rewards.
+pub fn assert_solver_rollout_is_deterministic(id: &str, mode: &str) {
+    let run = || {
+        let mut e = env(id, mode);
+        let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
+        let mut a = vec![0.0f32; e.action_space().shape[0]];
+        e.reset(Some(5));
+        policy.reset(&e);
+        let mut trace: Vec<u32> = Vec::new();
+        for _ in 0..30 {
+            policy.act(&e, &mut a);
+            let s = e.step(&a).unwrap();
+            trace.extend(s.obs.iter().map(|x| x.to_bits()));
+            trace.push(s.reward.to_bits());
+        }
+        trace
+    };
+    assert_eq!(run(), run());
 }
