@@ -19,6 +19,29 @@ use crate::mujoco::{Data, Model, ObjType};
 /// Robot uids, as ManiSkill spells them.
 pub const ROBOT_UIDS: [&str; 5] = ["panda", "fetch", "xarm6_robotiq", "so100", "widowxai"];
 
+/// Control modes of an arm with joint, velocity and EE controllers (Panda, xArm6), in
+/// upstream's order, default first.
+pub const ARM_EE_MODES: [&str; 11] = [
+    "pd_joint_delta_pos",
+    "pd_joint_pos",
+    "pd_ee_delta_pos",
+    "pd_ee_delta_pose",
+    "pd_ee_pose",
+    "pd_joint_target_delta_pos",
+    "pd_ee_target_delta_pos",
+    "pd_ee_target_delta_pose",
+    "pd_joint_vel",
+    "pd_joint_pos_vel",
+    "pd_joint_delta_pos_vel",
+];
+
+/// Control modes of a joint-position-only arm (SO100, WidowX AI), default first.
+pub const JOINT_POS_MODES: [&str; 3] = [
+    "pd_joint_delta_pos",
+    "pd_joint_pos",
+    "pd_joint_target_delta_pos",
+];
+
 /// Armature (kg·m² or kg) added to every robot joint. PhysX drives are implicit and need
 /// none; MuJoCo needs a little on the 15 g fingers so that contacts with a stiff drive
 /// behind them resolve (mujoco-2.2-findings: fingers pass through a box without it). The PD

@@ -41,19 +41,7 @@ const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.04);
 const TCP: &str = "panda_hand_tcp";
 
 /// Panda control modes (robots.md §2), default first.
-pub const CONTROL_MODES: [&str; 11] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_pose",
-    "pd_joint_target_delta_pos",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
-];
+pub const CONTROL_MODES: [&str; 11] = super::ARM_EE_MODES;
 
 /// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {

@@ -31,11 +31,7 @@ pub const FIXED_JAW_TIP: [f64; 3] = [0.01, -0.097, 0.0];
 pub const MOVING_JAW_TIP: [f64; 3] = [-0.01, -0.073, 0.0];
 
 /// SO100 control modes (robots.md §5), default first.
-pub const CONTROL_MODES: [&str; 3] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
-];
+pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
 
 /// The parts of an SO100 control mode: always one part over all six joints.
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {

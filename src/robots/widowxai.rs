@@ -41,11 +41,7 @@ const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 const MIMIC_SOLREF: [f64; 2] = [2.0 * crate::mjcf::TIMESTEP, 1.0];
 
 /// WidowX AI control modes (robots.md §6), default first.
-pub const CONTROL_MODES: [&str; 3] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
-];
+pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
 
 /// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
 pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {

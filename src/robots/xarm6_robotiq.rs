@@ -99,19 +99,7 @@ const PAD_PATCH_RADIUS: f64 = 0.1;
 const PAD_FRICTION_AVG: f64 = (2.0 + crate::mjcf::DEFAULT_FRICTION) / 2.0;
 
 /// xArm6 control modes (robots.md §4), default first.
-pub const CONTROL_MODES: [&str; 11] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_pose",
-    "pd_joint_target_delta_pos",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
-];
+pub const CONTROL_MODES: [&str; 11] = super::ARM_EE_MODES;
 
 /// The parts of an xArm6 control mode: the arm, then the active gripper (the right outer
 /// knuckle takes the action, the left one mimics it ×1 + 0). The passive linkage joints
