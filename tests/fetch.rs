@@ -324,15 +324,7 @@ fn ee_modes_move_the_tcp_in_the_commanded_direction() {
 fn ik_chain_starts_at_the_torso_and_rejects_a_non_ancestor_root() {
     let spec = robots::spec("fetch").unwrap();
     let desc = spec.description().unwrap();
-    let arm = [
-        "shoulder_pan_joint",
-        "shoulder_lift_joint",
-        "upperarm_roll_joint",
-        "elbow_flex_joint",
-        "forearm_roll_joint",
-        "wrist_flex_joint",
-        "wrist_roll_joint",
-    ];
+    let arm = spec.arm_joints;
     // From the URDF root the chain has 11 joints (base, torso, arm): over the limit.
     assert!(Chain::new(&desc, "gripper_link", &arm).is_err());
     let chain = Chain::from_root(&desc, Some("torso_lift_link"), "gripper_link", &arm).unwrap();

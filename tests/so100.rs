@@ -163,21 +163,11 @@ fn delta_bounds_are_005_on_the_arm_and_02_on_the_gripper() {
 #[test]
 fn seeded_reset_adds_six_numpy_normals_to_the_table_qpos() {
     // numpy RandomState(0).normal(0, 1, 6) and RandomState(1).normal(0, 1, 6).
-    let normals = [
-        (
-            0u64,
-            [
-                1.764052345967664,
-                0.4001572083672233,
-                0.9787379841057392,
-                2.240893199201458,
-                1.8675579901499675,
-                -0.977277879876411,
-            ],
-        ),
+    let normals: [(u64, &[f64]); 2] = [
+        (0, &common::NUMPY_SEED0_NORMALS[..6]),
         (
             1,
-            [
+            &[
                 1.6243453636632417,
                 -0.6117564136500754,
                 -0.5281717522634557,

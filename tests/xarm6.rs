@@ -345,20 +345,7 @@ fn gripper_action_semantics_absolute_and_delta() {
 #[test]
 fn seeded_reset_reproduces_maniskills_noise() {
     // numpy: np.random.RandomState(0).normal(0, 1, 12)
-    const N0: [f64; 12] = [
-        1.764052345967664,
-        0.4001572083672233,
-        0.9787379841057392,
-        2.240893199201458,
-        1.8675579901499675,
-        -0.977277879876411,
-        0.9500884175255894,
-        -0.1513572082976979,
-        -0.10321885179355784,
-        0.41059850193837233,
-        0.144043571160878,
-        1.454273506962975,
-    ];
+    const N0: [f64; 12] = common::NUMPY_SEED0_NORMALS;
     let mut env = pickcube("pd_joint_delta_pos");
     env.reset(Some(0));
     let mut q = vec![0.0; 12];

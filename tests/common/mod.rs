@@ -15,6 +15,22 @@ use mjskill::{make, EnvConfig};
 /// (name, type, parent, child, origin, axis) of one URDF joint.
 type JointRow = (String, String, String, String, Isometry3<f64>, Vector3<f64>);
 
+/// numpy's `RandomState(0).normal(0, 1, 12)` (ManiSkill's table-scene qpos noise source).
+pub const NUMPY_SEED0_NORMALS: [f64; 12] = [
+    1.764052345967664,
+    0.4001572083672233,
+    0.9787379841057392,
+    2.240893199201458,
+    1.8675579901499675,
+    -0.977277879876411,
+    0.9500884175255894,
+    -0.1513572082976979,
+    -0.10321885179355784,
+    0.41059850193837233,
+    0.144043571160878,
+    1.454273506962975,
+];
+
 /// Forward kinematics straight from the URDF text (roxmltree; not urdf-rs, not mjskill's
 /// loader): composes origin · motion along the tree.
 pub struct IndependentFk {
