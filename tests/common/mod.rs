@@ -327,3 +327,52 @@ pub fn assert_solver_rollout_is_deterministic(id: &str, mode: &str) {
     };
     assert_eq!(run(), run());
 }
+
+/// The scripted solver on `id` in `mode`: on the first 3 seeds of 0..20 whose goal is at
+/// least `min_goal_z` high, 50 steps grasp the cube at some step and end grasped and
+/// successful with the cube above `min_cube_z`; `check(env, seed)` then tests the end state.
+pub fn solver_grasps_and_lifts(
+    id: &str,
+    mode: &str,
+    min_goal_z: f32,
+    min_cube_z: f32,
+    mut check: impl FnMut(&mjskill::Env, u64),
+) {
+    let mut e = env(id, mode);
+    let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
+    let mut a = vec![0.0f32; e.action_space().shape[0]];
+    let mut tested = 0;
+    for seed in 0..20u64 {
+        e.reset(Some(seed));
+        if e.obs_part("extra/goal_pos").unwrap()[2] < min_goal_z {
+            continue; // want a goal well above the table
+        }
+        policy.reset(&e);
+        let mut grasped_at = None;
+        for t in 0..50 {
+            policy.act(&e, &mut a);
+            let s = e.step(&a).unwrap();
+            if s.info.flag("is_grasped") && grasped_at.is_none() {
+                grasped_at = Some(t);
+            }
+        }
+        assert!(grasped_at.is_some(), "seed {seed}: never grasped");
+        let info = e.info();
+        assert!(
+            info.flag("is_grasped") && info.success(),
+            "seed {seed}: {info:?}"
+        );
+        let obj = e.obs_part("extra/obj_pose").unwrap();
+        assert!(
+            obj[2] > min_cube_z,
+            "seed {seed}: the cube was lifted, z = {}",
+            obj[2]
+        );
+        check(&e, seed);
+        tested += 1;
+        if tested == 3 {
+            break;
+        }
+    }
+    assert_eq!(tested, 3);
+}
