@@ -80,6 +80,19 @@ pub struct GraspDef {
     pub max_angle_deg: f64,
 }
 
+impl GraspDef {
+    /// The two fingers (link, opening-direction sign) with ManiSkill's default thresholds:
+    /// 0.5 N and 85°.
+    pub const fn new(finger1: (&'static str, f64), finger2: (&'static str, f64)) -> GraspDef {
+        GraspDef {
+            finger1,
+            finger2,
+            min_force: 0.5,
+            max_angle_deg: 85.0,
+        }
+    }
+}
+
 /// Which joints get initial-pose noise in the table scene (tasks.md §0.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum InitNoise {

@@ -82,12 +82,7 @@ pub static PANDA: RobotSpec = RobotSpec {
     finger_friction: (&["panda_leftfinger", "panda_rightfinger"], 2.0),
     tcp: TcpDef::Link(TCP),
     tcp_link: Some(TCP),
-    grasp: GraspDef {
-        finger1: ("panda_leftfinger", 1.0),
-        finger2: ("panda_rightfinger", -1.0),
-        min_force: 0.5,
-        max_angle_deg: 85.0,
-    },
+    grasp: GraspDef::new(("panda_leftfinger", 1.0), ("panda_rightfinger", -1.0)),
     static_rule: StaticRule::Arm(7),
     table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &REST,

@@ -65,10 +65,8 @@ pub static SO100: RobotSpec = RobotSpec {
     },
     tcp_link: None,
     grasp: GraspDef {
-        finger1: ("Fixed_Jaw", 1.0),
-        finger2: ("Moving_Jaw", -1.0),
-        min_force: 0.5,
         max_angle_deg: 110.0,
+        ..GraspDef::new(("Fixed_Jaw", 1.0), ("Moving_Jaw", -1.0))
     },
     static_rule: StaticRule::Arm(5),
     table_pose: (

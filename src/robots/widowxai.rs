@@ -71,10 +71,8 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     tcp: TcpDef::Link("ee_gripper_link"),
     tcp_link: Some("ee_gripper_link"),
     grasp: GraspDef {
-        finger1: ("gripper_left", 1.0),
-        finger2: ("gripper_right", -1.0),
         min_force: 0.2,
-        max_angle_deg: 85.0,
+        ..GraspDef::new(("gripper_left", 1.0), ("gripper_right", -1.0))
     },
     static_rule: StaticRule::Arm(6),
     table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),

@@ -182,12 +182,10 @@ pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
     finger_friction: (&PADS, 2.0),
     tcp: TcpDef::Link(EE_LINK),
     tcp_link: Some(EE_LINK),
-    grasp: GraspDef {
-        finger1: ("left_inner_finger_pad", 1.0),
-        finger2: ("right_inner_finger_pad", 1.0),
-        min_force: 0.5,
-        max_angle_deg: 85.0,
-    },
+    grasp: GraspDef::new(
+        ("left_inner_finger_pad", 1.0),
+        ("right_inner_finger_pad", 1.0),
+    ),
     static_rule: StaticRule::Arm(6),
     table_pose: ([-0.522, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &REST,
