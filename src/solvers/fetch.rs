@@ -49,6 +49,8 @@ const ROT_TOL: f64 = 0.05;
 /// is 0.38615): low to reach down to the table, high to reach up to the goal.
 const TORSO_PICK: f64 = 0.25;
 const TORSO_CARRY: f64 = 0.386;
+/// Torso command per unit error (a full step overshoots).
+const TORSO_GAIN: f64 = 0.5;
 /// Arm lengths (m): shoulder-lift axis to wrist-flex axis when straight, and wrist-flex axis
 /// to the TCP (models/fetch/fetch.urdf), with the margin kept from a straight arm.
 const UPPER_REACH: f64 = 0.219 + 0.133 + 0.197 + 0.1245;
@@ -165,6 +167,8 @@ pub struct ArmCommand {
     pub grip: f32,
     /// Position action limit (≤ 1).
     pub limit: f64,
+    /// Shortest position command (action units; 0: purely proportional).
+    pub min_step: f64,
 }
 
 impl FetchArm {
@@ -215,9 +219,20 @@ impl FetchArm {
         // targets ahead are out of reach and the IK would fail (the arm then holds still).
         let x_axis = cur * Vector3::x();
         let cur_pitch = (-x_axis.z).atan2(x_axis.x.hypot(x_axis.y));
-        let target = clamp_to_reach(cmd.target, self.shoulder_xyz(env), cur_pitch);
+        // The arm hangs from the torso: aim higher by the torso travel still to come, so a
+        // lowering torso does not drive the gripper below its target.
+        let torso_left = self.q[3] - cmd.torso;
+        let target = cmd.target + Vector3::new(0.0, 0.0, torso_left);
+        let target = clamp_to_reach(target, self.shoulder_xyz(env), cur_pitch);
+        // Small steps are lost to the arm's sag under gravity: commands shorter than
+        // `cmd.min_step` are stretched to it.
+        let mut step = (target - cmd.tcp) / POS_SCALE;
+        let n = step.norm();
+        if n > 1e-9 && n < cmd.min_step {
+            step *= cmd.min_step / n;
+        }
         for k in 0..3 {
-            action[k] = ((target[k] - cmd.tcp[k]) / POS_SCALE).clamp(-cmd.limit, cmd.limit) as f32;
+            action[k] = step[k].clamp(-cmd.limit, cmd.limit) as f32;
         }
         let mut r = rot_err / ROT_SCALE;
         if r.norm() > 1.0 {
@@ -228,7 +243,7 @@ impl FetchArm {
         // Body: hold the head, move the torso (Δ ±0.1 m per unit action).
         action[7] = 0.0;
         action[8] = 0.0;
-        action[9] = ((cmd.torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
+        action[9] = (TORSO_GAIN * (cmd.torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
         // Base: forward speed (±1 m/s) towards BASE_FORWARD, yaw rate (±3.14 rad/s) to 0.
         action[10] = (BASE_GAIN * (BASE_FORWARD - self.q[0])).clamp(-1.0, 1.0) as f32;
         action[11] = (-BASE_GAIN * self.q[2] / crate::robots::fetch::YAW_RATE_MAX as f64)
@@ -309,6 +324,7 @@ impl Policy for FetchPickCube {
             torso,
             grip,
             limit: 1.0,
+            min_step: 0.0,
         };
         self.arm.drive(env, cmd, action);
     }

@@ -18,6 +18,7 @@ use crate::env::Env;
 use crate::tasks::body_id;
 
 pub mod fetch;
+pub mod fetch_tasks;
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -90,7 +91,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver.
-pub const SOLVED: [(&str, &str); 8] = [
+pub const SOLVED: [(&str, &str); 10] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "so100"),
@@ -98,7 +99,9 @@ pub const SOLVED: [(&str, &str); 8] = [
     ("PickCubeSO100-v1", "so100"),
     ("PickCubeWidowXAI-v1", "widowxai"),
     ("PlaceSphere-v1", "panda"),
+    ("PlaceSphere-v1", "fetch"),
     ("PokeCube-v1", "panda"),
+    ("PokeCube-v1", "fetch"),
 ];
 
 /// Which scripted solver fits an (env, robot) pair.
@@ -132,6 +135,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
             joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
         )),
         ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
+        ("PlaceSphere-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPlaceSphere::new(env)?)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: {}",
             SOLVED

@@ -1,0 +1,76 @@
+//! Scripted PlaceSphere-v1 and PokeCube-v1 solvers for Fetch (control mode
+//! `pd_ee_delta_pose`): the Panda solvers' phases (solvers.md §7.2, §7.3; `place_sphere.rs`,
+//! `poke_cube.rs`) plan the TCP targets, and [`FetchArm`] turns them into Fetch actions the
+//! way the Fetch PickCube solver does (`fetch.rs`: flatter gripper pitch, lowered torso, base
+//! a little forward, targets clamped to the arm's reach). The TCP is `gripper_link`
+//! (`agent.tcp` of both tasks).
+use nalgebra::Vector3;
+
+use super::fetch::{
+    descended, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, FETCH_GRIPPER,
+};
+use super::place_sphere::PlaceSphereSolver;
+use super::Policy;
+use crate::env::Env;
+use crate::tasks::body_id;
+
+/// Orientation tolerance before leaving the approach (rad).
+const ROT_TOL: f64 = 0.1;
+/// Shortest position command (action units).
+const MIN_STEP: f64 = 0.0;
+/// Torso height while grasping and while carrying (m).
+const TORSO_LOW: f64 = 0.25;
+const TORSO_HIGH: f64 = 0.386;
+
+/// solvers.md §7.2 with Fetch.
+#[derive(Debug)]
+pub struct FetchPlaceSphere {
+    inner: PlaceSphereSolver,
+    arm: FetchArm,
+    sphere: usize,
+    pitch: f64,
+}
+
+impl FetchPlaceSphere {
+    /// Resolves the bodies of a PlaceSphere env with Fetch.
+    pub fn new(env: &Env) -> Result<Self, String> {
+        Ok(FetchPlaceSphere {
+            inner: PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended),
+            arm: FetchArm::new(env)?,
+            sphere: body_id(env.model(), "sphere")?,
+            pitch: 0.0,
+        })
+    }
+}
+
+impl Policy for FetchPlaceSphere {
+    fn reset(&mut self, env: &Env) {
+        self.inner.reset(env);
+        let sphere = super::body_xyz(env, self.sphere);
+        self.pitch = pitch_for_x(sphere.x);
+        self.inner.grasp_lift = (min_tcp_height(self.pitch) - sphere.z).max(0.0);
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = self.arm.gripper_xyz(env);
+        let ready = self.arm.rot_err(env, self.pitch) < ROT_TOL;
+        let (target, grip) = self.inner.plan(env, tcp, ready);
+        let carrying = self.inner.phase() >= 3;
+        let pitch = if carrying {
+            pitch_towards(self.arm.shoulder_xyz(env), target)
+        } else {
+            self.pitch
+        };
+        let torso = if self.inner.phase() >= 4 { TORSO_LOW } else { TORSO_HIGH };
+        let cmd = ArmCommand {
+            target,
+            tcp,
+            pitch,
+            torso,
+            grip,
+            limit: 1.0,
+            min_step: MIN_STEP,
+        };
+        self.arm.drive(env, cmd, action);
+    }
+}
