@@ -51,7 +51,11 @@ fn seeded_pokecube_objects_do_not_depend_on_the_robot() {
     let mut p = env("PokeCube-v1", "panda", None);
     f.reset(Some(0));
     p.reset(Some(0));
-    for key in ["extra/cube_pose", "extra/peg_pose", "extra/cube_to_goal_pos"] {
+    for key in [
+        "extra/cube_pose",
+        "extra/peg_pose",
+        "extra/cube_to_goal_pos",
+    ] {
         assert_eq!(part(&f, key), part(&p, key), "{key}");
     }
     // tasks.md §5, PokeCube seed 0.
@@ -109,7 +113,11 @@ fn pokecube_reward_uses_gripper_link_and_fetchs_static_rule() {
     assert!((d - 0.03).abs() < 1e-6);
     assert!(!e.info().flag("is_peg_grasped"));
     let want = 2.0 * (1.0 - (5.0f64 * 0.03).tanh());
-    assert!((e.dense_reward() - want).abs() < 1e-9, "{}", e.dense_reward());
+    assert!(
+        (e.dense_reward() - want).abs() < 1e-9,
+        "{}",
+        e.dense_reward()
+    );
 
     // Cube on the goal: the static term covers qvel[:-2] (base dofs included, fingers not).
     e.reset(Some(0));

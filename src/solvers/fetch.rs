@@ -49,8 +49,6 @@ const ROT_TOL: f64 = 0.05;
 /// is 0.38615): low to reach down to the table, high to reach up to the goal.
 const TORSO_PICK: f64 = 0.25;
 const TORSO_CARRY: f64 = 0.386;
-/// Torso command per unit error (a full step overshoots).
-const TORSO_GAIN: f64 = 0.5;
 /// Arm lengths (m): shoulder-lift axis to wrist-flex axis when straight, and wrist-flex axis
 /// to the TCP (models/fetch/fetch.urdf), with the margin kept from a straight arm.
 const UPPER_REACH: f64 = 0.219 + 0.133 + 0.197 + 0.1245;
@@ -163,6 +161,8 @@ pub struct ArmCommand {
     pub pitch: f64,
     /// Torso height target (m).
     pub torso: f64,
+    /// Torso command per unit error (1: the whole error in one step).
+    pub torso_gain: f64,
     /// Gripper action.
     pub grip: f32,
     /// Position action limit (≤ 1).
@@ -199,6 +199,11 @@ impl FetchArm {
         UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(g[0], g[1], g[2], g[3]))
     }
 
+    /// The torso lift joint's position (m).
+    pub fn torso(&self, env: &Env) -> f64 {
+        env.data().qpos()[env.robot().qpos_adr[3]]
+    }
+
     /// Orientation error (rad) of the gripper from `pitch`.
     pub fn rot_err(&self, env: &Env, pitch: f64) -> f64 {
         let want = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
@@ -219,11 +224,7 @@ impl FetchArm {
         // targets ahead are out of reach and the IK would fail (the arm then holds still).
         let x_axis = cur * Vector3::x();
         let cur_pitch = (-x_axis.z).atan2(x_axis.x.hypot(x_axis.y));
-        // The arm hangs from the torso: aim higher by the torso travel still to come, so a
-        // lowering torso does not drive the gripper below its target.
-        let torso_left = self.q[3] - cmd.torso;
-        let target = cmd.target + Vector3::new(0.0, 0.0, torso_left);
-        let target = clamp_to_reach(target, self.shoulder_xyz(env), cur_pitch);
+        let target = clamp_to_reach(cmd.target, self.shoulder_xyz(env), cur_pitch);
         // Small steps are lost to the arm's sag under gravity: commands shorter than
         // `cmd.min_step` are stretched to it.
         let mut step = (target - cmd.tcp) / POS_SCALE;
@@ -243,7 +244,7 @@ impl FetchArm {
         // Body: hold the head, move the torso (Δ ±0.1 m per unit action).
         action[7] = 0.0;
         action[8] = 0.0;
-        action[9] = (TORSO_GAIN * (cmd.torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
+        action[9] = (cmd.torso_gain * (cmd.torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
         // Base: forward speed (±1 m/s) towards BASE_FORWARD, yaw rate (±3.14 rad/s) to 0.
         action[10] = (BASE_GAIN * (BASE_FORWARD - self.q[0])).clamp(-1.0, 1.0) as f32;
         action[11] = (-BASE_GAIN * self.q[2] / crate::robots::fetch::YAW_RATE_MAX as f64)
@@ -322,6 +323,7 @@ impl Policy for FetchPickCube {
             tcp,
             pitch,
             torso,
+            torso_gain: 1.0,
             grip,
             limit: 1.0,
             min_step: 0.0,

@@ -4,12 +4,12 @@
 //! way the Fetch PickCube solver does (`fetch.rs`: flatter gripper pitch, lowered torso, base
 //! a little forward, targets clamped to the arm's reach). The TCP is `gripper_link`
 //! (`agent.tcp` of both tasks).
-use nalgebra::Vector3;
 
 use super::fetch::{
     descended, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, FETCH_GRIPPER,
 };
 use super::place_sphere::PlaceSphereSolver;
+use super::poke_cube::PokeCubeSolver;
 use super::Policy;
 use crate::env::Env;
 use crate::tasks::body_id;
@@ -21,6 +21,8 @@ const MIN_STEP: f64 = 0.0;
 /// Torso height while grasping and while carrying (m).
 const TORSO_LOW: f64 = 0.25;
 const TORSO_HIGH: f64 = 0.386;
+/// Torso command per unit error (a full step overshoots).
+const TORSO_GAIN: f64 = 0.5;
 
 /// solvers.md §7.2 with Fetch.
 #[derive(Debug)]
@@ -61,14 +63,71 @@ impl Policy for FetchPlaceSphere {
         } else {
             self.pitch
         };
-        let torso = if self.inner.phase() >= 4 { TORSO_LOW } else { TORSO_HIGH };
+        // The torso stays up: moving it while carrying or releasing sets the sphere rolling.
+        let torso = TORSO_HIGH;
         let cmd = ArmCommand {
             target,
             tcp,
             pitch,
             torso,
+            torso_gain: TORSO_GAIN,
             grip,
             limit: 1.0,
+            min_step: MIN_STEP,
+        };
+        self.arm.drive(env, cmd, action);
+    }
+}
+
+/// Fetch grasps the peg at its tail: the head then reaches the far cubes.
+const POKE_GRASP_OFFSET_X: f64 = -0.10;
+/// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
+const POKE_PUSH_SHORT: f64 = 0.045;
+
+/// solvers.md §7.3 with Fetch.
+#[derive(Debug)]
+pub struct FetchPokeCube {
+    inner: PokeCubeSolver,
+    arm: FetchArm,
+    peg: usize,
+    pitch: f64,
+}
+
+impl FetchPokeCube {
+    /// Resolves the bodies of a PokeCube env with Fetch.
+    pub fn new(env: &Env) -> Result<Self, String> {
+        let mut inner = PokeCubeSolver::new(env, FETCH_GRIPPER)?.with_descent(descended);
+        inner.grasp_offset_x = POKE_GRASP_OFFSET_X;
+        inner.push_short_of_goal = POKE_PUSH_SHORT;
+        Ok(FetchPokeCube {
+            inner,
+            arm: FetchArm::new(env)?,
+            peg: body_id(env.model(), "peg")?,
+            pitch: 0.0,
+        })
+    }
+}
+
+impl Policy for FetchPokeCube {
+    fn reset(&mut self, env: &Env) {
+        self.inner.reset(env);
+        let peg = super::body_xyz(env, self.peg);
+        self.pitch = pitch_for_x(0.1);
+        self.inner.grasp_lift = (min_tcp_height(self.pitch) - peg.z).max(0.0);
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = self.arm.gripper_xyz(env);
+        let ready = self.arm.rot_err(env, self.pitch) < ROT_TOL;
+        let (target, grip, limit) = self.inner.plan(env, tcp, ready);
+        let cmd = ArmCommand {
+            target,
+            tcp,
+            pitch: self.pitch,
+            torso: TORSO_LOW,
+            torso_gain: TORSO_GAIN,
+            grip,
+            limit,
             min_step: MIN_STEP,
         };
         self.arm.drive(env, cmd, action);

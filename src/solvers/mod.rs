@@ -136,6 +136,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         )),
         ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
         ("PlaceSphere-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPlaceSphere::new(env)?)),
+        ("PokeCube-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPokeCube::new(env)?)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: {}",
             SOLVED
