@@ -79,6 +79,9 @@ impl Policy for FetchPlaceSphere {
     }
 }
 
+/// Shortest position command while poking (action units): shorter ones are lost to the
+/// arm's sag under gravity and the descent onto the peg stalls.
+const POKE_MIN_STEP: f64 = 0.1;
 /// Fetch grasps the peg at its tail: the head then reaches the far cubes.
 const POKE_GRASP_OFFSET_X: f64 = -0.10;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
@@ -112,7 +115,9 @@ impl Policy for FetchPokeCube {
     fn reset(&mut self, env: &Env) {
         self.inner.reset(env);
         let peg = super::body_xyz(env, self.peg);
-        self.pitch = pitch_for_x(0.1);
+        // The flattest pitch: the longest reach along the table (turning the gripper while
+        // it holds the peg lifts the peg).
+        self.pitch = pitch_for_x(f64::INFINITY);
         self.inner.grasp_lift = (min_tcp_height(self.pitch) - peg.z).max(0.0);
     }
 
@@ -128,7 +133,7 @@ impl Policy for FetchPokeCube {
             torso_gain: TORSO_GAIN,
             grip,
             limit,
-            min_step: MIN_STEP,
+            min_step: POKE_MIN_STEP,
         };
         self.arm.drive(env, cmd, action);
     }
