@@ -63,8 +63,9 @@ impl Policy for FetchPlaceSphere {
         } else {
             self.pitch
         };
-        // The torso stays up: moving it while carrying or releasing sets the sphere rolling.
-        let torso = TORSO_HIGH;
+        // The torso is not driven: moving it while carrying or releasing sets the sphere
+        // rolling.
+        let torso = self.arm.torso(env);
         let cmd = ArmCommand {
             target,
             tcp,
