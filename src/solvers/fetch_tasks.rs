@@ -18,9 +18,8 @@ use crate::tasks::body_id;
 const ROT_TOL: f64 = 0.1;
 /// Shortest position command (action units).
 const MIN_STEP: f64 = 0.0;
-/// Torso height while grasping and while carrying (m).
+/// Torso height while poking (m; the table pose has 0.386): low to reach along the table.
 const TORSO_LOW: f64 = 0.25;
-const TORSO_HIGH: f64 = 0.386;
 /// Torso command per unit error (a full step overshoots).
 const TORSO_GAIN: f64 = 0.5;
 
