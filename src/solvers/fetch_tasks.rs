@@ -5,6 +5,8 @@
 //! a little forward, targets clamped to the arm's reach). The TCP is `gripper_link`
 //! (`agent.tcp` of both tasks).
 
+use nalgebra::Vector3;
+
 use super::fetch::{
     descended, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, FETCH_GRIPPER,
 };
@@ -87,6 +89,14 @@ const POKE_GRASP_OFFSET_X: f64 = -0.10;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
 const POKE_PUSH_SHORT: f64 = 0.045;
 
+/// The descent onto the peg is done: centred across the fingers (y) within 4 mm, within 1 cm
+/// in height (the arm stalls a few mm above its target with the fingers already around the
+/// peg's upper half) and 1.2 cm along the fingers.
+fn descended_on_peg(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    let e = target - tcp;
+    e.y.abs() < 0.004 && e.z.abs() < 0.01 && e.x.abs() < 0.012
+}
+
 /// solvers.md §7.3 with Fetch.
 #[derive(Debug)]
 pub struct FetchPokeCube {
@@ -99,7 +109,7 @@ pub struct FetchPokeCube {
 impl FetchPokeCube {
     /// Resolves the bodies of a PokeCube env with Fetch.
     pub fn new(env: &Env) -> Result<Self, String> {
-        let mut inner = PokeCubeSolver::new(env, FETCH_GRIPPER)?.with_descent(descended);
+        let mut inner = PokeCubeSolver::new(env, FETCH_GRIPPER)?.with_descent(descended_on_peg);
         inner.grasp_offset_x = POKE_GRASP_OFFSET_X;
         inner.push_short_of_goal = POKE_PUSH_SHORT;
         Ok(FetchPokeCube {
