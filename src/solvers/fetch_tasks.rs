@@ -135,11 +135,18 @@ impl Policy for FetchPokeCube {
         let tcp = self.arm.gripper_xyz(env);
         let ready = self.arm.rot_err(env, self.pitch) < ROT_TOL;
         let (target, grip, limit) = self.inner.plan(env, tcp, ready);
+        // The torso goes down (for the reach along the table) once the peg is held: lowering
+        // it during the approach drives the gripper below the approach point.
+        let torso = if self.inner.phase() >= 3 {
+            TORSO_LOW
+        } else {
+            self.arm.torso(env)
+        };
         let cmd = ArmCommand {
             target,
             tcp,
             pitch: self.pitch,
-            torso: TORSO_LOW,
+            torso,
             torso_gain: TORSO_GAIN,
             grip,
             limit,
