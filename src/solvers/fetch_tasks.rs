@@ -85,9 +85,9 @@ impl Policy for FetchPlaceSphere {
 /// arm's sag under gravity and the descent onto the peg stalls.
 const POKE_MIN_STEP: f64 = 0.1;
 /// Fetch grasps the peg at its tail: the head then reaches the far cubes.
-const POKE_GRASP_OFFSET_X: f64 = -0.10;
+const POKE_GRASP_OFFSET_X: f64 = -0.115;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
-const POKE_PUSH_SHORT: f64 = 0.045;
+const POKE_PUSH_SHORT: f64 = 0.055;
 
 /// The descent onto the peg is done: centred across the fingers (y) within 4 mm, within 1 cm
 /// in height (the arm stalls a few mm above its target with the fingers already around the
