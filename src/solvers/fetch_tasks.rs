@@ -21,7 +21,7 @@ const ROT_TOL: f64 = 0.1;
 /// Shortest position command (action units).
 const MIN_STEP: f64 = 0.0;
 /// Torso height while poking (m; the table pose has 0.386): low to reach along the table.
-const TORSO_LOW: f64 = 0.25;
+const TORSO_LOW: f64 = 0.22;
 /// Torso command per unit error (a full step overshoots).
 const TORSO_GAIN: f64 = 0.5;
 
@@ -87,7 +87,7 @@ const POKE_MIN_STEP: f64 = 0.1;
 /// Fetch grasps the peg at its tail: the head then reaches the far cubes.
 const POKE_GRASP_OFFSET_X: f64 = -0.115;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
-const POKE_PUSH_SHORT: f64 = 0.055;
+const POKE_PUSH_SHORT: f64 = 0.062;
 
 /// The descent onto the peg is done: centred across the fingers (y) within 4 mm, within 1 cm
 /// in height (the arm stalls a few mm above its target with the fingers already around the
