@@ -25,6 +25,11 @@ const TORSO_LOW: f64 = 0.22;
 /// Torso command per unit error (a full step overshoots).
 const TORSO_GAIN: f64 = 0.5;
 
+/// The sphere is released only within this horizontal distance of the bin centre (m): the
+/// Fetch's lowering drifts sideways, and a sphere released off-centre keeps rolling between
+/// the wall edges.
+const RELEASE_ALIGN: f64 = 0.0015;
+
 /// solvers.md §7.2 with Fetch.
 #[derive(Debug)]
 pub struct FetchPlaceSphere {
@@ -37,8 +42,10 @@ pub struct FetchPlaceSphere {
 impl FetchPlaceSphere {
     /// Resolves the bodies of a PlaceSphere env with Fetch.
     pub fn new(env: &Env) -> Result<Self, String> {
+        let mut inner = PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended);
+        inner.release_align = RELEASE_ALIGN;
         Ok(FetchPlaceSphere {
-            inner: PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended),
+            inner,
             arm: FetchArm::new(env)?,
             sphere: body_id(env.model(), "sphere")?,
             pitch: 0.0,

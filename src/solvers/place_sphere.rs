@@ -50,6 +50,9 @@ pub struct PlaceSphereSolver {
     gripper: Gripper,
     /// Height of the grasp point above the sphere centre (m; 0 for a top-down gripper).
     pub grasp_lift: f64,
+    /// Horizontal sphere-to-bin distance the release also waits for (m; the Panda's spec
+    /// phases do not wait: infinite).
+    pub release_align: f64,
     /// Whether the descent to the grasp point is done (target, tcp).
     descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
     phase: usize,
@@ -68,6 +71,7 @@ impl PlaceSphereSolver {
             bin: body_id(env.model(), "bin")?,
             gripper,
             grasp_lift: 0.0,
+            release_align: f64::INFINITY,
             descended: descended_panda,
             phase: 0,
             steps_in_phase: 0,
@@ -114,7 +118,8 @@ impl PlaceSphereSolver {
                 5 => (
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
-                    sphere.z - bin.z < RELEASE_BELOW,
+                    sphere.z - bin.z < RELEASE_BELOW
+                        && (sphere.xy() - bin.xy()).norm() < self.release_align,
                 ),
                 6 => (tcp, open, self.steps_in_phase >= OPEN_STEPS),
                 _ => (tcp + Vector3::new(0.0, 0.0, RETREAT), open, false),
