@@ -28,7 +28,7 @@ const TORSO_GAIN: f64 = 0.5;
 /// The sphere is released only within this horizontal distance of the bin centre (m): the
 /// Fetch's lowering drifts sideways, and a sphere released off-centre keeps rolling between
 /// the wall edges.
-const RELEASE_ALIGN: f64 = 0.0015;
+const RELEASE_ALIGN: f64 = 0.001;
 
 /// solvers.md §7.2 with Fetch.
 #[derive(Debug)]
