@@ -29,8 +29,6 @@ use crate::tasks::body_id;
 
 /// Orientation tolerance before leaving the approach (rad).
 const ROT_TOL: f64 = 0.1;
-/// Shortest position command (action units).
-const MIN_STEP: f64 = 0.0;
 /// Torso height while poking (m; the table pose has 0.386): low to reach along the table.
 const TORSO_LOW: f64 = 0.22;
 /// Torso command per unit error (a full step overshoots).
@@ -93,7 +91,7 @@ impl Policy for FetchPlaceSphere {
             torso_gain: TORSO_GAIN,
             grip,
             limit: 1.0,
-            min_step: MIN_STEP,
+            min_step: 0.0,
         };
         self.arm.drive(env, cmd, action);
     }
