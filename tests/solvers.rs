@@ -128,3 +128,25 @@ fn pokecube_solver_pushes_with_the_peg_and_earns_the_full_dense_reward() {
     assert!(env.info().get("angle_diff").unwrap() < 0.05);
     assert_eq!(last, 10.0);
 }
+
+#[test]
+fn every_registered_env_and_robot_has_a_scripted_solver() {
+    use mjskill::solvers::{make_policy, SOLVED};
+    let mut pairs = Vec::new();
+    for env in mjskill::registry() {
+        for (robot, _) in &env.robots {
+            pairs.push((env.id, *robot));
+            let config = EnvConfig {
+                robot: Some(robot.to_string()),
+                ..Default::default()
+            };
+            let e = eval::make_env(env.id, config, "solver").unwrap();
+            make_policy("solver", &e, 0)
+                .unwrap_or_else(|err| panic!("{} with {robot}: {err}", env.id));
+        }
+    }
+    pairs.sort();
+    let mut solved = SOLVED.to_vec();
+    solved.sort();
+    assert_eq!(pairs, solved, "SOLVED lists exactly the registered pairs");
+}

@@ -276,7 +276,7 @@ static REGISTRY: [EnvSpec; 5] = [
     },
     EnvSpec {
         id: "PokeCube-v1",
-        robots: &["panda"],
+        robots: &["panda", "fetch"],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: poke_cube,
     },

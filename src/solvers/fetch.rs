@@ -80,8 +80,7 @@ const ROT_SCALE: f64 = -0.1;
 pub struct FetchPickCube {
     cube: usize,
     goal: usize,
-    gripper_link: usize,
-    shoulder: usize,
+    arm: FetchArm,
     phase: usize,
     steps_in_phase: usize,
     /// Gripper pitch and grasp height above the cube centre for this episode.
@@ -89,26 +88,20 @@ pub struct FetchPickCube {
     grasp_height: f64,
     /// TCP − cube centre when the grasp closed (carried to the goal).
     hold_offset: Vector3<f64>,
-    q: [f64; 15],
 }
 
 impl FetchPickCube {
     /// Resolves the bodies of a PickCube env with Fetch.
     pub fn new(env: &Env) -> Result<Self, String> {
-        if env.robot().qpos_adr.len() != 15 {
-            return Err("the Fetch solver needs the 15-dof Fetch".into());
-        }
         Ok(FetchPickCube {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,
-            gripper_link: env.robot().body("gripper_link")?,
-            shoulder: env.robot().body("shoulder_lift_link")?,
+            arm: FetchArm::new(env)?,
             phase: 0,
             steps_in_phase: 0,
             pitch: PITCH_NEAR,
             grasp_height: 0.0,
             hold_offset: Vector3::zeros(),
-            q: [0.0; 15],
         })
     }
 }
@@ -119,7 +112,7 @@ fn xyz(env: &Env, body: usize) -> Vector3<f64> {
 
 /// Height of the TCP above the table that keeps fingers and palm `CLEARANCE` above it at
 /// gripper pitch `pitch` (rad below the horizontal).
-fn min_tcp_height(pitch: f64) -> f64 {
+pub fn min_tcp_height(pitch: f64) -> f64 {
     let low = |(x, z): (f64, f64)| -x * pitch.sin() + z * pitch.cos();
     CLEARANCE - low(FINGER_FRONT).min(low(PALM_FRONT))
 }
@@ -148,39 +141,153 @@ fn clamp_to_reach(target: Vector3<f64>, shoulder: Vector3<f64>, pitch: f64) -> V
     shoulder + lo * (target - shoulder)
 }
 
+/// The Fetch's arm, torso and base driven towards a gripper position and pitch through
+/// `pd_ee_delta_pose` (12 actions): shared by the Fetch solvers of every task.
+#[derive(Debug)]
+pub struct FetchArm {
+    gripper_link: usize,
+    shoulder: usize,
+    q: [f64; 15],
+}
+
+/// One command of [`FetchArm::drive`].
+#[derive(Debug, Clone, Copy)]
+pub struct ArmCommand {
+    /// Target of the TCP (`tcp`'s frame point) in world coordinates.
+    pub target: Vector3<f64>,
+    /// Current TCP position.
+    pub tcp: Vector3<f64>,
+    /// Gripper pitch wanted (rad below the horizontal; yaw and roll 0).
+    pub pitch: f64,
+    /// Torso height target (m).
+    pub torso: f64,
+    /// Torso command per unit error (1: the whole error in one step).
+    pub torso_gain: f64,
+    /// Gripper action.
+    pub grip: f32,
+    /// Position action limit (≤ 1).
+    pub limit: f64,
+    /// Shortest position command (action units; 0: purely proportional).
+    pub min_step: f64,
+}
+
+impl FetchArm {
+    /// Resolves the Fetch's bodies.
+    pub fn new(env: &Env) -> Result<Self, String> {
+        if env.robot().qpos_adr.len() != 15 {
+            return Err("the Fetch solvers need the 15-dof Fetch".into());
+        }
+        Ok(FetchArm {
+            gripper_link: env.robot().body("gripper_link")?,
+            shoulder: env.robot().body("shoulder_lift_link")?,
+            q: [0.0; 15],
+        })
+    }
+
+    /// `gripper_link`'s position (`agent.tcp.pose.p` of Fetch).
+    pub fn gripper_xyz(&self, env: &Env) -> Vector3<f64> {
+        xyz(env, self.gripper_link)
+    }
+
+    /// The shoulder-lift link's position (the arm's reach centre).
+    pub fn shoulder_xyz(&self, env: &Env) -> Vector3<f64> {
+        xyz(env, self.shoulder)
+    }
+
+    fn gripper_quat(&self, env: &Env) -> UnitQuaternion<f64> {
+        let g = &env.data().xquat()[4 * self.gripper_link..4 * self.gripper_link + 4];
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(g[0], g[1], g[2], g[3]))
+    }
+
+    /// The torso lift joint's position (m).
+    pub fn torso(&self, env: &Env) -> f64 {
+        env.data().qpos()[env.robot().qpos_adr[3]]
+    }
+
+    /// Orientation error (rad) of the gripper from `pitch`.
+    pub fn rot_err(&self, env: &Env, pitch: f64) -> f64 {
+        let want = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
+        (want * self.gripper_quat(env).inverse()).angle()
+    }
+
+    /// Writes the 12 actions: the position (clamped to the reach at the current pitch), the
+    /// rotation towards `cmd.pitch`, the gripper, the head held, the torso towards
+    /// `cmd.torso`, the base towards `BASE_FORWARD` with yaw 0.
+    pub fn drive(&mut self, env: &Env, cmd: ArmCommand, action: &mut [f32]) {
+        let data = env.data();
+        env.robot().qpos(data, &mut self.q);
+        let cur = self.gripper_quat(env);
+        let want = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), cmd.pitch);
+        let rot_err = (want * cur.inverse()).scaled_axis();
+        // Keep the target within reach at the gripper's current pitch (the IK keeps the
+        // orientation up to one rotation step): with the table pose's steep pitch most
+        // targets ahead are out of reach and the IK would fail (the arm then holds still).
+        let x_axis = cur * Vector3::x();
+        let cur_pitch = (-x_axis.z).atan2(x_axis.x.hypot(x_axis.y));
+        let target = clamp_to_reach(cmd.target, self.shoulder_xyz(env), cur_pitch);
+        // Small steps are lost to the arm's sag under gravity: commands shorter than
+        // `cmd.min_step` are stretched to it.
+        let mut step = (target - cmd.tcp) / POS_SCALE;
+        let n = step.norm();
+        if n > 1e-9 && n < cmd.min_step {
+            step *= cmd.min_step / n;
+        }
+        for k in 0..3 {
+            action[k] = step[k].clamp(-cmd.limit, cmd.limit) as f32;
+        }
+        let mut r = rot_err / ROT_SCALE;
+        if r.norm() > 1.0 {
+            r /= r.norm();
+        }
+        action[3..6].copy_from_slice(&[r.x as f32, r.y as f32, r.z as f32]);
+        action[6] = cmd.grip;
+        // Body: hold the head, move the torso (Δ ±0.1 m per unit action).
+        action[7] = 0.0;
+        action[8] = 0.0;
+        action[9] = (cmd.torso_gain * (cmd.torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
+        // Base: forward speed (±1 m/s) towards BASE_FORWARD, yaw rate (±3.14 rad/s) to 0.
+        action[10] = (BASE_GAIN * (BASE_FORWARD - self.q[0])).clamp(-1.0, 1.0) as f32;
+        action[11] = (-BASE_GAIN * self.q[2] / crate::robots::fetch::YAW_RATE_MAX as f64)
+            .clamp(-1.0, 1.0) as f32;
+    }
+}
+
+/// Gripper pitch for an object at table x (rad below the horizontal): steep near the robot,
+/// flat far from it.
+pub fn pitch_for_x(x: f64) -> f64 {
+    let s = ((x + 0.1) / 0.2).clamp(0.0, 1.0);
+    PITCH_NEAR + (PITCH_FAR - PITCH_NEAR) * s
+}
+
+/// Pitch that points the gripper from the shoulder at `target` (the longest reach).
+pub fn pitch_towards(shoulder: Vector3<f64>, target: Vector3<f64>) -> f64 {
+    let d = target - shoulder;
+    (-d.z)
+        .atan2(d.x.hypot(d.y))
+        .clamp(CARRY_PITCH.0, CARRY_PITCH.1)
+}
+
 impl Policy for FetchPickCube {
     fn reset(&mut self, env: &Env) {
         self.phase = 0;
         self.steps_in_phase = 0;
         let cube = xyz(env, self.cube);
-        let s = ((cube.x + 0.1) / 0.2).clamp(0.0, 1.0);
-        self.pitch = PITCH_NEAR + (PITCH_FAR - PITCH_NEAR) * s;
+        self.pitch = pitch_for_x(cube.x);
         self.grasp_height = (min_tcp_height(self.pitch) - cube.z).max(0.0);
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
-        let data = env.data();
-        env.robot().qpos(data, &mut self.q);
-        let tcp = Vector3::from(env.robot().tcp_pose(data).0);
+        let tcp = Vector3::from(env.robot().tcp_pose(env.data()).0);
         let cube = xyz(env, self.cube);
         let goal = xyz(env, self.goal);
         let grasp = cube + Vector3::new(0.0, 0.0, self.grasp_height);
-        // Orientation error of gripper_link (world = torso axes: the base keeps yaw 0).
-        let g = &data.xquat()[4 * self.gripper_link..4 * self.gripper_link + 4];
-        let cur =
-            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(g[0], g[1], g[2], g[3]));
-        let shoulder = xyz(env, self.shoulder);
         let carrying = self.phase >= 3;
         let pitch = if carrying {
-            // Point the gripper along the line from the shoulder to the goal: the longest reach.
-            let d = goal + self.hold_offset - shoulder;
-            let horizontal = (d.x * d.x + d.y * d.y).sqrt();
-            (-d.z).atan2(horizontal).clamp(CARRY_PITCH.0, CARRY_PITCH.1)
+            pitch_towards(self.arm.shoulder_xyz(env), goal + self.hold_offset)
         } else {
             self.pitch
         };
-        let want = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
-        let rot_err = (want * cur.inverse()).scaled_axis();
+        let rot_err = self.arm.rot_err(env, pitch);
         let (target, grip) = loop {
             let (target, grip) = match self.phase {
                 0 => (
@@ -192,13 +299,10 @@ impl Policy for FetchPickCube {
                 _ => (goal + self.hold_offset, FETCH_GRIPPER.close),
             };
             let done = match self.phase {
-                0 => (target - tcp).norm() < APPROACH_TOL && rot_err.norm() < ROT_TOL,
+                0 => (target - tcp).norm() < APPROACH_TOL && rot_err < ROT_TOL,
                 // Along the fingers (≈ x) a shortfall does not matter: the 6 cm fingers still
                 // straddle the cube when the arm stops at the edge of its reach.
-                1 => {
-                    let e = target - tcp;
-                    e.y.hypot(e.z) < DESCEND_TOL && e.x.abs() < DESCEND_TOL_ALONG
-                }
+                1 => descended(target, tcp),
                 2 => self.steps_in_phase >= HOLD,
                 _ => false,
             };
@@ -213,29 +317,23 @@ impl Policy for FetchPickCube {
             self.steps_in_phase += 1;
             break (target, grip);
         };
-        // Keep the target within reach at the gripper's current pitch (the IK keeps the
-        // orientation up to one rotation step): with the table pose's steep pitch most
-        // targets ahead are out of reach and the IK would fail (the arm then holds still).
-        let x_axis = cur * Vector3::x();
-        let cur_pitch = (-x_axis.z).atan2(x_axis.x.hypot(x_axis.y));
-        let target = clamp_to_reach(target, shoulder, cur_pitch);
-        for k in 0..3 {
-            action[k] = ((target[k] - tcp[k]) / POS_SCALE).clamp(-1.0, 1.0) as f32;
-        }
-        let mut r = rot_err / ROT_SCALE;
-        if r.norm() > 1.0 {
-            r /= r.norm();
-        }
-        action[3..6].copy_from_slice(&[r.x as f32, r.y as f32, r.z as f32]);
-        action[6] = grip;
-        // Body: hold the head, move the torso (Δ ±0.1 m per unit action).
-        action[7] = 0.0;
-        action[8] = 0.0;
         let torso = if carrying { TORSO_CARRY } else { TORSO_PICK };
-        action[9] = ((torso - self.q[3]) / 0.1).clamp(-1.0, 1.0) as f32;
-        // Base: forward speed (±1 m/s) towards BASE_FORWARD, yaw rate (±3.14 rad/s) to 0.
-        action[10] = (BASE_GAIN * (BASE_FORWARD - self.q[0])).clamp(-1.0, 1.0) as f32;
-        action[11] = (-BASE_GAIN * self.q[2] / crate::robots::fetch::YAW_RATE_MAX as f64)
-            .clamp(-1.0, 1.0) as f32;
+        let cmd = ArmCommand {
+            target,
+            tcp,
+            pitch,
+            torso,
+            torso_gain: 1.0,
+            grip,
+            limit: 1.0,
+            min_step: 0.0,
+        };
+        self.arm.drive(env, cmd, action);
     }
+}
+
+/// The descent is done: within `DESCEND_TOL` across the fingers, `DESCEND_TOL_ALONG` along.
+pub fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    let e = target - tcp;
+    e.y.hypot(e.z) < DESCEND_TOL && e.x.abs() < DESCEND_TOL_ALONG
 }

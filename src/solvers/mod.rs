@@ -19,6 +19,7 @@ use crate::env::Env;
 use crate::tasks::body_id;
 
 pub mod fetch;
+pub mod fetch_tasks;
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -94,7 +95,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver.
-pub const SOLVED: [(&str, &str); 9] = [
+pub const SOLVED: [(&str, &str); 11] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -103,7 +104,9 @@ pub const SOLVED: [(&str, &str); 9] = [
     ("PickCubeSO100-v1", "so100"),
     ("PickCubeWidowXAI-v1", "widowxai"),
     ("PlaceSphere-v1", "panda"),
+    ("PlaceSphere-v1", "fetch"),
     ("PokeCube-v1", "panda"),
+    ("PokeCube-v1", "fetch"),
 ];
 
 /// Which scripted solver fits an (env, robot) pair.
@@ -142,6 +145,8 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
             joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
         )),
         ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
+        ("PlaceSphere-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPlaceSphere::new(env)?)),
+        ("PokeCube-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPokeCube::new(env)?)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: {}",
             SOLVED

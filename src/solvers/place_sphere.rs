@@ -48,8 +48,19 @@ pub struct PlaceSphereSolver {
     sphere: usize,
     bin: usize,
     gripper: Gripper,
+    /// Height of the grasp point above the sphere centre (m; 0 for a top-down gripper).
+    pub grasp_lift: f64,
+    /// Horizontal sphere-to-bin distance the release also waits for (m; the Panda's spec
+    /// phases do not wait: infinite).
+    pub release_align: f64,
+    /// Whether the descent to the grasp point is done (target, tcp).
+    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
     phase: usize,
     steps_in_phase: usize,
+}
+
+fn descended_panda(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    (target - tcp).norm() < DESCEND_TOL
 }
 
 impl PlaceSphereSolver {
@@ -59,31 +70,40 @@ impl PlaceSphereSolver {
             sphere: body_id(env.model(), "sphere")?,
             bin: body_id(env.model(), "bin")?,
             gripper,
+            grasp_lift: 0.0,
+            release_align: f64::INFINITY,
+            descended: descended_panda,
             phase: 0,
             steps_in_phase: 0,
         })
     }
-}
 
-impl Policy for PlaceSphereSolver {
-    fn reset(&mut self, _env: &Env) {
-        self.phase = 0;
-        self.steps_in_phase = 0;
+    /// The same phases with another descent check (e.g. a tilted gripper's).
+    pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
+        self.descended = descended;
+        self
     }
 
-    fn act(&mut self, env: &Env, action: &mut [f32]) {
-        let tcp = tcp_link_xyz(env);
+    /// The current phase (0–7, as solvers.md §7.2).
+    pub fn phase(&self) -> usize {
+        self.phase
+    }
+
+    /// The TCP target and gripper action for this step (phases advance with fall-through);
+    /// `ready`: whether the robot may leave the approach (e.g. its gripper is turned).
+    pub fn plan(&mut self, env: &Env, tcp: Vector3<f64>, ready: bool) -> (Vector3<f64>, f32) {
         let sphere = body_xyz(env, self.sphere);
+        let grasp = sphere + Vector3::new(0.0, 0.0, self.grasp_lift);
         let bin = body_xyz(env, self.bin);
         let (open, close) = (self.gripper.open, self.gripper.close);
         loop {
             let (target, grip, done) = match self.phase {
                 0 => {
-                    let t = sphere + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, (t - tcp).norm() < APPROACH_TOL)
+                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
                 }
-                1 => (sphere, open, (sphere - tcp).norm() < DESCEND_TOL),
-                2 => (sphere, close, self.steps_in_phase >= CLOSE_STEPS),
+                1 => (grasp, open, (self.descended)(grasp, tcp)),
+                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
                 3 => (
                     Vector3::new(tcp.x, tcp.y, LIFT_Z),
                     close,
@@ -98,7 +118,8 @@ impl Policy for PlaceSphereSolver {
                 5 => (
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
-                    sphere.z - bin.z < RELEASE_BELOW,
+                    sphere.z - bin.z < RELEASE_BELOW
+                        && (sphere.xy() - bin.xy()).norm() < self.release_align,
                 ),
                 6 => (tcp, open, self.steps_in_phase >= OPEN_STEPS),
                 _ => (tcp + Vector3::new(0.0, 0.0, RETREAT), open, false),
@@ -109,8 +130,20 @@ impl Policy for PlaceSphereSolver {
                 continue;
             }
             self.steps_in_phase += 1;
-            ee_action(target, tcp, 1.0, grip, action);
-            return;
+            return (target, grip);
         }
+    }
+}
+
+impl Policy for PlaceSphereSolver {
+    fn reset(&mut self, _env: &Env) {
+        self.phase = 0;
+        self.steps_in_phase = 0;
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let (target, grip) = self.plan(env, tcp, true);
+        ee_action(target, tcp, 1.0, grip, action);
     }
 }

@@ -51,8 +51,20 @@ pub struct PokeCubeSolver {
     /// Cube and goal positions at the episode start.
     cube0: Vector3<f64>,
     goal0: Vector3<f64>,
+    /// Grasp point relative to the peg centre along world x (m).
+    pub grasp_offset_x: f64,
+    /// Height of the grasp point above the peg centre (m; 0 for a top-down gripper).
+    pub grasp_lift: f64,
+    /// The push stops with the head this far short of the goal centre (m).
+    pub push_short_of_goal: f64,
+    /// Whether the descent to the grasp point is done (target, tcp).
+    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
     phase: usize,
     steps_in_phase: usize,
+}
+
+fn descended_panda(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    (target - tcp).norm() < DESCEND_TOL
 }
 
 impl PokeCubeSolver {
@@ -65,9 +77,65 @@ impl PokeCubeSolver {
             gripper,
             cube0: Vector3::zeros(),
             goal0: Vector3::zeros(),
+            grasp_offset_x: GRASP_OFFSET_X,
+            grasp_lift: 0.0,
+            push_short_of_goal: PUSH_SHORT_OF_GOAL,
+            descended: descended_panda,
             phase: 0,
             steps_in_phase: 0,
         })
+    }
+
+    /// The same phases with another descent check (e.g. a tilted gripper's).
+    pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
+        self.descended = descended;
+        self
+    }
+
+    /// The current phase (0–5, as solvers.md §7.3).
+    pub fn phase(&self) -> usize {
+        self.phase
+    }
+
+    /// The TCP target, gripper action and position action limit for this step (phases
+    /// advance with fall-through); `ready`: whether the robot may leave the approach.
+    pub fn plan(&mut self, env: &Env, tcp: Vector3<f64>, ready: bool) -> (Vector3<f64>, f32, f64) {
+        let cube = body_xyz(env, self.cube);
+        let peg = body_xyz(env, self.peg);
+        let head = peg_head(peg);
+        let grasp = peg + Vector3::new(self.grasp_offset_x, 0.0, self.grasp_lift);
+        let (open, close) = (self.gripper.open, self.gripper.close);
+        loop {
+            let mut limit = 1.0;
+            let (target, grip, done) = match self.phase {
+                0 => {
+                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
+                }
+                1 => (grasp, open, (self.descended)(grasp, tcp)),
+                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
+                3 => {
+                    let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
+                    let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;
+                    (shift_xy(tcp, pre, head), close, done)
+                }
+                4 => {
+                    limit = PUSH_LIMIT;
+                    let push =
+                        Vector3::new(self.goal0.x - self.push_short_of_goal, self.cube0.y, 0.0);
+                    let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
+                    (shift_xy(tcp, push, head), close, done)
+                }
+                _ => (tcp, close, false),
+            };
+            if done {
+                self.phase += 1;
+                self.steps_in_phase = 0;
+                continue;
+            }
+            self.steps_in_phase += 1;
+            return (target, grip, limit);
+        }
     }
 }
 
@@ -86,41 +154,7 @@ impl Policy for PokeCubeSolver {
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
         let tcp = tcp_link_xyz(env);
-        let cube = body_xyz(env, self.cube);
-        let peg = body_xyz(env, self.peg);
-        let head = peg_head(peg);
-        let grasp = peg + Vector3::new(GRASP_OFFSET_X, 0.0, 0.0);
-        let (open, close) = (self.gripper.open, self.gripper.close);
-        loop {
-            let mut limit = 1.0;
-            let (target, grip, done) = match self.phase {
-                0 => {
-                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, (t - tcp).norm() < APPROACH_TOL)
-                }
-                1 => (grasp, open, (grasp - tcp).norm() < DESCEND_TOL),
-                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
-                3 => {
-                    let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
-                    let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;
-                    (shift_xy(tcp, pre, head), close, done)
-                }
-                4 => {
-                    limit = PUSH_LIMIT;
-                    let push = Vector3::new(self.goal0.x - PUSH_SHORT_OF_GOAL, self.cube0.y, 0.0);
-                    let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
-                    (shift_xy(tcp, push, head), close, done)
-                }
-                _ => (tcp, close, false),
-            };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            ee_action(target, tcp, limit, grip, action);
-            return;
-        }
+        let (target, grip, limit) = self.plan(env, tcp, true);
+        ee_action(target, tcp, limit, grip, action);
     }
 }
