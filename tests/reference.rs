@@ -101,6 +101,9 @@ fn regenerate_reference_trajectories() {
             "{name}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
+        // rollout also leaves a PNG of the human camera next to the recording; the references
+        // keep only the recordings.
+        let _ = std::fs::remove_file(mjskill::cli::rollout::frame_path(&dir().join(&name)));
         println!("{name}: {}", String::from_utf8_lossy(&out.stdout).trim());
     }
 }
