@@ -13,21 +13,16 @@
 //! and reached" stages before success (upstream's `reached` measures to the peg centre).
 use nalgebra::Vector3;
 
-use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
+use super::{
+    body_xyz, descended, ee_action, tcp_link_xyz, Gripper, Phases, Policy, APPROACH_HEIGHT,
+    APPROACH_TOL, CLOSE_STEPS,
+};
 use crate::env::Env;
 use crate::tasks::body_id;
 use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
 const GRASP_OFFSET_X: f64 = -0.08;
-/// Approach height above the grasp point (m).
-const APPROACH_HEIGHT: f64 = 0.05;
-/// Approach tolerance (m).
-const APPROACH_TOL: f64 = 0.01;
-/// Descent tolerance (m).
-const DESCEND_TOL: f64 = 0.004;
-/// Steps the gripper closes before moving.
-const CLOSE_STEPS: usize = 3;
 /// Half diagonal of the cube's footprint (m): clears the cube at any yaw.
 const CUBE_HALF_DIAGONAL: f64 = 0.0283;
 /// Gap between the head and the cube before the push (m).
@@ -59,12 +54,7 @@ pub struct PokeCubeSolver {
     pub push_short_of_goal: f64,
     /// Whether the descent to the grasp point is done (target, tcp).
     descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
-    phase: usize,
-    steps_in_phase: usize,
-}
-
-fn descended_panda(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
-    (target - tcp).norm() < DESCEND_TOL
+    phases: Phases,
 }
 
 impl PokeCubeSolver {
@@ -80,9 +70,8 @@ impl PokeCubeSolver {
             grasp_offset_x: GRASP_OFFSET_X,
             grasp_lift: 0.0,
             push_short_of_goal: PUSH_SHORT_OF_GOAL,
-            descended: descended_panda,
-            phase: 0,
-            steps_in_phase: 0,
+            descended,
+            phases: Phases::default(),
         })
     }
 
@@ -94,7 +83,7 @@ impl PokeCubeSolver {
 
     /// The current phase (0–5, as solvers.md §7.3).
     pub fn phase(&self) -> usize {
-        self.phase
+        self.phases.phase
     }
 
     /// The TCP target, gripper action and position action limit for this step (phases
@@ -104,16 +93,18 @@ impl PokeCubeSolver {
         let peg = body_xyz(env, self.peg);
         let head = peg_head(peg);
         let grasp = peg + Vector3::new(self.grasp_offset_x, 0.0, self.grasp_lift);
-        let (open, close) = (self.gripper.open, self.gripper.close);
-        loop {
+        let Gripper { open, close } = self.gripper;
+        let descended = self.descended;
+        let (cube0, goal0, push_short) = (self.cube0, self.goal0, self.push_short_of_goal);
+        self.phases.run(|phase, steps| {
             let mut limit = 1.0;
-            let (target, grip, done) = match self.phase {
+            let (target, grip, done) = match phase {
                 0 => {
                     let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
                     (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
                 }
-                1 => (grasp, open, (self.descended)(grasp, tcp)),
-                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
+                1 => (grasp, open, descended(grasp, tcp)),
+                2 => (grasp, close, steps >= CLOSE_STEPS),
                 3 => {
                     let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
                     let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;
@@ -121,21 +112,14 @@ impl PokeCubeSolver {
                 }
                 4 => {
                     limit = PUSH_LIMIT;
-                    let push =
-                        Vector3::new(self.goal0.x - self.push_short_of_goal, self.cube0.y, 0.0);
+                    let push = Vector3::new(goal0.x - push_short, cube0.y, 0.0);
                     let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
                     (shift_xy(tcp, push, head), close, done)
                 }
                 _ => (tcp, close, false),
             };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            return (target, grip, limit);
-        }
+            ((target, grip, limit), done)
+        })
     }
 }
 
@@ -148,8 +132,7 @@ impl Policy for PokeCubeSolver {
     fn reset(&mut self, env: &Env) {
         self.cube0 = body_xyz(env, self.cube);
         self.goal0 = body_xyz(env, self.goal);
-        self.phase = 0;
-        self.steps_in_phase = 0;
+        self.phases.reset();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
