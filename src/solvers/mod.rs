@@ -8,6 +8,7 @@
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
 pub mod fetch;
+pub mod fetch_arm;
 pub mod fetch_tasks;
 pub mod joint_ik;
 pub mod pick_cube;
