@@ -27,15 +27,20 @@ use nalgebra::Vector3;
 use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, PITCH_NEAR,
 };
-use super::{
-    body_xyz, tcp_xyz, Gripper, Phases, Policy, APPROACH_HEIGHT, APPROACH_TOL, CLOSE_STEPS,
-    FETCH_GRIPPER,
-};
+use super::{body_xyz, tcp_xyz, Grasp, Phases, Policy, CLOSE_STEPS, FETCH_GRIPPER};
 use crate::env::Env;
 use crate::tasks::body_id;
 
 /// Orientation tolerance before descending (rad).
 const ROT_TOL: f64 = 0.05;
+/// The grasp phases with the tilted gripper's descent check: along the fingers (≈ x) a
+/// shortfall does not matter, the 6 cm fingers still straddle the cube when the arm stops at
+/// the edge of its reach.
+const GRASP: Grasp = Grasp {
+    gripper: FETCH_GRIPPER,
+    descended: descended_tilted,
+    hold: CLOSE_STEPS,
+};
 /// Torso height while picking and while carrying (m; the table pose has 0.386, the limit
 /// is 0.38615): low to reach down to the table, high to reach up to the goal.
 const TORSO_PICK: f64 = 0.25;
@@ -90,27 +95,17 @@ impl Policy for FetchPickCube {
             self.pitch
         };
         let rot_err = self.arm.rot_err(env, pitch);
-        let Gripper { open, close } = FETCH_GRIPPER;
+        let ready = rot_err < ROT_TOL;
         let hold_offset = &mut self.hold_offset;
         let (target, grip) = self.phases.run(|phase, steps| match phase {
-            0 => {
-                let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                (
-                    (t, open),
-                    (t - tcp).norm() < APPROACH_TOL && rot_err < ROT_TOL,
-                )
-            }
-            // Along the fingers (≈ x) a shortfall does not matter: the 6 cm fingers still
-            // straddle the cube when the arm stops at the edge of its reach.
-            1 => ((grasp, open), descended_tilted(grasp, tcp)),
-            2 => {
-                let done = steps >= CLOSE_STEPS;
-                if done {
+            0..=2 => {
+                let (t, grip, done) = GRASP.phase(phase, steps, grasp, tcp, ready);
+                if phase == 2 && done {
                     *hold_offset = tcp - cube;
                 }
-                ((grasp, close), done)
+                ((t, grip), done)
             }
-            _ => ((goal + *hold_offset, close), false),
+            _ => ((goal + *hold_offset, GRASP.gripper.close), false),
         });
         let torso = if carrying { TORSO_CARRY } else { TORSO_PICK };
         let cmd = ArmCommand {

@@ -262,6 +262,51 @@ fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
     (target - tcp).norm() < DESCEND_TOL
 }
 
+/// Phases 0–2 that every EE-space solver starts with (solvers.md §7): above the grasp point
+/// (open), down to it (open), close for `hold` steps.
+#[derive(Debug, Clone, Copy)]
+pub struct Grasp {
+    /// The robot's gripper commands.
+    pub gripper: Gripper,
+    /// Whether the descent to the grasp point is done (target, tcp).
+    pub descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
+    /// Steps the gripper closes before the object is moved.
+    pub hold: usize,
+}
+
+impl Grasp {
+    /// The spec's grasp: descent within [`DESCEND_TOL`], [`CLOSE_STEPS`] closing steps.
+    pub fn new(gripper: Gripper) -> Self {
+        Grasp {
+            gripper,
+            descended,
+            hold: CLOSE_STEPS,
+        }
+    }
+
+    /// Target, gripper action and done flag of grasp phase `phase` (0–2) after `steps`
+    /// actions in it, for grasp point `point`; `ready`: whether the robot may leave the
+    /// approach (e.g. its gripper is turned).
+    pub fn phase(
+        &self,
+        phase: usize,
+        steps: usize,
+        point: Vector3<f64>,
+        tcp: Vector3<f64>,
+        ready: bool,
+    ) -> (Vector3<f64>, f32, bool) {
+        let Gripper { open, close } = self.gripper;
+        match phase {
+            0 => {
+                let t = point + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
+            }
+            1 => (point, open, (self.descended)(point, tcp)),
+            _ => (point, close, steps >= self.hold),
+        }
+    }
+}
+
 /// Writes the position action `clip(step, −limit, limit)` into `action[0..3]`, where `step`
 /// is a position error already divided by [`ACTION_SCALE`].
 fn write_pos(step: Vector3<f64>, limit: f64, action: &mut [f32]) {

@@ -1,14 +1,9 @@
 //! solvers.md §7.1: the EE-space scripted PickCube policy (`pd_ee_delta_pos`).
 //!
-//! Above the cube, down to it, close for [`CLOSE_STEPS`] steps, carry to the goal. Positions
+//! Above the cube, down to it, close for [`CLOSE_STEPS`](super::CLOSE_STEPS) steps, carry to the goal. Positions
 //! are the robot's `tcp_pose` and the cube and goal centres, read before each step.
 //! Robot-generic: the gripper commands are a parameter.
-use nalgebra::Vector3;
-
-use super::{
-    body_xyz, descended, ee_action, tcp_xyz, Gripper, Phases, Policy, APPROACH_HEIGHT,
-    APPROACH_TOL, CLOSE_STEPS,
-};
+use super::{body_xyz, ee_action, tcp_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
 use crate::tasks::body_id;
 
@@ -17,7 +12,7 @@ use crate::tasks::body_id;
 pub struct PickCubeSolver {
     cube: usize,
     goal: usize,
-    gripper: Gripper,
+    grasp: Grasp,
     phases: Phases,
 }
 
@@ -27,7 +22,7 @@ impl PickCubeSolver {
         Ok(PickCubeSolver {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,
-            gripper,
+            grasp: Grasp::new(gripper),
             phases: Phases::default(),
         })
     }
@@ -42,15 +37,13 @@ impl Policy for PickCubeSolver {
         let tcp = tcp_xyz(env);
         let cube = body_xyz(env, self.cube);
         let goal = body_xyz(env, self.goal);
-        let Gripper { open, close } = self.gripper;
+        let grasp = self.grasp;
         let (target, grip) = self.phases.run(|phase, steps| match phase {
-            0 => {
-                let t = cube + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                ((t, open), (t - tcp).norm() < APPROACH_TOL)
+            0..=2 => {
+                let (t, grip, done) = grasp.phase(phase, steps, cube, tcp, true);
+                ((t, grip), done)
             }
-            1 => ((cube, open), descended(cube, tcp)),
-            2 => ((cube, close), steps >= CLOSE_STEPS),
-            _ => ((goal, close), false),
+            _ => ((goal, grasp.gripper.close), false),
         });
         ee_action(target, tcp, 1.0, grip, action);
     }

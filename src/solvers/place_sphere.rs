@@ -14,10 +14,7 @@
 //! bodies is not emulated (README, Physics).
 use nalgebra::Vector3;
 
-use super::{
-    body_xyz, descended, ee_action, tcp_link_xyz, Gripper, Phases, Policy, APPROACH_HEIGHT,
-    APPROACH_TOL, CLOSE_STEPS,
-};
+use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
 use crate::tasks::body_id;
 
@@ -42,14 +39,12 @@ const RETREAT: f64 = 0.03;
 pub struct PlaceSphereSolver {
     sphere: usize,
     bin: usize,
-    gripper: Gripper,
+    grasp: Grasp,
     /// Height of the grasp point above the sphere centre (m; 0 for a top-down gripper).
     pub grasp_lift: f64,
     /// Horizontal sphere-to-bin distance the release also waits for (m; the Panda's spec
     /// phases do not wait: infinite).
     pub release_align: f64,
-    /// Whether the descent to the grasp point is done (target, tcp).
-    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
     phases: Phases,
 }
 
@@ -59,17 +54,16 @@ impl PlaceSphereSolver {
         Ok(PlaceSphereSolver {
             sphere: body_id(env.model(), "sphere")?,
             bin: body_id(env.model(), "bin")?,
-            gripper,
+            grasp: Grasp::new(gripper),
             grasp_lift: 0.0,
             release_align: f64::INFINITY,
-            descended,
             phases: Phases::default(),
         })
     }
 
     /// The same phases with another descent check (e.g. a tilted gripper's).
     pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
-        self.descended = descended;
+        self.grasp.descended = descended;
         self
     }
 
@@ -84,16 +78,12 @@ impl PlaceSphereSolver {
         let sphere = body_xyz(env, self.sphere);
         let grasp = sphere + Vector3::new(0.0, 0.0, self.grasp_lift);
         let bin = body_xyz(env, self.bin);
-        let Gripper { open, close } = self.gripper;
-        let (descended, release_align) = (self.descended, self.release_align);
+        let g = self.grasp;
+        let (open, close) = (g.gripper.open, g.gripper.close);
+        let release_align = self.release_align;
         self.phases.run(|phase, steps| {
             let (target, grip, done) = match phase {
-                0 => {
-                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
-                }
-                1 => (grasp, open, descended(grasp, tcp)),
-                2 => (grasp, close, steps >= CLOSE_STEPS),
+                0..=2 => g.phase(phase, steps, grasp, tcp, ready),
                 3 => (
                     Vector3::new(tcp.x, tcp.y, LIFT_Z),
                     close,

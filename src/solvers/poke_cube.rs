@@ -13,10 +13,7 @@
 //! and reached" stages before success (upstream's `reached` measures to the peg centre).
 use nalgebra::Vector3;
 
-use super::{
-    body_xyz, descended, ee_action, tcp_link_xyz, Gripper, Phases, Policy, APPROACH_HEIGHT,
-    APPROACH_TOL, CLOSE_STEPS,
-};
+use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
 use crate::tasks::body_id;
 use crate::tasks::poke_cube::peg_head;
@@ -42,7 +39,7 @@ pub struct PokeCubeSolver {
     cube: usize,
     peg: usize,
     goal: usize,
-    gripper: Gripper,
+    grasp: Grasp,
     /// Cube and goal positions at the episode start.
     cube0: Vector3<f64>,
     goal0: Vector3<f64>,
@@ -52,8 +49,6 @@ pub struct PokeCubeSolver {
     pub grasp_lift: f64,
     /// The push stops with the head this far short of the goal centre (m).
     pub push_short_of_goal: f64,
-    /// Whether the descent to the grasp point is done (target, tcp).
-    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
     phases: Phases,
 }
 
@@ -64,20 +59,19 @@ impl PokeCubeSolver {
             cube: body_id(env.model(), "cube")?,
             peg: body_id(env.model(), "peg")?,
             goal: body_id(env.model(), "goal_region")?,
-            gripper,
+            grasp: Grasp::new(gripper),
             cube0: Vector3::zeros(),
             goal0: Vector3::zeros(),
             grasp_offset_x: GRASP_OFFSET_X,
             grasp_lift: 0.0,
             push_short_of_goal: PUSH_SHORT_OF_GOAL,
-            descended,
             phases: Phases::default(),
         })
     }
 
     /// The same phases with another descent check (e.g. a tilted gripper's).
     pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
-        self.descended = descended;
+        self.grasp.descended = descended;
         self
     }
 
@@ -93,18 +87,13 @@ impl PokeCubeSolver {
         let peg = body_xyz(env, self.peg);
         let head = peg_head(peg);
         let grasp = peg + Vector3::new(self.grasp_offset_x, 0.0, self.grasp_lift);
-        let Gripper { open, close } = self.gripper;
-        let descended = self.descended;
+        let g = self.grasp;
+        let close = g.gripper.close;
         let (cube0, goal0, push_short) = (self.cube0, self.goal0, self.push_short_of_goal);
         self.phases.run(|phase, steps| {
             let mut limit = 1.0;
             let (target, grip, done) = match phase {
-                0 => {
-                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
-                }
-                1 => (grasp, open, descended(grasp, tcp)),
-                2 => (grasp, close, steps >= CLOSE_STEPS),
+                0..=2 => g.phase(phase, steps, grasp, tcp, ready),
                 3 => {
                     let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
                     let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;

@@ -14,8 +14,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::{
-    body_quat, body_xyz, descended, tcp_xyz, write_pos, write_rot, Gripper, Phases, Policy,
-    ACTION_SCALE, APPROACH_HEIGHT, APPROACH_TOL, XARM6_ABS_GRIPPER,
+    body_quat, body_xyz, descended, tcp_xyz, write_pos, write_rot, Grasp, Phases, Policy,
+    ACTION_SCALE, XARM6_ABS_GRIPPER,
 };
 use crate::env::Env;
 use crate::tasks::body_id;
@@ -25,6 +25,12 @@ use crate::tasks::body_id;
 const HOLD: usize = 4;
 /// Orientation tolerance before descending (rad).
 const ROT_TOL: f64 = 0.03;
+/// The grasp phases with the absolute gripper.
+const GRASP: Grasp = Grasp {
+    gripper: XARM6_ABS_GRIPPER,
+    descended,
+    hold: HOLD,
+};
 
 /// solvers.md §7.1 for the xArm6, with the gripper turned to the cube's faces.
 #[derive(Debug)]
@@ -83,16 +89,13 @@ impl Policy for Xarm6PickCube {
         let cube = body_xyz(env, self.cube);
         let goal = body_xyz(env, self.goal);
         let rot_err = (self.want * body_quat(env, self.eef).inverse()).scaled_axis();
-        let Gripper { open, close } = XARM6_ABS_GRIPPER;
+        let ready = rot_err.norm() < ROT_TOL;
         let (target, grip) = self.phases.run(|phase, steps| match phase {
-            0 => {
-                let t = cube + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                let done = (t - tcp).norm() < APPROACH_TOL && rot_err.norm() < ROT_TOL;
-                ((t, open), done)
+            0..=2 => {
+                let (t, grip, done) = GRASP.phase(phase, steps, cube, tcp, ready);
+                ((t, grip), done)
             }
-            1 => ((cube, open), descended(cube, tcp)),
-            2 => ((cube, close), steps >= HOLD),
-            _ => ((goal, close), false),
+            _ => ((goal, GRASP.gripper.close), false),
         });
         write_pos((target - tcp) / ACTION_SCALE, 1.0, action);
         write_rot(rot_err, action);
