@@ -43,10 +43,9 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     }
     Some(match robot {
         "so100" | "widowxai" => "pd_joint_pos",
-        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
-        "fetch" => "pd_ee_delta_pose",
-        // The xArm6 turns its gripper to the cube's faces (solvers/xarm6.rs).
-        "xarm6_robotiq" => "pd_ee_delta_pose",
+        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
+        // its gripper to the cube's faces (solvers/xarm6.rs).
+        "fetch" | "xarm6_robotiq" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
