@@ -1,7 +1,7 @@
 //! Scripted PlaceSphere-v1 and PokeCube-v1 solvers for Fetch (control mode
 //! `pd_ee_delta_pose`): the Panda solvers' phases (solvers.md §7.2, §7.3; `place_sphere.rs`,
 //! `poke_cube.rs`) plan the TCP targets, and [`FetchArm`] turns them into Fetch actions the
-//! way the Fetch PickCube solver does (`fetch.rs`: flatter gripper pitch, lowered torso, base
+//! way the Fetch PickCube solver does (`fetch_arm.rs`: flatter gripper pitch, lowered torso, base
 //! a little forward, targets clamped to the arm's reach). The TCP is `gripper_link`
 //! (`agent.tcp` of both tasks).
 //!
@@ -18,12 +18,12 @@
 
 use nalgebra::Vector3;
 
-use super::fetch::{
-    descended, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, FETCH_GRIPPER,
+use super::fetch_arm::{
+    descended_tilted, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm,
 };
 use super::place_sphere::PlaceSphereSolver;
 use super::poke_cube::PokeCubeSolver;
-use super::Policy;
+use super::{body_xyz, Policy, FETCH_GRIPPER};
 use crate::env::Env;
 use crate::tasks::body_id;
 
@@ -51,7 +51,7 @@ pub struct FetchPlaceSphere {
 impl FetchPlaceSphere {
     /// Resolves the bodies of a PlaceSphere env with Fetch.
     pub fn new(env: &Env) -> Result<Self, String> {
-        let mut inner = PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended);
+        let mut inner = PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended_tilted);
         inner.release_align = RELEASE_ALIGN;
         Ok(FetchPlaceSphere {
             inner,
@@ -65,7 +65,7 @@ impl FetchPlaceSphere {
 impl Policy for FetchPlaceSphere {
     fn reset(&mut self, env: &Env) {
         self.inner.reset(env);
-        let sphere = super::body_xyz(env, self.sphere);
+        let sphere = body_xyz(env, self.sphere);
         self.pitch = pitch_for_x(sphere.x);
         self.inner.grasp_lift = (min_tcp_height(self.pitch) - sphere.z).max(0.0);
     }
@@ -140,7 +140,7 @@ impl FetchPokeCube {
 impl Policy for FetchPokeCube {
     fn reset(&mut self, env: &Env) {
         self.inner.reset(env);
-        let peg = super::body_xyz(env, self.peg);
+        let peg = body_xyz(env, self.peg);
         // The flattest pitch: the longest reach along the table (turning the gripper while
         // it holds the peg lifts the peg).
         self.pitch = pitch_for_x(f64::INFINITY);

@@ -18,7 +18,7 @@
 //! Positions are read from MuJoCo before the step; nothing is allocated per step.
 use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
 
-use super::Policy;
+use super::{body_xyz, Phases, Policy, APPROACH_TOL, DESCEND_TOL};
 use crate::controllers::ik::Chain;
 use crate::env::Env;
 use crate::tasks::body_id;
@@ -39,6 +39,8 @@ const MAX_DQ: f64 = 0.2;
 const ITERS: (usize, usize) = (30, 10);
 /// Finite-difference step of the numerical Jacobian (rad or m).
 const FD: f64 = 1e-6;
+/// Steps after which the descent gives up on [`DESCEND_TOL`] and closes anyway.
+const DESCEND_MAX_STEPS: usize = 12;
 
 /// What the solver needs to know about a robot.
 #[derive(Debug, Clone, Copy)]
@@ -97,13 +99,6 @@ pub const WIDOWXAI: JointIkRobot = JointIkRobot {
     hold: 4,
 };
 
-/// Approach tolerance (m).
-const APPROACH_TOL: f64 = 0.01;
-/// Descent tolerance (m).
-const DESCEND_TOL: f64 = 0.004;
-/// Steps after which the descent gives up on the tolerance and closes anyway.
-const DESCEND_MAX_STEPS: usize = 12;
-
 type Jac = SMatrix<f64, ROWS, MAX_ARM>;
 
 /// The PickCube policy for SO100 and WidowX AI in `pd_joint_pos`.
@@ -115,8 +110,7 @@ pub struct JointIkPickCube {
     limits: [(f64, f64); MAX_ARM],
     cube: usize,
     goal: usize,
-    phase: usize,
-    steps_in_phase: usize,
+    phases: Phases,
     /// Horizontal unit normal to the cube face axis the gripper closes along (fixed per
     /// episode at the first step).
     closing_normal: Option<Vector3<f64>>,
@@ -147,8 +141,7 @@ impl JointIkPickCube {
             limits,
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,
-            phase: 0,
-            steps_in_phase: 0,
+            phases: Phases::default(),
             closing_normal: None,
             q: vec![0.0; n],
             q_ik: vec![0.0; n],
@@ -198,34 +191,32 @@ impl JointIkPickCube {
         jac
     }
 
-    fn clamp(&mut self) {
+    /// Moves the arm joints of `q_ik` by `−dq` (shortened to [`MAX_DQ`]) within their limits;
+    /// returns the length of the step taken before the limits.
+    fn descend(&mut self, mut dq: SVector<f64, MAX_ARM>) -> f64 {
+        let norm = dq.norm();
+        if norm > MAX_DQ {
+            dq *= MAX_DQ / norm;
+        }
         for k in 0..self.robot.n_arm {
             let (lo, hi) = self.limits[k];
-            self.q_ik[k] = self.q_ik[k].clamp(lo, hi);
+            self.q_ik[k] = (self.q_ik[k] - dq[k]).clamp(lo, hi);
         }
+        dq.norm()
     }
 
     /// Solves for the arm joints (written into `q_ik`, starting from `q`) that put the grasp
     /// point at `target` with the gripper top-down and closing perpendicular to `n`.
     fn solve(&mut self, target: &Vector3<f64>, n: &Vector3<f64>) {
         self.q_ik.copy_from_slice(&self.q);
-        let k = self.robot.n_arm;
         for _ in 0..ITERS.0 {
             let e = self.error(&self.q_ik, target, n);
             let jac = self.jacobian(target, n, &e);
             let jtj =
                 jac.transpose() * jac + SMatrix::<f64, MAX_ARM, MAX_ARM>::identity() * DAMPING;
             let Some(ch) = jtj.cholesky() else { break };
-            let mut dq = ch.solve(&(jac.transpose() * e));
-            let norm = dq.norm();
-            if norm > MAX_DQ {
-                dq *= MAX_DQ / norm;
-            }
-            for i in 0..k {
-                self.q_ik[i] -= dq[i];
-            }
-            self.clamp();
-            if dq.norm() < 1e-9 {
+            let dq = ch.solve(&(jac.transpose() * e));
+            if self.descend(dq) < 1e-9 {
                 break;
             }
         }
@@ -236,15 +227,7 @@ impl JointIkPickCube {
             let jjt = jp * jp.transpose() + nalgebra::Matrix3::identity() * DAMPING;
             let Some(ch) = jjt.cholesky() else { break };
             let ep = e.fixed_rows::<3>(0).into_owned();
-            let mut dq = jp.transpose() * ch.solve(&ep);
-            let norm = dq.norm();
-            if norm > MAX_DQ {
-                dq *= MAX_DQ / norm;
-            }
-            for i in 0..k {
-                self.q_ik[i] -= dq[i];
-            }
-            self.clamp();
+            self.descend(jp.transpose() * ch.solve(&ep));
             if ep.norm() < 1e-6 {
                 break;
             }
@@ -263,10 +246,6 @@ impl JointIkPickCube {
     }
 }
 
-fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
-    Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
-}
-
 /// The cube face axis (world, horizontal) the gripper should close along: of the cube's x
 /// and y axes, the one closer to the current closing axis. Returns its horizontal normal.
 fn closing_normal(env: &Env, cube: usize, closing: &Vector3<f64>) -> Vector3<f64> {
@@ -283,8 +262,7 @@ fn closing_normal(env: &Env, cube: usize, closing: &Vector3<f64>) -> Vector3<f64
 
 impl Policy for JointIkPickCube {
     fn reset(&mut self, _env: &Env) {
-        self.phase = 0;
-        self.steps_in_phase = 0;
+        self.phases.reset();
         self.closing_normal = None;
     }
 
@@ -297,28 +275,22 @@ impl Policy for JointIkPickCube {
             .closing_normal
             .get_or_insert_with(|| closing_normal(env, self.cube, &c));
         let r = self.robot;
-        let (target, close) = loop {
-            let (target, close) = match self.phase {
+        let (target, close) = self.phases.run(|phase, steps| {
+            let (target, close) = match phase {
                 0 => (cube + Vector3::new(0.0, 0.0, r.approach_height), false),
                 1 => (cube + Vector3::new(0.0, 0.0, r.grasp_height), false),
                 2 => (p, true),
                 _ => (goal + (p - cube), true),
             };
             let err = (target - p).norm();
-            let done = match self.phase {
+            let done = match phase {
                 0 => err < APPROACH_TOL,
-                1 => err < DESCEND_TOL || self.steps_in_phase >= DESCEND_MAX_STEPS,
-                2 => self.steps_in_phase >= r.hold,
+                1 => err < DESCEND_TOL || steps >= DESCEND_MAX_STEPS,
+                2 => steps >= r.hold,
                 _ => false,
             };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            break (target, close);
-        };
+            ((target, close), done)
+        });
         let d = target - p;
         let step = if d.norm() > MAX_STEP {
             p + d * (MAX_STEP / d.norm())
@@ -326,7 +298,7 @@ impl Policy for JointIkPickCube {
             target
         };
         // While closing, the arm keeps its last targets.
-        if self.phase != 2 {
+        if self.phases.phase != 2 {
             self.solve(&step, &n);
         }
         for (a, q) in action.iter_mut().zip(&self.q_ik).take(r.n_arm) {

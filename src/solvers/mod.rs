@@ -7,19 +7,19 @@
 //! that phase, counting the step on which it was entered (the spec's [audited] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
+pub mod fetch;
+pub mod fetch_arm;
+pub mod fetch_tasks;
 pub mod joint_ik;
+pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;
 pub mod xarm6;
 
-use nalgebra::Vector3;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
 use crate::env::Env;
-use crate::tasks::body_id;
-
-pub mod fetch;
-pub mod fetch_tasks;
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -43,10 +43,9 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     }
     Some(match robot {
         "so100" | "widowxai" => "pd_joint_pos",
-        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs).
-        "fetch" => "pd_ee_delta_pose",
-        // The xArm6 turns its gripper to the cube's faces (solvers/xarm6.rs).
-        "xarm6_robotiq" => "pd_ee_delta_pose",
+        // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
+        // its gripper to the cube's faces (solvers/xarm6.rs).
+        "fetch" | "xarm6_robotiq" => "pd_ee_delta_pose",
         _ => "pd_ee_delta_pos",
     })
 }
@@ -94,7 +93,7 @@ impl Policy for Random {
     }
 }
 
-/// The (env id, robot) pairs that have a scripted solver.
+/// The (env id, robot) pairs that have a scripted solver (the arms of [`solver`]'s match).
 pub const SOLVED: [(&str, &str); 11] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
@@ -108,6 +107,11 @@ pub const SOLVED: [(&str, &str); 11] = [
     ("PokeCube-v1", "panda"),
     ("PokeCube-v1", "fetch"),
 ];
+
+/// Boxes a freshly built solver.
+fn boxed<P: Policy + 'static>(policy: Result<P, String>) -> Result<Box<dyn Policy>, String> {
+    Ok(Box::new(policy?))
+}
 
 /// Which scripted solver fits an (env, robot) pair.
 fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
@@ -124,29 +128,21 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ));
     }
     match (env.id(), robot) {
-        ("PickCube-v1", "panda") => Ok(Box::new(PickCubeSolver::new(
-            env,
-            PANDA_GRIPPER,
-            PICK_HOLD_PANDA,
-        )?)),
-        ("PickCube-v1", "xarm6_robotiq") => Ok(Box::new(xarm6::Xarm6PickCube::new(env)?)),
-        ("PlaceSphere-v1", "panda") => Ok(Box::new(place_sphere::PlaceSphereSolver::new(
-            env,
-            PANDA_GRIPPER,
-        )?)),
-        ("PokeCube-v1", "panda") => Ok(Box::new(poke_cube::PokeCubeSolver::new(
-            env,
-            PANDA_GRIPPER,
-        )?)),
-        ("PickCube-v1" | "PickCubeSO100-v1", "so100") => Ok(Box::new(
-            joint_ik::JointIkPickCube::new(env, joint_ik::SO100)?,
-        )),
-        ("PickCube-v1" | "PickCubeWidowXAI-v1", "widowxai") => Ok(Box::new(
-            joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI)?,
-        )),
-        ("PickCube-v1", "fetch") => Ok(Box::new(fetch::FetchPickCube::new(env)?)),
-        ("PlaceSphere-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPlaceSphere::new(env)?)),
-        ("PokeCube-v1", "fetch") => Ok(Box::new(fetch_tasks::FetchPokeCube::new(env)?)),
+        ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(env, PANDA_GRIPPER)),
+        ("PickCube-v1", "fetch") => boxed(fetch::FetchPickCube::new(env)),
+        ("PickCube-v1", "xarm6_robotiq") => boxed(xarm6::Xarm6PickCube::new(env)),
+        ("PickCube-v1" | "PickCubeSO100-v1", "so100") => {
+            boxed(joint_ik::JointIkPickCube::new(env, joint_ik::SO100))
+        }
+        ("PickCube-v1" | "PickCubeWidowXAI-v1", "widowxai") => {
+            boxed(joint_ik::JointIkPickCube::new(env, joint_ik::WIDOWXAI))
+        }
+        ("PlaceSphere-v1", "panda") => {
+            boxed(place_sphere::PlaceSphereSolver::new(env, PANDA_GRIPPER))
+        }
+        ("PlaceSphere-v1", "fetch") => boxed(fetch_tasks::FetchPlaceSphere::new(env)),
+        ("PokeCube-v1", "panda") => boxed(poke_cube::PokeCubeSolver::new(env, PANDA_GRIPPER)),
+        ("PokeCube-v1", "fetch") => boxed(fetch_tasks::FetchPokeCube::new(env)),
         (id, r) => Err(format!(
             "no scripted solver for {id} with {r}; available: {}",
             SOLVED
@@ -158,7 +154,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     }
 }
 
-/// Gripper commands (open, close) of a robot's normalised gripper action.
+/// Gripper commands (open, close) of a robot's gripper action.
 #[derive(Debug, Clone, Copy)]
 pub struct Gripper {
     /// Action value that opens.
@@ -173,70 +169,77 @@ pub const PANDA_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
-/// xArm6 + Robotiq in `pd_ee_delta_pos`: the gripper action is a ±0.15 rad knuckle delta, so
-/// −1 opens and +1 closes (solvers.md §7.1; the `solver` policy uses `xarm6::Xarm6PickCube`).
-pub const XARM6_GRIPPER: Gripper = Gripper {
-    open: -1.0,
-    close: 1.0,
+/// Fetch: +1 opens (0.05 m), −1 closes (−0.01 m target).
+pub const FETCH_GRIPPER: Gripper = Gripper {
+    open: 1.0,
+    close: -1.0,
 };
+
+/// xArm6 + Robotiq in `pd_ee_delta_pose`: the absolute gripper (robots.md §4) takes target
+/// 0 rad (open) and 0.81 rad (closed).
+pub const XARM6_ABS_GRIPPER: Gripper = Gripper {
+    open: 0.0,
+    close: 0.81,
+};
+
+/// Height of the approach point above the grasp point (m; the grasp phases of solvers.md §7).
+pub const APPROACH_HEIGHT: f64 = 0.05;
+/// Approach tolerance (m).
+pub const APPROACH_TOL: f64 = 0.01;
+/// Descent tolerance (m).
+pub const DESCEND_TOL: f64 = 0.004;
+/// Steps the gripper closes before the object is moved (Panda, Fetch).
+pub const CLOSE_STEPS: usize = 3;
 
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
+/// Rotation per unit action of `pd_ee_delta_pose` (rad; upstream scales by rot_lower = −0.1,
+/// controllers.md §1, so +1 turns −0.1 rad).
+const ROT_SCALE: f64 = -0.1;
 
-/// Writes `clip((target − tcp)/0.1, −limit, limit)` and the gripper value.
-fn ee_action(
-    target: Vector3<f64>,
-    tcp: Vector3<f64>,
-    limit: f64,
-    gripper: f32,
-    action: &mut [f32],
-) {
-    for k in 0..3 {
-        action[k] = ((target[k] - tcp[k]) / ACTION_SCALE).clamp(-limit, limit) as f32;
+/// Phase bookkeeping of the scripted solvers: phases are checked in order and fall through
+/// within one step; "k steps in a phase" counts the actions issued in it, including the one
+/// of the step on which it was entered.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Phases {
+    /// The current phase.
+    pub phase: usize,
+    /// Actions issued in the current phase.
+    pub steps: usize,
+}
+
+impl Phases {
+    /// Back to phase 0 (episode start).
+    pub fn reset(&mut self) {
+        *self = Phases::default();
     }
-    action[3] = gripper;
-}
 
-/// solvers.md §7.1: above the cube, down to it, close for H steps, carry to the goal.
-#[derive(Debug)]
-pub struct PickCubeSolver {
-    cube: usize,
-    goal: usize,
-    gripper: Gripper,
-    /// Steps to hold the closing gripper before lifting.
-    hold: usize,
-    phase: usize,
-    steps_in_phase: usize,
-}
-
-/// Lift-off height above the cube for the approach (m).
-const PICK_APPROACH_HEIGHT: f64 = 0.05;
-/// Approach tolerance (m).
-const PICK_APPROACH_TOL: f64 = 0.01;
-/// Descent tolerance (m).
-const PICK_DESCEND_TOL: f64 = 0.004;
-/// Panda: steps the gripper closes before lifting.
-pub const PICK_HOLD_PANDA: usize = 3;
-/// xArm6 + Robotiq: steps the gripper closes before lifting (0.15 rad per step).
-pub const PICK_HOLD_XARM6: usize = 8;
-
-impl PickCubeSolver {
-    /// Resolves the cube and goal bodies of a PickCube env; `hold` is the number of steps the
-    /// gripper closes before the lift.
-    pub fn new(env: &Env, gripper: Gripper, hold: usize) -> Result<Self, String> {
-        Ok(PickCubeSolver {
-            cube: body_id(env.model(), "cube")?,
-            goal: body_id(env.model(), "goal_site")?,
-            gripper,
-            hold,
-            phase: 0,
-            steps_in_phase: 0,
-        })
+    /// Runs one step: `plan(phase, steps)` gives this step's output and whether the phase is
+    /// done; done phases are left (falling through to the next in the same step) until one
+    /// is not, whose output is returned and counted as an action of that phase.
+    pub fn run<T>(&mut self, mut plan: impl FnMut(usize, usize) -> (T, bool)) -> T {
+        loop {
+            let (out, done) = plan(self.phase, self.steps);
+            if done {
+                self.phase += 1;
+                self.steps = 0;
+                continue;
+            }
+            self.steps += 1;
+            return out;
+        }
     }
 }
 
-fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
+/// A body's world position, read from MuJoCo.
+pub fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
     Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
+}
+
+/// A body's world orientation, read from MuJoCo.
+pub fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
+    let q = &env.data().xquat()[4 * body..4 * body + 4];
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
 /// `agent.tcp.pose.p`: the TCP link's position (PlaceSphere, PokeCube), or `tcp_pose` for a
@@ -244,44 +247,91 @@ fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
 fn tcp_link_xyz(env: &Env) -> Vector3<f64> {
     match env.robot().tcp_body {
         Some(b) => body_xyz(env, b),
-        None => Vector3::from(env.robot().tcp_pose(env.data()).0),
+        None => tcp_xyz(env),
     }
 }
 
-impl Policy for PickCubeSolver {
-    fn reset(&mut self, _env: &Env) {
-        self.phase = 0;
-        self.steps_in_phase = 0;
-    }
+/// The robot's TCP position (`tcp_pose`).
+fn tcp_xyz(env: &Env) -> Vector3<f64> {
+    Vector3::from(env.robot().tcp_pose(env.data()).0)
+}
 
-    fn act(&mut self, env: &Env, action: &mut [f32]) {
-        let tcp = Vector3::from(env.robot().tcp_pose(env.data()).0);
-        let cube = body_xyz(env, self.cube);
-        let goal = body_xyz(env, self.goal);
-        loop {
-            let (target, grip) = match self.phase {
-                0 => (
-                    cube + Vector3::new(0.0, 0.0, PICK_APPROACH_HEIGHT),
-                    self.gripper.open,
-                ),
-                1 => (cube, self.gripper.open),
-                2 => (cube, self.gripper.close),
-                _ => (goal, self.gripper.close),
-            };
-            let done = match self.phase {
-                0 => (target - tcp).norm() < PICK_APPROACH_TOL,
-                1 => (target - tcp).norm() < PICK_DESCEND_TOL,
-                2 => self.steps_in_phase >= self.hold,
-                _ => false,
-            };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            ee_action(target, tcp, 1.0, grip, action);
-            return;
+/// The descent onto the grasp point is done: within [`DESCEND_TOL`] (Panda, xArm6).
+fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    (target - tcp).norm() < DESCEND_TOL
+}
+
+/// Phases 0–2 that every EE-space solver starts with (solvers.md §7): above the grasp point
+/// (open), down to it (open), close for `hold` steps.
+#[derive(Debug, Clone, Copy)]
+pub struct Grasp {
+    /// The robot's gripper commands.
+    pub gripper: Gripper,
+    /// Whether the descent to the grasp point is done (target, tcp).
+    pub descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
+    /// Steps the gripper closes before the object is moved.
+    pub hold: usize,
+}
+
+impl Grasp {
+    /// The spec's grasp: descent within [`DESCEND_TOL`], [`CLOSE_STEPS`] closing steps.
+    pub fn new(gripper: Gripper) -> Self {
+        Grasp {
+            gripper,
+            descended,
+            hold: CLOSE_STEPS,
         }
     }
+
+    /// Target, gripper action and done flag of grasp phase `phase` (0–2) after `steps`
+    /// actions in it, for grasp point `point`; `ready`: whether the robot may leave the
+    /// approach (e.g. its gripper is turned).
+    pub fn phase(
+        &self,
+        phase: usize,
+        steps: usize,
+        point: Vector3<f64>,
+        tcp: Vector3<f64>,
+        ready: bool,
+    ) -> (Vector3<f64>, f32, bool) {
+        let Gripper { open, close } = self.gripper;
+        match phase {
+            0 => {
+                let t = point + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
+            }
+            1 => (point, open, (self.descended)(point, tcp)),
+            _ => (point, close, steps >= self.hold),
+        }
+    }
+}
+
+/// Writes the position action `clip(step, −limit, limit)` into `action[0..3]`, where `step`
+/// is a position error already divided by [`ACTION_SCALE`].
+fn write_pos(step: Vector3<f64>, limit: f64, action: &mut [f32]) {
+    for k in 0..3 {
+        action[k] = step[k].clamp(-limit, limit) as f32;
+    }
+}
+
+/// Writes `clip((target − tcp)/0.1, −limit, limit)` and the gripper value (`pd_ee_delta_pos`).
+fn ee_action(
+    target: Vector3<f64>,
+    tcp: Vector3<f64>,
+    limit: f64,
+    gripper: f32,
+    action: &mut [f32],
+) {
+    write_pos((target - tcp) / ACTION_SCALE, limit, action);
+    action[3] = gripper;
+}
+
+/// Writes the rotation action of `pd_ee_delta_pose` into `action[3..6]` for an orientation
+/// error `rot_err` (scaled axis, rad): divided by [`ROT_SCALE`] and scaled down to norm ≤ 1.
+fn write_rot(rot_err: Vector3<f64>, action: &mut [f32]) {
+    let mut r = rot_err / ROT_SCALE;
+    if r.norm() > 1.0 {
+        r /= r.norm();
+    }
+    action[3..6].copy_from_slice(&[r.x as f32, r.y as f32, r.z as f32]);
 }

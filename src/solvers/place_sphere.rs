@@ -14,18 +14,10 @@
 //! bodies is not emulated (README, Physics).
 use nalgebra::Vector3;
 
-use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
+use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
 use crate::tasks::body_id;
 
-/// Approach height above the sphere (m).
-const APPROACH_HEIGHT: f64 = 0.05;
-/// Approach tolerance (m).
-const APPROACH_TOL: f64 = 0.01;
-/// Descent tolerance (m).
-const DESCEND_TOL: f64 = 0.004;
-/// Steps the gripper closes before lifting.
-const CLOSE_STEPS: usize = 3;
 /// Carrying height of the TCP (m) and its tolerance.
 const LIFT_Z: f64 = 0.08;
 const LIFT_TOL: f64 = 0.01;
@@ -47,20 +39,13 @@ const RETREAT: f64 = 0.03;
 pub struct PlaceSphereSolver {
     sphere: usize,
     bin: usize,
-    gripper: Gripper,
+    grasp: Grasp,
     /// Height of the grasp point above the sphere centre (m; 0 for a top-down gripper).
     pub grasp_lift: f64,
     /// Horizontal sphere-to-bin distance the release also waits for (m; the Panda's spec
     /// phases do not wait: infinite).
     pub release_align: f64,
-    /// Whether the descent to the grasp point is done (target, tcp).
-    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
-    phase: usize,
-    steps_in_phase: usize,
-}
-
-fn descended_panda(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
-    (target - tcp).norm() < DESCEND_TOL
+    phases: Phases,
 }
 
 impl PlaceSphereSolver {
@@ -69,24 +54,22 @@ impl PlaceSphereSolver {
         Ok(PlaceSphereSolver {
             sphere: body_id(env.model(), "sphere")?,
             bin: body_id(env.model(), "bin")?,
-            gripper,
+            grasp: Grasp::new(gripper),
             grasp_lift: 0.0,
             release_align: f64::INFINITY,
-            descended: descended_panda,
-            phase: 0,
-            steps_in_phase: 0,
+            phases: Phases::default(),
         })
     }
 
     /// The same phases with another descent check (e.g. a tilted gripper's).
     pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
-        self.descended = descended;
+        self.grasp.descended = descended;
         self
     }
 
     /// The current phase (0–7, as solvers.md §7.2).
     pub fn phase(&self) -> usize {
-        self.phase
+        self.phases.phase
     }
 
     /// The TCP target and gripper action for this step (phases advance with fall-through);
@@ -95,15 +78,12 @@ impl PlaceSphereSolver {
         let sphere = body_xyz(env, self.sphere);
         let grasp = sphere + Vector3::new(0.0, 0.0, self.grasp_lift);
         let bin = body_xyz(env, self.bin);
-        let (open, close) = (self.gripper.open, self.gripper.close);
-        loop {
-            let (target, grip, done) = match self.phase {
-                0 => {
-                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
-                }
-                1 => (grasp, open, (self.descended)(grasp, tcp)),
-                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
+        let g = self.grasp;
+        let (open, close) = (g.gripper.open, g.gripper.close);
+        let release_align = self.release_align;
+        self.phases.run(|phase, steps| {
+            let (target, grip, done) = match phase {
+                0..=2 => g.phase(phase, steps, grasp, tcp, ready),
                 3 => (
                     Vector3::new(tcp.x, tcp.y, LIFT_Z),
                     close,
@@ -119,26 +99,19 @@ impl PlaceSphereSolver {
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
                     sphere.z - bin.z < RELEASE_BELOW
-                        && (sphere.xy() - bin.xy()).norm() < self.release_align,
+                        && (sphere.xy() - bin.xy()).norm() < release_align,
                 ),
-                6 => (tcp, open, self.steps_in_phase >= OPEN_STEPS),
+                6 => (tcp, open, steps >= OPEN_STEPS),
                 _ => (tcp + Vector3::new(0.0, 0.0, RETREAT), open, false),
             };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            return (target, grip);
-        }
+            ((target, grip), done)
+        })
     }
 }
 
 impl Policy for PlaceSphereSolver {
     fn reset(&mut self, _env: &Env) {
-        self.phase = 0;
-        self.steps_in_phase = 0;
+        self.phases.reset();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {

@@ -13,21 +13,13 @@
 //! and reached" stages before success (upstream's `reached` measures to the peg centre).
 use nalgebra::Vector3;
 
-use super::{body_xyz, ee_action, tcp_link_xyz, Gripper, Policy};
+use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
 use crate::tasks::body_id;
 use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
 const GRASP_OFFSET_X: f64 = -0.08;
-/// Approach height above the grasp point (m).
-const APPROACH_HEIGHT: f64 = 0.05;
-/// Approach tolerance (m).
-const APPROACH_TOL: f64 = 0.01;
-/// Descent tolerance (m).
-const DESCEND_TOL: f64 = 0.004;
-/// Steps the gripper closes before moving.
-const CLOSE_STEPS: usize = 3;
 /// Half diagonal of the cube's footprint (m): clears the cube at any yaw.
 const CUBE_HALF_DIAGONAL: f64 = 0.0283;
 /// Gap between the head and the cube before the push (m).
@@ -47,7 +39,7 @@ pub struct PokeCubeSolver {
     cube: usize,
     peg: usize,
     goal: usize,
-    gripper: Gripper,
+    grasp: Grasp,
     /// Cube and goal positions at the episode start.
     cube0: Vector3<f64>,
     goal0: Vector3<f64>,
@@ -57,14 +49,7 @@ pub struct PokeCubeSolver {
     pub grasp_lift: f64,
     /// The push stops with the head this far short of the goal centre (m).
     pub push_short_of_goal: f64,
-    /// Whether the descent to the grasp point is done (target, tcp).
-    descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
-    phase: usize,
-    steps_in_phase: usize,
-}
-
-fn descended_panda(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
-    (target - tcp).norm() < DESCEND_TOL
+    phases: Phases,
 }
 
 impl PokeCubeSolver {
@@ -74,27 +59,25 @@ impl PokeCubeSolver {
             cube: body_id(env.model(), "cube")?,
             peg: body_id(env.model(), "peg")?,
             goal: body_id(env.model(), "goal_region")?,
-            gripper,
+            grasp: Grasp::new(gripper),
             cube0: Vector3::zeros(),
             goal0: Vector3::zeros(),
             grasp_offset_x: GRASP_OFFSET_X,
             grasp_lift: 0.0,
             push_short_of_goal: PUSH_SHORT_OF_GOAL,
-            descended: descended_panda,
-            phase: 0,
-            steps_in_phase: 0,
+            phases: Phases::default(),
         })
     }
 
     /// The same phases with another descent check (e.g. a tilted gripper's).
     pub fn with_descent(mut self, descended: fn(Vector3<f64>, Vector3<f64>) -> bool) -> Self {
-        self.descended = descended;
+        self.grasp.descended = descended;
         self
     }
 
     /// The current phase (0–5, as solvers.md §7.3).
     pub fn phase(&self) -> usize {
-        self.phase
+        self.phases.phase
     }
 
     /// The TCP target, gripper action and position action limit for this step (phases
@@ -104,16 +87,13 @@ impl PokeCubeSolver {
         let peg = body_xyz(env, self.peg);
         let head = peg_head(peg);
         let grasp = peg + Vector3::new(self.grasp_offset_x, 0.0, self.grasp_lift);
-        let (open, close) = (self.gripper.open, self.gripper.close);
-        loop {
+        let g = self.grasp;
+        let close = g.gripper.close;
+        let (cube0, goal0, push_short) = (self.cube0, self.goal0, self.push_short_of_goal);
+        self.phases.run(|phase, steps| {
             let mut limit = 1.0;
-            let (target, grip, done) = match self.phase {
-                0 => {
-                    let t = grasp + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
-                    (t, open, ready && (t - tcp).norm() < APPROACH_TOL)
-                }
-                1 => (grasp, open, (self.descended)(grasp, tcp)),
-                2 => (grasp, close, self.steps_in_phase >= CLOSE_STEPS),
+            let (target, grip, done) = match phase {
+                0..=2 => g.phase(phase, steps, grasp, tcp, ready),
                 3 => {
                     let pre = Vector3::new(cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP, cube.y, 0.0);
                     let done = (pre.xy() - head.xy()).norm() < PRE_PUSH_TOL;
@@ -121,21 +101,14 @@ impl PokeCubeSolver {
                 }
                 4 => {
                     limit = PUSH_LIMIT;
-                    let push =
-                        Vector3::new(self.goal0.x - self.push_short_of_goal, self.cube0.y, 0.0);
+                    let push = Vector3::new(goal0.x - push_short, cube0.y, 0.0);
                     let done = (push.xy() - head.xy()).norm() < PUSH_TOL;
                     (shift_xy(tcp, push, head), close, done)
                 }
                 _ => (tcp, close, false),
             };
-            if done {
-                self.phase += 1;
-                self.steps_in_phase = 0;
-                continue;
-            }
-            self.steps_in_phase += 1;
-            return (target, grip, limit);
-        }
+            ((target, grip, limit), done)
+        })
     }
 }
 
@@ -148,8 +121,7 @@ impl Policy for PokeCubeSolver {
     fn reset(&mut self, env: &Env) {
         self.cube0 = body_xyz(env, self.cube);
         self.goal0 = body_xyz(env, self.goal);
-        self.phase = 0;
-        self.steps_in_phase = 0;
+        self.phases.reset();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
