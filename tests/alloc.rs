@@ -110,5 +110,29 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         0,
         "rgbd step or render allocated"
     );
+    // Fetch renders its two mounted cameras too, into buffers of their own.
+    let config = mjskill::EnvConfig {
+        robot: Some("fetch".into()),
+        obs_mode: mjskill::ObsMode::Rgbd,
+        ..Default::default()
+    };
+    let mut env = mjskill::make("PickCube-v1", config).unwrap();
+    let a = vec![0.1f32; env.action_space().shape[0]];
+    env.step(&a).unwrap();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    for _ in 0..3 {
+        env.step(&a).unwrap();
+        for cam in ["fetch_head", "fetch_hand"] {
+            let img = env.image(cam).unwrap();
+            sum += img.rgb.unwrap()[0] as u64 + img.depth.unwrap()[0] as u64;
+        }
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        0,
+        "fetch rgbd step allocated"
+    );
     std::hint::black_box(sum);
 }

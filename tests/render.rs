@@ -438,3 +438,128 @@ fn visual_envs_render_on_vec_env_worker_threads() {
         assert_eq!(v.obs_of(i), e.obs(), "env {i}");
     }
 }
+
+fn fetch_env(mode: ObsMode, seed: u64) -> Env {
+    let mut e = make(
+        "PickCube-v1",
+        EnvConfig {
+            robot: Some("fetch".into()),
+            obs_mode: mode,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    e.reset(Some(seed));
+    e
+}
+
+/// MuJoCo camera pose (position, rotation with columns right, up, backward).
+fn camera_pose(env: &Env, name: &str) -> (Vector3<f64>, Matrix3<f64>) {
+    let id = env.model().require_id(ObjType::Camera, name).unwrap();
+    let d = env.data();
+    let p = &d.cam_xpos()[3 * id..3 * id + 3];
+    (
+        Vector3::new(p[0], p[1], p[2]),
+        Matrix3::from_row_slice(&d.cam_xmat()[9 * id..9 * id + 9]),
+    )
+}
+
+#[test]
+fn fetch_cameras_sit_on_their_links_and_look_along_the_link_x_axis() {
+    let mut e = fetch_env(ObsMode::Rgb, 0);
+    // Move the head and arm so that the link frames are not axis-aligned.
+    let a: Vec<f32> = (0..e.action_space().shape[0])
+        .map(|i| 0.3 * (i as f32 + 1.0).sin())
+        .collect();
+    for _ in 0..3 {
+        e.step(&a).unwrap();
+    }
+    assert_eq!(
+        e.sensor_names(),
+        vec!["base_camera", "fetch_head", "fetch_hand"]
+    );
+    for (cam, link, offset) in [
+        ("fetch_head", "head_camera_link", Vector3::zeros()),
+        ("fetch_hand", "gripper_link", Vector3::new(-0.1, 0.0, 0.1)),
+    ] {
+        let (lp, lr) = body(&e, link);
+        let (cp, cr) = camera_pose(&e, cam);
+        assert!(
+            (cp - (lp + lr * offset)).norm() < 1e-9,
+            "{cam}: {cp} vs link {lp}"
+        );
+        // SAPIEN's camera frame (forward, left, up) = the link's (x, y, z): MuJoCo's camera
+        // looks along its −z with +y up and +x right.
+        let (fwd, left, up) = (lr.column(0), lr.column(1), lr.column(2));
+        assert!(
+            (-cr.column(2) - fwd).norm() < 1e-9,
+            "{cam} looks along the link's +x"
+        );
+        assert!(
+            (cr.column(1) - up).norm() < 1e-9,
+            "{cam}: up is the link's +z"
+        );
+        assert!(
+            (cr.column(0) + left).norm() < 1e-9,
+            "{cam}: right is the link's −y"
+        );
+        assert!(lr.column(0).z.abs() < 0.999, "the link frame is tilted");
+        let id = e.model().require_id(ObjType::Camera, cam).unwrap();
+        assert!((e.model().cam_fovy()[id] - 2f64.to_degrees()).abs() < 1e-9);
+    }
+    // The head is turned away from the world axes by the body action.
+    let (_, head) = body(&e, "head_camera_link");
+    assert!((head.column(0) - Vector3::x()).norm() > 0.01);
+}
+
+#[test]
+fn fetch_camera_images_exist_differ_and_are_deterministic() {
+    let mut e = fetch_env(ObsMode::Rgb, 1);
+    let imgs: Vec<Vec<u8>> = ["base_camera", "fetch_head", "fetch_hand"]
+        .iter()
+        .map(|n| {
+            let img = e.image(n).unwrap();
+            assert_eq!((img.name, img.width, img.height), (*n, 128, 128));
+            assert!(img.depth.is_none());
+            let rgb = img.rgb.unwrap();
+            assert_eq!(rgb.len(), 128 * 128 * 3);
+            rgb.to_vec()
+        })
+        .collect();
+    assert_ne!(imgs[0], imgs[1]);
+    assert_ne!(imgs[0], imgs[2]);
+    assert_ne!(imgs[1], imgs[2]);
+    // The hand camera looks down at the table from behind the gripper and sees the cube.
+    let reds = imgs[2]
+        .chunks(3)
+        .filter(|c| is_red([c[0], c[1], c[2]]))
+        .count();
+    assert!(reds > 0, "the cube is in the hand camera's view");
+    // Same state ⇒ same images; a step changes the hand view.
+    let s = e.get_state();
+    let a = vec![0.5f32; e.action_space().shape[0]];
+    e.step(&a).unwrap();
+    assert_ne!(e.image("fetch_hand").unwrap().rgb.unwrap(), &imgs[2][..]);
+    e.set_state(&s).unwrap();
+    for (n, img) in ["base_camera", "fetch_head", "fetch_hand"]
+        .iter()
+        .zip(&imgs)
+    {
+        assert_eq!(e.image(n).unwrap().rgb.unwrap(), &img[..], "{n}");
+    }
+    let f = fetch_env(ObsMode::Rgb, 1);
+    assert_eq!(f.image("fetch_head").unwrap().rgb.unwrap(), &imgs[1][..]);
+    // Depth modes give the robot cameras depth too; state modes and Panda have none.
+    let d = fetch_env(ObsMode::Depth, 1);
+    let hd = d.image("fetch_hand").unwrap();
+    assert!(hd.rgb.is_none());
+    assert!(hd
+        .depth
+        .unwrap()
+        .iter()
+        .all(|z| z.is_finite() && *z >= 0.01 && *z <= 100.0));
+    assert!(fetch_env(ObsMode::State, 1).image("fetch_head").is_none());
+    let p = env(ObsMode::Rgb, 1);
+    assert!(p.image("fetch_head").is_none());
+    assert_eq!(p.sensor_names(), vec!["base_camera"]);
+}

@@ -192,8 +192,8 @@ pub enum Command {
         /// Reset seed.
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Camera: the human render camera (render_camera, 512x512) or the sensor camera
-        /// (base_camera, 128x128).
+        /// Camera: the human render camera (render_camera, 512x512), the sensor camera
+        /// (base_camera, 128x128) or a robot camera (Fetch: fetch_head, fetch_hand).
         #[arg(long, default_value = "render_camera")]
         camera: String,
         /// Output PNG file.

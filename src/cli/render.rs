@@ -26,7 +26,7 @@ pub struct RenderSummary {
 }
 
 /// Resets `env_id` with `seed` and writes the frame of `camera` (the task's human render
-/// camera or its sensor camera, by name) to `out` as PNG.
+/// camera, its sensor camera or a robot-mounted camera, by name) to `out` as PNG.
 pub fn run(
     env_id: &str,
     config: EnvConfig,
@@ -36,25 +36,33 @@ pub fn run(
 ) -> Result<RenderSummary, String> {
     let probe = make(env_id, config.clone()).map_err(|e| e.to_string())?;
     let (sensor, human) = probe.cameras();
+    let mounted = probe.robot_spec().cameras;
     drop(probe);
     let (rgb, (w, h), robot) = if camera == human.name {
         let mut env = make(env_id, config).map_err(|e| e.to_string())?;
         env.reset(Some(seed));
         let frame = env.render().map_err(|e| e.to_string())?.to_vec();
         (frame, human.size, env.robot_spec().uid)
-    } else if camera == sensor.name {
+    } else if camera == sensor.name || mounted.iter().any(|c| c.name == camera) {
         let config = EnvConfig {
             obs_mode: ObsMode::Rgb,
             ..config
         };
         let mut env = make(env_id, config).map_err(|e| e.to_string())?;
         env.reset(Some(seed));
-        let frame = env.sensor_rgb().expect("rgb obs mode").to_vec();
-        (frame, sensor.size, env.robot_spec().uid)
+        let img = env
+            .image(camera)
+            .expect("a sensor camera of the rgb obs mode");
+        let frame = img.rgb.expect("rgb obs mode").to_vec();
+        (frame, (img.width, img.height), env.robot_spec().uid)
     } else {
+        let valid: Vec<&str> = [human.name, sensor.name]
+            .into_iter()
+            .chain(mounted.iter().map(|c| c.name))
+            .collect();
         return Err(format!(
-            "unknown camera {camera:?} for {env_id}; valid cameras: {}, {}",
-            human.name, sensor.name
+            "unknown camera {camera:?} for {env_id}; valid cameras: {}",
+            valid.join(", ")
         ));
     };
     write_png(out, &rgb, w, h)?;

@@ -553,6 +553,7 @@ impl Env {
                 render::Vision::new(
                     &model,
                     task.cameras(),
+                    rs.cameras,
                     config.obs_mode != ObsMode::Depth,
                     config.obs_mode != ObsMode::Rgb,
                     render_options,
@@ -959,18 +960,40 @@ impl Env {
             .map(|v| v.sensor_depth.as_slice())
     }
 
-    /// A sensor camera's images by name (ManiSkill's `obs["sensor_data"][name]`), e.g.
-    /// `env.image("base_camera")`; `None` for an unknown name or a non-visual obs mode.
+    /// A sensor camera's images by name (ManiSkill's `obs["sensor_data"][name]`): the task's
+    /// `env.image("base_camera")` or a robot-mounted camera (Fetch's `"fetch_head"`,
+    /// `"fetch_hand"`); `None` for an unknown name or a non-visual obs mode.
     pub fn image(&self, camera: &str) -> Option<CameraImage<'_>> {
         let v = self.vision.as_ref()?;
+        if !(v.rgb_on || v.depth_on) {
+            return None;
+        }
         let def = v.sensor_def();
-        (def.name == camera).then(|| CameraImage {
-            name: def.name,
-            width: def.size.0,
-            height: def.size.1,
-            rgb: self.sensor_rgb(),
-            depth: self.sensor_depth(),
+        if def.name == camera {
+            return Some(CameraImage {
+                name: def.name,
+                width: def.size.0,
+                height: def.size.1,
+                rgb: self.sensor_rgb(),
+                depth: self.sensor_depth(),
+            });
+        }
+        let m = v.mounted.iter().find(|m| m.name == camera)?;
+        Some(CameraImage {
+            name: m.name,
+            width: m.size.0,
+            height: m.size.1,
+            rgb: v.rgb_on.then_some(m.rgb.as_slice()),
+            depth: v.depth_on.then_some(m.depth.as_slice()),
         })
+    }
+
+    /// Names of the sensor cameras of a visual obs mode, as [`Env::image`] takes them: the
+    /// task's sensor camera, then the robot's mounted cameras.
+    pub fn sensor_names(&self) -> Vec<&'static str> {
+        std::iter::once(self.task.cameras().0.name)
+            .chain(self.spec.cameras.iter().map(|c| c.name))
+            .collect()
     }
 
     /// The task's (sensor, human render) cameras.
@@ -988,6 +1011,7 @@ impl Env {
                 render::Vision::new(
                     &self.model,
                     self.task.cameras(),
+                    self.spec.cameras,
                     false,
                     false,
                     self.render_options,
@@ -1021,6 +1045,7 @@ impl Env {
             let new = render::Vision::new(
                 &self.model,
                 self.task.cameras(),
+                self.spec.cameras,
                 old.rgb_on,
                 old.depth_on,
                 options,

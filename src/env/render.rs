@@ -1,11 +1,13 @@
-//! Camera images of an env: the task's sensor camera (observations in the `rgb`, `depth` and
-//! `rgbd` obs modes) and its human render camera ([`super::Env::render`]), drawn by one
-//! [`Renderer`] into buffers that are reused every step.
+//! Camera images of an env: the task's sensor camera and the robot's mounted cameras
+//! (observations in the `rgb`, `depth` and `rgbd` obs modes) and the task's human render
+//! camera ([`super::Env::render`]), drawn by one [`Renderer`] into buffers that are reused
+//! every step.
 use std::sync::Arc;
 
 use crate::mjcf::{GROUP_COLLISION, GROUP_HIDDEN};
 use crate::mujoco::render::{RenderError, RenderOptions, Renderer};
 use crate::mujoco::{Data, Model, ObjType};
+use crate::robots::MountedCamera;
 use crate::tasks::CameraDef;
 
 /// One camera image, borrowed from the env (rewritten in place by every step).
@@ -45,6 +47,16 @@ struct Cam {
     id: usize,
 }
 
+/// A robot-mounted camera with its image buffers.
+#[derive(Debug)]
+pub(crate) struct Mounted {
+    pub(crate) name: &'static str,
+    pub(crate) size: (usize, usize),
+    id: usize,
+    pub(crate) rgb: Vec<u8>,
+    pub(crate) depth: Vec<f32>,
+}
+
 /// The renderer of an env and its image buffers.
 pub(crate) struct Vision {
     renderer: Renderer,
@@ -54,6 +66,7 @@ pub(crate) struct Vision {
     pub(crate) depth_on: bool,
     pub(crate) sensor_rgb: Vec<u8>,
     pub(crate) sensor_depth: Vec<f32>,
+    pub(crate) mounted: Vec<Mounted>,
     pub(crate) human_rgb: Vec<u8>,
     human_fresh: bool,
 }
@@ -65,6 +78,10 @@ impl std::fmt::Debug for Vision {
             .field("renderer", &self.renderer)
             .field("sensor", &self.sensor)
             .field("human", &self.human)
+            .field(
+                "mounted",
+                &self.mounted.iter().map(|m| m.name).collect::<Vec<_>>(),
+            )
             .field("rgb_on", &self.rgb_on)
             .field("depth_on", &self.depth_on)
             .finish_non_exhaustive()
@@ -72,10 +89,12 @@ impl std::fmt::Debug for Vision {
 }
 
 impl Vision {
-    /// A renderer for the task's two cameras; `rgb`/`depth` select the sensor textures.
+    /// A renderer for the task's two cameras and the robot's mounted cameras; `rgb`/`depth`
+    /// select the sensor textures (of the task's sensor camera and the mounted ones).
     pub(crate) fn new(
         model: &Arc<Model>,
         cams: (CameraDef, CameraDef),
+        mounted: &[MountedCamera],
         rgb: bool,
         depth: bool,
         options: RenderOptions,
@@ -87,8 +106,29 @@ impl Vision {
             Ok(Cam { def, id })
         };
         let (sensor, human) = (resolve(cams.0)?, resolve(cams.1)?);
-        let w = sensor.def.size.0.max(human.def.size.0);
-        let h = sensor.def.size.1.max(human.def.size.1);
+        let mounted = mounted
+            .iter()
+            .map(|c| {
+                let id = model
+                    .require_id(ObjType::Camera, c.name)
+                    .map_err(|e| RenderError::Invalid(e.to_string()))?;
+                let (w, h) = c.size;
+                Ok(Mounted {
+                    name: c.name,
+                    size: c.size,
+                    id,
+                    rgb: vec![0; if rgb { w * h * 3 } else { 0 }],
+                    depth: vec![0.0; if depth { w * h } else { 0 }],
+                })
+            })
+            .collect::<Result<Vec<_>, RenderError>>()?;
+        let sizes = || {
+            [sensor.def.size, human.def.size]
+                .into_iter()
+                .chain(mounted.iter().map(|m| m.size))
+        };
+        let w = sizes().map(|s| s.0).max().unwrap_or(1);
+        let h = sizes().map(|s| s.1).max().unwrap_or(1);
         let renderer = Renderer::new(model.clone(), (w, h), options)?;
         let (sw, sh) = sensor.def.size;
         let (hw, hh) = human.def.size;
@@ -98,6 +138,7 @@ impl Vision {
             depth_on: depth,
             sensor_rgb: vec![0; if rgb { sw * sh * 3 } else { 0 }],
             sensor_depth: vec![0.0; if depth { sw * sh } else { 0 }],
+            mounted,
             human_rgb: vec![0; hw * hh * 3],
             sensor,
             human,
@@ -110,22 +151,32 @@ impl Vision {
         self.human_fresh = false;
     }
 
-    /// Renders the sensor camera into the observation buffers.
+    /// Renders the sensor camera and the mounted cameras into the observation buffers.
     pub(crate) fn render_sensor(&mut self, data: &mut Data) -> Result<(), RenderError> {
         self.human_fresh = false;
         if !(self.rgb_on || self.depth_on) {
             return Ok(());
         }
-        let rgb = self.rgb_on.then_some(self.sensor_rgb.as_mut_slice());
-        let depth = self.depth_on.then_some(self.sensor_depth.as_mut_slice());
+        let (rgb_on, depth_on) = (self.rgb_on, self.depth_on);
         self.renderer.render(
             data,
             self.sensor.id,
             self.sensor.def.size,
             sensor_groups(),
-            rgb,
-            depth,
-        )
+            rgb_on.then_some(self.sensor_rgb.as_mut_slice()),
+            depth_on.then_some(self.sensor_depth.as_mut_slice()),
+        )?;
+        for m in self.mounted.iter_mut() {
+            self.renderer.render(
+                data,
+                m.id,
+                m.size,
+                sensor_groups(),
+                rgb_on.then_some(m.rgb.as_mut_slice()),
+                depth_on.then_some(m.depth.as_mut_slice()),
+            )?;
+        }
+        Ok(())
     }
 
     /// Renders the human camera (once per state) and returns its RGB frame.

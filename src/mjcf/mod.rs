@@ -103,6 +103,22 @@ pub struct Connect {
     pub anchor: [f64; 3],
 }
 
+/// A MuJoCo camera in a robot link's body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkCamera {
+    /// Camera name.
+    pub name: String,
+    /// The link (body) it is attached to.
+    pub link: String,
+    /// Position in the link frame.
+    pub pos: [f64; 3],
+    /// Orientation (w, x, y, z) of the MuJoCo camera frame (looking along −z, +y up) in the
+    /// link frame.
+    pub quat: [f64; 4],
+    /// Vertical field of view in degrees.
+    pub fovy_deg: f64,
+}
+
 /// How a robot is placed and driven in a scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotOptions {
@@ -135,6 +151,8 @@ pub struct RobotOptions {
     pub torsional_friction: Vec<(String, f64)>,
     /// `solref` of the loop closures (None: MuJoCo's default, time constant 0.02 s).
     pub connect_solref: Option<[f64; 2]>,
+    /// Cameras attached to links.
+    pub cameras: Vec<LinkCamera>,
 }
 
 impl Default for RobotOptions {
@@ -153,6 +171,7 @@ impl Default for RobotOptions {
             mimic_solref: None,
             connect_solref: None,
             torsional_friction: Vec::new(),
+            cameras: Vec::new(),
         }
     }
 }
@@ -290,6 +309,14 @@ impl Scene {
                 return Err(format!(
                     "robot {} has no link {link:?} for a site",
                     robot.name
+                ));
+            }
+        }
+        for c in &opts.cameras {
+            if robot.link(&c.link).is_none() {
+                return Err(format!(
+                    "robot {} has no link {:?} for camera {:?}",
+                    robot.name, c.link, c.name
                 ));
             }
         }
@@ -506,6 +533,15 @@ impl Scene {
                         .attr("group", GROUP_HIDDEN),
                 );
             }
+        }
+        for c in opts.cameras.iter().filter(|c| c.link == l.name) {
+            body.push(
+                Element::new("camera")
+                    .attr("name", &c.name)
+                    .attr_nums("pos", &c.pos)
+                    .attr_nums("quat", &c.quat)
+                    .attr("fovy", num(c.fovy_deg)),
+            );
         }
         for j in robot.child_joints(link) {
             let jd = &robot.joints[j];

@@ -860,13 +860,15 @@ impl Data {
         )
     }
     /// Brings poses and velocities derived from qpos/qvel up to date after `step` (which
-    /// leaves them at the start of the step): `mj_kinematics`, `mj_comPos`, `mj_comVel`.
+    /// leaves them at the start of the step): `mj_kinematics`, `mj_comPos`, `mj_camlight`
+    /// (camera and light poses, for cameras mounted on moving bodies), `mj_comVel`.
     /// Touches nothing that influences the next step.
     pub fn update_kinematics(&mut self) {
         // SAFETY: as step.
         unsafe {
             sys::mj_kinematics(self.model.ptr, self.ptr);
             sys::mj_comPos(self.model.ptr, self.ptr);
+            sys::mj_camlight(self.model.ptr, self.ptr);
             sys::mj_comVel(self.model.ptr, self.ptr);
         }
     }

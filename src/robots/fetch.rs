@@ -11,7 +11,7 @@
 //!   of the 7 arm joints for `gripper_link` with poses relative to `torso_lift_link`.
 use std::f64::consts::PI;
 
-use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
+use super::{GraspDef, InitNoise, MountedCamera, RobotSpec, StaticRule, TcpDef};
 use crate::controllers::{PartKind, PartSpec};
 use crate::mjcf::RobotOptions;
 
@@ -150,6 +150,27 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
     ])
 }
 
+/// Fetch's two cameras (robots.md §3 "robot cameras"): 128×128, fovy 2 rad (near 0.01 and
+/// far 100 are the renderer's clip planes, shared by every camera).
+pub const CAMERAS: [MountedCamera; 2] = [
+    MountedCamera {
+        name: "fetch_head",
+        link: "head_camera_link",
+        pos: [0.0, 0.0, 0.0],
+        quat: [1.0, 0.0, 0.0, 0.0],
+        fovy: 2.0,
+        size: (128, 128),
+    },
+    MountedCamera {
+        name: "fetch_hand",
+        link: "gripper_link",
+        pos: [-0.1, 0.0, 0.1],
+        quat: [1.0, 0.0, 0.0, 0.0],
+        fovy: 2.0,
+        size: (128, 128),
+    },
+];
+
 /// Fetch's scene options: the wheels never touch the ground (upstream puts them and the
 /// ground in one collision group, robots.md §3).
 fn customize(opts: &mut RobotOptions) {
@@ -180,5 +201,6 @@ pub static FETCH: RobotSpec = RobotSpec {
     init_noise: InitNoise::None,
     control_modes: &CONTROL_MODES,
     parts,
+    cameras: &CAMERAS,
     customize,
 };

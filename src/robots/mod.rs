@@ -13,7 +13,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::controllers::PartSpec;
 use crate::mjcf::urdf::RobotDesc;
-use crate::mjcf::{actuator_name, Drive, RobotOptions, GRAVITY};
+use crate::mjcf::{actuator_name, Drive, LinkCamera, RobotOptions, GRAVITY};
 use crate::mujoco::{Data, Model, ObjType};
 
 /// Robot uids, as ManiSkill spells them.
@@ -132,6 +132,40 @@ impl StaticRule {
     }
 }
 
+/// A camera mounted on a robot link (ManiSkill's `_sensor_configs` with `mount=link`): the
+/// pose is SAPIEN's camera frame (x forward, y left, z up) in the link frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MountedCamera {
+    /// Camera name (the key of `obs["sensor_data"]`).
+    pub name: &'static str,
+    /// The link the camera is mounted on.
+    pub link: &'static str,
+    /// Position in the link frame.
+    pub pos: [f64; 3],
+    /// Orientation (w, x, y, z) of SAPIEN's camera frame in the link frame.
+    pub quat: [f64; 4],
+    /// Vertical field of view in radians.
+    pub fovy: f64,
+    /// Image width and height.
+    pub size: (usize, usize),
+}
+
+impl MountedCamera {
+    /// The MuJoCo camera's orientation (w, x, y, z) in the link frame: the mount rotation
+    /// composed with the map from SAPIEN's camera frame to MuJoCo's (x right = −left,
+    /// y up, z backward = −forward), as [`crate::tasks::look_at_mujoco`] does for world cameras.
+    pub fn mujoco_quat(&self) -> [f64; 4] {
+        let q = self.quat;
+        let mount =
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+        let m = nalgebra::Matrix3::new(0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+        let sapien_to_mujoco =
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
+        let r = mount * sapien_to_mujoco;
+        [r.w, r.i, r.j, r.k]
+    }
+}
+
 /// Everything mjskill knows about one robot besides its URDF.
 #[derive(Debug, Clone)]
 pub struct RobotSpec {
@@ -169,6 +203,9 @@ pub struct RobotSpec {
     pub control_modes: &'static [&'static str],
     /// The parts of a control mode (None for an unknown mode).
     pub parts: fn(&str) -> Option<Vec<PartSpec>>,
+    /// Cameras mounted on the robot's links, rendered in the visual obs modes besides the
+    /// task's sensor camera (empty for most robots).
+    pub cameras: &'static [MountedCamera],
     /// Robot-specific scene options on top of [`RobotSpec::options`]' defaults: loop
     /// closures, extra collision exclusions, links that ignore the ground, per-joint armature
     /// or damping of undriven joints.
@@ -209,6 +246,17 @@ impl RobotSpec {
                 .map(|l| (l.to_string(), self.finger_friction.1))
                 .collect(),
             sites,
+            cameras: self
+                .cameras
+                .iter()
+                .map(|c| LinkCamera {
+                    name: c.name.to_string(),
+                    link: c.link.to_string(),
+                    pos: c.pos,
+                    quat: c.mujoco_quat(),
+                    fovy_deg: c.fovy.to_degrees(),
+                })
+                .collect(),
             ..RobotOptions::default()
         };
         (self.customize)(&mut opts);

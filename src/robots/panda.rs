@@ -89,5 +89,6 @@ pub static PANDA: RobotSpec = RobotSpec {
     init_noise: InitNoise::AllButLast(2),
     control_modes: &CONTROL_MODES,
     parts,
+    cameras: &[],
     customize: |_| {},
 };

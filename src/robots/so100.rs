@@ -82,5 +82,6 @@ pub static SO100: RobotSpec = RobotSpec {
     init_noise: InitNoise::All,
     control_modes: &CONTROL_MODES,
     parts,
+    cameras: &[],
     customize: |_| {},
 };

@@ -80,5 +80,6 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     init_noise: InitNoise::None,
     control_modes: &CONTROL_MODES,
     parts,
+    cameras: &[],
     customize: |o| o.mimic_solref = Some(MIMIC_SOLREF),
 };

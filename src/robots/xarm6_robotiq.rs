@@ -192,5 +192,6 @@ pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
     init_noise: InitNoise::All,
     control_modes: &CONTROL_MODES,
     parts,
+    cameras: &[],
     customize,
 };
