@@ -92,7 +92,7 @@ pub enum Command {
         #[arg(long)]
         threads: Option<usize>,
         /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
-        /// render the 128x128 sensor camera every step).
+        /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Also time this many human-camera frames (Env::render, 512x512): render_frames_per_s.
