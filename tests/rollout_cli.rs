@@ -68,7 +68,6 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
             "{e}"
         );
     }
-    let t = Instant::now();
     let o = mjskill()
         .args(["rollout", "--out", "/nonexistent-dir/x.mcap"])
         .output()
@@ -76,7 +75,6 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent-dir/x.mcap"));
     assert!(o.stdout.is_empty(), "no summary: nothing was simulated");
-    assert!(t.elapsed() < Duration::from_secs(20));
     let o = mjskill()
         .args(["rollout", "--policy", "telepathy", "--out"])
         .arg(tmp("p.mcap"))

@@ -40,6 +40,16 @@ fn policy_errors_name_the_problem() {
         e.contains("pd_ee_delta_pos") && e.contains("pd_joint_pos"),
         "{e}"
     );
+    // An unknown mode is named as unknown, with the robot's valid modes.
+    let config = EnvConfig {
+        control_mode: Some("pd_telekinesis".into()),
+        ..Default::default()
+    };
+    let e = eval::run("PickCube-v1", config, "solver", 1, 0).unwrap_err();
+    assert!(
+        e.contains("unknown control mode \"pd_telekinesis\"") && e.contains("pd_ee_delta_pose"),
+        "{e}"
+    );
 }
 
 #[test]

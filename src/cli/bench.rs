@@ -172,7 +172,7 @@ pub fn run(
     Ok(BenchReport {
         env: env_id.to_string(),
         robot: env.robot_spec().uid.to_string(),
-        control_mode: env.config().control_mode.clone().unwrap_or_default(),
+        control_mode: env.control_mode().to_string(),
         obs_mode: env.config().obs_mode.name().to_string(),
         steps,
         substeps: SUBSTEPS,

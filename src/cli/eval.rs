@@ -59,9 +59,11 @@ pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env
             None => config.control_mode = Some(required.to_string()),
             Some(m) if m == required => {}
             Some(m) => {
+                // An unknown mode is reported as such, with the robot's valid modes.
+                crate::robots::spec(&robot)?.control_mode(m)?;
                 return Err(format!(
                     "policy {policy:?} needs control mode {required}, not {m}"
-                ))
+                ));
             }
         }
     }
@@ -136,7 +138,7 @@ pub fn run(
     Ok(EvalReport {
         env: env_id.to_string(),
         robot: env.robot_spec().uid.to_string(),
-        control_mode: env.config().control_mode.clone().unwrap_or_default(),
+        control_mode: env.control_mode().to_string(),
         policy: policy.to_string(),
         episodes,
         successes,

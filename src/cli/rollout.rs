@@ -151,11 +151,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         out: a.out.display().to_string(),
         env: a.env.clone(),
         robot: env.robot_spec().uid.to_string(),
-        control_mode: env
-            .config()
-            .control_mode
-            .clone()
-            .unwrap_or_else(|| "pd_joint_delta_pos".into()),
+        control_mode: env.control_mode().to_string(),
         policy: a.policy.clone(),
         episodes: a.episodes,
         successes,
@@ -213,7 +209,11 @@ pub fn info(path: &Path) -> Result<InfoSummary, String> {
         episodes: fin.len(),
         successes: fin.iter().filter(|e| e.success).count(),
         steps: fin.iter().map(|e| e.steps.len()).sum(),
-        mean_return: fin.iter().map(|e| e.ret).sum::<f64>() / fin.len().max(1) as f64,
+        mean_return: if fin.is_empty() {
+            0.0 // not the -0.0 an empty f64 sum gives
+        } else {
+            fin.iter().map(|e| e.ret).sum::<f64>() / fin.len() as f64
+        },
         complete: r.complete,
         unfinished_steps: r
             .episodes

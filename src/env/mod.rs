@@ -616,6 +616,10 @@ impl Env {
     pub fn robot_spec(&self) -> &'static RobotSpec {
         self.spec
     }
+    /// The control mode in use (the robot's default when the config names none).
+    pub fn control_mode(&self) -> &str {
+        self.controller.mode()
+    }
     /// The compiled model.
     pub fn model(&self) -> &Arc<Model> {
         &self.model

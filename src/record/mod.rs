@@ -203,8 +203,7 @@ impl Meta {
             robot: env.robot_spec().uid.to_string(),
             obs_mode: cfg.obs_mode.name().to_string(),
             reward_mode: cfg.reward_mode.name().to_string(),
-            // `make` fills in the default control mode, so the config always names it.
-            control_mode: cfg.control_mode.clone().unwrap_or_default(),
+            control_mode: env.control_mode().to_string(),
             robot_init_qpos_noise: cfg.robot_init_qpos_noise,
             max_episode_steps: env.max_episode_steps(),
             timestep: crate::mjcf::TIMESTEP,

@@ -116,11 +116,7 @@ fn boxed<P: Policy + 'static>(policy: Result<P, String>) -> Result<Box<dyn Polic
 /// Which scripted solver fits an (env, robot) pair.
 fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
     let robot = env.robot_spec().uid;
-    let mode = env
-        .config()
-        .control_mode
-        .as_deref()
-        .unwrap_or("pd_joint_delta_pos");
+    let mode = env.control_mode();
     let required = required_control_mode("solver", robot).unwrap_or(mode);
     if mode != required {
         return Err(format!(
