@@ -92,7 +92,14 @@ fn regenerate_reference_trajectories() {
             .args([
                 "rollout", "--env", env, "--robot", robot, "--policy", policy,
             ])
-            .args(["--episodes", &episodes.to_string(), "--seed", "0", "--out"])
+            .args([
+                "--episodes",
+                &episodes.to_string(),
+                "--seed",
+                "0",
+                "--no-frame",
+            ])
+            .arg("--out")
             .arg(dir().join(&name))
             .output()
             .unwrap();
@@ -101,9 +108,6 @@ fn regenerate_reference_trajectories() {
             "{name}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        // rollout also leaves a PNG of the human camera next to the recording; the references
-        // keep only the recordings.
-        let _ = std::fs::remove_file(mjskill::cli::rollout::frame_path(&dir().join(&name)));
         println!("{name}: {}", String::from_utf8_lossy(&out.stdout).trim());
     }
 }

@@ -49,6 +49,20 @@ fn rollout_info_and_replay_round_trip() {
 }
 
 #[test]
+fn no_frame_skips_the_png_next_to_the_recording() {
+    let out = tmp("noframe.mcap");
+    let png = mjskill::cli::rollout::frame_path(&out);
+    let o = mjskill()
+        .args(["rollout", "--episodes", "1", "--no-frame", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(json(&o.stdout)["frame"].is_null());
+    assert!(out.exists() && !png.exists());
+}
+
+#[test]
 fn bad_files_and_unwritable_outputs_are_clear_errors() {
     let garbage = tmp("garbage.mcap");
     std::fs::write(&garbage, b"definitely not mcap").unwrap();

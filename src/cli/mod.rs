@@ -166,6 +166,9 @@ pub enum Command {
         /// /render_camera/image (foxglove.CompressedImage).
         #[arg(long)]
         video: bool,
+        /// Do not write the PNG of the first episode's last frame next to the recording.
+        #[arg(long)]
+        no_frame: bool,
     },
     /// Summarise a recording (JSON); says whether it was cut short.
     Info {
@@ -273,6 +276,7 @@ fn run(cli: Cli) -> Result<(), String> {
             seed,
             out,
             video,
+            no_frame,
         } => {
             use std::io::IsTerminal;
             let config = crate::env::EnvConfig {
@@ -290,6 +294,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 out,
                 progress: std::io::stderr().is_terminal(),
                 video,
+                frame: !no_frame,
             };
             let summary = rollout::rollout(&args)?;
             out!(

@@ -58,6 +58,8 @@ pub struct RolloutArgs {
     pub progress: bool,
     /// Record the human render camera's frames (`/render_camera/image`, PNG).
     pub video: bool,
+    /// Write the first episode's last human-camera frame next to `out` ([`frame_path`]).
+    pub frame: bool,
 }
 
 /// The PNG written next to a recording: `rollout.mcap` → `rollout.png`.
@@ -129,7 +131,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
             }
         }
         rec.end_episode(success).map_err(|e| e.to_string())?;
-        if k == 0 {
+        if k == 0 && a.frame {
             let path = frame_path(&a.out);
             match env.render() {
                 Ok(rgb) => {
