@@ -195,6 +195,25 @@ impl Vision {
         Ok(&self.human_rgb)
     }
 
+    /// Sensor image `k` in [`super::Env::sensor_names`] order (0: the task's sensor camera,
+    /// then the mounted cameras): name, (width, height), rgb and depth buffers (empty when
+    /// that texture is off); `None` past the last camera. No lookups, no allocation.
+    pub(crate) fn sensor_image(
+        &self,
+        k: usize,
+    ) -> Option<(&'static str, (usize, usize), &[u8], &[f32])> {
+        if k == 0 {
+            return Some((
+                self.sensor.def.name,
+                self.sensor.def.size,
+                &self.sensor_rgb,
+                &self.sensor_depth,
+            ));
+        }
+        let m = self.mounted.get(k - 1)?;
+        Some((m.name, m.size, &m.rgb, &m.depth))
+    }
+
     /// The sensor camera.
     pub(crate) fn sensor_def(&self) -> &CameraDef {
         &self.sensor.def
