@@ -233,3 +233,32 @@ fn image_is_none_for_bad_index_name_and_state_mode() {
     assert!(state.sensor_names().is_empty());
     assert!(state.image(0, "base_camera").is_none());
 }
+
+/// VecEnv builds its envs on the calling thread and moves them to worker threads. An EGL
+/// context still current on its creator cannot be made current elsewhere (EGL_BAD_ACCESS,
+/// which Mesa enforces), so the renderer must leave it current nowhere: an env made here and
+/// stepped on another thread renders the same frames as its twin stepped here.
+#[test]
+fn an_env_made_on_one_thread_renders_on_another() {
+    let config = visual(ObsMode::Rgb, None, 50);
+    let mut here = make("PickCube-v1", config.clone()).expect(NEEDS_RENDER);
+    // Made last, so the last context used on this thread is its own.
+    let moved = make("PickCube-v1", config).unwrap();
+    let a = actions(1, 8, 4);
+    let frames = std::thread::spawn(move || {
+        let mut e = moved;
+        e.step(&a).unwrap();
+        let first = e.sensor_rgb().unwrap().to_vec();
+        e.step(&a).unwrap();
+        (first, e.sensor_rgb().unwrap().to_vec())
+    })
+    .join()
+    .expect("stepping on another thread failed");
+    here.step(&actions(1, 8, 4)).unwrap();
+    assert!(frames.0 == here.sensor_rgb().unwrap(), "first step differs");
+    here.step(&actions(1, 8, 4)).unwrap();
+    assert!(
+        frames.1 == here.sensor_rgb().unwrap(),
+        "second step differs"
+    );
+}
