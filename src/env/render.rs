@@ -196,22 +196,22 @@ impl Vision {
     }
 
     /// Sensor image `k` in [`super::Env::sensor_names`] order (0: the task's sensor camera,
-    /// then the mounted cameras): name, (width, height), rgb and depth buffers (empty when
-    /// that texture is off); `None` past the last camera. No lookups, no allocation.
-    pub(crate) fn sensor_image(
-        &self,
-        k: usize,
-    ) -> Option<(&'static str, (usize, usize), &[u8], &[f32])> {
-        if k == 0 {
-            return Some((
-                self.sensor.def.name,
-                self.sensor.def.size,
-                &self.sensor_rgb,
-                &self.sensor_depth,
-            ));
-        }
-        let m = self.mounted.get(k - 1)?;
-        Some((m.name, m.size, &m.rgb, &m.depth))
+    /// then the mounted cameras); `None` past the last camera. No lookups, no allocation.
+    pub(crate) fn sensor_image(&self, k: usize) -> Option<CameraImage<'_>> {
+        let (name, size, rgb, depth) = if k == 0 {
+            let d = &self.sensor.def;
+            (d.name, d.size, &self.sensor_rgb, &self.sensor_depth)
+        } else {
+            let m = self.mounted.get(k - 1)?;
+            (m.name, m.size, &m.rgb, &m.depth)
+        };
+        Some(CameraImage {
+            name,
+            width: size.0,
+            height: size.1,
+            rgb: self.rgb_on.then_some(rgb.as_slice()),
+            depth: self.depth_on.then_some(depth.as_slice()),
+        })
     }
 
     /// The sensor camera.

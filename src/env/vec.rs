@@ -74,11 +74,11 @@ impl ImageLayout {
         l.rgb_on = v.rgb_on;
         l.depth_on = v.depth_on;
         let mut k = 0;
-        while let Some((name, size, _, _)) = v.sensor_image(k) {
-            let px = size.0 * size.1;
+        while let Some(img) = v.sensor_image(k) {
+            let px = img.width * img.height;
             l.cams.push(CamSlot {
-                name,
-                size,
+                name: img.name,
+                size: (img.width, img.height),
                 rgb_cell: l.rgb_cells,
                 depth_at: l.depth_len,
             });
@@ -109,6 +109,14 @@ fn pack_bytes(cells: &[AtomicU32], bytes: &[u8]) {
         let mut b = [0u8; 4];
         b[..rest.len()].copy_from_slice(rest);
         cells[n].store(u32::from_le_bytes(b), Ordering::Relaxed);
+    }
+}
+
+/// Unpacks cells written by [`pack_bytes`] into `dst` (4 bytes per cell; `dst` holds whole
+/// cells, so padding bytes land in it too).
+fn unpack_bytes(dst: &mut [u8], cells: &[AtomicU32]) {
+    for (d, cell) in dst.chunks_exact_mut(4).zip(cells) {
+        d.copy_from_slice(&cell.load(Ordering::Relaxed).to_le_bytes());
     }
 }
 
@@ -172,12 +180,13 @@ impl Worker {
         if let Some(v) = env.vision.as_ref().filter(|_| !l.cams.is_empty()) {
             let (rgb_base, depth_base) = (g * l.rgb_cells, g * l.depth_len);
             for (k, slot) in l.cams.iter().enumerate() {
-                let Some((_, _, rgb, depth)) = v.sensor_image(k) else {
+                let Some(img) = v.sensor_image(k) else {
                     break;
                 };
-                if l.rgb_on {
+                if let Some(rgb) = img.rgb {
                     pack_bytes(&sh.rgb[rgb_base + slot.rgb_cell..], rgb);
                 }
+                let depth = img.depth.unwrap_or_default();
                 for (cell, d) in sh.depth[depth_base + slot.depth_at..].iter().zip(depth) {
                     cell.store(d.to_bits(), Ordering::Relaxed);
                 }
@@ -429,9 +438,7 @@ impl VecEnv {
         for (dst, cell) in self.info.iter_mut().zip(&sh.info) {
             *dst = f64::from_bits(cell.load(Ordering::Relaxed));
         }
-        for (dst, cell) in self.rgb.chunks_exact_mut(4).zip(&sh.rgb) {
-            dst.copy_from_slice(&cell.load(Ordering::Relaxed).to_le_bytes());
-        }
+        unpack_bytes(&mut self.rgb, &sh.rgb);
         for (dst, cell) in self.depth.iter_mut().zip(&sh.depth) {
             *dst = f32::from_bits(cell.load(Ordering::Relaxed));
         }
@@ -559,5 +566,25 @@ impl Drop for VecEnv {
         for h in self.handles.drain(..) {
             let _ = h.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bytes_survive_packing_with_a_partial_last_cell() {
+        // Two cameras of 7 and 5 bytes: 2 + 2 cells, the second camera starts at cell 2.
+        let cells: Vec<AtomicU32> = (0..4).map(|_| AtomicU32::new(u32::MAX)).collect();
+        let (a, b) = ([1u8, 2, 3, 4, 5, 6, 7], [8u8, 9, 10, 11, 12]);
+        pack_bytes(&cells[0..], &a);
+        pack_bytes(&cells[2..], &b);
+        let mut out = [0xAAu8; 16];
+        unpack_bytes(&mut out, &cells);
+        assert_eq!(&out[..7], &a);
+        assert_eq!(out[7], 0, "padding is zeroed");
+        assert_eq!(&out[8..13], &b);
+        assert_eq!(&out[13..], &[0, 0, 0]);
     }
 }
