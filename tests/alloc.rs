@@ -134,5 +134,34 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         0,
         "fetch rgbd step allocated"
     );
+    // A visual-mode VecEnv: workers render into their envs' buffers, pack the pixels into the
+    // image cells made by `VecEnv::new`, and the caller unpacks them into its own buffers.
+    let config = mjskill::EnvConfig {
+        robot: Some("fetch".into()),
+        obs_mode: mjskill::ObsMode::Rgbd,
+        ..Default::default()
+    };
+    let mut v = mjskill::env::VecEnv::new("PickCube-v1", config, 3, 2).unwrap();
+    let acts: Vec<f32> = (0..3 * v.single_action_space().shape[0])
+        .map(|i| (i as f32 * 0.3).sin())
+        .collect();
+    v.step(&acts).unwrap();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    for _ in 0..3 {
+        v.step(&acts).unwrap();
+        for i in 0..3 {
+            for cam in v.sensor_names() {
+                let img = v.image(i, cam).unwrap();
+                sum += img.rgb.unwrap()[0] as u64 + img.depth.unwrap()[0] as u64;
+            }
+        }
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        0,
+        "rgbd VecEnv step allocated"
+    );
     std::hint::black_box(sum);
 }

@@ -1,7 +1,7 @@
 //! VecEnv: thread-count independence, autoreset semantics, errors.
 
 use mjskill::env::VecEnv;
-use mjskill::{make, EnvConfig};
+use mjskill::{make, Env, EnvConfig, ObsMode};
 
 fn actions(n: usize, dim: usize, k: usize) -> Vec<f32> {
     (0..n * dim)
@@ -100,4 +100,165 @@ fn bad_actions_are_errors_and_the_vec_env_stays_usable() {
     assert!(e.contains("action[9]"), "{e}");
     assert!(v.step(&[0.0; 16]).is_ok());
     assert!(VecEnv::new("PickCube-v1", EnvConfig::default(), 0, 1).is_err());
+}
+
+// ---- camera images (rendering: CI installs EGL/Mesa, see tests/render.rs) ----------------
+
+fn visual(mode: ObsMode, robot: Option<&str>, episode: u32) -> EnvConfig {
+    EnvConfig {
+        robot: robot.map(str::to_string),
+        obs_mode: mode,
+        max_episode_steps: Some(episode),
+        ..Default::default()
+    }
+}
+
+const NEEDS_RENDER: &str = "rendering must be available (bash .ci/setup installs EGL/Mesa)";
+
+/// Every image of every env of `v`, in sensor-name order, as raw bits.
+fn all_images(v: &VecEnv) -> Vec<u32> {
+    let mut out = Vec::new();
+    for i in 0..v.num_envs() {
+        for cam in v.sensor_names() {
+            let img = v.image(i, cam).unwrap();
+            out.extend(img.rgb.unwrap_or(&[]).iter().map(|&b| b as u32));
+            out.extend(img.depth.unwrap_or(&[]).iter().map(|d| d.to_bits()));
+        }
+    }
+    out
+}
+
+/// Asserts that env `i` of `v` shows exactly the images of `single`.
+fn assert_same_images(v: &VecEnv, i: usize, single: &Env, what: &str) {
+    assert_eq!(v.sensor_names(), single.sensor_names().as_slice());
+    for cam in v.sensor_names() {
+        let (a, b) = (v.image(i, cam).unwrap(), single.image(cam).unwrap());
+        assert_eq!((a.name, a.width, a.height), (b.name, b.width, b.height));
+        assert!(a.rgb == b.rgb, "{what}: env {i} {cam} rgb differs");
+        let bits = |d: Option<&[f32]>| d.map(|d| d.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+        assert!(
+            bits(a.depth) == bits(b.depth),
+            "{what}: env {i} {cam} depth differs"
+        );
+    }
+}
+
+#[test]
+fn vec_env_images_equal_single_envs_across_autoresets() {
+    let (n, episode, seed) = (3, 4, 300);
+    let config = visual(ObsMode::Rgbd, None, episode);
+    let mut v = VecEnv::new("PickCube-v1", config.clone(), n, 2).expect(NEEDS_RENDER);
+    assert_eq!(v.sensor_names(), ["base_camera"]);
+    v.reset(Some(seed));
+    let mut singles: Vec<Env> = (0..n)
+        .map(|i| {
+            let mut e = make("PickCube-v1", config.clone()).unwrap();
+            e.reset(Some(seed + i as u64));
+            e
+        })
+        .collect();
+    for (i, s) in singles.iter().enumerate() {
+        assert_same_images(&v, i, s, "after reset");
+    }
+    let dim = v.single_action_space().shape[0];
+    let mut ended = vec![false; n];
+    let mut autoresets = 0;
+    let mut previous = all_images(&v);
+    for k in 0..2 * episode as usize + 2 {
+        let a = actions(n, dim, k);
+        v.step(&a).unwrap();
+        for (i, s) in singles.iter_mut().enumerate() {
+            assert_eq!(v.autoreset()[i], ended[i], "step {k}");
+            if ended[i] {
+                s.reset(None);
+                ended[i] = false;
+                autoresets += 1;
+            } else {
+                let st = s.step(&a[i * dim..(i + 1) * dim]).unwrap();
+                ended[i] = st.terminated || st.truncated;
+            }
+            assert_eq!(v.obs_of(i), s.obs(), "step {k}");
+            assert_same_images(&v, i, s, &format!("step {k}"));
+        }
+        // The images follow the state: every step changes them.
+        let now = all_images(&v);
+        assert_ne!(now, previous, "step {k}: images did not change");
+        previous = now;
+    }
+    assert_eq!(autoresets, 2 * n, "two autoresets per env");
+}
+
+#[test]
+fn fetch_mounted_camera_images_are_identical_for_one_and_two_threads() {
+    let run = |threads: usize| {
+        let config = visual(ObsMode::Rgb, Some("fetch"), 3);
+        let mut v = VecEnv::new("PickCube-v1", config, 3, threads).expect(NEEDS_RENDER);
+        assert_eq!(
+            v.sensor_names(),
+            ["base_camera", "fetch_head", "fetch_hand"]
+        );
+        v.reset(Some(5));
+        let dim = v.single_action_space().shape[0];
+        let mut out = all_images(&v);
+        for k in 0..5 {
+            v.step(&actions(3, dim, k)).unwrap();
+            out.extend(all_images(&v));
+        }
+        // rgb mode: colour only; the three cameras see different things.
+        let img = |cam| v.image(2, cam).unwrap();
+        assert!(img("fetch_hand").depth.is_none());
+        assert_ne!(img("fetch_head").rgb, img("fetch_hand").rgb);
+        assert_ne!(img("base_camera").rgb, img("fetch_head").rgb);
+        out
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.len(), 6 * 3 * 3 * 128 * 128 * 3);
+    assert!(a == b, "T=1 and T=2 images differ");
+}
+
+#[test]
+fn image_is_none_for_bad_index_name_and_state_mode() {
+    let config = visual(ObsMode::Depth, None, 50);
+    let mut v = VecEnv::new("PickCube-v1", config.clone(), 2, 2).expect(NEEDS_RENDER);
+    v.reset(Some(9));
+    let img = v.image(1, "base_camera").unwrap();
+    assert!(img.rgb.is_none());
+    let mut single = make("PickCube-v1", config).unwrap();
+    single.reset(Some(10));
+    assert_same_images(&v, 1, &single, "depth mode");
+    assert!(v.image(2, "base_camera").is_none());
+    assert!(v.image(0, "fetch_head").is_none());
+    assert!(v.image(0, "render_camera").is_none());
+    let state = VecEnv::new("PickCube-v1", EnvConfig::default(), 2, 2).unwrap();
+    assert!(state.sensor_names().is_empty());
+    assert!(state.image(0, "base_camera").is_none());
+}
+
+/// VecEnv builds its envs on the calling thread and moves them to worker threads. An EGL
+/// context still current on its creator cannot be made current elsewhere (EGL_BAD_ACCESS,
+/// which Mesa enforces), so the renderer must leave it current nowhere: an env made here and
+/// stepped on another thread renders the same frames as its twin stepped here.
+#[test]
+fn an_env_made_on_one_thread_renders_on_another() {
+    let config = visual(ObsMode::Rgb, None, 50);
+    let mut here = make("PickCube-v1", config.clone()).expect(NEEDS_RENDER);
+    // Made last, so the last context used on this thread is its own.
+    let moved = make("PickCube-v1", config).unwrap();
+    let a = actions(1, 8, 4);
+    let frames = std::thread::spawn(move || {
+        let mut e = moved;
+        e.step(&a).unwrap();
+        let first = e.sensor_rgb().unwrap().to_vec();
+        e.step(&a).unwrap();
+        (first, e.sensor_rgb().unwrap().to_vec())
+    })
+    .join()
+    .expect("stepping on another thread failed");
+    here.step(&actions(1, 8, 4)).unwrap();
+    assert!(frames.0 == here.sensor_rgb().unwrap(), "first step differs");
+    here.step(&actions(1, 8, 4)).unwrap();
+    assert!(
+        frames.1 == here.sensor_rgb().unwrap(),
+        "second step differs"
+    );
 }

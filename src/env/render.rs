@@ -195,6 +195,25 @@ impl Vision {
         Ok(&self.human_rgb)
     }
 
+    /// Sensor image `k` in [`super::Env::sensor_names`] order (0: the task's sensor camera,
+    /// then the mounted cameras); `None` past the last camera. No lookups, no allocation.
+    pub(crate) fn sensor_image(&self, k: usize) -> Option<CameraImage<'_>> {
+        let (name, size, rgb, depth) = if k == 0 {
+            let d = &self.sensor.def;
+            (d.name, d.size, &self.sensor_rgb, &self.sensor_depth)
+        } else {
+            let m = self.mounted.get(k - 1)?;
+            (m.name, m.size, &m.rgb, &m.depth)
+        };
+        Some(CameraImage {
+            name,
+            width: size.0,
+            height: size.1,
+            rgb: self.rgb_on.then_some(rgb.as_slice()),
+            depth: self.depth_on.then_some(depth.as_slice()),
+        })
+    }
+
     /// The sensor camera.
     pub(crate) fn sensor_def(&self) -> &CameraDef {
         &self.sensor.def

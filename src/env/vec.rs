@@ -15,6 +15,15 @@
 //! [`VecEnv::autoreset`] marks those envs. So the final observation of an episode is simply
 //! the observation returned with its terminated/truncated flag.
 //!
+//! **Camera images.** In the visual obs modes (`rgb`, `depth`, `rgbd`) every env renders its
+//! sensor cameras (the task's sensor camera, then the robot's mounted ones, e.g. Fetch's
+//! `fetch_head` and `fetch_hand`) on the thread that steps it. The pixels cross threads through
+//! atomic cells made in [`VecEnv::new`] (colour bytes packed four per `AtomicU32`, each camera
+//! padded to whole cells; depth as f32 bits) and are unpacked into the VecEnv's own buffers
+//! once every thread is done. [`VecEnv::image`]`(i, name)` returns env i's images of the last
+//! `reset`/`step` (after an autoreset: the new episode's first frame, like `obs()`);
+//! [`VecEnv::sensor_names`] lists the cameras. A state-only VecEnv has no image cells.
+//!
 //! **Seeds.** `reset(Some(s))` seeds env i with `s + i` (ManiSkill's per-env seeding); every
 //! env owns its random streams, so results do not depend on the thread count.
 
@@ -23,13 +32,93 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering}
 use std::sync::Arc;
 use std::thread::{JoinHandle, Thread};
 
-use super::{make, BoxSpace, Env, EnvConfig, EnvError};
+use super::{make, BoxSpace, CameraImage, Env, EnvConfig, EnvError};
 
 const CMD_STEP: u64 = 0;
 const CMD_RESET: u64 = 1;
 const CMD_QUIT: u64 = 2;
 /// Busy-wait iterations before a waiting thread parks or yields.
 const SPINS: u32 = 20_000;
+
+/// Where one sensor camera's images live inside an env's image block.
+#[derive(Debug, Clone)]
+struct CamSlot {
+    name: &'static str,
+    size: (usize, usize),
+    /// First rgb cell (4 bytes each) within the env's rgb block; the camera's `w·h·3` bytes
+    /// start at `4 × rgb_cell` in the unpacked buffer.
+    rgb_cell: usize,
+    /// First depth value within the env's depth block.
+    depth_at: usize,
+}
+
+/// Image layout of one env (identical for all envs of a VecEnv); empty for non-visual modes.
+#[derive(Debug, Clone, Default)]
+struct ImageLayout {
+    cams: Vec<CamSlot>,
+    rgb_on: bool,
+    depth_on: bool,
+    /// rgb cells per env (each camera rounded up to whole cells).
+    rgb_cells: usize,
+    /// depth values per env.
+    depth_len: usize,
+}
+
+impl ImageLayout {
+    /// The layout of `env`'s sensor images (empty unless its obs mode renders).
+    fn of(env: &Env) -> ImageLayout {
+        let mut l = ImageLayout::default();
+        let Some(v) = env.vision.as_ref().filter(|v| v.rgb_on || v.depth_on) else {
+            return l;
+        };
+        l.rgb_on = v.rgb_on;
+        l.depth_on = v.depth_on;
+        let mut k = 0;
+        while let Some(img) = v.sensor_image(k) {
+            let px = img.width * img.height;
+            l.cams.push(CamSlot {
+                name: img.name,
+                size: (img.width, img.height),
+                rgb_cell: l.rgb_cells,
+                depth_at: l.depth_len,
+            });
+            if l.rgb_on {
+                l.rgb_cells += (px * 3).div_ceil(4);
+            }
+            if l.depth_on {
+                l.depth_len += px;
+            }
+            k += 1;
+        }
+        l
+    }
+}
+
+/// Packs `bytes` four per cell (little-endian; a short last chunk is zero-padded).
+fn pack_bytes(cells: &[AtomicU32], bytes: &[u8]) {
+    let chunks = bytes.chunks_exact(4);
+    let rest = chunks.remainder();
+    let n = chunks.len();
+    for (cell, c) in cells.iter().zip(chunks) {
+        cell.store(
+            u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+            Ordering::Relaxed,
+        );
+    }
+    if !rest.is_empty() {
+        let mut b = [0u8; 4];
+        b[..rest.len()].copy_from_slice(rest);
+        cells[n].store(u32::from_le_bytes(b), Ordering::Relaxed);
+    }
+}
+
+/// Unpacks cells written by [`pack_bytes`] into `dst` (4 bytes per cell; `dst` holds whole
+/// cells, so padding bytes land in it too).
+fn unpack_bytes(dst: &mut [u8], cells: &[AtomicU32]) {
+    for (d, cell) in dst.chunks_exact_mut(4).zip(cells) {
+        d.copy_from_slice(&cell.load(Ordering::Relaxed).to_le_bytes());
+    }
+}
 
 /// State shared between the caller and the workers.
 #[derive(Debug)]
@@ -49,6 +138,11 @@ struct Shared {
     truncated: Vec<AtomicBool>,
     autoreset: Vec<AtomicBool>,
     info: Vec<AtomicU64>,
+    images: ImageLayout,
+    /// `[N × images.rgb_cells]` packed colour bytes (empty unless the mode renders rgb).
+    rgb: Vec<AtomicU32>,
+    /// `[N × images.depth_len]` depth values as f32 bits (empty unless the mode renders depth).
+    depth: Vec<AtomicU32>,
 }
 
 /// The envs one thread steps.
@@ -81,6 +175,22 @@ impl Worker {
             .zip(&env.info().values)
         {
             cell.store(v.to_bits(), Ordering::Relaxed);
+        }
+        let l = &sh.images;
+        if let Some(v) = env.vision.as_ref().filter(|_| !l.cams.is_empty()) {
+            let (rgb_base, depth_base) = (g * l.rgb_cells, g * l.depth_len);
+            for (k, slot) in l.cams.iter().enumerate() {
+                let Some(img) = v.sensor_image(k) else {
+                    break;
+                };
+                if let Some(rgb) = img.rgb {
+                    pack_bytes(&sh.rgb[rgb_base + slot.rgb_cell..], rgb);
+                }
+                let depth = img.depth.unwrap_or_default();
+                for (cell, d) in sh.depth[depth_base + slot.depth_at..].iter().zip(depth) {
+                    cell.store(d.to_bits(), Ordering::Relaxed);
+                }
+            }
         }
     }
 
@@ -145,6 +255,12 @@ pub struct VecEnv {
     truncated: Vec<bool>,
     autoreset: Vec<bool>,
     info: Vec<f64>,
+    sensor_names: Vec<&'static str>,
+    /// Unpacked colour bytes, `[N × 4·rgb_cells]` (camera k of env i at
+    /// `4·(i·rgb_cells + rgb_cell)`).
+    rgb: Vec<u8>,
+    /// Depth values, `[N × depth_len]`.
+    depth: Vec<f32>,
 }
 
 impl VecEnv {
@@ -172,6 +288,9 @@ impl VecEnv {
         let nkeys = keys.len();
         let single_action_space = first.action_space().clone();
         let single_observation_space = first.observation_space().clone();
+        let images = ImageLayout::of(first);
+        let sensor_names: Vec<&'static str> = images.cams.iter().map(|c| c.name).collect();
+        let (rgb_cells, depth_len) = (images.rgb_cells, images.depth_len);
         let cells32 = |n: usize| (0..n).map(|_| AtomicU32::new(0)).collect::<Vec<_>>();
         let flags = |n: usize| (0..n).map(|_| AtomicBool::new(false)).collect::<Vec<_>>();
         let shared = Arc::new(Shared {
@@ -187,6 +306,9 @@ impl VecEnv {
             truncated: flags(num_envs),
             autoreset: flags(num_envs),
             info: (0..num_envs * nkeys).map(|_| AtomicU64::new(0)).collect(),
+            images,
+            rgb: cells32(num_envs * rgb_cells),
+            depth: cells32(num_envs * depth_len),
         });
         // Even split: the first `num_envs % threads` shares get one extra env.
         let ranges: Vec<Range<usize>> = (0..threads)
@@ -267,6 +389,9 @@ impl VecEnv {
             truncated: vec![false; num_envs],
             autoreset: vec![false; num_envs],
             info: vec![0.0; num_envs * nkeys],
+            sensor_names,
+            rgb: vec![0; num_envs * rgb_cells * 4],
+            depth: vec![0.0; num_envs * depth_len],
         };
         v.shared.has_seed.store(true, Ordering::Relaxed);
         v.shared
@@ -312,6 +437,10 @@ impl VecEnv {
         }
         for (dst, cell) in self.info.iter_mut().zip(&sh.info) {
             *dst = f64::from_bits(cell.load(Ordering::Relaxed));
+        }
+        unpack_bytes(&mut self.rgb, &sh.rgb);
+        for (dst, cell) in self.depth.iter_mut().zip(&sh.depth) {
+            *dst = f32::from_bits(cell.load(Ordering::Relaxed));
         }
     }
 
@@ -399,6 +528,32 @@ impl VecEnv {
     pub fn info(&self) -> &[f64] {
         &self.info
     }
+    /// Names of the sensor cameras [`VecEnv::image`] serves, as [`Env::sensor_names`] lists
+    /// them (the task's sensor camera, then the robot's mounted cameras); empty unless the obs
+    /// mode is `rgb`, `depth` or `rgbd`.
+    pub fn sensor_names(&self) -> &[&'static str] {
+        &self.sensor_names
+    }
+    /// Env `i`'s images from sensor camera `camera` after the last `reset`/`step` (after an
+    /// autoreset: the new episode's first frame), as [`Env::image`] gives them; `None` for an
+    /// env index ≥ N, an unknown camera or a non-visual obs mode.
+    pub fn image(&self, i: usize, camera: &str) -> Option<CameraImage<'_>> {
+        if i >= self.num_envs {
+            return None;
+        }
+        let l = &self.shared.images;
+        let slot = l.cams.iter().find(|c| c.name == camera)?;
+        let (w, h) = slot.size;
+        let rgb_at = 4 * (i * l.rgb_cells + slot.rgb_cell);
+        let depth_at = i * l.depth_len + slot.depth_at;
+        Some(CameraImage {
+            name: slot.name,
+            width: w,
+            height: h,
+            rgb: l.rgb_on.then(|| &self.rgb[rgb_at..rgb_at + w * h * 3]),
+            depth: l.depth_on.then(|| &self.depth[depth_at..depth_at + w * h]),
+        })
+    }
 }
 
 impl Drop for VecEnv {
@@ -411,5 +566,25 @@ impl Drop for VecEnv {
         for h in self.handles.drain(..) {
             let _ = h.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bytes_survive_packing_with_a_partial_last_cell() {
+        // Two cameras of 7 and 5 bytes: 2 + 2 cells, the second camera starts at cell 2.
+        let cells: Vec<AtomicU32> = (0..4).map(|_| AtomicU32::new(u32::MAX)).collect();
+        let (a, b) = ([1u8, 2, 3, 4, 5, 6, 7], [8u8, 9, 10, 11, 12]);
+        pack_bytes(&cells[0..], &a);
+        pack_bytes(&cells[2..], &b);
+        let mut out = [0xAAu8; 16];
+        unpack_bytes(&mut out, &cells);
+        assert_eq!(&out[..7], &a);
+        assert_eq!(out[7], 0, "padding is zeroed");
+        assert_eq!(&out[8..13], &b);
+        assert_eq!(&out[13..], &[0, 0, 0]);
     }
 }
