@@ -26,10 +26,16 @@
 //!
 //! **Seeds.** `reset(Some(s))` seeds env i with `s + i` (ManiSkill's per-env seeding); every
 //! env owns its random streams, so results do not depend on the thread count.
+//!
+//! **Panics.** A panic inside an env on a worker thread is caught there and re-raised on the
+//! caller's thread by the `step`/`reset` that ran it (the same panic a single env would
+//! raise), instead of leaving the caller waiting; the VecEnv is unusable afterwards.
 
+use std::any::Any;
 use std::ops::Range;
+use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::{JoinHandle, Thread};
 
 use super::{make, BoxSpace, CameraImage, Env, EnvConfig, EnvError};
@@ -37,6 +43,9 @@ use super::{make, BoxSpace, CameraImage, Env, EnvConfig, EnvError};
 const CMD_STEP: u64 = 0;
 const CMD_RESET: u64 = 1;
 const CMD_QUIT: u64 = 2;
+/// Test-only: workers other than the caller's panic.
+#[cfg(test)]
+const CMD_TEST_PANIC: u64 = 3;
 /// Busy-wait iterations before a waiting thread parks or yields.
 const SPINS: u32 = 20_000;
 
@@ -143,6 +152,10 @@ struct Shared {
     rgb: Vec<AtomicU32>,
     /// `[N × images.depth_len]` depth values as f32 bits (empty unless the mode renders depth).
     depth: Vec<AtomicU32>,
+    /// Set by a worker whose envs panicked; the payload waits in `panic_payload`.
+    panicked: AtomicBool,
+    /// The first worker panic, re-raised on the caller's thread (locked only after a panic).
+    panic_payload: Mutex<Option<Box<dyn Any + Send>>>,
 }
 
 /// The envs one thread steps.
@@ -195,6 +208,11 @@ impl Worker {
     }
 
     fn run(&mut self, sh: &Shared, command: u64) {
+        #[cfg(test)]
+        if command == CMD_TEST_PANIC {
+            assert!(self.first == 0, "test panic in env {}", self.first);
+            return;
+        }
         for i in 0..self.envs.len() {
             let g = self.first + i;
             if command == CMD_RESET {
@@ -309,6 +327,8 @@ impl VecEnv {
             images,
             rgb: cells32(num_envs * rgb_cells),
             depth: cells32(num_envs * depth_len),
+            panicked: AtomicBool::new(false),
+            panic_payload: Mutex::new(None),
         });
         // Even split: the first `num_envs % threads` shares get one extra env.
         let ranges: Vec<Range<usize>> = (0..threads)
@@ -361,7 +381,16 @@ impl VecEnv {
                         if command == CMD_QUIT {
                             break;
                         }
-                        w.run(&sh, command);
+                        // A panic in an env (a bug, or a GL driver failing mid-run) must not
+                        // leave the caller waiting for `done` forever: it is caught here and
+                        // re-raised on the caller's thread, as a single env's panic would be.
+                        if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
+                        {
+                            if let Ok(mut slot) = sh.panic_payload.lock() {
+                                slot.get_or_insert(payload);
+                            }
+                            sh.panicked.store(true, Ordering::Release);
+                        }
                         sh.done.fetch_add(1, Ordering::Release);
                     }
                 })
@@ -419,6 +448,10 @@ impl VecEnv {
             } else {
                 std::thread::yield_now();
             }
+        }
+        if sh.panicked.load(Ordering::Acquire) {
+            let payload = sh.panic_payload.lock().ok().and_then(|mut p| p.take());
+            resume_unwind(payload.unwrap_or_else(|| Box::new("a VecEnv worker panicked")));
         }
         for (dst, cell) in self.obs.iter_mut().zip(&sh.obs) {
             *dst = f32::from_bits(cell.load(Ordering::Relaxed));
@@ -572,6 +605,18 @@ impl Drop for VecEnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_worker_panic_reaches_the_caller_instead_of_hanging() {
+        let mut v = VecEnv::new("PickCube-v1", EnvConfig::default(), 2, 2).unwrap();
+        let r = catch_unwind(AssertUnwindSafe(|| v.dispatch(CMD_TEST_PANIC)));
+        let msg = r.expect_err("the worker's panic is re-raised here");
+        assert_eq!(
+            msg.downcast_ref::<String>().map(String::as_str),
+            Some("test panic in env 1")
+        );
+        drop(v); // the workers survived the panic and join
+    }
 
     #[test]
     fn bytes_survive_packing_with_a_partial_last_cell() {
