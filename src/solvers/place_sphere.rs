@@ -28,7 +28,7 @@ pub(super) const ALIGN_TOL: f64 = 0.003;
 /// Lowering target of the sphere centre above the bin origin (m), and the height at which
 /// the sphere is released.
 const LOWER_TO: f64 = 0.0255;
-const RELEASE_BELOW: f64 = 0.0285;
+pub(super) const RELEASE_BELOW: f64 = 0.0285;
 /// Steps the gripper opens while holding still.
 const OPEN_STEPS: usize = 4;
 /// Retreat height above the release pose (m).
@@ -47,6 +47,9 @@ pub struct PlaceSphereSolver {
     pub release_align: f64,
     /// Horizontal sphere-to-bin distance that ends the carry (m; the spec's 3 mm).
     pub align_tol: f64,
+    /// Height of the sphere centre over the bin origin below which it is released (m; the
+    /// spec's 2.85 cm).
+    pub release_below: f64,
     phases: Phases,
 }
 
@@ -60,6 +63,7 @@ impl PlaceSphereSolver {
             grasp_lift: 0.0,
             release_align: f64::INFINITY,
             align_tol: ALIGN_TOL,
+            release_below: RELEASE_BELOW,
             phases: Phases::default(),
         })
     }
@@ -84,6 +88,7 @@ impl PlaceSphereSolver {
         let g = self.grasp;
         let (open, close) = (g.gripper.open, g.gripper.close);
         let (release_align, align_tol) = (self.release_align, self.align_tol);
+        let release_below = self.release_below;
         self.phases.run(|phase, steps| {
             let (target, grip, done) = match phase {
                 0..=2 => g.phase(phase, steps, grasp, tcp, ready),
@@ -101,7 +106,7 @@ impl PlaceSphereSolver {
                 5 => (
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
-                    sphere.z - bin.z < RELEASE_BELOW
+                    sphere.z - bin.z < release_below
                         && (sphere.xy() - bin.xy()).norm() < release_align,
                 ),
                 6 => (tcp, open, steps >= OPEN_STEPS),
