@@ -8,7 +8,7 @@
 //! Fetch-specific choices (each measured to matter): PlaceSphere does not drive the torso
 //! (moving it while carrying or releasing sets the sphere rolling) and releases the sphere
 //! only within 1 mm of the bin centre (released off-centre it keeps rolling between the wall
-//! edges); PokeCube grasps the peg near its tail with the flattest gripper (the head then
+//! edges); PokeCube grasps the peg by its tail end with the flattest gripper (the head then
 //! reaches goals up to x = 0.42), accepts a descent that stalls up to 1 cm above the grasp
 //! point (the arm sags under small commands), lowers the torso only once the peg is held, and
 //! stops the push 6.2 cm short of the goal (the cube still ends inside the 5 cm goal radius).
@@ -17,9 +17,9 @@
 //! wall edge, from where the sphere rolls in) once the sphere has stalled short of it (the
 //! farthest bins, at the edge of the arm's reach).
 //!
-//! Measured on seeds 0–99: PlaceSphere 93/100 (first success at step 41.8), PokeCube 91/100
-//! (43.4). The misses of both are bins or goals at the far edge of the arm's reach (bin
-//! x ≥ 0.094, where the sphere runs out of the 50 steps; PokeCube goals at x ≥ 0.39).
+//! Measured on seeds 0–99: PlaceSphere 96/100 (first success at step 41.6), PokeCube 98/100
+//! (43.1; 97/100 still successful at step 50). The PlaceSphere misses are the farthest bins
+//! (x ≥ 0.097), whose sphere is still rolling in the bin at step 50.
 
 use nalgebra::Vector3;
 
@@ -142,8 +142,11 @@ impl Policy for FetchPlaceSphere {
 /// Shortest position command while poking (action units): shorter ones are lost to the
 /// arm's sag under gravity and the descent onto the peg stalls.
 const POKE_MIN_STEP: f64 = 0.1;
-/// Fetch grasps the peg at its tail: the head then reaches the far cubes.
-const POKE_GRASP_OFFSET_X: f64 = -0.115;
+/// Fetch grasps the peg by its tail end (the peg's half length is 0.12 m): the finger
+/// midpoint 2 cm behind the tail, the 6 cm fingers holding the last 1.1 cm of the peg. The
+/// head then reaches the farthest cubes; holding 5 mm more of the peg (−0.115, −0.128)
+/// leaves goals beyond x ≈ 0.39 out of reach, holding 5 mm less (−0.15) loses the peg.
+const POKE_GRASP_OFFSET_X: f64 = -0.14;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
 const POKE_PUSH_SHORT: f64 = 0.062;
 
