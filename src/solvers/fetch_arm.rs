@@ -21,7 +21,7 @@ const BASE_FORWARD: f64 = 0.033;
 const BASE_GAIN: f64 = 4.0;
 /// Gripper pitch below the horizontal for the nearest (x = −0.1) and farthest (x = 0.1) cubes.
 pub(super) const PITCH_NEAR: f64 = 45.0 * std::f64::consts::PI / 180.0;
-const PITCH_FAR: f64 = 5.0 * std::f64::consts::PI / 180.0;
+pub(super) const PITCH_FAR: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// Clearance of the lowest finger or palm point above the table (m).
 const CLEARANCE: f64 = 0.004;
 /// Gripper geometry (gripper_link frame): finger box front-bottom corner and the palm box's
@@ -165,11 +165,11 @@ fn pitched(pitch: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch)
 }
 
-/// Gripper pitch for an object at table x (rad below the horizontal): steep near the robot,
-/// flat far from it.
-pub fn pitch_for_x(x: f64) -> f64 {
+/// Gripper pitch for an object at table x (rad below the horizontal): steep ([`PITCH_NEAR`])
+/// near the robot, flat (`far`) far from it.
+pub fn pitch_for_x(x: f64, far: f64) -> f64 {
     let s = ((x + 0.1) / 0.2).clamp(0.0, 1.0);
-    PITCH_NEAR + (PITCH_FAR - PITCH_NEAR) * s
+    PITCH_NEAR + (far - PITCH_NEAR) * s
 }
 
 /// Pitch that points the gripper from the shoulder at `target` (the longest reach).

@@ -24,11 +24,11 @@ const LIFT_TOL: f64 = 0.01;
 /// Height of the sphere centre over the bin origin while carrying (m).
 const CARRY_ABOVE_BIN: f64 = 0.06;
 /// Horizontal alignment of sphere and bin before lowering (m).
-const ALIGN_TOL: f64 = 0.003;
+pub(super) const ALIGN_TOL: f64 = 0.003;
 /// Lowering target of the sphere centre above the bin origin (m), and the height at which
 /// the sphere is released.
 const LOWER_TO: f64 = 0.0255;
-const RELEASE_BELOW: f64 = 0.0285;
+pub(super) const RELEASE_BELOW: f64 = 0.0285;
 /// Steps the gripper opens while holding still.
 const OPEN_STEPS: usize = 4;
 /// Retreat height above the release pose (m).
@@ -45,6 +45,11 @@ pub struct PlaceSphereSolver {
     /// Horizontal sphere-to-bin distance the release also waits for (m; the Panda's spec
     /// phases do not wait: infinite).
     pub release_align: f64,
+    /// Horizontal sphere-to-bin distance that ends the carry (m; the spec's 3 mm).
+    pub align_tol: f64,
+    /// Height of the sphere centre over the bin origin below which it is released (m; the
+    /// spec's 2.85 cm).
+    pub release_below: f64,
     phases: Phases,
 }
 
@@ -57,6 +62,8 @@ impl PlaceSphereSolver {
             grasp: Grasp::new(gripper),
             grasp_lift: 0.0,
             release_align: f64::INFINITY,
+            align_tol: ALIGN_TOL,
+            release_below: RELEASE_BELOW,
             phases: Phases::default(),
         })
     }
@@ -80,7 +87,8 @@ impl PlaceSphereSolver {
         let bin = body_xyz(env, self.bin);
         let g = self.grasp;
         let (open, close) = (g.gripper.open, g.gripper.close);
-        let release_align = self.release_align;
+        let (release_align, align_tol) = (self.release_align, self.align_tol);
+        let release_below = self.release_below;
         self.phases.run(|phase, steps| {
             let (target, grip, done) = match phase {
                 0..=2 => g.phase(phase, steps, grasp, tcp, ready),
@@ -93,12 +101,12 @@ impl PlaceSphereSolver {
                     let mut grip_offset = tcp - sphere;
                     grip_offset.z = 0.0;
                     let t = bin + Vector3::new(0.0, 0.0, CARRY_ABOVE_BIN) + grip_offset;
-                    (t, close, (sphere.xy() - bin.xy()).norm() < ALIGN_TOL)
+                    (t, close, (sphere.xy() - bin.xy()).norm() < align_tol)
                 }
                 5 => (
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
-                    sphere.z - bin.z < RELEASE_BELOW
+                    sphere.z - bin.z < release_below
                         && (sphere.xy() - bin.xy()).norm() < release_align,
                 ),
                 6 => (tcp, open, steps >= OPEN_STEPS),
