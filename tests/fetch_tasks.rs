@@ -1,7 +1,9 @@
 //! PokeCube-v1 and PlaceSphere-v1 with Fetch (tasks.md §2–§5): state dims, seeded objects
 //! independent of the robot, the Fetch's TCP link (`gripper_link`) in the PokeCube reward,
 //! the static term over `qvel[:-2]` and Fetch's signed static rule, and the scripted solvers.
-use mjskill::mujoco::ObjType;
+mod common;
+
+use common::{norm, part};
 use mjskill::robots::fetch;
 use mjskill::solvers::make_policy;
 use mjskill::{make, Env, EnvConfig, RewardMode};
@@ -17,14 +19,6 @@ fn env(task: &str, robot: &str, mode: Option<&str>) -> Env {
         },
     )
     .unwrap()
-}
-
-fn part(e: &Env, key: &str) -> Vec<f64> {
-    e.obs_part(key).unwrap().iter().map(|&x| x as f64).collect()
-}
-
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 #[test]
@@ -79,21 +73,10 @@ fn seeded_pokecube_objects_do_not_depend_on_the_robot() {
     }
 }
 
-/// Writes a free body's pose (zero velocity) and the robot's joint velocities.
+/// Writes a free body's pose (unrotated, zero velocity) and the robot's joint velocities.
 fn put(e: &mut Env, body: &str, pos: [f64; 3], robot_qvel: &[f64]) {
-    let model = e.model().clone();
-    let j = model.require_id(ObjType::Joint, body).unwrap();
-    let adr = model.jnt_qposadr()[j] as usize;
-    let vadr = model.jnt_dofadr()[j] as usize;
-    let nq = model.nq();
-    let mut st = e.get_state();
-    st.physics[1 + adr..1 + adr + 3].copy_from_slice(&pos);
-    st.physics[1 + adr + 3..1 + adr + 7].copy_from_slice(&[1.0, 0.0, 0.0, 0.0]);
-    st.physics[1 + nq + vadr..1 + nq + vadr + 6].fill(0.0);
-    for (&a, &v) in e.robot().dof_adr.iter().zip(robot_qvel) {
-        st.physics[1 + nq + a] = v;
-    }
-    e.set_state(&st).unwrap();
+    common::put_free_body(e, body, pos, [1.0, 0.0, 0.0, 0.0]);
+    common::set_robot_qvel(e, robot_qvel);
 }
 
 #[test]

@@ -1,5 +1,8 @@
 //! PickCube-v1 with the Panda: the env API, seeding, observations, controllers and state.
 
+mod common;
+
+use common::close;
 use mjskill::{make, registry, EnvConfig, ObsMode, RewardMode};
 
 fn env_with(mode: &str) -> mjskill::Env {
@@ -11,16 +14,6 @@ fn env_with(mode: &str) -> mjskill::Env {
         },
     )
     .unwrap()
-}
-
-fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
-    assert_eq!(got.len(), want.len(), "{what}: length");
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (*g as f64 - w).abs() < tol,
-            "{what}[{k}]: got {g}, want {w}"
-        );
-    }
 }
 
 #[test]

@@ -1,19 +1,13 @@
 //! PlaceSphere-v1 with the Panda: seeding, layout, the bin, evaluate and reward stages.
 
+mod common;
+
+use common::close;
 use mjskill::mujoco::ObjType;
 use mjskill::{make, EnvConfig};
 
 fn env() -> mjskill::Env {
     make("PlaceSphere-v1", EnvConfig::default()).unwrap()
-}
-
-fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (*g as f64 - w).abs() < tol,
-            "{what}[{k}]: got {g}, want {w}"
-        );
-    }
 }
 
 #[test]
@@ -81,14 +75,7 @@ fn state_layout_is_39_long_in_maniskills_order() {
 
 /// Puts the sphere at `pos` with zero velocity through the env state.
 fn place_sphere(e: &mut mjskill::Env, pos: [f64; 3]) {
-    let model = e.model().clone();
-    let j = model.require_id(ObjType::Joint, "sphere").unwrap();
-    let adr = model.jnt_qposadr()[j] as usize;
-    let mut st = e.get_state();
-    // physics = [time, qpos..., qvel..., ...]
-    st.physics[1 + adr..1 + adr + 3].copy_from_slice(&pos);
-    st.physics[1 + adr + 3..1 + adr + 7].copy_from_slice(&[1.0, 0.0, 0.0, 0.0]);
-    e.set_state(&st).unwrap();
+    common::put_free_body(e, "sphere", pos, [1.0, 0.0, 0.0, 0.0]);
 }
 
 #[test]

@@ -1,7 +1,11 @@
 //! PokeCube-v1 with the Panda: seeding, layout, the goal target, the upstream quirks of the
 //! observation and `evaluate()`, and every dense-reward stage on constructed states.
 
+mod common;
+
 use std::f64::consts::FRAC_1_SQRT_2;
+
+use common::{close, norm, part, put_free_body as put, set_robot_qvel};
 
 use mjskill::mujoco::ObjType;
 use mjskill::{make, Env, EnvConfig, RewardMode};
@@ -16,24 +20,6 @@ fn env_with(control_mode: Option<&str>) -> Env {
         },
     )
     .unwrap()
-}
-
-fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
-    assert_eq!(got.len(), want.len(), "{what}");
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!(
-            (*g as f64 - w).abs() < tol,
-            "{what}[{k}]: got {g}, want {w}"
-        );
-    }
-}
-
-fn part(e: &Env, key: &str) -> Vec<f64> {
-    e.obs_part(key).unwrap().iter().map(|&x| x as f64).collect()
-}
-
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 fn rotz(yaw: f64) -> [f64; 4] {
@@ -184,32 +170,6 @@ fn scene_has_upstream_masses_and_a_visible_flat_target() {
         let xmat = &d.geom_xmat()[9 * g..9 * g + 9];
         assert!(xmat[8].abs() > 1.0 - 1e-6, "ring {k} not flat: {xmat:?}");
     }
-}
-
-/// Writes a free body's pose (and zero velocity) through the env state.
-fn put(e: &mut Env, body: &str, pos: [f64; 3], quat: [f64; 4]) {
-    let model = e.model().clone();
-    let j = model.require_id(ObjType::Joint, body).unwrap();
-    let adr = model.jnt_qposadr()[j] as usize;
-    let vadr = model.jnt_dofadr()[j] as usize;
-    let nq = model.nq();
-    let mut st = e.get_state();
-    // physics = [time, qpos (nq), qvel (nv), ...]
-    st.physics[1 + adr..1 + adr + 3].copy_from_slice(&pos);
-    st.physics[1 + adr + 3..1 + adr + 7].copy_from_slice(&quat);
-    st.physics[1 + nq + vadr..1 + nq + vadr + 6].fill(0.0);
-    e.set_state(&st).unwrap();
-}
-
-/// Sets the robot's joint velocities (ManiSkill order) through the env state.
-fn set_robot_qvel(e: &mut Env, qvel: &[f64]) {
-    let nq = e.model().nq();
-    let dofs = e.robot().dof_adr.clone();
-    let mut st = e.get_state();
-    for (&a, &v) in dofs.iter().zip(qvel) {
-        st.physics[1 + nq + a] = v;
-    }
-    e.set_state(&st).unwrap();
 }
 
 fn reach_reward(d: f64) -> f64 {

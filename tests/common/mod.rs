@@ -1,6 +1,6 @@
 //! Helpers shared by the robot test files: an independent URDF forward kinematics (roxmltree,
 //! not urdf-rs and not mjskill's loader), a table scene with PD targets, env construction,
-//! `export-mjcf` runs and a determinism check.
+//! `export-mjcf` runs, a determinism check, and the task tests' observation and state helpers.
 #![allow(dead_code)]
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -375,4 +375,55 @@ pub fn solver_grasps_and_lifts(
         }
     }
     assert_eq!(tested, 3);
+}
+
+// ---- task tests: observations and constructed states --------------------------------
+
+/// Asserts that `got` equals `want` element by element within `tol` (same length).
+pub fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: length");
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!(
+            (*g as f64 - w).abs() < tol,
+            "{what}[{k}]: got {g}, want {w}"
+        );
+    }
+}
+
+/// A named observation slice (`"extra/tcp_pose"`) as f64.
+pub fn part(e: &mjskill::Env, key: &str) -> Vec<f64> {
+    e.obs_part(key).unwrap().iter().map(|&x| x as f64).collect()
+}
+
+/// Euclidean norm.
+pub fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// Writes the pose of the free body whose free joint is `joint` (zero velocity) through the
+/// env state: `physics` = [time, qpos (nq), qvel (nv), ...].
+pub fn put_free_body(e: &mut mjskill::Env, joint: &str, pos: [f64; 3], quat: [f64; 4]) {
+    let model = e.model().clone();
+    let j = model
+        .require_id(mjskill::mujoco::ObjType::Joint, joint)
+        .unwrap();
+    let adr = model.jnt_qposadr()[j] as usize;
+    let vadr = model.jnt_dofadr()[j] as usize;
+    let nq = model.nq();
+    let mut st = e.get_state();
+    st.physics[1 + adr..1 + adr + 3].copy_from_slice(&pos);
+    st.physics[1 + adr + 3..1 + adr + 7].copy_from_slice(&quat);
+    st.physics[1 + nq + vadr..1 + nq + vadr + 6].fill(0.0);
+    e.set_state(&st).unwrap();
+}
+
+/// Sets the robot's joint velocities (ManiSkill order) through the env state.
+pub fn set_robot_qvel(e: &mut mjskill::Env, qvel: &[f64]) {
+    let nq = e.model().nq();
+    let dofs = e.robot().dof_adr.clone();
+    let mut st = e.get_state();
+    for (&a, &v) in dofs.iter().zip(qvel) {
+        st.physics[1 + nq + a] = v;
+    }
+    e.set_state(&st).unwrap();
 }
