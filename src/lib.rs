@@ -13,6 +13,7 @@
 pub mod cli;
 pub mod controllers;
 pub mod env;
+pub mod maniskill;
 pub mod mjcf;
 pub mod models;
 pub mod mujoco;
@@ -22,7 +23,8 @@ pub mod solvers;
 pub mod tasks;
 
 pub use env::{
-    make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, Step,
+    make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode,
+    SimConfig, StateDict, Step,
 };
 
 /// The README's examples, compiled and run as doc tests.

@@ -95,8 +95,9 @@ fn round_trip_and_exact_replay() {
     assert_eq!(m.reward_mode, env.config().reward_mode.name());
     assert_eq!(m.control_mode, env.get_state().control_mode);
     assert_eq!(m.max_episode_steps, env.max_episode_steps());
-    assert_eq!(m.timestep, mjskill::mjcf::TIMESTEP);
-    assert_eq!(m.substeps, mjskill::mjcf::SUBSTEPS);
+    assert_eq!(m.timestep, env.model().timestep());
+    assert_eq!(m.substeps, env.substeps());
+    assert_eq!(m.sim(), env.config().sim);
     assert_eq!(m.version, env!("CARGO_PKG_VERSION"));
     assert_eq!(m.action_space.shape, env.action_space().shape);
     assert_eq!(bits(&m.action_space.low), bits(&env.action_space().low));

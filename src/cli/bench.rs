@@ -5,7 +5,6 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
 use crate::env::{make, EnvConfig};
-use crate::mjcf::SUBSTEPS;
 use crate::mujoco::Data;
 
 /// One bench result (printed as a JSON line).
@@ -73,6 +72,7 @@ pub fn run(
         .collect();
     env.reset(Some(0));
     let start = env.get_state();
+    let substeps = env.substeps();
     // Untimed pass: record the drive commands the env writes, so that raw physics can replay
     // the identical trajectory (same contacts, same solver work). The episode is not reset
     // at truncation (ManiSkill keeps stepping too), so both runs are one continuous rollout.
@@ -101,16 +101,16 @@ pub fn run(
         for i in 0..steps {
             data.ctrl_mut()
                 .copy_from_slice(&ctrls[i * nu..(i + 1) * nu]);
-            for _ in 0..SUBSTEPS {
+            for _ in 0..substeps {
                 data.step();
             }
             // As the env does after its substeps (poses for reading; normalises quaternions).
             data.update_kinematics();
         }
-        mj_rate = mj_rate.max((steps * SUBSTEPS) as f64 / t.elapsed().as_secs_f64());
+        mj_rate = mj_rate.max((steps * substeps) as f64 / t.elapsed().as_secs_f64());
         replay_identical = data.qpos() == env_qpos.as_slice() && data.qvel() == env_qvel.as_slice();
     }
-    let phys = mj_rate / SUBSTEPS as f64;
+    let phys = mj_rate / substeps as f64;
     let vec_rate = match vec {
         None => None,
         Some((n, t)) => {
@@ -175,7 +175,7 @@ pub fn run(
         control_mode: env.control_mode().to_string(),
         obs_mode: env.config().obs_mode.name().to_string(),
         steps,
-        substeps: SUBSTEPS,
+        substeps: env.substeps(),
         env_steps_per_s: env_rate,
         physics_steps_per_s: phys,
         mj_step_per_s: mj_rate,

@@ -25,6 +25,8 @@ macro_rules! out {
 
 pub mod bench;
 pub mod eval;
+pub mod fidelity;
+pub mod plot;
 pub mod render;
 pub mod rollout;
 
@@ -49,6 +51,10 @@ pub struct EnvArgs {
     /// Control mode (default: the policy's if it needs one, else the robot's default).
     #[arg(long)]
     pub control_mode: Option<String>,
+    /// Physics steps per second (ManiSkill's sim_freq); a multiple of the 20 Hz control
+    /// frequency. Higher is slower and closer to continuous-time dynamics.
+    #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+    pub sim_freq: u32,
 }
 
 impl EnvArgs {
@@ -57,6 +63,9 @@ impl EnvArgs {
         crate::env::EnvConfig {
             robot: self.robot.clone(),
             control_mode: self.control_mode.clone(),
+            sim: crate::env::SimConfig {
+                sim_freq: self.sim_freq,
+            },
             ..Default::default()
         }
     }
@@ -183,6 +192,27 @@ pub enum Command {
         /// Largest allowed absolute deviation of observations, rewards and info values.
         #[arg(long, default_value_t = 1e-6)]
         tolerance: f64,
+    },
+    /// Replay a ManiSkill reference trajectory file (`<env>__<robot>.json.gz`) in mjskill and
+    /// print the per-step deviations of joints, TCP, objects, rewards and flags (JSON).
+    Fidelity {
+        /// The reference file.
+        file: PathBuf,
+        /// Re-import the reference state every K steps (1: one-step errors only).
+        #[arg(long)]
+        resync: Option<u32>,
+        /// Physics steps per second of the replaying env.
+        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        sim_freq: u32,
+        /// Only the episodes of this control mode.
+        #[arg(long)]
+        control_mode: Option<String>,
+        /// Leave out the per-step arrays (per-episode and per-bucket summaries only).
+        #[arg(long)]
+        summary: bool,
+        /// Draw the error curves (joint, TCP, object error against the step) to this PNG.
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -330,6 +360,21 @@ fn run(cli: Cli) -> Result<(), String> {
             out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
             Ok(())
         }
+        Command::Fidelity {
+            file,
+            resync,
+            sim_freq,
+            control_mode,
+            summary,
+            plot,
+        } => fidelity::run(&fidelity::FidelityArgs {
+            file,
+            resync,
+            sim: crate::env::SimConfig { sim_freq },
+            control_mode,
+            summary,
+            plot,
+        }),
         Command::Envs => {
             out!(
                 "{}",

@@ -272,6 +272,7 @@ pub fn replay_recording(
         control_mode: Some(m.control_mode.clone()),
         robot_init_qpos_noise: m.robot_init_qpos_noise,
         max_episode_steps: Some(m.max_episode_steps),
+        sim: m.sim(),
     };
     let mut env = crate::env::make(&m.env_id, config).map_err(|e| e.to_string())?;
     let mut rep = ReplayReport {

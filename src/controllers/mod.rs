@@ -4,6 +4,7 @@
 //! a slice of the action in order. Arithmetic follows upstream's float32 path: actions are
 //! f32, normalised parts clip to [−1, 1] and rescale in f32, deltas are added to the f32
 //! measured position. Targets are written as MuJoCo controls through [`RobotIds`].
+pub mod drive;
 pub mod ik;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -529,6 +530,111 @@ impl Controller {
                         *o = v as f32;
                     }
                     k += 7;
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// The action range of every part, in action order (ManiSkill's `action_space` dict).
+    pub fn part_ranges(&self) -> Vec<(&'static str, std::ops::Range<usize>)> {
+        let mut off = 0;
+        self.parts
+            .iter()
+            .map(|p| {
+                let r = off..off + p.low.len();
+                off = r.end;
+                (p.spec.name, r)
+            })
+            .collect()
+    }
+
+    /// The controller state of ManiSkill's `get_state_dict()`: `("<part>.target_qpos",
+    /// values)` / `("<part>.target_pose", [p, q])` for the parts that accumulate targets
+    /// (without the part prefix when the mode has a single part).
+    pub fn state_entries(&self) -> Vec<(String, Vec<f64>)> {
+        let nested = self.parts.len() > 1;
+        let key = |p: &Part, k: &str| {
+            if nested {
+                format!("{}.{k}", p.spec.name)
+            } else {
+                k.to_string()
+            }
+        };
+        let mut v = Vec::new();
+        for p in &self.parts {
+            match p.spec.kind {
+                PartKind::JointPos {
+                    use_target: true, ..
+                } => v.push((
+                    key(p, "target_qpos"),
+                    p.target_q.iter().map(|&x| x as f64).collect(),
+                )),
+                PartKind::Ee {
+                    use_target: true, ..
+                } => {
+                    let t = p.target_pose.translation.vector;
+                    let q = p.target_pose.rotation;
+                    v.push((
+                        key(p, "target_pose"),
+                        vec![t.x, t.y, t.z, q.w, q.i, q.j, q.k],
+                    ));
+                }
+                _ => {}
+            }
+        }
+        v
+    }
+
+    /// After the physics state was set from outside (ManiSkill's `set_state_dict`): every
+    /// target restarts from the measured positions as in [`Controller::reset`], then the
+    /// given `state_entries`-style values override the accumulated targets, and the drives
+    /// hold the accumulated joint targets (or the measured positions).
+    pub fn set_targets_from_state(
+        &mut self,
+        robot: &RobotIds,
+        model: &Model,
+        data: &mut Data,
+        entries: &indexmap::IndexMap<String, Vec<f64>>,
+    ) {
+        self.reset(robot, model, data);
+        let nested = self.parts.len() > 1;
+        for p in &mut self.parts {
+            let key = |k: &str| {
+                if nested {
+                    format!("{}.{k}", p.spec.name)
+                } else {
+                    k.to_string()
+                }
+            };
+            match p.spec.kind {
+                PartKind::JointPos {
+                    use_target: true, ..
+                } => {
+                    if let Some(v) = entries.get(&key("target_qpos")) {
+                        for (t, &x) in p.target_q.iter_mut().zip(v) {
+                            *t = x as f32;
+                        }
+                        for (k, &i) in p.idx.iter().enumerate() {
+                            robot.set_drive_target(model, data, i, p.target_q[k] as f64, 0.0);
+                        }
+                        for &(fi, ci, m, o) in &p.followers {
+                            let t = m * p.target_q[ci] + o;
+                            robot.set_drive_target(model, data, fi, t as f64, 0.0);
+                        }
+                    }
+                }
+                PartKind::Ee {
+                    use_target: true, ..
+                } => {
+                    if let Some(v) = entries.get(&key("target_pose")) {
+                        p.target_pose = Isometry3::from_parts(
+                            Translation3::new(v[0], v[1], v[2]),
+                            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                                v[3], v[4], v[5], v[6],
+                            )),
+                        );
+                    }
                 }
                 _ => {}
             }

@@ -7,8 +7,10 @@
 //! counting, `truncated` stays true), exactly as upstream.
 pub mod render;
 pub mod rng;
+pub mod state_dict;
 pub mod vec;
 pub use render::CameraImage;
+pub use state_dict::{ActionPart, StateDict};
 pub use vec::VecEnv;
 
 use std::sync::Arc;
@@ -16,7 +18,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::controllers::Controller;
-use crate::mjcf::{Mjcf, Scene, SUBSTEPS};
+use crate::mjcf::{Mjcf, Scene, CONTROL_DT};
 use crate::mujoco::{Data, Model, Warnings};
 use crate::robots::{InitNoise, RobotIds, RobotSpec};
 use crate::tasks::{finger_forces, Task, TaskCtx};
@@ -178,6 +180,49 @@ fn names<T>(v: &[(&str, T)]) -> String {
     v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
+/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
+pub const CONTROL_FREQ: u32 = 20;
+
+/// Physics settings (ManiSkill's `sim_config`): how many physics steps simulate one 20 Hz
+/// control step. A higher `sim_freq` is slower and closer to the continuous-time dynamics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SimConfig {
+    /// Physics steps per second; a positive multiple of [`CONTROL_FREQ`].
+    pub sim_freq: u32,
+}
+
+impl SimConfig {
+    /// The default physics rate.
+    pub const DEFAULT_SIM_FREQ: u32 = 500;
+    /// Physics steps per control step.
+    pub fn substeps(&self) -> usize {
+        (self.sim_freq / CONTROL_FREQ) as usize
+    }
+    /// Physics timestep (s).
+    pub fn timestep(&self) -> f64 {
+        CONTROL_DT / self.substeps() as f64
+    }
+    /// Checks that `sim_freq` is a positive multiple of the control frequency.
+    pub fn validate(&self) -> Result<(), EnvError> {
+        if self.sim_freq == 0 || self.sim_freq % CONTROL_FREQ != 0 || self.sim_freq > 100_000 {
+            return Err(EnvError::Build(format!(
+                "sim_freq {} is not a multiple of the control frequency {CONTROL_FREQ} Hz \
+                 between {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)",
+                self.sim_freq
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            sim_freq: Self::DEFAULT_SIM_FREQ,
+        }
+    }
+}
+
 /// Env construction options; `Default` equals ManiSkill's defaults (env.md §2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EnvConfig {
@@ -193,6 +238,9 @@ pub struct EnvConfig {
     pub robot_init_qpos_noise: f64,
     /// Episode length for truncation (None: 50).
     pub max_episode_steps: Option<u32>,
+    /// Physics settings.
+    #[serde(default)]
+    pub sim: SimConfig,
 }
 
 impl Default for EnvConfig {
@@ -204,6 +252,7 @@ impl Default for EnvConfig {
             control_mode: None,
             robot_init_qpos_noise: DEFAULT_QPOS_NOISE,
             max_episode_steps: None,
+            sim: SimConfig::default(),
         }
     }
 }
@@ -339,7 +388,8 @@ fn resolve_robot(spec: &EnvSpec, robot: Option<&str>) -> Result<&'static RobotSp
 pub fn scene_mjcf(env_id: &str, robot: &str) -> Result<Mjcf, String> {
     let spec = env_spec(env_id).map_err(|e| e.to_string())?;
     let rs = resolve_robot(spec, Some(robot)).map_err(|e| e.to_string())?;
-    let (mjcf, ..) = build_scene(spec, rs, rs.control_modes[0]).map_err(|e| e.to_string())?;
+    let (mjcf, ..) = build_scene(spec, rs, rs.control_modes[0], SimConfig::default())
+        .map_err(|e| e.to_string())?;
     Ok(mjcf)
 }
 
@@ -354,6 +404,7 @@ fn build_scene(
     spec: &EnvSpec,
     rs: &'static RobotSpec,
     control_mode: &str,
+    sim: SimConfig,
 ) -> Result<Built, EnvError> {
     let desc = rs.description().map_err(EnvError::Build)?;
     let parts = rs
@@ -361,7 +412,7 @@ fn build_scene(
         .map_err(EnvError::UnknownMode)?;
     let controller = Controller::new(control_mode, parts, &desc).map_err(EnvError::Build)?;
     let task = (spec.make_task)(rs.uid);
-    let mut scene = Scene::new(&format!("{}-{}", spec.id, rs.uid));
+    let mut scene = Scene::new(&format!("{}-{}", spec.id, rs.uid), sim.timestep());
     scene.add_table_scene();
     scene
         .add_robot(
@@ -472,6 +523,8 @@ pub struct Env {
     robot: RobotIds,
     controller: Controller,
     task: Box<dyn Task>,
+    /// ManiSkill's actors (table first, then the task's), resolved to bodies.
+    actors: Vec<state_dict::Actor>,
     numpy: NumpyRandomState,
     torch_global: TorchGenerator,
     main_seed: Option<u64>,
@@ -511,11 +564,14 @@ impl Env {
                 config.robot_init_qpos_noise
             )));
         }
-        let (mjcf, desc, controller, mut task) = build_scene(spec, rs, &mode)?;
+        config.sim.validate()?;
+        let (mjcf, desc, controller, mut task) = build_scene(spec, rs, &mode, config.sim)?;
         let model = Arc::new(mjcf.compile().map_err(|e| EnvError::Build(e.to_string()))?);
         let data = Data::new(model.clone()).map_err(|e| EnvError::Build(e.to_string()))?;
         let robot = RobotIds::resolve(&model, &desc, rs).map_err(EnvError::Build)?;
         task.resolve(&model).map_err(EnvError::Build)?;
+        let actors =
+            state_dict::resolve_actors(&model, task.actor_names()).map_err(EnvError::Build)?;
         let n = robot.qpos_adr.len();
         let keys = task.info_keys();
         let state = config.obs_mode != ObsMode::None;
@@ -576,6 +632,7 @@ impl Env {
             robot,
             controller,
             task,
+            actors,
             numpy: NumpyRandomState::new(CONSTRUCTION_SEED),
             torch_global: TorchGenerator::default(),
             main_seed: None,
@@ -607,6 +664,10 @@ impl Env {
     /// Env id.
     pub fn id(&self) -> &'static str {
         self.id
+    }
+    /// Physics steps per env step.
+    pub fn substeps(&self) -> usize {
+        self.config.sim.substeps()
     }
     /// The effective configuration (robot and control mode filled in).
     pub fn config(&self) -> &EnvConfig {
@@ -764,7 +825,7 @@ impl Env {
     }
 
     fn advance(&mut self) -> Step<'_> {
-        for _ in 0..SUBSTEPS {
+        for _ in 0..self.config.sim.substeps() {
             self.data.step();
         }
         // mj_step leaves poses at the start of its last substep; observations, rewards and

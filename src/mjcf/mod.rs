@@ -2,8 +2,8 @@
 //! MuJoCo scene ([`Scene`] → [`Mjcf`]), compiled by the safe layer.
 //!
 //! Physics scheme (see the README's "Physics" section for the reasoning and measurements):
-//! * `timestep` [`TIMESTEP`] with the implicit integrator; one 20 Hz control step is
-//!   [`SUBSTEPS`] physics steps.
+//! * `timestep` chosen by the env (default [`TIMESTEP`]) with the implicit integrator; one
+//!   20 Hz control step is [`CONTROL_DT`] / timestep physics steps.
 //! * Every controlled joint gets a PhysX-style PD drive as one `general` actuator with gain 1
 //!   and bias `(0, −kp, −kd)`, so `force = clamp(ctrl − kp·q − kd·q̇, ±F)` with
 //!   `ctrl = kp·q* + kd·q̇*`: exactly ManiSkill's `clamp(kp(q*−q) + kd(q̇*−q̇), ±F)`.
@@ -23,10 +23,8 @@ use crate::mujoco::{Model, Result as MjResult};
 use urdf::{JointKind, RobotDesc, ShapeGeom};
 use xml::{num, nums, Element};
 
-/// Physics timestep in seconds.
+/// Default physics timestep in seconds (the env's `SimConfig` may choose another).
 pub const TIMESTEP: f64 = 0.002;
-/// Physics steps per 20 Hz control step (0.05 s / [`TIMESTEP`]).
-pub const SUBSTEPS: usize = 25;
 /// Control period of one env step (ManiSkill: 20 Hz).
 pub const CONTROL_DT: f64 = 0.05;
 /// Standard gravity used by ManiSkill.
@@ -35,10 +33,13 @@ pub const GRAVITY: f64 = 9.81;
 pub const DEFAULT_FRICTION: f64 = 0.3;
 /// MuJoCo torsional and rolling friction coefficients used for every geom.
 pub const TORSIONAL_ROLLING: [f64; 2] = [0.005, 0.0001];
-/// Contact `solref` (time constant, damping ratio): the stiffest stable setting at
-/// [`TIMESTEP`] (time constant 2·dt), so that rigid PhysX-like contacts are approximated and a
-/// grasped 4 cm cube is penetrated by well under a millimetre.
-pub const CONTACT_SOLREF: [f64; 2] = [2.0 * TIMESTEP, 1.0];
+/// Constraint `solref` (time constant, damping ratio) of contacts and of the stiff
+/// equalities: the stiffest stable setting at timestep `dt` (time constant 2·dt), so that
+/// rigid PhysX-like contacts are approximated and a grasped 4 cm cube is penetrated by well
+/// under a millimetre.
+pub fn stiff_solref(dt: f64) -> [f64; 2] {
+    [2.0 * dt, 1.0]
+}
 /// Contact `solimp` (impedance 0.95 → 0.99 over 1 mm of penetration).
 pub const CONTACT_SOLIMP: [f64; 3] = [0.95, 0.99, 0.001];
 /// Constraint rows MuJoCo preallocates per `mjData` (contacts × condim plus limits and
@@ -142,15 +143,16 @@ pub struct RobotOptions {
     pub no_ground_contact: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
-    /// `solref` of the joint equalities made from URDF `<mimic>` tags (None: MuJoCo's
-    /// default, 0.02 s). A stiffer value stands in for PhysX's 1e5 N/m mimic tendon where a
-    /// mimic follower has no drive of its own (WidowX AI).
-    pub mimic_solref: Option<[f64; 2]>,
+    /// Whether the joint equalities made from URDF `<mimic>` tags get [`stiff_solref`]
+    /// (otherwise MuJoCo's default, 0.02 s). The stiff value stands in for PhysX's 1e5 N/m
+    /// mimic tendon where a mimic follower has no drive of its own (WidowX AI).
+    pub stiff_mimic: bool,
     /// Links whose collision shapes get torsional friction (condim 4) with this coefficient
     /// (m): MuJoCo's analogue of a PhysX material `patch_radius` (torque ≤ μ·r·N).
     pub torsional_friction: Vec<(String, f64)>,
-    /// `solref` of the loop closures (None: MuJoCo's default, time constant 0.02 s).
-    pub connect_solref: Option<[f64; 2]>,
+    /// Whether the loop closures get [`stiff_solref`] (otherwise MuJoCo's default, time
+    /// constant 0.02 s).
+    pub stiff_connect: bool,
     /// Cameras attached to links.
     pub cameras: Vec<LinkCamera>,
 }
@@ -168,8 +170,8 @@ impl Default for RobotOptions {
             extra_excludes: Vec::new(),
             no_ground_contact: Vec::new(),
             connects: Vec::new(),
-            mimic_solref: None,
-            connect_solref: None,
+            stiff_mimic: false,
+            stiff_connect: false,
             torsional_friction: Vec::new(),
             cameras: Vec::new(),
         }
@@ -223,11 +225,12 @@ pub fn pose_attrs(mut e: Element, p: &Isometry3<f64>) -> Element {
 pub struct Scene {
     root: Element,
     assets: Vec<(String, Vec<u8>)>,
+    timestep: f64,
 }
 
 impl Scene {
-    /// An empty scene with mjskill's physics options.
-    pub fn new(model_name: &str) -> Scene {
+    /// An empty scene with mjskill's physics options and physics timestep `timestep` (s).
+    pub fn new(model_name: &str, timestep: f64) -> Scene {
         let mut root = Element::new("mujoco").attr("model", model_name);
         root.push(
             Element::new("compiler")
@@ -240,7 +243,7 @@ impl Scene {
         );
         root.push(
             Element::new("option")
-                .attr("timestep", num(TIMESTEP))
+                .attr("timestep", num(timestep))
                 .attr("integrator", "implicit")
                 .attr_nums("gravity", &[0.0, 0.0, -GRAVITY]),
         );
@@ -263,7 +266,7 @@ impl Scene {
             Element::new("default").child(
                 Element::new("geom")
                     .attr_nums("friction", &friction)
-                    .attr_nums("solref", &CONTACT_SOLREF)
+                    .attr_nums("solref", &stiff_solref(timestep))
                     .attr_nums("solimp", &CONTACT_SOLIMP)
                     .attr("contype", CONTACT_PROP)
                     .attr("conaffinity", CONTACT_PROP),
@@ -274,6 +277,7 @@ impl Scene {
         Scene {
             root,
             assets: Vec::new(),
+            timestep,
         }
     }
 
@@ -364,8 +368,8 @@ impl Scene {
                     .attr("joint1", &j.name)
                     .attr("joint2", &m.leader)
                     .attr_nums("polycoef", &[m.offset, m.multiplier, 0.0, 0.0, 0.0]);
-                if let Some(sr) = opts.mimic_solref {
-                    eq = eq.attr_nums("solref", &sr);
+                if opts.stiff_mimic {
+                    eq = eq.attr_nums("solref", &stiff_solref(self.timestep));
                 }
                 self.section("equality").push(eq);
             }
@@ -376,8 +380,8 @@ impl Scene {
                 .attr("body1", &c.link1)
                 .attr("body2", &c.link2)
                 .attr_nums("anchor", &c.anchor);
-            if let Some(r) = opts.connect_solref {
-                e = e.attr_nums("solref", &r);
+            if opts.stiff_connect {
+                e = e.attr_nums("solref", &stiff_solref(self.timestep));
             }
             self.section("equality").push(e);
         }

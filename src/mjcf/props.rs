@@ -264,7 +264,7 @@ mod tests {
 
     #[test]
     fn table_top_is_at_zero_and_box_masses_follow_density() {
-        let mut s = Scene::new("t");
+        let mut s = Scene::new("t", crate::mjcf::TIMESTEP);
         s.add_table_scene();
         s.add_box("cube", [0.02; 3], [1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.1]);
         s.add_peg("peg", 0.12, 0.025, [0.0, 0.0, 1.0, 1.0], [0.3, 0.0, 0.1]);

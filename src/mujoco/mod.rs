@@ -980,7 +980,30 @@ impl Data {
         }
     }
 
-    /// 6-D velocity of body `body` at its frame origin, world-oriented: [angular 3, linear 3].
+    /// Solves `M x = y` for `n` right-hand sides (`mj_solveM`), with the factorisation of the
+    /// joint-space inertia computed by the last [`Data::step1`] / [`Data::forward`]. `y` and
+    /// `x` hold `n` vectors of length nv one after another. `x` and `y` may not overlap.
+    pub fn solve_m(&mut self, x: &mut [f64], y: &[f64], n: usize) {
+        let nv = self.model.nv();
+        assert!(
+            x.len() >= n * nv && y.len() >= n * nv,
+            "solve_m needs {n}×nv = {} values in x and y",
+            n * nv
+        );
+        // SAFETY: model and data belong together; x and y hold n·nv values each and are
+        // distinct borrows; mj_solveM only reads qLD/qLDiagInv, which step1/forward computed.
+        unsafe {
+            sys::mj_solveM(
+                self.model.ptr,
+                self.ptr,
+                x.as_mut_ptr(),
+                y.as_ptr(),
+                n as c_int,
+            )
+        }
+    }
+
+    /// 6-D velocity of body `body` at its centre of mass, world-oriented: [angular 3, linear 3].
     pub fn body_velocity(&self, body: usize) -> [f64; 6] {
         assert!(body < self.model.nbody(), "body id {body} out of range");
         let mut v = [0.0; 6];

@@ -206,8 +206,8 @@ impl Meta {
             control_mode: env.control_mode().to_string(),
             robot_init_qpos_noise: cfg.robot_init_qpos_noise,
             max_episode_steps: env.max_episode_steps(),
-            timestep: crate::mjcf::TIMESTEP,
-            substeps: crate::mjcf::SUBSTEPS,
+            timestep: env.model().timestep(),
+            substeps: env.substeps(),
             version: env!("CARGO_PKG_VERSION").to_string(),
             action_space: space(env.action_space()),
             observation_space: space(env.observation_space()),
@@ -250,6 +250,13 @@ impl Meta {
             obj.insert(k.clone(), value);
         }
         serde_json::from_value(serde_json::Value::Object(obj)).map_err(|e| e.to_string())
+    }
+
+    /// The physics settings the file was recorded with.
+    pub fn sim(&self) -> crate::env::SimConfig {
+        crate::env::SimConfig {
+            sim_freq: self.substeps as u32 * crate::env::CONTROL_FREQ,
+        }
     }
 
     /// Duration of one control step in nanoseconds.

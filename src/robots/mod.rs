@@ -333,6 +333,8 @@ pub struct RobotIds {
     pub limits: Vec<(f64, f64)>,
     /// Body ids of all robot links.
     pub bodies: Vec<usize>,
+    /// Body of the root link (fixed to the world at the robot's table pose).
+    pub root_body: usize,
     /// Body id per URDF link name lookup (name, id).
     pub link_bodies: Vec<(String, usize)>,
     /// The `tcp` site (at the TCP link's origin), when the robot has a TCP link.
@@ -358,6 +360,7 @@ impl RobotIds {
             joint_names: Vec::new(),
             limits: Vec::new(),
             bodies: Vec::new(),
+            root_body: 0,
             link_bodies: Vec::new(),
             tcp_site: model.id(ObjType::Site, "tcp"),
             tcp_body: None,
@@ -386,6 +389,7 @@ impl RobotIds {
             r.link_bodies.push((l.name.clone(), b));
             r.weight.push(model.body_mass()[b] * GRAVITY);
         }
+        r.root_body = r.body(&robot.links[robot.root].name)?;
         r.fingers = [r.body(spec.grasp.finger1.0)?, r.body(spec.grasp.finger2.0)?];
         r.tcp_body = spec.tcp_link.map(|l| r.body(l)).transpose()?;
         r.tcp_parts = match &spec.tcp {
@@ -528,7 +532,7 @@ pub fn table_scene_with(
     let mode = spec.control_modes[0];
     let drives =
         crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
-    let mut scene = crate::mjcf::Scene::new(spec.uid);
+    let mut scene = crate::mjcf::Scene::new(spec.uid, crate::mjcf::TIMESTEP);
     scene.add_table_scene();
     scene.add_robot(&desc, &spec.options(spec.table_base(), drives), &|_| None)?;
     extra(&mut scene);

@@ -35,11 +35,6 @@ const JOINT_DELTA: f32 = 0.1;
 /// Carriage opening range of the (normalised, absolute) gripper action (m).
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
-/// `solref` of the carriage coupling (URDF mimic → MuJoCo joint equality): time constant
-/// 2·timestep, the stiffest stable value, standing in for the PhysX tendon of 1e5 N/m that
-/// alone holds the undriven right carriage against the grasp force.
-const MIMIC_SOLREF: [f64; 2] = [2.0 * crate::mjcf::TIMESTEP, 1.0];
-
 /// WidowX AI control modes (robots.md §6), default first.
 pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
 
@@ -81,5 +76,8 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     control_modes: &CONTROL_MODES,
     parts,
     cameras: &[],
-    customize: |o| o.mimic_solref = Some(MIMIC_SOLREF),
+    // The carriage coupling (URDF mimic → MuJoCo joint equality) gets the stiffest stable
+    // solref, standing in for the PhysX tendon of 1e5 N/m that alone holds the undriven right
+    // carriage against the grasp force.
+    customize: |o| o.stiff_mimic = true,
 };

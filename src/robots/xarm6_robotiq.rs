@@ -152,7 +152,7 @@ fn customize(opts: &mut RobotOptions) {
             anchor: a1,
         });
     }
-    opts.connect_solref = Some(crate::mjcf::CONTACT_SOLREF);
+    opts.stiff_connect = true;
     for pad in PADS {
         opts.torsional_friction
             .push((pad.to_string(), PAD_FRICTION_AVG * PAD_PATCH_RADIUS));

@@ -119,6 +119,16 @@ pub trait Task: Send + std::fmt::Debug {
     fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64;
     /// Sensor and human-render cameras.
     fn cameras(&self) -> (CameraDef, CameraDef);
+    /// ManiSkill's names of the task's actors (MuJoCo bodies of the same name: free bodies
+    /// for dynamic actors, mocap bodies for kinematic ones), in ManiSkill's scene order. The
+    /// table (`table-workspace`) comes before them in every scene.
+    fn actor_names(&self) -> &'static [&'static str];
+    /// The info key of the grasp check (`is_grasped`, `is_peg_grasped`, `is_obj_grasped`).
+    fn grasp_flag(&self) -> &'static str;
+    /// Whether an info key is a boolean flag (PokeCube also reports two distances).
+    fn bool_info(&self, key: &str) -> bool {
+        self.info_keys().contains(&key)
+    }
 }
 
 /// Position of a body.

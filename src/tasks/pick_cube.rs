@@ -251,6 +251,14 @@ impl Task for PickCube {
         r
     }
 
+    fn grasp_flag(&self) -> &'static str {
+        "is_grasped"
+    }
+
+    fn actor_names(&self) -> &'static [&'static str] {
+        &["cube", "goal_site"]
+    }
+
     fn cameras(&self) -> (CameraDef, CameraDef) {
         (
             CameraDef {

@@ -190,6 +190,14 @@ impl Task for PlaceSphere {
         r
     }
 
+    fn grasp_flag(&self) -> &'static str {
+        "is_obj_grasped"
+    }
+
+    fn actor_names(&self) -> &'static [&'static str] {
+        &["sphere", "bin"]
+    }
+
     fn cameras(&self) -> (CameraDef, CameraDef) {
         (
             CameraDef {

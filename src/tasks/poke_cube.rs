@@ -284,6 +284,18 @@ impl Task for PokeCube {
         r
     }
 
+    fn grasp_flag(&self) -> &'static str {
+        "is_peg_grasped"
+    }
+
+    fn bool_info(&self, key: &str) -> bool {
+        self.info_keys().contains(&key) && !matches!(key, "angle_diff" | "head_to_cube_dist")
+    }
+
+    fn actor_names(&self) -> &'static [&'static str] {
+        &["cube", "peg", "goal_region"]
+    }
+
     fn cameras(&self) -> (CameraDef, CameraDef) {
         (
             CameraDef {

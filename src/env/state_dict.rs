@@ -1,0 +1,496 @@
+//! The env state in ManiSkill's terms: `get_state_dict` / `set_state_dict`, actor poses by
+//! name and the per-part action split.
+//!
+//! ManiSkill's `env.get_state_dict()` (batch dim dropped) is
+//! * `actors.<name>`: `[x, y, z, qw, qx, qy, qz, vx, vy, vz, wx, wy, wz]`, world frame, the
+//!   linear velocity of the centre of mass; kinematic actors have zero velocities, static
+//!   ones (the ground) are left out;
+//! * `articulations.<robot>`: `[root pose (7), root linear vel (3), root angular vel (3),
+//!   qpos (n), qvel (n)]` in ManiSkill's joint order;
+//! * `controller[.<part>].target_qpos` / `target_pose`: the accumulated targets of the
+//!   `*_target_*` control modes (nested under the part name when the mode has several parts).
+//!
+//! mjskill's robots are fixed at their table pose (the root is welded to the world), so a
+//! state dict whose root pose differs from it is rejected rather than silently ignored.
+use indexmap::IndexMap;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde_json::{json, Map, Value};
+
+use super::{Env, EnvError};
+use crate::mujoco::{JointType, Model};
+
+/// Largest root-pose difference [`Env::set_state_dict`] accepts (m, and rad for the
+/// rotation): ManiSkill stores the pose in float32.
+pub const ROOT_POSE_TOLERANCE: f64 = 1e-5;
+
+/// `env.get_state_dict()` in ManiSkill's layout. Maps keep ManiSkill's order (actors in
+/// scene order, then the articulation, then the controller state), which is also the order
+/// of the flat `env.get_state()` vector ([`StateDict::flat`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct StateDict {
+    /// Actor name → pose (7) and velocities (6).
+    pub actors: IndexMap<String, [f64; 13]>,
+    /// Articulation name (the robot uid) → root pose (7), root velocities (6), qpos, qvel.
+    pub articulations: IndexMap<String, Vec<f64>>,
+    /// Controller state: `"<part>.target_qpos"` / `"<part>.target_pose"` for modes with
+    /// several parts, `"target_qpos"` for single-part modes (so100).
+    pub controller: IndexMap<String, Vec<f64>>,
+}
+
+impl StateDict {
+    /// The flat vector of ManiSkill's `env.get_state()` (leaves concatenated in order).
+    pub fn flat(&self) -> Vec<f64> {
+        let mut v = Vec::new();
+        for a in self.actors.values() {
+            v.extend_from_slice(a);
+        }
+        for a in self.articulations.values() {
+            v.extend_from_slice(a);
+        }
+        for c in self.controller.values() {
+            v.extend_from_slice(c);
+        }
+        v
+    }
+
+    /// ManiSkill's nested JSON form (`{"actors": {...}, "articulations": {...},
+    /// "controller": {...}}`; no `controller` key when the mode keeps no state).
+    pub fn to_json(&self) -> Value {
+        let mut top = Map::new();
+        top.insert("actors".into(), json!(self.actors));
+        top.insert("articulations".into(), json!(self.articulations));
+        if !self.controller.is_empty() {
+            let mut c = Map::new();
+            for (k, v) in &self.controller {
+                match k.split_once('.') {
+                    Some((part, key)) => {
+                        let e = c
+                            .entry(part.to_string())
+                            .or_insert_with(|| Value::Object(Map::new()));
+                        if let Value::Object(m) = e {
+                            m.insert(key.to_string(), json!(v));
+                        }
+                    }
+                    None => {
+                        c.insert(k.clone(), json!(v));
+                    }
+                }
+            }
+            top.insert("controller".into(), Value::Object(c));
+        }
+        Value::Object(top)
+    }
+
+    /// Parses ManiSkill's nested JSON form (as [`StateDict::to_json`] writes it and as
+    /// ManiSkill's `get_state_dict()` serialises). Errors name the offending key.
+    pub fn from_json(v: &Value) -> Result<StateDict, String> {
+        let obj = v.as_object().ok_or("a state dict must be a JSON object")?;
+        for k in obj.keys() {
+            if !matches!(k.as_str(), "actors" | "articulations" | "controller") {
+                return Err(format!(
+                    "unknown state dict key {k:?}; valid keys: actors, articulations, controller"
+                ));
+            }
+        }
+        let floats = |key: &str, v: &Value| -> Result<Vec<f64>, String> {
+            v.as_array()
+                .ok_or_else(|| format!("{key} must be an array of numbers"))?
+                .iter()
+                .map(|x| {
+                    x.as_f64()
+                        .ok_or_else(|| format!("{key} holds a non-number {x}"))
+                })
+                .collect()
+        };
+        let mut sd = StateDict::default();
+        if let Some(a) = obj.get("actors") {
+            let a = a.as_object().ok_or("actors must be an object")?;
+            for (name, v) in a {
+                let key = format!("actors.{name}");
+                let f = floats(&key, v)?;
+                let arr: [f64; 13] = f
+                    .as_slice()
+                    .try_into()
+                    .map_err(|_| format!("{key} has {} values, expected 13", f.len()))?;
+                sd.actors.insert(name.clone(), arr);
+            }
+        }
+        if let Some(a) = obj.get("articulations") {
+            let a = a.as_object().ok_or("articulations must be an object")?;
+            for (name, v) in a {
+                sd.articulations
+                    .insert(name.clone(), floats(&format!("articulations.{name}"), v)?);
+            }
+        }
+        if let Some(c) = obj.get("controller") {
+            let c = c.as_object().ok_or("controller must be an object")?;
+            for (k, v) in c {
+                match v {
+                    Value::Object(inner) => {
+                        for (k2, v2) in inner {
+                            let key = format!("{k}.{k2}");
+                            let f = floats(&format!("controller.{key}"), v2)?;
+                            sd.controller.insert(key, f);
+                        }
+                    }
+                    _ => {
+                        let f = floats(&format!("controller.{k}"), v)?;
+                        sd.controller.insert(k.clone(), f);
+                    }
+                }
+            }
+        }
+        Ok(sd)
+    }
+}
+
+/// How an actor of ManiSkill's scene is represented in the MuJoCo model.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum ActorBody {
+    /// A dynamic actor: a body with a free joint.
+    Free {
+        /// Body id.
+        body: usize,
+        /// qpos address of the free joint.
+        qadr: usize,
+        /// dof address of the free joint.
+        dadr: usize,
+    },
+    /// A kinematic actor: a mocap body.
+    Mocap {
+        /// Body id.
+        body: usize,
+        /// Mocap index.
+        mocap: usize,
+    },
+    /// A kinematic actor that never moves in mjskill (the table): its ManiSkill pose.
+    Fixed([f64; 7]),
+}
+
+/// One ManiSkill actor, resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Actor {
+    /// ManiSkill's actor name.
+    pub name: &'static str,
+    /// Its MuJoCo representation.
+    pub body: ActorBody,
+}
+
+/// The pose ManiSkill gives the table actor (`table-workspace`): its position and a 90° turn
+/// about z. mjskill's table geom carries the same pose with its box centre half a height up.
+fn table_pose() -> [f64; 7] {
+    let p = crate::mjcf::props::TABLE_POS;
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    [p[0], p[1], p[2], h, 0.0, 0.0, h]
+}
+
+/// Resolves the actors of an env's scene: the table, then the task's actors in ManiSkill's
+/// scene order. Errors name an actor the model lacks.
+pub(crate) fn resolve_actors(
+    model: &Model,
+    task_actors: &[&'static str],
+) -> Result<Vec<Actor>, String> {
+    let mut out = vec![Actor {
+        name: crate::mjcf::TABLE,
+        body: ActorBody::Fixed(table_pose()),
+    }];
+    for &name in task_actors {
+        let body = model
+            .id(crate::mujoco::ObjType::Body, name)
+            .ok_or_else(|| format!("the scene has no body for actor {name:?}"))?;
+        let free = (0..model.njnt()).find(|&j| {
+            model.jnt_bodyid()[j] as usize == body && model.joint_type(j) == JointType::Free
+        });
+        let mocap = model.body_mocapid()[body];
+        let body = match (free, mocap) {
+            (Some(j), _) => ActorBody::Free {
+                body,
+                qadr: model.jnt_qposadr()[j] as usize,
+                dadr: model.jnt_dofadr()[j] as usize,
+            },
+            (None, m) if m >= 0 => ActorBody::Mocap {
+                body,
+                mocap: m as usize,
+            },
+            _ => return Err(format!("actor {name:?} is neither free nor mocap")),
+        };
+        out.push(Actor { name, body });
+    }
+    Ok(out)
+}
+
+fn quat_of(q: &[f64]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+/// Angle between two (unnormalised) orientations, in radians.
+fn rotation_distance(a: &[f64], b: &[f64]) -> f64 {
+    quat_of(a).angle_to(&quat_of(b))
+}
+
+fn check_finite(key: &str, v: &[f64]) -> Result<(), EnvError> {
+    match v.iter().position(|x| !x.is_finite()) {
+        Some(i) => Err(EnvError::BadState(format!(
+            "{key}[{i}] = {} is not finite",
+            v[i]
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// A named slice of the action vector (ManiSkill's `action_space` dict entry of one
+/// controller part).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ActionPart {
+    /// Part name (`arm`, `gripper`, `body`, `base`, `gripper_active`).
+    pub name: &'static str,
+    /// Position in the flat action vector.
+    pub range: std::ops::Range<usize>,
+    /// Lower bounds of the part's entries.
+    pub low: Vec<f32>,
+    /// Upper bounds of the part's entries.
+    pub high: Vec<f32>,
+}
+
+impl Env {
+    /// The pose `[x, y, z, qw, qx, qy, qz]` of a ManiSkill actor by name (`"cube"`,
+    /// `"goal_site"`, `"table-workspace"`, ...); `None` for a name the scene lacks.
+    pub fn actor_pose(&self, name: &str) -> Option<[f64; 7]> {
+        let a = self.actors.iter().find(|a| a.name == name)?;
+        Some(self.actor_state(a)[..7].try_into().expect("13 values"))
+    }
+
+    /// Names of the scene's actors in ManiSkill's order.
+    pub fn actor_names(&self) -> Vec<&'static str> {
+        self.actors.iter().map(|a| a.name).collect()
+    }
+
+    fn actor_state(&self, a: &Actor) -> [f64; 13] {
+        let d = &self.data;
+        let mut s = [0.0; 13];
+        match a.body {
+            ActorBody::Free { body, qadr, .. } => {
+                s[..7].copy_from_slice(&d.qpos()[qadr..qadr + 7]);
+                let v = d.body_velocity(body); // [angular, linear at the COM], world
+                s[7..10].copy_from_slice(&v[3..6]);
+                s[10..13].copy_from_slice(&v[0..3]);
+            }
+            ActorBody::Mocap { mocap, .. } => {
+                s[..3].copy_from_slice(&d.mocap_pos()[3 * mocap..3 * mocap + 3]);
+                s[3..7].copy_from_slice(&d.mocap_quat()[4 * mocap..4 * mocap + 4]);
+            }
+            ActorBody::Fixed(p) => s[..7].copy_from_slice(&p),
+        }
+        s
+    }
+
+    /// The per-part split of the action vector (ManiSkill's `action_space` dict), in action
+    /// order. Parts that take no action (the xArm6's passive linkage) are left out.
+    pub fn action_parts(&self) -> Vec<ActionPart> {
+        let (low, high) = self.controller.bounds();
+        self.controller
+            .part_ranges()
+            .into_iter()
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(name, r)| ActionPart {
+                name,
+                low: low[r.clone()].to_vec(),
+                high: high[r.clone()].to_vec(),
+                range: r,
+            })
+            .collect()
+    }
+
+    /// ManiSkill's `env.get_state_dict()` of the current state.
+    pub fn get_state_dict(&self) -> StateDict {
+        let mut sd = StateDict::default();
+        for a in &self.actors {
+            sd.actors.insert(a.name.to_string(), self.actor_state(a));
+        }
+        let root = self.robot.root_body;
+        let mut art = Vec::with_capacity(13 + 2 * self.qpos.len());
+        art.extend_from_slice(&self.data.xpos()[3 * root..3 * root + 3]);
+        art.extend_from_slice(&self.data.xquat()[4 * root..4 * root + 4]);
+        art.extend_from_slice(&[0.0; 6]);
+        let n = self.qpos.len();
+        let mut q = vec![0.0; n];
+        self.robot.qpos(&self.data, &mut q);
+        art.extend_from_slice(&q);
+        self.robot.qvel(&self.data, &mut q);
+        art.extend_from_slice(&q);
+        sd.articulations.insert(self.spec.uid.to_string(), art);
+        for (key, v) in self.controller.state_entries() {
+            sd.controller.insert(key, v);
+        }
+        sd
+    }
+
+    /// Sets the state from ManiSkill's `get_state_dict()` layout (as
+    /// [`Env::get_state_dict`] returns it). Every actor and the robot must be present; the
+    /// controller entries of `*_target_*` modes are optional (missing ones keep their
+    /// values). Afterwards the drive targets hold the new positions (or the restored
+    /// controller targets), contacts are recomputed, and `obs`, `info` and every reward mode
+    /// describe the new state; `elapsed_steps` and the RNG streams are unchanged. Errors
+    /// (missing or unknown names, wrong lengths, non-finite values, a root pose other than
+    /// the robot's fixed table pose) leave the env unchanged.
+    pub fn set_state_dict(&mut self, sd: &StateDict) -> Result<(), EnvError> {
+        // Validate everything before touching the simulation.
+        for name in sd.actors.keys() {
+            if !self.actors.iter().any(|a| a.name == name) {
+                return Err(EnvError::BadState(format!(
+                    "unknown actor {name:?}; this scene's actors: {}",
+                    self.actor_names().join(", ")
+                )));
+            }
+        }
+        for a in &self.actors {
+            let s = sd.actors.get(a.name).ok_or_else(|| {
+                EnvError::BadState(format!("state dict lacks actor {:?}", a.name))
+            })?;
+            check_finite(&format!("actors.{}", a.name), s)?;
+            if let ActorBody::Fixed(p) = a.body {
+                let dp = Vector3::from_column_slice(&s[..3]) - Vector3::from_column_slice(&p[..3]);
+                if dp.norm() > ROOT_POSE_TOLERANCE
+                    || rotation_distance(&s[3..7], &p[3..7]) > ROOT_POSE_TOLERANCE
+                {
+                    return Err(EnvError::BadState(format!(
+                        "actor {:?} is fixed at {p:?} in mjskill; the state dict puts it at {:?}",
+                        a.name,
+                        &s[..7]
+                    )));
+                }
+            }
+        }
+        let uid = self.spec.uid;
+        if let Some(other) = sd.articulations.keys().find(|k| k.as_str() != uid) {
+            return Err(EnvError::BadState(format!(
+                "unknown articulation {other:?}; this env's robot is {uid:?}"
+            )));
+        }
+        let art = sd
+            .articulations
+            .get(uid)
+            .ok_or_else(|| EnvError::BadState(format!("state dict lacks articulation {uid:?}")))?;
+        let n = self.qpos.len();
+        if art.len() != 13 + 2 * n {
+            return Err(EnvError::BadState(format!(
+                "articulations.{uid} has {} values, expected {} (root pose 7, root velocity 6, \
+                 qpos {n}, qvel {n})",
+                art.len(),
+                13 + 2 * n
+            )));
+        }
+        check_finite(&format!("articulations.{uid}"), art)?;
+        let root = self.robot.root_body;
+        let rp = &self.data.xpos()[3 * root..3 * root + 3];
+        let rq = &self.data.xquat()[4 * root..4 * root + 4];
+        let dp = Vector3::from_column_slice(&art[..3]) - Vector3::from_column_slice(rp);
+        if dp.norm() > ROOT_POSE_TOLERANCE
+            || rotation_distance(&art[3..7], rq) > ROOT_POSE_TOLERANCE
+            || art[7..13].iter().any(|v| *v != 0.0)
+        {
+            return Err(EnvError::BadState(format!(
+                "the robot's root is fixed at {:?} with zero velocity in mjskill; the state \
+                 dict gives pose {:?} and velocity {:?}",
+                [rp[0], rp[1], rp[2], rq[0], rq[1], rq[2], rq[3]],
+                &art[..7],
+                &art[7..13]
+            )));
+        }
+        let expected: Vec<(String, usize)> = self
+            .controller
+            .state_entries()
+            .into_iter()
+            .map(|(k, v)| (k, v.len()))
+            .collect();
+        for (k, v) in &sd.controller {
+            match expected.iter().find(|(e, _)| e == k) {
+                None => {
+                    return Err(EnvError::BadState(format!(
+                        "unknown controller state {k:?} for control mode {}; valid: {}",
+                        self.controller.mode(),
+                        if expected.is_empty() {
+                            "none".to_string()
+                        } else {
+                            expected
+                                .iter()
+                                .map(|e| e.0.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        }
+                    )))
+                }
+                Some((_, len)) if *len != v.len() => {
+                    return Err(EnvError::BadState(format!(
+                        "controller.{k} has {} values, expected {len}",
+                        v.len()
+                    )))
+                }
+                _ => check_finite(&format!("controller.{k}"), v)?,
+            }
+        }
+
+        // Write the state.
+        for a in &self.actors {
+            let s = &sd.actors[a.name];
+            match a.body {
+                ActorBody::Free { qadr, dadr, body } => {
+                    self.data.qpos_mut()[qadr..qadr + 7].copy_from_slice(&s[..7]);
+                    // qvel of a free joint: linear velocity of the body origin (world) and
+                    // angular velocity in the body frame; ManiSkill gives the centre of mass's
+                    // linear velocity and the world angular velocity.
+                    let r = quat_of(&s[3..7]).to_rotation_matrix();
+                    let w = Vector3::from_column_slice(&s[10..13]);
+                    let ipos = &self.model.body_ipos()[3 * body..3 * body + 3];
+                    let com_offset: Vector3<f64> = r * Vector3::from_column_slice(ipos);
+                    let v_origin = Vector3::from_column_slice(&s[7..10]) - w.cross(&com_offset);
+                    let w_local: Vector3<f64> = Matrix3::from(r).transpose() * w;
+                    let qv = &mut self.data.qvel_mut()[dadr..dadr + 6];
+                    qv[..3].copy_from_slice(v_origin.as_slice());
+                    qv[3..].copy_from_slice(w_local.as_slice());
+                }
+                ActorBody::Mocap { mocap, .. } => {
+                    self.data.mocap_pos_mut()[3 * mocap..3 * mocap + 3].copy_from_slice(&s[..3]);
+                    self.data.mocap_quat_mut()[4 * mocap..4 * mocap + 4].copy_from_slice(&s[3..7]);
+                }
+                ActorBody::Fixed(_) => {}
+            }
+        }
+        self.robot.set_qpos(&mut self.data, &art[13..13 + n]);
+        let qv = self.data.qvel_mut();
+        for (&a, &v) in self.robot.dof_adr.iter().zip(&art[13 + n..]) {
+            qv[a] = v;
+        }
+        self.controller.set_targets_from_state(
+            &self.robot,
+            &self.model,
+            &mut self.data,
+            &sd.controller,
+        );
+        self.data.qacc_warmstart_mut().fill(0.0);
+        self.refresh_after_state_change();
+        Ok(())
+    }
+
+    /// Recomputes everything derived from the simulation state (forward dynamics, contacts,
+    /// finger forces, info and observation) after the state was written from outside.
+    fn refresh_after_state_change(&mut self) {
+        self.data.forward();
+        crate::tasks::finger_forces(
+            &self.model,
+            &self.data,
+            self.robot.fingers,
+            self.task.grasp_object(),
+            &mut self.finger_forces,
+        );
+        self.evaluate();
+        self.write_obs();
+    }
+
+    /// Sets `elapsed_steps` (ManiSkill's state dict does not carry it; `info` and
+    /// `truncated` follow it).
+    pub fn set_elapsed_steps(&mut self, steps: u32) {
+        self.elapsed_steps = steps;
+        self.info.elapsed_steps = steps;
+    }
+}
