@@ -7,20 +7,39 @@
 //! ForceDrive` / `computeDriveImpulse` in PhysX's `DyCpuGpuArticulation.h`):
 //!
 //! ```text
-//! F = clamp( kp (q* − q − h q̇') + kd (q̇* − q̇'), −F_max, F_max ),   q̇' = q̇ + h M⁻¹ F
+//! F = clamp( kp (q* − q − h q̇') + kd (q̇* − q̇'), −F_max, F_max ),   q̇' = q̇ + h W F
 //! ```
 //!
-//! [`Drives::apply`] solves this for all drives of a robot at once (projected Gauss–Seidel
-//! on the joint-space response `M⁻¹`, which couples the drives of one articulation; the
-//! first sweep is exactly PhysX's per-dof formula with the articulated unit response) and
-//! writes the forces as the controls of force actuators (gain 1, no bias). MuJoCo then
-//! integrates with its explicit Euler step while contacts, joint limits and equality
-//! constraints stay implicit in its constraint solver. Because the drive is implicit in its
-//! own terms, stiff drives are stable at PhysX's 0.01 s step without added armature.
+//! where `W` is the articulation's joint-space response (the drives' block of `M⁻¹`).
+//!
+//! [`Drives::apply`] computes the forces for one MuJoCo substep of length `h`:
+//! * **Micro-steps.** PhysX's TGS solver integrates positions within its 10 ms step (15
+//!   position iterations); a single implicit step of 10 ms would lag the drive's slow mode.
+//!   The drive dynamics `q̈ = a₀ + W F` (with the unconstrained acceleration `a₀` of the
+//!   arm, frozen over the substep) are therefore integrated in [`MICRO_STEPS`] implicit
+//!   micro-steps; the substep applies their mean force, so MuJoCo's explicit Euler step
+//!   ends at the micro-integrated velocity.
+//! * **Coupling.** Within a micro-step the drives of one articulation are solved together
+//!   by projected Gauss–Seidel on `W` ([`SWEEPS`] sweeps; the first sweep is exactly
+//!   PhysX's per-dof formula), each force clamped to its limit.
+//! * **Constraints.** Equality constraints that move an undriven joint (the WidowX AI's
+//!   mimic carriage, the Robotiq linkage) are folded into `W` with MuJoCo's own compliance:
+//!   `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)`, so a drive sees the inertia it actually moves.
+//! * **Position.** MuJoCo's semi-implicit Euler moves a joint by `h q̇'`; the micro-steps
+//!   know the path within the substep, and the arm joints get the difference added to
+//!   `qpos` after the step (second-order accurate positions). Gripper joints, which end
+//!   most substeps against an object, get neither the correction nor `a₀`.
+//!
+//! The forces are the controls of MuJoCo force actuators (gain 1, no bias, force range
+//! ±F); contacts, joint limits and equalities stay implicit in MuJoCo's constraint solver.
+use nalgebra::DMatrix;
+
 use crate::mjcf::Drive;
 use crate::mujoco::{Data, Model, ObjType};
 
-/// Gauss–Seidel sweeps over the coupled drive equations per substep.
+/// Implicit micro-steps of the drive dynamics per physics substep.
+pub const MICRO_STEPS: usize = 10;
+/// Gauss–Seidel sweeps over the coupled drive equations per micro-step.
 pub const SWEEPS: usize = 4;
 
 /// One resolved drive.
@@ -35,29 +54,58 @@ struct DriveDof {
     kp: f64,
     kd: f64,
     force_limit: f64,
+    /// Arm joint (true) or gripper joint (false): see the module docs, "Position".
+    arm: bool,
 }
 
-/// The drives of one robot: targets plus the force law.
+/// The drives of one robot: targets plus the force law. All buffers are allocated in
+/// [`Drives::new`]; [`Drives::apply`] allocates nothing.
 #[derive(Debug, Clone)]
 pub struct Drives {
     dofs: Vec<DriveDof>,
+    /// Drive index of every robot joint (ManiSkill order); None for undriven joints.
+    by_joint: Vec<Option<usize>>,
     /// Position target per drive.
     target_q: Vec<f64>,
     /// Velocity target per drive.
     target_v: Vec<f64>,
-    /// Forces of the last substep.
+    /// Mean forces of the last substep.
     force: Vec<f64>,
-    /// Scratch: unit vectors (n × nv) and their M⁻¹ images (n × nv).
+    /// Unit vectors at the drives' dofs (n × nv) and their images under M⁻¹ (n × nv).
     unit: Vec<f64>,
     minv: Vec<f64>,
-    /// Scratch: the drives' block of M⁻¹ (n × n, row-major).
+    /// The drives' response block W (n × n, row-major).
     w: Vec<f64>,
+    /// Micro-step state: position, velocity, unconstrained acceleration, force, force sum,
+    /// position correction (n each).
+    mq: Vec<f64>,
+    mv: Vec<f64>,
+    acc: Vec<f64>,
+    micro_force: Vec<f64>,
+    force_sum: Vec<f64>,
+    correction: Vec<f64>,
+    /// Equality rows that move an undriven dof: their Jacobian rows (ne × nv), their M⁻¹
+    /// images (ne × nv), indices into the model's equality rows, and the small dense
+    /// matrices A = J M⁻¹ Jᵀ + R (ne × ne) and Z = (M⁻¹ Jᵀ) at the drives (ne × n).
+    eq_j: Vec<f64>,
+    eq_y: Vec<f64>,
+    eq_rows: Vec<usize>,
+    eq_a: DMatrix<f64>,
+    eq_z: DMatrix<f64>,
+    eq_yd: DMatrix<f64>,
 }
 
 impl Drives {
     /// Resolves `drives` (one force actuator per joint, named by
-    /// [`crate::mjcf::actuator_name`]) in `model`. Errors name a missing joint or actuator.
-    pub fn new(model: &Model, drives: &[Drive]) -> Result<Drives, String> {
+    /// [`crate::mjcf::actuator_name`]) in `model`. `joints` are the robot's joints in
+    /// ManiSkill order; `gripper` names the gripper joints. Errors name a missing joint or
+    /// actuator.
+    pub fn new(
+        model: &Model,
+        drives: &[Drive],
+        joints: &[String],
+        gripper: &[&str],
+    ) -> Result<Drives, String> {
         let mut dofs = Vec::with_capacity(drives.len());
         for d in drives {
             let j = model
@@ -73,6 +121,7 @@ impl Drives {
                 kp: d.kp,
                 kd: d.kd,
                 force_limit: d.force_limit,
+                arm: !gripper.contains(&d.joint.as_str()),
             });
         }
         let n = dofs.len();
@@ -81,14 +130,33 @@ impl Drives {
         for (k, d) in dofs.iter().enumerate() {
             unit[k * nv + d.dof] = 1.0;
         }
+        let by_joint = joints
+            .iter()
+            .map(|j| drives.iter().position(|d| &d.joint == j))
+            .collect();
+        // Upper bound of the equality rows (a connect has 3 rows, a weld 6, a joint 1).
+        let max_rows = 6 * model.neq();
         Ok(Drives {
-            dofs,
+            by_joint,
             target_q: vec![0.0; n],
             target_v: vec![0.0; n],
             force: vec![0.0; n],
             unit,
             minv: vec![0.0; n * nv],
             w: vec![0.0; n * n],
+            mq: vec![0.0; n],
+            mv: vec![0.0; n],
+            acc: vec![0.0; n],
+            micro_force: vec![0.0; n],
+            force_sum: vec![0.0; n],
+            correction: vec![0.0; n],
+            eq_j: Vec::with_capacity(max_rows * nv),
+            eq_y: Vec::with_capacity(max_rows * nv),
+            eq_rows: Vec::with_capacity(max_rows),
+            eq_a: DMatrix::zeros(0, 0),
+            eq_z: DMatrix::zeros(0, 0),
+            eq_yd: DMatrix::zeros(0, 0),
+            dofs,
         })
     }
 
@@ -108,19 +176,26 @@ impl Drives {
         self.target_v[k] = v;
     }
 
+    /// Sets the targets of robot joint `k` (ManiSkill order); undriven joints are skipped.
+    pub fn set_joint_target(&mut self, k: usize, q: f64, v: f64) {
+        if let Some(d) = self.by_joint[k] {
+            self.set_target(d, q, v);
+        }
+    }
+
     /// Position and velocity target of drive `k`.
     pub fn target(&self, k: usize) -> (f64, f64) {
         (self.target_q[k], self.target_v[k])
     }
 
-    /// Forces applied in the last substep.
+    /// Mean drive forces of the last substep.
     pub fn forces(&self) -> &[f64] {
         &self.force
     }
 
     /// Computes the drive forces for the coming substep of length `h` and writes them as
-    /// the actuator controls. Call between [`Data::step1`] (which factorises M) and
-    /// [`Data::step2`]. No allocation.
+    /// the actuator controls. Call after [`Data::step1`] (which factorises M and builds the
+    /// constraint rows) and before [`Data::step2`]. No allocation.
     pub fn apply(&mut self, data: &mut Data, h: f64) {
         let n = self.dofs.len();
         if n == 0 {
@@ -133,19 +208,55 @@ impl Drives {
                 self.w[i * n + j] = self.minv[j * nv + di.dof];
             }
         }
-        let (qpos, qvel) = (data.qpos(), data.qvel());
-        self.force.fill(0.0);
-        for _ in 0..SWEEPS {
-            for (i, d) in self.dofs.iter().enumerate() {
-                let g = h * d.kp + d.kd;
-                let c = d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i];
-                let row = &self.w[i * n..(i + 1) * n];
-                let v1 =
-                    qvel[d.dof] + h * row.iter().zip(&self.force).map(|(w, f)| w * f).sum::<f64>();
-                let residual = c - g * v1 - self.force[i];
-                let f = self.force[i] + residual / (1.0 + h * g * row[i]);
-                self.force[i] = f.clamp(-d.force_limit, d.force_limit);
+        self.fold_in_equalities(data, nv);
+        // The arm's unconstrained acceleration (Coriolis, gravity compensation, passive
+        // forces) with the drives switched off.
+        {
+            let ctrl = data.ctrl_mut();
+            for d in &self.dofs {
+                ctrl[d.actuator] = 0.0;
             }
+        }
+        data.smooth_acceleration();
+        let (qpos, qvel, qacc) = (data.qpos(), data.qvel(), data.qacc_smooth());
+        for (i, d) in self.dofs.iter().enumerate() {
+            self.mq[i] = qpos[d.qpos];
+            self.mv[i] = qvel[d.dof];
+            self.acc[i] = if d.arm { qacc[d.dof] } else { 0.0 };
+        }
+        let dt = h / MICRO_STEPS as f64;
+        self.micro_force.fill(0.0);
+        self.force_sum.fill(0.0);
+        for _ in 0..MICRO_STEPS {
+            for _ in 0..SWEEPS {
+                for (i, d) in self.dofs.iter().enumerate() {
+                    let g = dt * d.kp + d.kd;
+                    let c = d.kp * (self.target_q[i] - self.mq[i]) + d.kd * self.target_v[i];
+                    let row = &self.w[i * n..(i + 1) * n];
+                    let wf: f64 = row.iter().zip(&self.micro_force).map(|(w, f)| w * f).sum();
+                    let v1 = self.mv[i] + dt * (self.acc[i] + wf);
+                    let residual = c - g * v1 - self.micro_force[i];
+                    let f = self.micro_force[i] + residual / (1.0 + dt * g * row[i]);
+                    self.micro_force[i] = f.clamp(-d.force_limit, d.force_limit);
+                }
+            }
+            for i in 0..n {
+                let row = &self.w[i * n..(i + 1) * n];
+                let wf: f64 = row.iter().zip(&self.micro_force).map(|(w, f)| w * f).sum();
+                self.mv[i] += dt * (self.acc[i] + wf);
+            }
+            for i in 0..n {
+                self.mq[i] += dt * self.mv[i];
+                self.force_sum[i] += self.micro_force[i];
+            }
+        }
+        for (i, d) in self.dofs.iter().enumerate() {
+            self.force[i] = self.force_sum[i] / MICRO_STEPS as f64;
+            self.correction[i] = if d.arm {
+                self.mq[i] - (qpos[d.qpos] + h * self.mv[i])
+            } else {
+                0.0
+            };
         }
         let ctrl = data.ctrl_mut();
         for (d, &f) in self.dofs.iter().zip(&self.force) {
@@ -153,12 +264,82 @@ impl Drives {
         }
     }
 
-    /// One physics substep with the drives: `mj_step1`, [`Drives::apply`], `mj_step2`.
+    /// Restricts `W` to the motions the equality constraints on undriven joints allow,
+    /// with MuJoCo's compliance `R` of those (soft) constraints. Equalities whose every
+    /// dof has a drive of its own (the Panda's finger mimic) are left to the drives.
+    fn fold_in_equalities(&mut self, data: &mut Data, nv: usize) {
+        let n = self.dofs.len();
+        let ne_all = data.ne();
+        let Some(jac) = data.equality_jacobian() else {
+            return;
+        };
+        self.eq_j.clear();
+        self.eq_rows.clear();
+        for r in 0..ne_all {
+            let row = &jac[r * nv..(r + 1) * nv];
+            let undriven = row
+                .iter()
+                .enumerate()
+                .any(|(k, &x)| x != 0.0 && !self.dofs.iter().any(|d| d.dof == k));
+            if undriven && self.eq_rows.len() < self.eq_rows.capacity() {
+                self.eq_j.extend_from_slice(row);
+                self.eq_rows.push(r);
+            }
+        }
+        let ne = self.eq_rows.len();
+        if ne == 0 {
+            return;
+        }
+        if self.eq_a.nrows() != ne {
+            // Sized once: the equality rows of a model do not change between substeps.
+            self.eq_a = DMatrix::zeros(ne, ne);
+            self.eq_z = DMatrix::zeros(ne, n);
+            self.eq_yd = DMatrix::zeros(ne, n);
+        }
+        self.eq_y.resize(ne * nv, 0.0);
+        data.solve_m(&mut self.eq_y, &self.eq_j, ne);
+        let compliance = data.efc_r(ne_all);
+        for r in 0..ne {
+            for c in 0..ne {
+                self.eq_a[(r, c)] = (0..nv)
+                    .map(|k| self.eq_j[r * nv + k] * self.eq_y[c * nv + k])
+                    .sum::<f64>();
+            }
+            self.eq_a[(r, r)] += compliance[self.eq_rows[r]];
+            for (c, d) in self.dofs.iter().enumerate() {
+                self.eq_yd[(r, c)] = self.eq_y[r * nv + d.dof];
+            }
+        }
+        self.eq_z.copy_from(&self.eq_yd);
+        // In place: `cholesky` takes the buffer and `unpack` gives it back.
+        let a = std::mem::replace(&mut self.eq_a, DMatrix::zeros(0, 0));
+        match a.cholesky() {
+            Some(chol) => {
+                chol.solve_mut(&mut self.eq_z);
+                self.eq_a = chol.unpack();
+            }
+            // Not positive definite (cannot happen with R > 0): keep the free response.
+            None => return,
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let fold: f64 = (0..ne).map(|r| self.eq_yd[(r, i)] * self.eq_z[(r, j)]).sum();
+                self.w[i * n + j] -= fold;
+            }
+        }
+    }
+
+    /// One physics substep with the drives: `mj_step1`, [`Drives::apply`], `mj_step2`,
+    /// then the arm joints' position correction.
     pub fn step(&mut self, data: &mut Data) {
         let h = data.model().timestep();
         data.step1();
         self.apply(data, h);
         data.step2();
+        let q = data.qpos_mut();
+        for (d, c) in self.dofs.iter().zip(&self.correction) {
+            q[d.qpos] += c;
+        }
     }
 
     /// Appends the targets (position then velocity, per drive) to `out`.

@@ -3,7 +3,7 @@
 //! A control mode is a list of parts ([`PartSpec`]: arm, gripper, body, base) that each take
 //! a slice of the action in order. Arithmetic follows upstream's float32 path: actions are
 //! f32, normalised parts clip to [−1, 1] and rescale in f32, deltas are added to the f32
-//! measured position. Targets are written as MuJoCo controls through [`RobotIds`].
+//! measured position. Targets go to the robot's [`Drives`], which turn them into forces.
 pub mod drive;
 pub mod ik;
 
@@ -11,8 +11,9 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::mjcf::urdf::RobotDesc;
 use crate::mjcf::Drive;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::Data;
 use crate::robots::RobotIds;
+pub use drive::Drives;
 use ik::Chain;
 
 /// What a part does with its action slice.
@@ -593,11 +594,11 @@ impl Controller {
     pub fn set_targets_from_state(
         &mut self,
         robot: &RobotIds,
-        model: &Model,
-        data: &mut Data,
+        data: &Data,
+        drives: &mut Drives,
         entries: &indexmap::IndexMap<String, Vec<f64>>,
     ) {
-        self.reset(robot, model, data);
+        self.reset(robot, data, drives);
         let nested = self.parts.len() > 1;
         for p in &mut self.parts {
             let key = |k: &str| {
@@ -616,11 +617,11 @@ impl Controller {
                             *t = x as f32;
                         }
                         for (k, &i) in p.idx.iter().enumerate() {
-                            robot.set_drive_target(model, data, i, p.target_q[k] as f64, 0.0);
+                            drives.set_joint_target(i, p.target_q[k] as f64, 0.0);
                         }
                         for &(fi, ci, m, o) in &p.followers {
                             let t = m * p.target_q[ci] + o;
-                            robot.set_drive_target(model, data, fi, t as f64, 0.0);
+                            drives.set_joint_target(fi, t as f64, 0.0);
                         }
                     }
                 }
@@ -677,7 +678,7 @@ impl Controller {
     /// `reset()` of every part: targets := measured joint positions / EE pose; the drive
     /// targets are written right away (upstream writes them on the first action; identical
     /// whenever the first step carries an action).
-    pub fn reset(&mut self, robot: &RobotIds, model: &Model, data: &mut Data) {
+    pub fn reset(&mut self, robot: &RobotIds, data: &Data, drives: &mut Drives) {
         robot.qpos(data, &mut self.q);
         for p in &mut self.parts {
             for (t, &i) in p.target_q.iter_mut().zip(&p.idx) {
@@ -689,13 +690,19 @@ impl Controller {
         }
         for k in 0..self.n_dof {
             let q = self.q[k];
-            robot.set_drive_target(model, data, k, q, 0.0);
+            drives.set_joint_target(k, q, 0.0);
         }
     }
 
     /// Applies an action (already validated for length and finiteness): computes the part
     /// targets and writes the drive controls.
-    pub fn set_action(&mut self, action: &[f32], robot: &RobotIds, model: &Model, data: &mut Data) {
+    pub fn set_action(
+        &mut self,
+        action: &[f32],
+        robot: &RobotIds,
+        data: &Data,
+        drives: &mut Drives,
+    ) {
         robot.qpos(data, &mut self.q);
         let mut off = 0;
         for p in &mut self.parts {
@@ -729,13 +736,13 @@ impl Controller {
                             (true, false) => self.q[i] as f32 + x,
                             (false, _) => x,
                         };
-                        robot.set_drive_target(model, data, i, p.target_q[k] as f64, 0.0);
+                        drives.set_joint_target(i, p.target_q[k] as f64, 0.0);
                     }
                 }
                 PartKind::JointVel { low, high } => {
                     for (k, &i) in p.idx.iter().enumerate() {
                         let v = clip_scale(a[k], *low, *high);
-                        robot.set_drive_target(model, data, i, p.target_q[k] as f64, v as f64);
+                        drives.set_joint_target(i, p.target_q[k] as f64, v as f64);
                     }
                 }
                 PartKind::JointPosVel {
@@ -760,7 +767,7 @@ impl Controller {
                             (a[k], a[n + k])
                         };
                         p.target_q[k] = if *use_delta { self.q[i] as f32 + x } else { x };
-                        robot.set_drive_target(model, data, i, p.target_q[k] as f64, v as f64);
+                        drives.set_joint_target(i, p.target_q[k] as f64, v as f64);
                     }
                 }
                 PartKind::Ee {
@@ -813,7 +820,7 @@ impl Controller {
                         // On IK failure the arm holds its measured position for this step.
                         let t = if ok { self.q_ik[i] } else { self.q[i] };
                         p.target_q[k] = t as f32;
-                        robot.set_drive_target(model, data, i, t, 0.0);
+                        drives.set_joint_target(i, t, 0.0);
                     }
                 }
                 PartKind::BaseForwardVel { lin, ang } => {
@@ -822,13 +829,13 @@ impl Controller {
                     let theta = self.q[p.idx[2]];
                     let targets = [theta.cos() * v, theta.sin() * v, w];
                     for (k, &i) in p.idx.iter().enumerate() {
-                        robot.set_drive_target(model, data, i, 0.0, targets[k]);
+                        drives.set_joint_target(i, 0.0, targets[k]);
                     }
                 }
             }
             for &(fi, ci, m, o) in &p.followers {
                 let t = m * p.target_q[ci] + o;
-                robot.set_drive_target(model, data, fi, t as f64, 0.0);
+                drives.set_joint_target(fi, t as f64, 0.0);
             }
         }
     }

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use crate::controllers::Controller;
+use crate::controllers::{Controller, Drives};
 use crate::mjcf::{Mjcf, Scene, CONTROL_DT};
 use crate::mujoco::{Data, Model, Warnings};
 use crate::robots::{InitNoise, RobotIds, RobotSpec};
@@ -192,8 +192,8 @@ pub struct SimConfig {
 }
 
 impl SimConfig {
-    /// The default physics rate.
-    pub const DEFAULT_SIM_FREQ: u32 = 500;
+    /// The default physics rate: ManiSkill's own (0.01 s steps).
+    pub const DEFAULT_SIM_FREQ: u32 = 100;
     /// Physics steps per control step.
     pub fn substeps(&self) -> usize {
         (self.sim_freq / CONTROL_FREQ) as usize
@@ -398,6 +398,7 @@ type Built = (
     crate::mjcf::urdf::RobotDesc,
     Controller,
     Box<dyn Task>,
+    Vec<crate::mjcf::Drive>,
 );
 
 fn build_scene(
@@ -414,15 +415,13 @@ fn build_scene(
     let task = (spec.make_task)(rs.uid);
     let mut scene = Scene::new(&format!("{}-{}", spec.id, rs.uid), sim.timestep());
     scene.add_table_scene();
+    let drives = controller.drives(&desc);
+    let opts = rs.options(rs.table_base(), drives.clone());
     scene
-        .add_robot(
-            &desc,
-            &rs.options(rs.table_base(), controller.drives(&desc)),
-            &|_| None,
-        )
+        .add_robot(&desc, &opts, &|_| None)
         .map_err(EnvError::Build)?;
     task.build(&mut scene);
-    Ok((scene.finish(), desc, controller, task))
+    Ok((scene.finish(), desc, controller, task, drives))
 }
 
 /// A box-shaped space with per-entry bounds.
@@ -522,6 +521,8 @@ pub struct Env {
     data: Data,
     robot: RobotIds,
     controller: Controller,
+    /// The robot's joint drives (targets and force law).
+    drives: Drives,
     task: Box<dyn Task>,
     /// ManiSkill's actors (table first, then the task's), resolved to bodies.
     actors: Vec<state_dict::Actor>,
@@ -565,11 +566,14 @@ impl Env {
             )));
         }
         config.sim.validate()?;
-        let (mjcf, desc, controller, mut task) = build_scene(spec, rs, &mode, config.sim)?;
+        let (mjcf, desc, controller, mut task, drive_list) =
+            build_scene(spec, rs, &mode, config.sim)?;
         let model = Arc::new(mjcf.compile().map_err(|e| EnvError::Build(e.to_string()))?);
         let data = Data::new(model.clone()).map_err(|e| EnvError::Build(e.to_string()))?;
         let robot = RobotIds::resolve(&model, &desc, rs).map_err(EnvError::Build)?;
         task.resolve(&model).map_err(EnvError::Build)?;
+        let drives = Drives::new(&model, &drive_list, &robot.joint_names, rs.gripper_joints)
+            .map_err(EnvError::Build)?;
         let actors =
             state_dict::resolve_actors(&model, task.actor_names()).map_err(EnvError::Build)?;
         let n = robot.qpos_adr.len();
@@ -631,6 +635,7 @@ impl Env {
             data,
             robot,
             controller,
+            drives,
             task,
             actors,
             numpy: NumpyRandomState::new(CONSTRUCTION_SEED),
@@ -790,7 +795,7 @@ impl Env {
         self.robot.apply_gravity_compensation(&mut self.data);
         self.data.forward();
         self.controller
-            .reset(&self.robot, &self.model, &mut self.data);
+            .reset(&self.robot, &self.data, &mut self.drives);
         self.data.clear_warnings();
         // Contacts are not refreshed by a reset (env.md §3 step 8): the grasp check sees the
         // previous episode's last finger forces at the new poses.
@@ -814,7 +819,7 @@ impl Env {
             return Err(EnvError::ActionNotFinite { index, value });
         }
         self.controller
-            .set_action(action, &self.robot, &self.model, &mut self.data);
+            .set_action(action, &self.robot, &self.data, &mut self.drives);
         Ok(self.advance())
     }
 
@@ -826,7 +831,7 @@ impl Env {
 
     fn advance(&mut self) -> Step<'_> {
         for _ in 0..self.config.sim.substeps() {
-            self.data.step();
+            self.drives.step(&mut self.data);
         }
         // mj_step leaves poses at the start of its last substep; observations, rewards and
         // success must see the poses of the final state.
@@ -945,8 +950,10 @@ impl Env {
     pub fn get_state(&self) -> EnvState {
         let mut physics = Vec::with_capacity(self.data.state_len());
         self.data.get_state(&mut physics);
-        let mut controller = Vec::with_capacity(self.controller.save_len());
+        let mut controller =
+            Vec::with_capacity(self.controller.save_len() + self.drives.save_len());
         self.controller.save(&mut controller);
+        self.drives.save(&mut controller);
         EnvState {
             env_id: self.id.to_string(),
             robot: self.spec.uid.to_string(),
@@ -973,20 +980,21 @@ impl Env {
             )));
         }
         if s.physics.len() != self.data.state_len()
-            || s.controller.len() != self.controller.save_len()
+            || s.controller.len() != self.controller.save_len() + self.drives.save_len()
         {
             return Err(EnvError::BadState(format!(
                 "state sizes {} / {} do not match this env's {} / {}",
                 s.physics.len(),
                 s.controller.len(),
                 self.data.state_len(),
-                self.controller.save_len()
+                self.controller.save_len() + self.drives.save_len()
             )));
         }
         self.data
             .set_state(&s.physics)
             .map_err(|e| EnvError::BadState(e.to_string()))?;
-        self.controller.load(&s.controller);
+        let k = self.controller.load(&s.controller);
+        self.drives.load(&s.controller[k..]);
         self.elapsed_steps = s.elapsed_steps;
         self.finger_forces = s.finger_forces;
         self.numpy = s.numpy.clone();

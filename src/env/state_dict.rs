@@ -463,8 +463,8 @@ impl Env {
         }
         self.controller.set_targets_from_state(
             &self.robot,
-            &self.model,
-            &mut self.data,
+            &self.data,
+            &mut self.drives,
             &sd.controller,
         );
         self.data.qacc_warmstart_mut().fill(0.0);
@@ -475,6 +475,9 @@ impl Env {
     /// Recomputes everything derived from the simulation state (forward dynamics, contacts,
     /// finger forces, info and observation) after the state was written from outside.
     fn refresh_after_state_change(&mut self) {
+        // The drive forces of the new state take part in the contact forces.
+        self.data.forward();
+        self.drives.apply(&mut self.data, self.model.timestep());
         self.data.forward();
         crate::tasks::finger_forces(
             &self.model,

@@ -2,11 +2,11 @@
 //! MuJoCo scene ([`Scene`] → [`Mjcf`]), compiled by the safe layer.
 //!
 //! Physics scheme (see the README's "Physics" section for the reasoning and measurements):
-//! * `timestep` chosen by the env (default [`TIMESTEP`]) with the implicit integrator; one
-//!   20 Hz control step is [`CONTROL_DT`] / timestep physics steps.
-//! * Every controlled joint gets a PhysX-style PD drive as one `general` actuator with gain 1
-//!   and bias `(0, −kp, −kd)`, so `force = clamp(ctrl − kp·q − kd·q̇, ±F)` with
-//!   `ctrl = kp·q* + kd·q̇*`: exactly ManiSkill's `clamp(kp(q*−q) + kd(q̇*−q̇), ±F)`.
+//! * `timestep` chosen by the env (default [`TIMESTEP`], ManiSkill's 0.01 s) with MuJoCo's
+//!   explicit Euler integrator; one 20 Hz control step is [`CONTROL_DT`] / timestep physics
+//!   steps.
+//! * Every controlled joint gets a force actuator (`motor`, force range ±F); the env computes
+//!   PhysX's implicit, force-clamped PD drive law every substep (`controllers::drive`).
 //! * Robot links do not feel gravity: the env applies `m·g` upward at each robot body's
 //!   centre of mass through `xfrc_applied` (MuJoCo 2.2 has no per-body gravity switch).
 //! * Friction: every shape has ManiSkill's default material μ = 0.3; shapes with their own
@@ -23,8 +23,9 @@ use crate::mujoco::{Model, Result as MjResult};
 use urdf::{JointKind, RobotDesc, ShapeGeom};
 use xml::{num, nums, Element};
 
-/// Default physics timestep in seconds (the env's `SimConfig` may choose another).
-pub const TIMESTEP: f64 = 0.002;
+/// Default physics timestep in seconds, ManiSkill's (the env's `SimConfig` may choose
+/// another).
+pub const TIMESTEP: f64 = 0.01;
 /// Control period of one env step (ManiSkill: 20 Hz).
 pub const CONTROL_DT: f64 = 0.05;
 /// Standard gravity used by ManiSkill.
@@ -40,8 +41,14 @@ pub const TORSIONAL_ROLLING: [f64; 2] = [0.005, 0.0001];
 pub fn stiff_solref(dt: f64) -> [f64; 2] {
     [2.0 * dt, 1.0]
 }
-/// Contact `solimp` (impedance 0.95 → 0.99 over 1 mm of penetration).
-pub const CONTACT_SOLIMP: [f64; 3] = [0.95, 0.99, 0.001];
+/// Contact `solimp`: impedance 0.99 at first touch rising to 0.9999 over 1 mm of
+/// penetration. At a 0.01 s step the time constant cannot go below 0.02 s, so the contact
+/// is made hard through the impedance instead: a 100 N grasp sinks ~0.1 mm into the cube.
+pub const CONTACT_SOLIMP: [f64; 3] = [0.99, 0.9999, 0.001];
+/// Contact margin (m). MuJoCo only enforces contacts strictly closer than the margin; with
+/// a zero margin a cube placed exactly on the table (as ManiSkill places it) falls freely
+/// through its first substep. One micrometre makes the touching contact count.
+pub const CONTACT_MARGIN: f64 = 1e-6;
 /// Constraint rows MuJoCo preallocates per `mjData` (contacts × condim plus limits and
 /// equalities). The tabletop scenes use well under 200; keeping `mjData` small keeps many
 /// envs in cache (VecEnv). Overflow is reported as a MuJoCo warning in `info.warnings`.
@@ -229,7 +236,7 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// An empty scene with mjskill's physics options and physics timestep `timestep` (s).
+    /// An empty scene with mjskill's physics options at physics timestep `timestep` (s).
     pub fn new(model_name: &str, timestep: f64) -> Scene {
         let mut root = Element::new("mujoco").attr("model", model_name);
         root.push(
@@ -244,7 +251,11 @@ impl Scene {
         root.push(
             Element::new("option")
                 .attr("timestep", num(timestep))
-                .attr("integrator", "implicit")
+                // Explicit Euler: the drives are implicit in their own terms
+                // (`controllers::drive`); constraints stay implicit in MuJoCo's solver.
+                .attr("integrator", "Euler")
+                // Dense constraint Jacobians: the drives read the equality rows.
+                .attr("jacobian", "dense")
                 .attr_nums("gravity", &[0.0, 0.0, -GRAVITY]),
         );
         root.push(
@@ -268,6 +279,7 @@ impl Scene {
                     .attr_nums("friction", &friction)
                     .attr_nums("solref", &stiff_solref(timestep))
                     .attr_nums("solimp", &CONTACT_SOLIMP)
+                    .attr("margin", num(CONTACT_MARGIN))
                     .attr("contype", CONTACT_PROP)
                     .attr("conaffinity", CONTACT_PROP),
             ),
@@ -385,15 +397,13 @@ impl Scene {
             }
             self.section("equality").push(e);
         }
+        // The drive force itself is computed by `controllers::drive` every substep; the
+        // actuator applies it, clamped to the drive's force limit.
         for d in &opts.drives {
             self.section("actuator").push(
-                Element::new("general")
+                Element::new("motor")
                     .attr("name", actuator_name(&d.joint))
                     .attr("joint", &d.joint)
-                    .attr("gaintype", "fixed")
-                    .attr("gainprm", "1")
-                    .attr("biastype", "affine")
-                    .attr_nums("biasprm", &[0.0, -d.kp, -d.kd])
                     .attr("ctrllimited", "false")
                     .attr("forcelimited", "true")
                     .attr_nums("forcerange", &[-d.force_limit, d.force_limit]),

@@ -756,6 +756,8 @@ data_arrays! {
     cam_xmat = |m: &sys::mjModel| m.ncam * 9;
     /// Bias forces (Coriolis, centrifugal, gravity).
     qfrc_bias = |m: &sys::mjModel| m.nv;
+    /// Unconstrained accelerations (`mj_fwdAcceleration`).
+    qacc_smooth = |m: &sys::mjModel| m.nv;
     /// Actuator forces of the last step.
     actuator_force = |m: &sys::mjModel| m.nu;
 }
@@ -822,6 +824,15 @@ impl Data {
     pub fn step(&mut self) {
         // SAFETY: model and data pointers are valid and belong together.
         unsafe { sys::mj_step(self.model.ptr, self.ptr) }
+    }
+    /// Actuation and unconstrained acceleration (`mj_fwdActuation`, `mj_fwdAcceleration`)
+    /// for the current controls: fills `qacc_smooth`. Call after [`Data::step1`].
+    pub fn smooth_acceleration(&mut self) {
+        // SAFETY: as step.
+        unsafe {
+            sys::mj_fwdActuation(self.model.ptr, self.ptr);
+            sys::mj_fwdAcceleration(self.model.ptr, self.ptr);
+        }
     }
     /// First half of a step (`mj_step1`: positions, velocities, forces up to the controls).
     pub fn step1(&mut self) {
@@ -895,6 +906,32 @@ impl Data {
                 s.lastinfo = 0;
             }
         }
+    }
+
+    /// Number of equality-constraint rows in the current constraint set (`mjData.ne`).
+    pub fn ne(&self) -> usize {
+        self.raw().ne as usize
+    }
+
+    /// The Jacobian rows of the equality constraints (`ne` × nv, row-major), computed by the
+    /// last [`Data::step1`] / [`Data::forward`]. The model must use dense Jacobians
+    /// (`<option jacobian="dense">`, which mjskill's scenes set); `None` otherwise.
+    pub fn equality_jacobian(&self) -> Option<&[f64]> {
+        // SAFETY: model pointer valid for the lifetime of self.
+        let sparse = unsafe { sys::mj_isSparse(self.model.ptr) } != 0;
+        if sparse {
+            return None;
+        }
+        let nv = self.model.nv();
+        let d = self.raw();
+        Some(view!(d.efc_J, d.ne as usize * nv))
+    }
+
+    /// Regularisers `R` of the first `n` constraint rows (`efc_R`: the compliance MuJoCo's
+    /// soft constraints add to `J M⁻¹ Jᵀ`), computed by the last [`Data::step1`].
+    pub fn efc_r(&self, n: usize) -> &[f64] {
+        let d = self.raw();
+        view!(d.efc_R, n.min(d.nefc as usize))
     }
 
     /// Number of contacts in the current state.

@@ -42,11 +42,17 @@ pub const JOINT_POS_MODES: [&str; 3] = [
     "pd_joint_target_delta_pos",
 ];
 
-/// Armature (kg·m² or kg) added to every robot joint. PhysX drives are implicit and need
-/// none; MuJoCo needs a little on the 15 g fingers so that contacts with a stiff drive
-/// behind them resolve (mujoco-2.2-findings: fingers pass through a box without it). The PD
-/// drives are heavily overdamped (ζ ≈ 5), so their time constant kd/kp is unaffected.
-pub const ARMATURE: f64 = 0.1;
+/// Armature (kg·m² or kg) of every robot joint not listed otherwise. PhysX has none and the
+/// drives need none for stability (`controllers::drive` is implicit); a hundredth steadies
+/// the lightest wrist links at MuJoCo's explicit 0.01 s step (measured against ManiSkill's
+/// one-step motion: WidowX AI wrist error 9.7e-4 → 4.5e-4 rad, Panda unchanged).
+pub const ARMATURE: f64 = 0.01;
+
+/// Armature of the gripper joints (unless the robot sets its own). At a 0.01 s step a 15 g
+/// finger pressed against an object by a stiff drive rattles and lets a lifted peg slip;
+/// 0.1 kg of added inertia keeps the grasp steady (PokeCube's motion-planning grasps match
+/// ManiSkill with it and fail without it).
+pub const GRIPPER_ARMATURE: f64 = 0.1;
 
 /// How the tool-centre point is defined (robots.md: "TCP").
 #[derive(Debug, Clone, PartialEq)]
@@ -260,6 +266,11 @@ impl RobotSpec {
             ..RobotOptions::default()
         };
         (self.customize)(&mut opts);
+        for j in self.gripper_joints {
+            if !opts.armature.iter().any(|(n, _)| n == j) {
+                opts.armature.push((j.to_string(), GRIPPER_ARMATURE));
+            }
+        }
         opts
     }
 
