@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use nalgebra::Vector3;
 
+use mjskill::controllers::Drives;
 use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::{self, RobotIds};
 
@@ -14,7 +15,7 @@ use common::run;
 #[test]
 fn generated_scene_with_a_mistake_returns_mujoco_error_text() {
     let spec = robots::spec("panda").unwrap();
-    let (_, _, _, mjcf) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let mjcf = robots::table_scene_with(spec, |_| {}).unwrap().mjcf;
     let broken = mjcf.xml.replacen("type=\"hinge\"", "type=\"hinje\"", 1);
     let err = Model::from_xml_string(&broken, &[])
         .unwrap_err()
@@ -35,18 +36,20 @@ fn panda_forward_kinematics_matches_independent_urdf_fk() {
     common::check_fk("panda", 200, |_, _, _| {});
 }
 
-fn setup_panda(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data) {
+fn setup_panda(
+    extra: impl FnOnce(&mut mjskill::mjcf::Scene),
+) -> (Arc<Model>, RobotIds, Data, Drives) {
     common::table_scene_with(robots::spec("panda").unwrap(), extra)
 }
 
 #[test]
 fn panda_holds_pose_under_gravity_and_tracks_a_step_target() {
-    let (model, ids, mut d) = setup_panda(|_| {});
+    let (model, ids, mut d, mut dr) = setup_panda(|_| {});
     let spec = robots::spec("panda").unwrap();
     // Gravity is on in the model (objects fall); the robot's weight is cancelled.
     assert!(model.gravity()[2] < -9.0);
     let steps_5s = (5.0 / model.timestep()).round() as usize;
-    run(&mut d, steps_5s);
+    run(&mut d, &mut dr, steps_5s);
     let mut q = vec![0.0; 9];
     ids.qpos(&d, &mut q);
     for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate().take(7) {
@@ -59,9 +62,9 @@ fn panda_holds_pose_under_gravity_and_tracks_a_step_target() {
     let mut target = spec.table_qpos.to_vec();
     for (k, t) in target.iter_mut().enumerate().take(7) {
         *t += if k == 1 { -0.2 } else { 0.2 };
-        ids.set_drive_target(&model, &mut d, k, *t, 0.0);
+        dr.set_joint_target(k, *t, 0.0);
     }
-    run(&mut d, (1.5 / model.timestep()) as usize);
+    run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
     assert_eq!(d.ncon(), 0, "the moved arm touches nothing");
     ids.qpos(&d, &mut q);
     for k in 0..7 {
@@ -79,13 +82,13 @@ fn panda_fingers_close_on_a_4cm_box_and_hold_it_while_the_arm_moves() {
     let tcp_site = probe.1.tcp_site.unwrap();
     let tcp = &probe.2.site_xpos()[3 * tcp_site..3 * tcp_site + 3];
     let tcp = [tcp[0], tcp[1], tcp[2]];
-    let (model, ids, mut d) =
+    let (model, ids, mut d, mut dr) =
         setup_panda(|s| s.add_box("box", [0.02; 3], [1.0, 0.0, 0.0, 1.0], tcp));
     let bx = model.require_id(ObjType::Body, "box").unwrap();
     // Close: target −0.01 m on both fingers (ManiSkill's "closed" command).
-    ids.set_drive_target(&model, &mut d, 7, -0.01, 0.0);
-    ids.set_drive_target(&model, &mut d, 8, -0.01, 0.0);
-    run(&mut d, 250);
+    dr.set_joint_target(7, -0.01, 0.0);
+    dr.set_joint_target(8, -0.01, 0.0);
+    run(&mut d, &mut dr, 250);
     let mut q = vec![0.0; 9];
     ids.qpos(&d, &mut q);
     assert!(
@@ -108,9 +111,9 @@ fn panda_fingers_close_on_a_4cm_box_and_hold_it_while_the_arm_moves() {
     target[1] -= 0.3;
     target[3] += 0.3;
     for (k, t) in target.iter().enumerate().take(7) {
-        ids.set_drive_target(&model, &mut d, k, *t, 0.0);
+        dr.set_joint_target(k, *t, 0.0);
     }
-    run(&mut d, 1500);
+    run(&mut d, &mut dr, 1500);
     let rel1 = in_tcp(&d);
     assert!(
         (rel1 - rel0).norm() < 0.005,

@@ -259,7 +259,7 @@ fn only_the_srdf_default_pairs_are_excluded_besides_parent_child() {
     .collect();
     want.sort();
     assert_eq!(pairs, want);
-    let (_, _, _, mjcf) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let mjcf = robots::table_scene_with(spec, |_| {}).unwrap().mjcf;
     assert!(mjcf
         .xml
         .contains(r#"<exclude body1="Upper_Arm" body2="Base"/>"#));

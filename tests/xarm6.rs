@@ -9,6 +9,7 @@ use rand::Rng;
 mod common;
 use common::run;
 
+use mjskill::controllers::Drives;
 use mjskill::mujoco::{Data, Model, ObjType};
 use mjskill::robots::xarm6_robotiq::{LOOP_CLOSURES, REST};
 use mjskill::robots::{self, RobotIds};
@@ -20,7 +21,7 @@ fn spec() -> &'static robots::RobotSpec {
 
 /// Table scene at rest (`REST` is the table qpos) with drives on their rest targets and
 /// gravity compensation.
-fn setup(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data) {
+fn setup(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data, Drives) {
     common::table_scene_with(spec(), extra)
 }
 
@@ -37,14 +38,14 @@ fn anchor_gaps(ids: &RobotIds, d: &Data) -> Vec<f64> {
 }
 
 /// Sets the gripper target (both knuckles, as the mimic controller does).
-fn set_gripper(model: &Model, ids: &RobotIds, d: &mut Data, target: f64) {
-    ids.set_drive_target(model, d, 6, target, 0.0);
-    ids.set_drive_target(model, d, 8, target, 0.0);
+fn set_gripper(dr: &mut Drives, target: f64) {
+    dr.set_joint_target(6, target, 0.0);
+    dr.set_joint_target(8, target, 0.0);
 }
 
 #[test]
 fn qpos_order_is_maniskills_breadth_first_order() {
-    let (_, ids, _) = setup(|_| {});
+    let (_, ids, _, _) = setup(|_| {});
     assert_eq!(
         ids.joint_names,
         [
@@ -96,7 +97,7 @@ fn forward_kinematics_matches_independent_urdf_fk() {
             });
         }
     });
-    let (_, ids, d) = setup(|_| {});
+    let (_, ids, d, _) = setup(|_| {});
     // The TCP at rest (robots.md §4, measured upstream): p (−0.00044, 0, 0.16943), q (0, −1, 0, 0).
     let (p, q) = ids.tcp_pose(&d);
     let want = [-0.00044, 0.0, 0.16943];
@@ -108,10 +109,10 @@ fn forward_kinematics_matches_independent_urdf_fk() {
 
 #[test]
 fn linkage_closes_to_the_upstream_width_with_anchors_together() {
-    let (model, ids, mut d) = setup(|_| {});
+    let (_, ids, mut d, mut dr) = setup(|_| {});
     assert!(anchor_gaps(&ids, &d).iter().all(|&g| g < 1e-6), "q = 0");
-    set_gripper(&model, &ids, &mut d, 0.81);
-    run(&mut d, 1000);
+    set_gripper(&mut dr, 0.81);
+    run(&mut d, &mut dr, 1000);
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
     let mut q = vec![0.0; 12];
     ids.qpos(&d, &mut q);
@@ -142,16 +143,16 @@ fn linkage_closes_to_the_upstream_width_with_anchors_together() {
     // The settled linkage is at rest, and opens again.
     let v: f64 = d.qvel().iter().map(|x| x.abs()).fold(0.0, f64::max);
     assert!(v < 1e-2, "max |qvel| {v}");
-    set_gripper(&model, &ids, &mut d, 0.0);
-    run(&mut d, 1000);
+    set_gripper(&mut dr, 0.0);
+    run(&mut d, &mut dr, 1000);
     ids.qpos(&d, &mut q);
     assert!(q[6].abs() < 5e-3 && q[8].abs() < 5e-3, "{q:?}");
 }
 
 #[test]
 fn holds_rest_pose_and_tracks_joint_targets() {
-    let (model, ids, mut d) = setup(|_| {});
-    run(&mut d, (5.0 / model.timestep()) as usize);
+    let (model, ids, mut d, mut dr) = setup(|_| {});
+    run(&mut d, &mut dr, (5.0 / model.timestep()) as usize);
     let mut q = vec![0.0; 12];
     ids.qpos(&d, &mut q);
     for k in 0..12 {
@@ -164,9 +165,9 @@ fn holds_rest_pose_and_tracks_joint_targets() {
     let mut target = REST;
     for (k, t) in target.iter_mut().enumerate().take(6) {
         *t += if k == 1 { -0.2 } else { 0.2 };
-        ids.set_drive_target(&model, &mut d, k, *t, 0.0);
+        dr.set_joint_target(k, *t, 0.0);
     }
-    run(&mut d, (1.5 / model.timestep()) as usize);
+    run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
     ids.qpos(&d, &mut q);
     for k in 0..6 {
         assert!(
@@ -185,7 +186,7 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     let tcp = probe.1.tcp_pose(&probe.2).0;
     // The cube rests on the table below the TCP; lower the arm onto it first.
     let cube_pos = [tcp[0], tcp[1], 0.02];
-    let (model, ids, mut d) =
+    let (model, ids, mut d, mut dr) =
         setup(|s| s.add_box("box", [0.02; 3], [1.0, 0.0, 0.0, 1.0], cube_pos));
     let bx = model.require_id(ObjType::Body, "box").unwrap();
     // The rest TCP is 0.169 m up: IK on the URDF chain gives joint targets 0.1494 m lower,
@@ -207,16 +208,16 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     let mut q_down = vec![0.0; 12];
     assert!(chain.solve(&down, &q, &mut q_down));
     for (k, &t) in q_down.iter().enumerate().take(6) {
-        ids.set_drive_target(&model, &mut d, k, t, 0.0);
+        dr.set_joint_target(k, t, 0.0);
     }
-    run(&mut d, 1000);
+    run(&mut d, &mut dr, 1000);
     let tcp_now = ids.tcp_pose(&d).0;
     assert!(
         (tcp_now[2] - 0.02).abs() < 3e-3,
         "TCP lowered to the cube: {tcp_now:?}"
     );
-    set_gripper(&model, &ids, &mut d, 0.81);
-    run(&mut d, 500);
+    set_gripper(&mut dr, 0.81);
+    run(&mut d, &mut dr, 500);
     ids.qpos(&d, &mut q);
     assert!(
         q[6] > 0.3 && q[6] < 0.6 && q[8] > 0.3 && q[8] < 0.6,
@@ -225,9 +226,9 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     );
     // Lift back to rest.
     for (k, &r) in REST.iter().enumerate().take(6) {
-        ids.set_drive_target(&model, &mut d, k, r, 0.0);
+        dr.set_joint_target(k, r, 0.0);
     }
-    run(&mut d, 1500);
+    run(&mut d, &mut dr, 1500);
     let z = d.xpos()[3 * bx + 2];
     assert!(z > 0.12, "cube lifted with the gripper: z = {z}");
     let tcp_up = ids.tcp_pose(&d).0;

@@ -76,12 +76,12 @@ pub fn run(
     // Untimed pass: record the drive commands the env writes, so that raw physics can replay
     // the identical trajectory (same contacts, same solver work). The episode is not reset
     // at truncation (ManiSkill keeps stepping too), so both runs are one continuous rollout.
-    let nu = env.model().nu();
-    let mut ctrls = vec![0.0; nu * steps];
+    let nd = env.drives().save_len();
+    let mut targets = Vec::with_capacity(nd * steps);
     for i in 0..steps {
         env.step(&actions[i * dim..(i + 1) * dim])
             .map_err(|e| e.to_string())?;
-        ctrls[i * nu..(i + 1) * nu].copy_from_slice(env.data().ctrl());
+        env.drives().save(&mut targets);
     }
     // Timed passes, alternating env and raw physics three times; the best of each counts.
     let (mut env_rate, mut mj_rate, mut replay_identical) = (0.0f64, 0.0f64, false);
@@ -97,12 +97,12 @@ pub fn run(
 
         env.set_state(&start).map_err(|e| e.to_string())?;
         let mut data: Data = env.data().clone();
+        let mut drives = env.drives().clone();
         let t = Instant::now();
         for i in 0..steps {
-            data.ctrl_mut()
-                .copy_from_slice(&ctrls[i * nu..(i + 1) * nu]);
+            drives.load(&targets[i * nd..(i + 1) * nd]);
             for _ in 0..substeps {
-                data.step();
+                drives.step(&mut data);
             }
             // As the env does after its substeps (poses for reading; normalises quaternions).
             data.update_kinematics();

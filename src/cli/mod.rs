@@ -400,7 +400,7 @@ fn export_mjcf(robot: &str, env: Option<&str>, output: Option<PathBuf>) -> Resul
     let mjcf = match env {
         None => {
             let spec = crate::robots::spec(robot)?;
-            crate::robots::table_scene_with(spec, |_| {})?.3
+            crate::robots::table_scene_with(spec, |_| {})?.mjcf
         }
         Some(id) => crate::env::scene_mjcf(id, robot)?,
     };

@@ -25,10 +25,18 @@
 //! * **Constraints.** Equality constraints that move an undriven joint (the WidowX AI's
 //!   mimic carriage, the Robotiq linkage) are folded into `W` with MuJoCo's own compliance:
 //!   `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)`, so a drive sees the inertia it actually moves.
+//! * **Grippers.** A finger pressed against an object cannot move, but the drive equations
+//!   above only know the finger's free response, so an implicit drive would squeeze with a
+//!   fraction of its force. Gripper joints therefore get their damping `kd` as MuJoCo joint
+//!   damping — integrated implicitly by MuJoCo together with the contacts — and the spring
+//!   part `clamp(kp (q* − q) + kd q̇*, ±F)` as an explicit force. (Their damping is outside
+//!   the clamp, which caps a finger's speed at F / kd: 1 m/s for the Panda, far above what a
+//!   gripper reaches.)
 //! * **Position.** MuJoCo's semi-implicit Euler moves a joint by `h q̇'`; the micro-steps
-//!   know the path within the substep, and the arm joints get the difference added to
-//!   `qpos` after the step (second-order accurate positions). Gripper joints, which end
-//!   most substeps against an object, get neither the correction nor `a₀`.
+//!   know the path within the substep. The difference `c` is applied as a generalised force
+//!   `M c / h²` (so that what the arm holds moves with it through the contacts) and the
+//!   extra velocity `c / h` is taken off after the step. Gripper joints, which end most
+//!   substeps against an object, get neither the correction nor `a₀`.
 //!
 //! The forces are the controls of MuJoCo force actuators (gain 1, no bias, force range
 //! ±F); contacts, joint limits and equalities stay implicit in MuJoCo's constraint solver.
@@ -84,6 +92,13 @@ pub struct Drives {
     micro_force: Vec<f64>,
     force_sum: Vec<f64>,
     correction: Vec<f64>,
+    /// Per drive: the bodies its joint moves (gripper drives only; empty for arm drives),
+    /// and whether one of them touches something this substep.
+    gripper_bodies: Vec<Vec<usize>>,
+    blocked: Vec<bool>,
+    /// The correction as an nv-vector and its product with M.
+    cvec: Vec<f64>,
+    mc: Vec<f64>,
     /// Equality rows that move an undriven dof: their Jacobian rows (ne × nv), their M⁻¹
     /// images (ne × nv), indices into the model's equality rows, and the small dense
     /// matrices A = J M⁻¹ Jᵀ + R (ne × ne) and Z = (M⁻¹ Jᵀ) at the drives (ne × n).
@@ -126,6 +141,26 @@ impl Drives {
         }
         let n = dofs.len();
         let nv = model.nv();
+        // The subtree of a gripper joint's body: the links it moves.
+        let parent = model.body_parentid();
+        let gripper_bodies = dofs
+            .iter()
+            .map(|d| {
+                if d.arm {
+                    return Vec::new();
+                }
+                let root = model.dof_bodyid()[d.dof] as usize;
+                (0..model.nbody())
+                    .filter(|&b| {
+                        let mut x = b;
+                        while x != 0 && x != root {
+                            x = parent[x] as usize;
+                        }
+                        x == root
+                    })
+                    .collect()
+            })
+            .collect();
         let mut unit = vec![0.0; n * nv];
         for (k, d) in dofs.iter().enumerate() {
             unit[k * nv + d.dof] = 1.0;
@@ -150,6 +185,10 @@ impl Drives {
             micro_force: vec![0.0; n],
             force_sum: vec![0.0; n],
             correction: vec![0.0; n],
+            gripper_bodies,
+            blocked: vec![false; n],
+            cvec: vec![0.0; nv],
+            mc: vec![0.0; nv],
             eq_j: Vec::with_capacity(max_rows * nv),
             eq_y: Vec::with_capacity(max_rows * nv),
             eq_rows: Vec::with_capacity(max_rows),
@@ -217,6 +256,7 @@ impl Drives {
                 ctrl[d.actuator] = 0.0;
             }
         }
+        data.qfrc_applied_mut().fill(0.0);
         data.smooth_acceleration();
         let (qpos, qvel, qacc) = (data.qpos(), data.qvel(), data.qacc_smooth());
         for (i, d) in self.dofs.iter().enumerate() {
@@ -225,11 +265,38 @@ impl Drives {
             self.acc[i] = if d.arm { qacc[d.dof] } else { 0.0 };
         }
         let dt = h / MICRO_STEPS as f64;
-        self.micro_force.fill(0.0);
         self.force_sum.fill(0.0);
+        // A gripper joint whose links touch something is blocked: its drive acts with the full
+        // force a blocked joint gets from PhysX's implicit drive (zero response), explicitly.
+        self.blocked.fill(false);
+        let geom_body = data.model().geom_bodyid();
+        for c in 0..data.ncon() {
+            let (g1, g2) = data.contact_geoms(c);
+            let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+            for (i, bodies) in self.gripper_bodies.iter().enumerate() {
+                if bodies.contains(&b1) || bodies.contains(&b2) {
+                    self.blocked[i] = true;
+                }
+            }
+        }
+        for (i, d) in self.dofs.iter().enumerate() {
+            // Explicit damping, capped so that it cannot reverse a still-moving finger
+            // within the substep (the free inertia is 1 / W_ii).
+            let kd = d.kd.min(1.0 / (h * self.w[i * n + i]));
+            self.micro_force[i] = if self.blocked[i] {
+                (d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i]
+                    - kd * qvel[d.dof])
+                    .clamp(-d.force_limit, d.force_limit)
+            } else {
+                0.0
+            };
+        }
         for _ in 0..MICRO_STEPS {
             for _ in 0..SWEEPS {
                 for (i, d) in self.dofs.iter().enumerate() {
+                    if self.blocked[i] {
+                        continue;
+                    }
                     let g = dt * d.kp + d.kd;
                     let c = d.kp * (self.target_q[i] - self.mq[i]) + d.kd * self.target_v[i];
                     let row = &self.w[i * n..(i + 1) * n];
@@ -261,6 +328,17 @@ impl Drives {
         let ctrl = data.ctrl_mut();
         for (d, &f) in self.dofs.iter().zip(&self.force) {
             ctrl[d.actuator] = f;
+        }
+        // The position correction travels as velocity: a generalised force M c / h² moves
+        // the arm by c more during the substep (and whatever it holds with it, through the
+        // contacts), and `step` takes the extra c / h off the velocity afterwards.
+        self.cvec.fill(0.0);
+        for (d, &c) in self.dofs.iter().zip(&self.correction) {
+            self.cvec[d.dof] = c;
+        }
+        data.mul_m(&mut self.mc, &self.cvec);
+        for (f, mc) in data.qfrc_applied_mut().iter_mut().zip(&self.mc) {
+            *f = mc / (h * h);
         }
     }
 
@@ -323,7 +401,9 @@ impl Drives {
         }
         for i in 0..n {
             for j in 0..n {
-                let fold: f64 = (0..ne).map(|r| self.eq_yd[(r, i)] * self.eq_z[(r, j)]).sum();
+                let fold: f64 = (0..ne)
+                    .map(|r| self.eq_yd[(r, i)] * self.eq_z[(r, j)])
+                    .sum();
                 self.w[i * n + j] -= fold;
             }
         }
@@ -336,9 +416,9 @@ impl Drives {
         data.step1();
         self.apply(data, h);
         data.step2();
-        let q = data.qpos_mut();
+        let v = data.qvel_mut();
         for (d, c) in self.dofs.iter().zip(&self.correction) {
-            q[d.qpos] += c;
+            v[d.dof] -= c / h;
         }
     }
 

@@ -670,6 +670,10 @@ impl Env {
     pub fn id(&self) -> &'static str {
         self.id
     }
+    /// The robot's joint drives (targets and force law).
+    pub fn drives(&self) -> &Drives {
+        &self.drives
+    }
     /// Physics steps per env step.
     pub fn substeps(&self) -> usize {
         self.config.sim.substeps()

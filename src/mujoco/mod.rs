@@ -1040,6 +1040,19 @@ impl Data {
         }
     }
 
+    /// `res = M vec` with the joint-space inertia of the last [`Data::step1`] /
+    /// [`Data::forward`] (`mj_mulM`); both slices hold nv values.
+    pub fn mul_m(&self, res: &mut [f64], vec: &[f64]) {
+        let nv = self.model.nv();
+        assert!(
+            res.len() >= nv && vec.len() >= nv,
+            "mul_m needs nv = {nv} values"
+        );
+        // SAFETY: model and data belong together; res and vec hold nv values each and are
+        // distinct borrows; mj_mulM only reads qM.
+        unsafe { sys::mj_mulM(self.model.ptr, self.ptr, res.as_mut_ptr(), vec.as_ptr()) }
+    }
+
     /// 6-D velocity of body `body` at its centre of mass, world-oriented: [angular 3, linear 3].
     pub fn body_velocity(&self, body: usize) -> [f64; 6] {
         assert!(body < self.model.nbody(), "body id {body} out of range");

@@ -466,22 +466,6 @@ impl RobotIds {
         }
     }
 
-    /// Sets the PD target of active joint `k` (ManiSkill order): ctrl = kp·q* + kd·q̇*.
-    pub fn set_drive_target(
-        &self,
-        model: &Model,
-        data: &mut Data,
-        k: usize,
-        q_target: f64,
-        v_target: f64,
-    ) {
-        if let Some(a) = self.actuator[k] {
-            let bias = &model.actuator_biasprm()[10 * a..10 * a + 3];
-            // bias = (0, −kp, −kd)
-            data.ctrl_mut()[a] = -bias[1] * q_target - bias[2] * v_target;
-        }
-    }
-
     /// `agent.tcp_pose` (PickCube's TCP) as position and raw quaternion (w, x, y, z).
     pub fn tcp_pose(&self, data: &Data) -> ([f64; 3], [f64; 4]) {
         let pos = |b: usize| {
@@ -530,27 +514,58 @@ impl RobotIds {
     }
 }
 
+/// A robot alone at its table pose: the compiled model, its description and ids, the MJCF
+/// and the robot's drives (those of its default control mode).
+#[derive(Debug)]
+pub struct TableScene {
+    /// The compiled model.
+    pub model: Arc<Model>,
+    /// The robot description (URDF + SRDF).
+    pub desc: RobotDesc,
+    /// Resolved ids.
+    pub ids: RobotIds,
+    /// The generated MJCF.
+    pub mjcf: crate::mjcf::Mjcf,
+    /// The drives (targets at zero until set).
+    pub drives: crate::controllers::Drives,
+}
+
 /// Builds a scene with the table, this robot at its table pose with the drives of its
-/// default control mode, and returns the compiled model and resolved ids (used by tests and
-/// `export-mjcf`).
+/// default control mode, plus whatever `extra` adds (used by tests and `export-mjcf`).
 pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
-) -> Result<(Arc<Model>, RobotDesc, RobotIds, crate::mjcf::Mjcf), String> {
+) -> Result<TableScene, String> {
     let desc = spec.description()?;
     // The drives of the default control mode (for arm-and-gripper robots these are
     // `default_drives`; Fetch's also cover its body and base).
     let mode = spec.control_modes[0];
-    let drives =
+    let drive_list =
         crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
     let mut scene = crate::mjcf::Scene::new(spec.uid, crate::mjcf::TIMESTEP);
     scene.add_table_scene();
-    scene.add_robot(&desc, &spec.options(spec.table_base(), drives), &|_| None)?;
+    scene.add_robot(
+        &desc,
+        &spec.options(spec.table_base(), drive_list.clone()),
+        &|_| None,
+    )?;
     extra(&mut scene);
     let mjcf = scene.finish();
     let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
     let ids = RobotIds::resolve(&model, &desc, spec)?;
-    Ok((model, desc, ids, mjcf))
+    let drives = crate::controllers::Drives::new(
+        &model,
+        &drive_list,
+        &ids.joint_names,
+        spec.gripper_joints,
+    )?;
+    Ok(TableScene {
+        model,
+        desc,
+        ids,
+        mjcf,
+        drives,
+    })
 }
 
 /// Unit vector helper: the local y axis of a body in world coordinates.

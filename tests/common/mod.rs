@@ -8,6 +8,7 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
+use mjskill::controllers::Drives;
 use mjskill::mujoco::{Data, Model};
 use mjskill::robots::{self, RobotIds, RobotSpec};
 use mjskill::{make, EnvConfig};
@@ -139,7 +140,9 @@ pub fn check_fk_with(
     mut extra: impl FnMut(&Data, &RobotIds, &HashMap<String, Isometry3<f64>>),
 ) {
     let spec = robots::spec(uid).unwrap();
-    let (model, desc, ids, _) = robots::table_scene_with(spec, |_| {}).unwrap();
+    let robots::TableScene {
+        model, desc, ids, ..
+    } = robots::table_scene_with(spec, |_| {}).unwrap();
     let fk = IndependentFk::new(mjskill::models::text(spec.urdf).unwrap());
     let mut d = Data::new(model.clone()).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
@@ -168,8 +171,8 @@ pub fn check_fk_with(
 }
 
 /// The table scene of `spec` at its (noise-free) table qpos with the drive targets there and
-/// gravity compensation applied.
-pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data) {
+/// gravity compensation applied: model, ids, data and drives.
+pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data, Drives) {
     table_scene_with(spec, |_| {})
 }
 
@@ -177,27 +180,30 @@ pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data) {
 pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut mjskill::mjcf::Scene),
-) -> (Arc<Model>, RobotIds, Data) {
-    let (model, _, ids, _) = robots::table_scene_with(spec, extra).unwrap();
+) -> (Arc<Model>, RobotIds, Data, Drives) {
+    let robots::TableScene {
+        model,
+        ids,
+        mut drives,
+        ..
+    } = robots::table_scene_with(spec, extra).unwrap();
     let mut d = Data::new(model.clone()).unwrap();
     ids.set_qpos(&mut d, spec.table_qpos);
     ids.apply_gravity_compensation(&mut d);
     for (k, &q) in spec.table_qpos.iter().enumerate() {
-        ids.set_drive_target(&model, &mut d, k, q, 0.0);
+        drives.set_joint_target(k, q, 0.0);
     }
     d.forward();
-    (model, ids, d)
+    (model, ids, d, drives)
 }
 
 /// Holds the table pose for 5 s (sag < 1e-3 rad on every driven joint), then tracks a step
 /// of `delta` on the driven joints within `tol` after 1.5 s without touching anything.
 pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
-    let (model, ids, mut d) = table_scene(spec);
+    let (model, ids, mut d, mut dr) = table_scene(spec);
     assert!(model.gravity()[2] < -9.0);
     let n = ids.qpos_adr.len();
-    for _ in 0..(5.0 / model.timestep()).round() as usize {
-        d.step();
-    }
+    run(&mut d, &mut dr, (5.0 / model.timestep()).round() as usize);
     let mut q = vec![0.0; n];
     ids.qpos(&d, &mut q);
     for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate() {
@@ -212,11 +218,9 @@ pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
         .map(|(q, dq)| q + dq)
         .collect();
     for (k, &t) in target.iter().enumerate() {
-        ids.set_drive_target(&model, &mut d, k, t, 0.0);
+        dr.set_joint_target(k, t, 0.0);
     }
-    for _ in 0..(1.5 / model.timestep()) as usize {
-        d.step();
-    }
+    run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
     ids.qpos(&d, &mut q);
     for k in 0..n {
         if ids.actuator[k].is_some() {
@@ -231,10 +235,10 @@ pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
 }
 
-/// Steps `n` times.
-pub fn run(d: &mut Data, n: usize) {
+/// Steps `n` physics substeps with the drives.
+pub fn run(d: &mut Data, drives: &mut Drives, n: usize) {
     for _ in 0..n {
-        d.step();
+        drives.step(d);
     }
 }
 
