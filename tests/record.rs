@@ -222,7 +222,7 @@ fn channels_decode_with_any_mcap_reader() {
         assert_eq!(md.metadata["env_id"], "PickCube-v1");
         assert_eq!(md.metadata["control_mode"], "pd_joint_delta_pos");
         assert!(md.metadata["obs_layout"].contains("extra/tcp_pose"));
-        assert_eq!(md.metadata["timestep"], "0.002");
+        assert_eq!(md.metadata["timestep"], "0.01");
     }
     let raw = record::read_raw(&path).unwrap();
     assert_eq!(raw.profile, "mjskill");

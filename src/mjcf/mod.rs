@@ -45,6 +45,10 @@ pub fn stiff_solref(dt: f64) -> [f64; 2] {
 /// penetration. At a 0.01 s step the time constant cannot go below 0.02 s, so the contact
 /// is made hard through the impedance instead: a 100 N grasp sinks ~0.1 mm into the cube.
 pub const CONTACT_SOLIMP: [f64; 3] = [0.99, 0.9999, 0.001];
+/// Contact `solimp` of [`RobotOptions::firm_contact`] links: impedance 0.999 from first
+/// touch, so that a grasp with little normal force (the xArm6's 0.1 N·m gripper) creeps
+/// ten times slower than with [`CONTACT_SOLIMP`].
+pub const FIRM_CONTACT_SOLIMP: [f64; 3] = [0.999, 0.9999, 0.001];
 /// Contact margin (m). MuJoCo only enforces contacts strictly closer than the margin; with
 /// a zero margin a cube placed exactly on the table (as ManiSkill places it) falls freely
 /// through its first substep. One micrometre makes the touching contact count.
@@ -150,18 +154,22 @@ pub struct RobotOptions {
     pub no_ground_contact: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
-    /// Whether the joint equalities made from URDF `<mimic>` tags get [`stiff_solref`]
-    /// (otherwise MuJoCo's default, 0.02 s). The stiff value stands in for PhysX's 1e5 N/m
+    /// Whether the joint equalities made from URDF `<mimic>` tags get [`stiff_solref`] and
+    /// the contacts' hard impedance [`CONTACT_SOLIMP`] (otherwise MuJoCo's defaults). The stiff value stands in for PhysX's 1e5 N/m
     /// mimic tendon where a mimic follower has no drive of its own (WidowX AI).
     pub stiff_mimic: bool,
     /// Links whose collision shapes get torsional friction (condim 4) with this coefficient
     /// (m): MuJoCo's analogue of a PhysX material `patch_radius` (torque ≤ μ·r·N).
     pub torsional_friction: Vec<(String, f64)>,
-    /// Whether the loop closures get [`stiff_solref`] (otherwise MuJoCo's default, time
-    /// constant 0.02 s).
+    /// Whether the loop closures get [`stiff_solref`] and [`CONTACT_SOLIMP`] (otherwise
+    /// MuJoCo's defaults).
     pub stiff_connect: bool,
     /// Cameras attached to links.
     pub cameras: Vec<LinkCamera>,
+    /// Links whose contacts get the firmer impedance [`FIRM_CONTACT_SOLIMP`] (dominating
+    /// the partner's through `solmix`): weak grippers whose light grasp would otherwise
+    /// creep under MuJoCo's soft friction.
+    pub firm_contact: Vec<String>,
 }
 
 impl Default for RobotOptions {
@@ -181,6 +189,7 @@ impl Default for RobotOptions {
             stiff_connect: false,
             torsional_friction: Vec::new(),
             cameras: Vec::new(),
+            firm_contact: Vec::new(),
         }
     }
 }
@@ -381,7 +390,9 @@ impl Scene {
                     .attr("joint2", &m.leader)
                     .attr_nums("polycoef", &[m.offset, m.multiplier, 0.0, 0.0, 0.0]);
                 if opts.stiff_mimic {
-                    eq = eq.attr_nums("solref", &stiff_solref(self.timestep));
+                    eq = eq
+                        .attr_nums("solref", &stiff_solref(self.timestep))
+                        .attr_nums("solimp", &CONTACT_SOLIMP);
                 }
                 self.section("equality").push(eq);
             }
@@ -393,7 +404,9 @@ impl Scene {
                 .attr("body2", &c.link2)
                 .attr_nums("anchor", &c.anchor);
             if opts.stiff_connect {
-                e = e.attr_nums("solref", &stiff_solref(self.timestep));
+                e = e
+                    .attr_nums("solref", &stiff_solref(self.timestep))
+                    .attr_nums("solimp", &CONTACT_SOLIMP);
             }
             self.section("equality").push(e);
         }
@@ -522,6 +535,10 @@ impl Scene {
             }
             if torsional.is_some() {
                 g.set("condim", 4);
+            }
+            if opts.firm_contact.contains(&l.name) {
+                g.set("solimp", nums(&FIRM_CONTACT_SOLIMP));
+                g.set("solmix", 1000);
             }
             body.push(g);
         }

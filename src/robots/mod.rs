@@ -531,9 +531,19 @@ pub struct TableScene {
 }
 
 /// Builds a scene with the table, this robot at its table pose with the drives of its
-/// default control mode, plus whatever `extra` adds (used by tests and `export-mjcf`).
+/// default control mode, plus whatever `extra` adds (used by tests and `export-mjcf`), at the
+/// default physics timestep.
 pub fn table_scene_with(
     spec: &RobotSpec,
+    extra: impl FnOnce(&mut crate::mjcf::Scene),
+) -> Result<TableScene, String> {
+    table_scene_at(spec, crate::mjcf::TIMESTEP, extra)
+}
+
+/// [`table_scene_with`] at physics timestep `timestep` (s).
+pub fn table_scene_at(
+    spec: &RobotSpec,
+    timestep: f64,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
 ) -> Result<TableScene, String> {
     let desc = spec.description()?;
@@ -542,7 +552,7 @@ pub fn table_scene_with(
     let mode = spec.control_modes[0];
     let drive_list =
         crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
-    let mut scene = crate::mjcf::Scene::new(spec.uid, crate::mjcf::TIMESTEP);
+    let mut scene = crate::mjcf::Scene::new(spec.uid, timestep);
     scene.add_table_scene();
     scene.add_robot(
         &desc,

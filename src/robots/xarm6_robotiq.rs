@@ -156,6 +156,7 @@ fn customize(opts: &mut RobotOptions) {
     for pad in PADS {
         opts.torsional_friction
             .push((pad.to_string(), PAD_FRICTION_AVG * PAD_PATCH_RADIUS));
+        opts.firm_contact.push(pad.to_string());
     }
     for (i, a) in NO_SELF_COLLISION.iter().enumerate() {
         for b in &NO_SELF_COLLISION[i + 1..] {

@@ -181,12 +181,21 @@ pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut mjskill::mjcf::Scene),
 ) -> (Arc<Model>, RobotIds, Data, Drives) {
+    table_scene_at(spec, mjskill::mjcf::TIMESTEP, extra)
+}
+
+/// [`table_scene_with`] at physics timestep `timestep`.
+pub fn table_scene_at(
+    spec: &RobotSpec,
+    timestep: f64,
+    extra: impl FnOnce(&mut mjskill::mjcf::Scene),
+) -> (Arc<Model>, RobotIds, Data, Drives) {
     let robots::TableScene {
         model,
         ids,
         mut drives,
         ..
-    } = robots::table_scene_with(spec, extra).unwrap();
+    } = robots::table_scene_at(spec, timestep, extra).unwrap();
     let mut d = Data::new(model.clone()).unwrap();
     ids.set_qpos(&mut d, spec.table_qpos);
     ids.apply_gravity_compensation(&mut d);
