@@ -111,6 +111,26 @@ fn set_state_rejects_non_finite_and_out_of_range_values_naming_the_field() {
         env.set_state(&good).unwrap();
         assert_eq!(env.get_state(), good);
     }
+    // Every state a live env reaches restores, even after the largest actions (absolute
+    // targets are unclipped, as upstream: ctrl = kp × 3.4e38).
+    for mode in ["pd_joint_pos", "pd_joint_pos_vel", "pd_joint_vel"] {
+        let mut env = make(
+            "PickCube-v1",
+            EnvConfig {
+                control_mode: Some(mode.into()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let dim = env.action_space().shape[0];
+        for a in [f32::MAX, f32::MIN, 1e30] {
+            env.step(&vec![a; dim]).unwrap();
+            let s = env.get_state();
+            env.set_state(&s)
+                .unwrap_or_else(|e| panic!("{mode} after {a}: {e}"));
+            assert_eq!(env.get_state(), s);
+        }
+    }
 }
 
 #[test]
@@ -231,9 +251,14 @@ proptest! {
             }
         }
         s.elapsed_steps = steps;
-        let valid = s.physics.iter().chain(&s.controller)
-            .chain(s.finger_forces.as_flattened())
-            .all(|x| x.is_finite() && x.abs() <= 1e10)
+        // The documented bounds: physics within 1e10 but ctrl (finite), targets within f32.
+        let m = env.model();
+        let c0 = 1 + m.nq() + m.nv() + m.na();
+        let ctrl = c0..c0 + m.nu();
+        let valid = s.physics.iter().enumerate()
+                .all(|(i, x)| x.is_finite() && (x.abs() <= 1e10 || ctrl.contains(&i)))
+            && s.controller.iter().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64)
+            && s.finger_forces.as_flattened().iter().all(|x| x.is_finite() && x.abs() <= 1e10)
             && s.physics[0] >= 0.0 && steps != u32::MAX;
         match env.set_state(&s) {
             Ok(()) => {

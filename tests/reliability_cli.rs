@@ -315,6 +315,8 @@ fn huge_counts_are_range_errors_at_once() {
         (&["bench", "--steps", "1000000000000"], "--steps"),
         (&["bench", "--steps", "0"], "--steps"),
         (&["bench", "--steps", "-5"], "--steps"),
+        (&["bench", "--steps", "-inf"], "--steps"),
+        (&["eval", "--seed", "-inf"], "--seed"),
         (&["bench", "--envs", "0"], "--envs"),
         (&["bench", "--envs", "-1"], "--envs"),
         (&["bench", "--threads", "0"], "--threads"),

@@ -86,15 +86,15 @@ pub enum Command {
         #[command(flatten)]
         target: EnvArgs,
         /// Env steps to time (1..=1000000; after a warm-up of a tenth as many).
-        #[arg(long, default_value_t = 2000, value_parser = args::bench_steps, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 2000, value_parser = args::bench_steps, allow_hyphen_values = true)]
         steps: usize,
         /// Also time a VecEnv of this many envs (1..=256; reports vec_env_steps_per_s and
         /// scaling).
-        #[arg(long, value_parser = args::envs, allow_negative_numbers = true)]
+        #[arg(long, value_parser = args::envs, allow_hyphen_values = true)]
         envs: Option<usize>,
         /// VecEnv threads, the calling thread included (1..=256, at most one per env; default:
         /// available cores). The report gives the number used.
-        #[arg(long, value_parser = args::threads, allow_negative_numbers = true)]
+        #[arg(long, value_parser = args::threads, allow_hyphen_values = true)]
         threads: Option<usize>,
         /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
         /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
@@ -102,7 +102,7 @@ pub enum Command {
         obs_mode: String,
         /// Also time this many human-camera frames (1..=100000; Env::render, 512x512):
         /// render_frames_per_s.
-        #[arg(long, value_parser = args::render_frames, allow_negative_numbers = true)]
+        #[arg(long, value_parser = args::render_frames, allow_hyphen_values = true)]
         render: Option<usize>,
     },
     /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
@@ -116,10 +116,10 @@ pub enum Command {
         shape: String,
         /// Decompose greedily into up to this many primitives (1..=64; axis-aligned cuts);
         /// overrides --segments.
-        #[arg(long, value_parser = args::parts, allow_negative_numbers = true)]
+        #[arg(long, value_parser = args::parts, allow_hyphen_values = true)]
         parts: Option<usize>,
         /// Split the (cropped) mesh into this many slabs along its principal axis (1..=64).
-        #[arg(long, default_value_t = 1, value_parser = args::parts, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 1, value_parser = args::parts, allow_hyphen_values = true)]
         segments: usize,
         /// Keep only the mesh surface inside this box: "xmin,ymin,zmin,xmax,ymax,zmax" (mesh frame).
         #[arg(long, allow_hyphen_values = true)]
@@ -138,10 +138,10 @@ pub enum Command {
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (seeds seed, seed+1, ...; the last must be a 32-bit seed).
-        #[arg(long, default_value_t = 100, value_parser = args::episodes, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 100, value_parser = args::episodes, allow_hyphen_values = true)]
         episodes: usize,
         /// First seed (0..=4294967295: ManiSkill's seeds are 32-bit).
-        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
     },
     /// Record seeded episodes of a policy to an MCAP file; prints a JSON summary. With no
@@ -160,10 +160,10 @@ pub enum Command {
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (1 or more; the last seed must be a 32-bit seed).
-        #[arg(long, default_value_t = 10, value_parser = args::episodes, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 10, value_parser = args::episodes, allow_hyphen_values = true)]
         episodes: usize,
         /// Seed of the first episode (episode k uses seed + k; 0..=4294967295).
-        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
         /// Output MCAP file, written under a temporary name next to it and moved into place
         /// once the first episode is finished (an existing file is replaced only then). The
@@ -210,7 +210,7 @@ pub enum Command {
         #[command(flatten)]
         target: EnvArgs,
         /// Reset seed (0..=4294967295).
-        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
         /// Camera: the human render camera (render_camera, 512x512), the sensor camera
         /// (base_camera, 128x128) or a robot camera (Fetch: fetch_head, fetch_hand).

@@ -14,9 +14,15 @@ pub const MAX_SEED: u64 = u32::MAX as u64;
 /// beyond it the initial joint positions leave every joint range many times over.
 pub const MAX_QPOS_NOISE: f64 = 1.0;
 
-/// Largest magnitude of a restored physics or controller value. MuJoCo treats positions and
-/// velocities beyond 1e10 as diverged (`mjMAXVAL`), so no state of a running env exceeds it.
+/// Largest magnitude of a restored physics value (all but `ctrl`). MuJoCo treats positions,
+/// velocities and accelerations beyond 1e10 as diverged (`mjMAXVAL`) and resets, so no state
+/// of a running env exceeds it.
 pub const MAX_STATE_VALUE: f64 = 1e10;
+
+/// Largest magnitude of a restored controller target: the largest f32, as actions are f32
+/// (absolute-target modes take them unclipped, as upstream) and targets are observed as f32.
+/// `ctrl` (gain × target) only has to be finite.
+pub const MAX_TARGET_VALUE: f64 = f32::MAX as f64;
 
 /// Checks that `seed` is a 32-bit ManiSkill seed.
 pub fn check_seed(seed: u64) -> Result<(), EnvError> {
@@ -80,37 +86,45 @@ pub fn first_non_finite(s: &EnvState) -> Option<(String, f64)> {
 }
 
 /// Checks the values of a state before [`super::Env::set_state`] applies it (its ids and
-/// sizes are checked there): every physics value, controller target and finger force finite
-/// and within ±[`MAX_STATE_VALUE`], time ≥ 0, `elapsed_steps` below `u32::MAX` (the next step
-/// adds one), and neither RNG stream in the all-zero state MT19937 never leaves.
+/// sizes are checked there): every number finite; physics values (but `ctrl`) and finger
+/// forces within ±[`MAX_STATE_VALUE`], controller targets within ±[`MAX_TARGET_VALUE`];
+/// time ≥ 0; `elapsed_steps` below `u32::MAX` (the next step adds one); neither RNG stream in
+/// the all-zero state MT19937 never leaves. Every state [`super::Env::get_state`] returns
+/// passes.
 pub fn check_state_values(model: &Model, s: &EnvState) -> Result<(), EnvError> {
-    let bad = |field: String, value: f64, why: &str| {
+    let bad = |field: String, value: f64, why: String| {
         Err(EnvError::BadState(format!("{field} = {value} {why}")))
     };
-    let limit = format!("is out of range (|value| ≤ {MAX_STATE_VALUE:e})");
+    let range = |max: f64| format!("is out of range (|value| ≤ {max:e})");
+    let ctrl = 1 + model.nq() + model.nv() + model.na();
+    let ctrl = ctrl..ctrl + model.nu();
     for (i, &x) in s.physics.iter().enumerate() {
         if !x.is_finite() {
-            return bad(physics_field(model, i), x, "is not finite");
+            return bad(physics_field(model, i), x, "is not finite".into());
         }
-        if x.abs() > MAX_STATE_VALUE {
-            return bad(physics_field(model, i), x, &limit);
+        if x.abs() > MAX_STATE_VALUE && !ctrl.contains(&i) {
+            return bad(physics_field(model, i), x, range(MAX_STATE_VALUE));
         }
     }
     if let Some(&t) = s.physics.first() {
         if t < 0.0 {
-            return bad(physics_field(model, 0), t, "is negative (time ≥ 0)");
+            return bad(physics_field(model, 0), t, "is negative (time ≥ 0)".into());
         }
     }
-    for (name, v) in [
-        ("controller", s.controller.as_slice()),
-        ("finger_forces", s.finger_forces.as_flattened()),
+    for (name, v, max) in [
+        ("controller", s.controller.as_slice(), MAX_TARGET_VALUE),
+        (
+            "finger_forces",
+            s.finger_forces.as_flattened(),
+            MAX_STATE_VALUE,
+        ),
     ] {
         for (i, &x) in v.iter().enumerate() {
             if !x.is_finite() {
-                return bad(format!("{name}[{i}]"), x, "is not finite");
+                return bad(format!("{name}[{i}]"), x, "is not finite".into());
             }
-            if x.abs() > MAX_STATE_VALUE {
-                return bad(format!("{name}[{i}]"), x, &limit);
+            if x.abs() > max {
+                return bad(format!("{name}[{i}]"), x, range(max));
             }
         }
     }
