@@ -71,9 +71,14 @@ pub fn scale(s: &str) -> Result<f64, String> {
         .trim()
         .parse()
         .map_err(|_| format!("{s:?} is not a number; valid: a positive number up to {max:e}"))?;
-    if !(v.is_finite() && v > 0.0 && v <= max) {
+    if !(v.is_finite() && v > 0.0) {
         return Err(format!(
-            "--scale must be a positive number up to {max:e}, got {v}"
+            "--scale must be a positive number, got {v} (valid: 0 < scale ≤ {max:e})"
+        ));
+    }
+    if v > max {
+        return Err(format!(
+            "--scale {v:e} is too large (valid: 0 < scale ≤ {max:e})"
         ));
     }
     Ok(v)
