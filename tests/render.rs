@@ -435,7 +435,7 @@ fn visual_envs_render_on_vec_env_worker_threads() {
         for _ in 0..3 {
             e.step(&acts[i * dim..(i + 1) * dim]).unwrap();
         }
-        assert_eq!(v.obs_of(i), e.obs(), "env {i}");
+        assert_eq!(v.obs_of(i).unwrap(), e.obs(), "env {i}");
     }
 }
 

@@ -49,11 +49,11 @@ fn vec_env_i_matches_a_single_env_seeded_s_plus_i() {
     v.reset(Some(100));
     let mut single = make("PickCube-v1", short()).unwrap();
     single.reset(Some(102));
-    assert_eq!(v.obs_of(2), single.obs());
+    assert_eq!(v.obs_of(2).unwrap(), single.obs());
     let acts = actions(3, 8, 1);
     v.step(&acts).unwrap();
     let s = single.step(&acts[16..24]).unwrap();
-    assert_eq!(v.obs_of(2), s.obs);
+    assert_eq!(v.obs_of(2).unwrap(), s.obs);
     assert_eq!(v.rewards()[2], s.reward);
 }
 
@@ -69,24 +69,28 @@ fn autoreset_happens_on_the_step_after_truncation() {
         v.step(&a).unwrap();
         let s = single.step(&a[8..]).unwrap();
         assert_eq!(v.truncated()[1], k == 5);
-        assert_eq!(v.obs_of(1), s.obs, "step {k}");
+        assert_eq!(v.obs_of(1).unwrap(), s.obs, "step {k}");
         final_obs = s.obs.to_vec();
     }
     // The final observation is what the truncating step returned.
-    assert_eq!(v.obs_of(1), final_obs.as_slice());
+    assert_eq!(v.obs_of(1).unwrap(), final_obs.as_slice());
     // Next step: the action is ignored, the env resets unseeded (its streams continue).
     v.step(&actions(2, 8, 99)).unwrap();
     assert!(v.autoreset()[0] && v.autoreset()[1]);
     assert!(!v.truncated()[1] && !v.terminated()[1]);
     assert_eq!(v.rewards()[1], 0.0);
     single.reset(None);
-    assert_eq!(v.obs_of(1), single.obs(), "new episode's first observation");
-    assert_ne!(v.obs_of(1), final_obs.as_slice());
+    assert_eq!(
+        v.obs_of(1).unwrap(),
+        single.obs(),
+        "new episode's first observation"
+    );
+    assert_ne!(v.obs_of(1).unwrap(), final_obs.as_slice());
     // And the following step is an ordinary step of the new episode.
     v.step(&actions(2, 8, 3)).unwrap();
     assert!(!v.autoreset()[1]);
     let s = single.step(&actions(2, 8, 3)[8..]).unwrap();
-    assert_eq!(v.obs_of(1), s.obs);
+    assert_eq!(v.obs_of(1).unwrap(), s.obs);
 }
 
 #[test]
@@ -177,7 +181,7 @@ fn vec_env_images_equal_single_envs_across_autoresets() {
                 let st = s.step(&a[i * dim..(i + 1) * dim]).unwrap();
                 ended[i] = st.terminated || st.truncated;
             }
-            assert_eq!(v.obs_of(i), s.obs(), "step {k}");
+            assert_eq!(v.obs_of(i).unwrap(), s.obs(), "step {k}");
             assert_same_images(&v, i, s, &format!("step {k}"));
         }
         // The images follow the state: every step changes them.

@@ -34,7 +34,7 @@ pub struct BenchReport {
     /// VecEnv size (with `--envs`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub envs: Option<usize>,
-    /// VecEnv threads (with `--envs`).
+    /// VecEnv threads actually used (with `--envs`): `--threads`, at most one per env.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub threads: Option<usize>,
     /// Env steps per second summed over the VecEnv's envs (with `--envs`).
@@ -55,7 +55,24 @@ pub struct BenchReport {
     pub overhead_percent: f64,
 }
 
-/// Runs the benchmark.
+/// Largest `--steps`: the timed actions and drive commands are held in memory
+/// (about 100 bytes per step).
+pub const MAX_STEPS: usize = 1_000_000;
+/// Largest `--envs`.
+pub const MAX_ENVS: usize = 256;
+/// Largest `--threads`.
+pub const MAX_THREADS: usize = 256;
+/// Largest `--render`.
+pub const MAX_RENDER: usize = 100_000;
+
+fn check_count(flag: &str, n: usize, max: usize) -> Result<(), String> {
+    if !(1..=max).contains(&n) {
+        return Err(format!("{flag} must be in 1..={max}, got {n}"));
+    }
+    Ok(())
+}
+
+/// Runs the benchmark. Every argument is checked (and the VecEnv built) before any timing.
 pub fn run(
     env_id: &str,
     config: EnvConfig,
@@ -63,8 +80,26 @@ pub fn run(
     vec: Option<(usize, usize)>,
     render_frames: Option<usize>,
 ) -> Result<BenchReport, String> {
-    let steps = steps.max(1);
+    check_count("--steps", steps, MAX_STEPS)?;
+    if let Some((n, t)) = vec {
+        check_count("--envs", n, MAX_ENVS)?;
+        check_count("--threads", t, MAX_THREADS)?;
+    }
+    if let Some(n) = render_frames {
+        check_count("--render", n, MAX_RENDER)?;
+    }
     let mut env = make(env_id, config.clone()).map_err(|e| e.to_string())?;
+    // Built before timing, so that a bad VecEnv fails at once; the threads it uses (at most
+    // one per env) are what the report shows.
+    let mut vec_env = match vec {
+        None => None,
+        Some((n, t)) => {
+            Some(crate::env::VecEnv::new(env_id, config.clone(), n, t).map_err(|e| e.to_string())?)
+        }
+    };
+    if render_frames.is_some() {
+        env.render().map_err(|e| e.to_string())?; // fail before timing without rendering
+    }
     let dim = env.action_space().shape[0];
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);
     let actions: Vec<f32> = (0..dim * steps)
@@ -111,10 +146,10 @@ pub fn run(
         replay_identical = data.qpos() == env_qpos.as_slice() && data.qvel() == env_qvel.as_slice();
     }
     let phys = mj_rate / substeps as f64;
-    let vec_rate = match vec {
+    let vec_rate = match vec_env.as_mut() {
         None => None,
-        Some((n, t)) => {
-            let mut v = crate::env::VecEnv::new(env_id, config, n, t).map_err(|e| e.to_string())?;
+        Some(v) => {
+            let n = v.num_envs();
             // Every env follows the single env's action sequence (same workload per env step).
             let vsteps = (steps / n).max(1);
             let mut acts = vec![0.0f32; n * dim];
@@ -145,7 +180,6 @@ pub fn run(
     let render_rate = match render_frames {
         None => None,
         Some(n) => {
-            let n = n.max(1);
             env.set_state(&start).map_err(|e| e.to_string())?;
             let zero = vec![0.0f32; dim];
             env.render().map_err(|e| e.to_string())?; // warm-up (context creation)
@@ -180,8 +214,8 @@ pub fn run(
         physics_steps_per_s: phys,
         mj_step_per_s: mj_rate,
         replay_identical,
-        envs: vec.map(|v| v.0),
-        threads: vec.map(|v| v.1),
+        envs: vec_env.as_ref().map(|v| v.num_envs()),
+        threads: vec_env.as_ref().map(|v| v.num_threads()),
         vec_env_steps_per_s: vec_rate,
         scaling: vec_rate.map(|r| r / env_rate),
         render_frames_per_s: render_rate,

@@ -78,7 +78,7 @@ pub fn run_episode(
     action: &mut [f32],
     mut on_step: impl FnMut(&Env, &[f32], f32, bool, bool) -> Result<(), String>,
 ) -> Result<EpisodeResult, String> {
-    env.reset(seed);
+    env.try_reset(seed).map_err(|e| e.to_string())?;
     policy.reset(env);
     let mut r = EpisodeResult {
         seed: seed.unwrap_or(0),
@@ -108,7 +108,9 @@ pub fn run_episode(
     }
 }
 
-/// Runs `episodes` episodes with seeds `seed..seed + episodes`.
+/// Runs `episodes` episodes with seeds `seed..seed + episodes` (32-bit seeds: the range must
+/// end at [`crate::env::checks::MAX_SEED`] or below). Results are accumulated as the episodes
+/// run, so memory does not grow with `episodes`.
 pub fn run(
     env_id: &str,
     config: EnvConfig,
@@ -116,25 +118,29 @@ pub fn run(
     episodes: usize,
     seed: u64,
 ) -> Result<EvalReport, String> {
+    super::rollout::check_seed_range(seed, episodes as u64)?;
     let mut env = make_env(env_id, config, policy)?;
     let mut pol = make_policy(policy, &env, seed)?;
     let mut action = vec![0.0f32; env.action_space().shape[0]];
-    let mut results = Vec::with_capacity(episodes);
+    let (mut successes, mut at_end, mut returns) = (0usize, 0usize, 0.0f64);
+    let (mut first_sum, mut first_count) = (0.0f64, 0usize);
     for k in 0..episodes as u64 {
-        results.push(run_episode(
+        let r = run_episode(
             &mut env,
             pol.as_mut(),
             Some(seed + k),
             &mut action,
             |_, _, _, _, _| Ok(()),
-        )?);
+        )?;
+        successes += r.success_once as usize;
+        at_end += r.success_at_end as usize;
+        returns += r.ret;
+        if let Some(s) = r.first_success {
+            first_sum += s as f64;
+            first_count += 1;
+        }
     }
-    let n = results.len().max(1) as f64;
-    let successes = results.iter().filter(|r| r.success_once).count();
-    let firsts: Vec<f64> = results
-        .iter()
-        .filter_map(|r| r.first_success.map(|s| s as f64))
-        .collect();
+    let n = episodes.max(1) as f64;
     Ok(EvalReport {
         env: env_id.to_string(),
         robot: env.robot_spec().uid.to_string(),
@@ -143,9 +149,8 @@ pub fn run(
         episodes,
         successes,
         success_rate: successes as f64 / n,
-        success_at_end_rate: results.iter().filter(|r| r.success_at_end).count() as f64 / n,
-        mean_return: results.iter().map(|r| r.ret).sum::<f64>() / n,
-        mean_first_success_step: (!firsts.is_empty())
-            .then(|| firsts.iter().sum::<f64>() / firsts.len() as f64),
+        success_at_end_rate: at_end as f64 / n,
+        mean_return: returns / n,
+        mean_first_success_step: (first_count > 0).then(|| first_sum / first_count as f64),
     })
 }

@@ -23,9 +23,11 @@ macro_rules! out {
     };
 }
 
+pub mod args;
 pub mod bench;
 pub mod eval;
 pub mod fidelity;
+pub mod output;
 pub mod plot;
 pub mod render;
 pub mod rollout;
@@ -76,9 +78,10 @@ impl EnvArgs {
 pub enum Command {
     /// Write the complete generated MuJoCo scene (MJCF) of a robot, or of a task with a robot.
     ExportMjcf {
-        /// Robot uid (panda, fetch, xarm6_robotiq, so100, widowxai).
-        #[arg(long, default_value = "panda")]
-        robot: String,
+        /// Robot uid (panda, fetch, xarm6_robotiq, so100, widowxai; default: the env's
+        /// default robot, or panda without --env).
+        #[arg(long)]
+        robot: Option<String>,
         /// Env id whose scene to export (e.g. PickCube-v1); without it, the table scene and the robot.
         #[arg(long)]
         env: Option<String>,
@@ -91,21 +94,24 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Env steps to time (after a warm-up of a tenth as many).
-        #[arg(long, default_value_t = 2000)]
+        /// Env steps to time (1..=1000000; after a warm-up of a tenth as many).
+        #[arg(long, default_value_t = 2000, value_parser = args::bench_steps, allow_hyphen_values = true)]
         steps: usize,
-        /// Also time a VecEnv of this many envs (reports vec_env_steps_per_s and scaling).
-        #[arg(long)]
+        /// Also time a VecEnv of this many envs (1..=256; reports vec_env_steps_per_s and
+        /// scaling).
+        #[arg(long, value_parser = args::envs, allow_hyphen_values = true)]
         envs: Option<usize>,
-        /// VecEnv threads, the calling thread included (default: available cores).
-        #[arg(long)]
+        /// VecEnv threads, the calling thread included (1..=256, at most one per env; default:
+        /// available cores). The report gives the number used.
+        #[arg(long, value_parser = args::threads, allow_hyphen_values = true)]
         threads: Option<usize>,
         /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
         /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
         #[arg(long, default_value = "state")]
         obs_mode: String,
-        /// Also time this many human-camera frames (Env::render, 512x512): render_frames_per_s.
-        #[arg(long)]
+        /// Also time this many human-camera frames (1..=100000; Env::render, 512x512):
+        /// render_frames_per_s.
+        #[arg(long, value_parser = args::render_frames, allow_hyphen_values = true)]
         render: Option<usize>,
     },
     /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
@@ -117,18 +123,19 @@ pub enum Command {
         /// Primitive kind: box, capsule, cylinder or sphere; comma-separated to take the smallest.
         #[arg(long, default_value = "box,capsule,cylinder")]
         shape: String,
-        /// Decompose greedily into up to this many primitives (axis-aligned cuts); overrides --segments.
-        #[arg(long)]
+        /// Decompose greedily into up to this many primitives (1..=64; axis-aligned cuts);
+        /// overrides --segments.
+        #[arg(long, value_parser = args::parts, allow_hyphen_values = true)]
         parts: Option<usize>,
-        /// Split the (cropped) mesh into this many slabs along its principal axis.
-        #[arg(long, default_value_t = 1)]
+        /// Split the (cropped) mesh into this many slabs along its principal axis (1..=64).
+        #[arg(long, default_value_t = 1, value_parser = args::parts, allow_hyphen_values = true)]
         segments: usize,
         /// Keep only the mesh surface inside this box: "xmin,ymin,zmin,xmax,ymax,zmax" (mesh frame).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         crop: Option<String>,
         /// Uniform scale applied to the mesh vertices first (the URDF `<mesh scale>`, e.g. 0.001
-        /// for meshes in millimetres); crop boxes are in the scaled frame.
-        #[arg(long, default_value_t = 1.0)]
+        /// for meshes in millimetres; positive, up to 1e6); crop boxes are in the scaled frame.
+        #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
         scale: f64,
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
@@ -139,11 +146,11 @@ pub enum Command {
         /// Policy: solver, random or zero.
         #[arg(long, default_value = "solver")]
         policy: String,
-        /// Episodes (seeds seed, seed+1, ...).
-        #[arg(long, default_value_t = 100)]
+        /// Episodes (seeds seed, seed+1, ...; the last must be a 32-bit seed).
+        #[arg(long, default_value_t = 100, value_parser = args::episodes, allow_hyphen_values = true)]
         episodes: usize,
-        /// First seed.
-        #[arg(long, default_value_t = 0)]
+        /// First seed (0..=4294967295: ManiSkill's seeds are 32-bit).
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
     },
     /// Record seeded episodes of a policy to an MCAP file; prints a JSON summary. With no
@@ -161,14 +168,16 @@ pub enum Command {
         /// Policy: solver, random or zero.
         #[arg(long, default_value = "solver")]
         policy: String,
-        /// Episodes.
-        #[arg(long, default_value_t = 10)]
+        /// Episodes (1 or more; the last seed must be a 32-bit seed).
+        #[arg(long, default_value_t = 10, value_parser = args::episodes, allow_hyphen_values = true)]
         episodes: usize,
-        /// Seed of the first episode (episode k uses seed + k).
-        #[arg(long, default_value_t = 0)]
+        /// Seed of the first episode (episode k uses seed + k; 0..=4294967295).
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
-        /// Output MCAP file. The human camera's view at the end of the first episode is
-        /// written next to it as PNG (rollout.mcap → rollout.png) when rendering is available.
+        /// Output MCAP file, written under a temporary name next to it and moved into place
+        /// once the first episode is finished (an existing file is replaced only then). The
+        /// human camera's view at the end of the first episode is written next to it as PNG
+        /// (rollout.mcap → rollout.png) when rendering is available.
         #[arg(long, default_value = "rollout.mcap")]
         out: PathBuf,
         /// Also record the human render camera's frames (512x512 PNG) on
@@ -179,19 +188,27 @@ pub enum Command {
         #[arg(long)]
         no_frame: bool,
     },
-    /// Summarise a recording (JSON); says whether it was cut short.
+    /// Summarise a recording (JSON); says whether it was cut short. A damaged file (a CRC or
+    /// structure check fails) is an error naming the byte offset and chunk.
     Info {
         /// The .mcap file.
         file: PathBuf,
+        /// Summarise what precedes damage instead of failing (the damage is reported).
+        #[arg(long)]
+        salvage: bool,
     },
     /// Re-simulate every episode of a recording from its seed and actions and compare each
     /// step; prints the largest deviations (JSON) and fails beyond the tolerance.
     Replay {
         /// The .mcap file.
         file: PathBuf,
-        /// Largest allowed absolute deviation of observations, rewards and info values.
-        #[arg(long, default_value_t = 1e-6)]
+        /// Largest allowed absolute deviation of observations, rewards and info values (a
+        /// finite number ≥ 0).
+        #[arg(long, default_value_t = 1e-6, value_parser = args::tolerance, allow_hyphen_values = true)]
         tolerance: f64,
+        /// Replay the episodes that precede damage instead of failing (the damage is reported).
+        #[arg(long)]
+        salvage: bool,
     },
     /// Replay a ManiSkill reference trajectory file (`<env>__<robot>.json.gz`) in mjskill and
     /// print the per-step deviations of joints, TCP, objects, rewards and flags (JSON).
@@ -222,8 +239,8 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Reset seed.
-        #[arg(long, default_value_t = 0)]
+        /// Reset seed (0..=4294967295).
+        #[arg(long, default_value_t = 0, value_parser = args::seed, allow_hyphen_values = true)]
         seed: u64,
         /// Camera: the human render camera (render_camera, 512x512), the sensor camera
         /// (base_camera, 128x128) or a robot camera (Fetch: fetch_head, fetch_hand).
@@ -249,7 +266,9 @@ pub fn main() -> i32 {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
-        Command::ExportMjcf { robot, env, output } => export_mjcf(&robot, env.as_deref(), output),
+        Command::ExportMjcf { robot, env, output } => {
+            export_mjcf(robot.as_deref(), env.as_deref(), output)
+        }
         Command::Bench {
             target,
             steps,
@@ -333,13 +352,17 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             Ok(())
         }
-        Command::Info { file } => {
-            let s = rollout::info(&file)?;
+        Command::Info { file, salvage } => {
+            let s = rollout::info(&file, salvage)?;
             out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
             Ok(())
         }
-        Command::Replay { file, tolerance } => {
-            let r = rollout::replay(&file, tolerance)?;
+        Command::Replay {
+            file,
+            tolerance,
+            salvage,
+        } => {
+            let r = rollout::replay(&file, tolerance, salvage)?;
             out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())
@@ -396,13 +419,24 @@ fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), String> {
     }
 }
 
-fn export_mjcf(robot: &str, env: Option<&str>, output: Option<PathBuf>) -> Result<(), String> {
+fn export_mjcf(
+    robot: Option<&str>,
+    env: Option<&str>,
+    output: Option<PathBuf>,
+) -> Result<(), String> {
     let mjcf = match env {
         None => {
-            let spec = crate::robots::spec(robot)?;
+            let spec = crate::robots::spec(robot.unwrap_or("panda"))?;
             crate::robots::table_scene_with(spec, |_| {})?.mjcf
         }
-        Some(id) => crate::env::scene_mjcf(id, robot)?,
+        Some(id) => {
+            // As rollout does: without --robot, the env's own default robot.
+            let robot = match robot {
+                Some(r) => r,
+                None => crate::env::default_robot(id).map_err(|e| e.to_string())?,
+            };
+            crate::env::scene_mjcf(id, robot)?
+        }
     };
     if !mjcf.assets.is_empty() {
         // Meshes live in MuJoCo's in-memory VFS; write them next to the XML so the file loads.
@@ -427,19 +461,10 @@ fn fit_primitives(
     scale: f64,
 ) -> Result<(), String> {
     use crate::mjcf::mesh_fit;
-    if !(scale.is_finite() && scale > 0.0) {
-        return Err(format!("--scale must be a positive number, got {scale}"));
-    }
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())
         .collect::<Result<_, _>>()?;
-    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
-    let mut tris =
-        mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
-    for t in tris.iter_mut().flatten() {
-        *t *= scale;
-    }
     let crop = match crop {
         None => None,
         Some(s) => {
@@ -448,7 +473,9 @@ fn fit_primitives(
                 .map(|x| {
                     x.trim()
                         .parse::<f64>()
-                        .map_err(|_| format!("--crop: {x:?} is not a number"))
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| format!("--crop: {x:?} is not a finite number"))
                 })
                 .collect::<Result<_, _>>()?;
             if v.len() != 6 {
@@ -457,12 +484,21 @@ fn fit_primitives(
                     v.len()
                 ));
             }
+            if (0..3).any(|k| v[k] > v[k + 3]) {
+                return Err(format!(
+                    "--crop {s}: each minimum must not exceed its maximum"
+                ));
+            }
             Some(mesh_fit::Crop {
                 min: [v[0], v[1], v[2]].into(),
                 max: [v[3], v[4], v[5]].into(),
             })
         }
     };
+    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
+    let mut tris =
+        mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
+    mesh_fit::scale_triangles(&mut tris, scale).map_err(|e| e.to_string())?;
     let pts = mesh_fit::surface_points(&tris, crop.as_ref()).map_err(|e| e.to_string())?;
     let prims = match parts {
         Some(n) => mesh_fit::decompose(&pts, &kinds, n),
@@ -473,6 +509,9 @@ fn fit_primitives(
         None => mesh_fit::fit_any(&pts, &kinds).map(|p| vec![p]),
     }
     .map_err(|e| e.to_string())?;
+    for p in &prims {
+        mesh_fit::check_primitive(p, crop.is_some()).map_err(|e| e.to_string())?;
+    }
     let total: f64 = prims.iter().map(|p| p.volume()).sum();
     for p in &prims {
         out!("{}", p.to_urdf());

@@ -1,13 +1,17 @@
 //! `mjskill rollout`, `mjskill info` and `mjskill replay`: recorded rollouts in MCAP files.
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::env::{EnvConfig, ObsMode, RewardMode};
+use super::output::Output;
+use crate::env::checks::MAX_SEED;
+use crate::env::{Env, EnvConfig, ObsMode, RewardMode};
 use crate::record::image::write_png;
-use crate::record::{read, Recorder, Recording};
-use crate::solvers::make_policy;
+use crate::record::{
+    stream, EpisodeEnd, EpisodeStart, Meta, Recorder, Recording, StepRec, Visitor,
+};
+use crate::solvers::{make_policy, Policy};
 
 /// The one-line JSON summary of a rollout.
 #[derive(Debug, Clone, Serialize)]
@@ -67,22 +71,157 @@ pub fn frame_path(out: &Path) -> std::path::PathBuf {
     out.with_extension("png")
 }
 
+/// Where the frame PNG of a rollout goes, checked before anything is written: `None` with
+/// `--no-frame`. Errors: the PNG would be the recording itself, or cannot be written (a
+/// directory, a read-only file).
+pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, String> {
+    if !frame {
+        return Ok(None);
+    }
+    let png = frame_path(out);
+    if png == out {
+        return Err(format!(
+            "--out {}: the PNG of the first episode's last frame is written next to the \
+             recording with the extension .png, which would overwrite the recording itself; \
+             name the recording e.g. {} or pass --no-frame",
+            out.display(),
+            out.with_extension("mcap").display()
+        ));
+    }
+    if png.is_dir() {
+        return Err(format!(
+            "cannot write the frame PNG {}: it is a directory; pass --no-frame or another --out",
+            png.display()
+        ));
+    }
+    if png.exists() {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&png)
+            .map_err(|e| {
+                format!(
+                    "cannot write the frame PNG {}: {e}; pass --no-frame or another --out",
+                    png.display()
+                )
+            })?;
+    }
+    Ok(Some(png))
+}
+
+/// Checks that `episodes` episodes with seeds `seed, seed + 1, ...` stay within ManiSkill's
+/// 32-bit seeds; the errors name the flags.
+pub fn check_seed_range(seed: u64, episodes: u64) -> Result<(), String> {
+    if episodes == 0 {
+        return Err("--episodes must be at least 1".into());
+    }
+    if seed > MAX_SEED {
+        return Err(format!(
+            "--seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}"
+        ));
+    }
+    let last = seed as u128 + episodes as u128 - 1;
+    if last > MAX_SEED as u128 {
+        return Err(format!(
+            "--seed {seed} with --episodes {episodes} needs seeds up to {last}, beyond the \
+             32-bit seeds 0..={MAX_SEED}; lower --seed or --episodes"
+        ));
+    }
+    Ok(())
+}
+
 /// Records `episodes` seeded episodes; each finished episode is synced to disk before the next
-/// begins.
+/// begins. Every argument is checked before any file is created; the recording is written
+/// under a temporary name next to `out` and takes its final name once its first episode is
+/// finished (see [`super::output`]), so a failed run never leaves an empty or partial file
+/// under `out`, and a run killed later keeps its finished episodes there.
 pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
-    // Fail on an unwritable path before any simulation.
-    std::fs::File::create(&a.out).map_err(|e| format!("cannot write {}: {e}", a.out.display()))?;
+    check_seed_range(a.seed, a.episodes as u64)?;
     let mut env = super::eval::make_env(&a.env, a.config.clone(), &a.policy)?;
     let mut policy = make_policy(&a.policy, &env, a.seed)?;
-    let mut rec = Recorder::create(&a.out, &env).map_err(|e| e.to_string())?;
+    let frame_png = check_frame_path(&a.out, a.frame)?;
     let (render_w, render_h) = env.render_size();
     let camera = env.cameras().1.name;
     if a.video {
-        // Fail before simulating when rendering is unavailable.
+        // Fail before creating anything when rendering is unavailable.
         env.render().map_err(|e| e.to_string())?;
+    }
+    let (mut output, file) = Output::start(&a.out)?;
+    let mut rec = match Recorder::from_file(file, output.current(), &env) {
+        Ok(r) => r,
+        Err(e) => {
+            output.discard();
+            return Err(e.to_string());
+        }
+    };
+    let mut run = Run {
+        successes: 0,
+        total_return: 0.0,
+        steps: 0,
+        frame: None,
+    };
+    let t0 = Instant::now();
+    let r = record_all(
+        a,
+        &mut env,
+        policy.as_mut(),
+        &mut rec,
+        &mut output,
+        &mut run,
+        camera,
+        (render_w, render_h),
+        frame_png.as_deref(),
+    );
+    if let Err(e) = r {
+        // Keep what was finished (the file then reads as cut short), or nothing at all.
+        let abandoned = rec.abandon();
+        if output.published() {
+            abandoned.map_err(|a| format!("{e}; and: {a}"))?;
+        } else {
+            output.discard();
+        }
+        return Err(e);
+    }
+    let video_frames = rec.frames();
+    rec.finish().map_err(|e| e.to_string())?;
+    Ok(RolloutSummary {
+        out: a.out.display().to_string(),
+        env: a.env.clone(),
+        robot: env.robot_spec().uid.to_string(),
+        control_mode: env.control_mode().to_string(),
+        policy: a.policy.clone(),
+        episodes: a.episodes,
+        successes: run.successes,
+        mean_return: run.total_return / a.episodes.max(1) as f64,
+        steps: run.steps,
+        steps_per_s: run.steps as f64 / t0.elapsed().as_secs_f64(),
+        frame: run.frame,
+        video_frames,
+    })
+}
+
+/// Totals of a rollout.
+struct Run {
+    successes: usize,
+    total_return: f64,
+    steps: u64,
+    frame: Option<String>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn record_all(
+    a: &RolloutArgs,
+    env: &mut Env,
+    policy: &mut dyn Policy,
+    rec: &mut Recorder,
+    output: &mut Output,
+    run: &mut Run,
+    camera: &str,
+    (render_w, render_h): (usize, usize),
+    frame_png: Option<&Path>,
+) -> Result<(), String> {
+    if a.video {
         rec.enable_video(camera).map_err(|e| e.to_string())?;
     }
-    let mut frame = None;
     let bar = if a.progress {
         indicatif::ProgressBar::new(a.episodes as u64)
     } else {
@@ -95,13 +234,11 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         .map_err(|e| e.to_string())?,
     );
     let mut action = vec![0.0f32; env.action_space().shape[0]];
-    let (mut successes, mut total_return, mut steps) = (0usize, 0.0f64, 0u64);
-    let t0 = Instant::now();
     for k in 0..a.episodes as u64 {
         let seed = a.seed + k;
-        env.reset(Some(seed));
-        policy.reset(&env);
-        rec.begin_episode(&env, Some(seed))
+        env.try_reset(Some(seed)).map_err(|e| e.to_string())?;
+        policy.reset(env);
+        rec.begin_episode(env, Some(seed))
             .map_err(|e| e.to_string())?;
         if a.video {
             let rgb = env.render().map_err(|e| e.to_string())?;
@@ -110,13 +247,13 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         }
         let (mut ret, mut success) = (0.0f64, false);
         loop {
-            policy.act(&env, &mut action);
+            policy.act(env, &mut action);
             let before = env.get_state();
             let (reward, terminated, truncated) = {
                 let s = env.step(&action).map_err(|e| e.to_string())?;
                 (s.reward, s.terminated, s.truncated)
             };
-            rec.record_step(&env, &action, reward, terminated, truncated, &before)
+            rec.record_step(env, &action, reward, terminated, truncated, &before)
                 .map_err(|e| e.to_string())?;
             if a.video {
                 let rgb = env.render().map_err(|e| e.to_string())?;
@@ -125,44 +262,33 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
             }
             ret += reward as f64;
             success |= terminated;
-            steps += 1;
+            run.steps += 1;
             if truncated {
                 break;
             }
         }
         rec.end_episode(success).map_err(|e| e.to_string())?;
-        if k == 0 && a.frame {
-            let path = frame_path(&a.out);
-            match env.render() {
-                Ok(rgb) => {
-                    write_png(&path, rgb, render_w, render_h)?;
-                    frame = Some(path.display().to_string());
+        if k == 0 {
+            output.publish()?;
+            rec.renamed(output.current());
+            if let Some(path) = frame_png {
+                // A side output never stops the recording: a failure is a warning.
+                match env.render() {
+                    Ok(rgb) => match write_png(path, rgb, render_w, render_h) {
+                        Ok(()) => run.frame = Some(path.display().to_string()),
+                        Err(e) => bar.suspend(|| eprintln!("warning: {e}; recording goes on")),
+                    },
+                    Err(e) => bar.suspend(|| eprintln!("note: no {} written: {e}", path.display())),
                 }
-                Err(e) => bar.suspend(|| eprintln!("note: no {} written: {e}", path.display())),
             }
         }
-        successes += success as usize;
-        total_return += ret;
-        bar.set_message(format!("{successes} successes"));
+        run.successes += success as usize;
+        run.total_return += ret;
+        bar.set_message(format!("{} successes", run.successes));
         bar.inc(1);
     }
-    let video_frames = rec.frames();
-    rec.finish().map_err(|e| e.to_string())?;
     bar.finish_and_clear();
-    Ok(RolloutSummary {
-        out: a.out.display().to_string(),
-        env: a.env.clone(),
-        robot: env.robot_spec().uid.to_string(),
-        control_mode: env.control_mode().to_string(),
-        policy: a.policy.clone(),
-        episodes: a.episodes,
-        successes,
-        mean_return: total_return / a.episodes.max(1) as f64,
-        steps,
-        steps_per_s: steps as f64 / t0.elapsed().as_secs_f64(),
-        frame,
-        video_frames,
-    })
+    Ok(())
 }
 
 /// `mjskill info`: a summary of a recording.
@@ -194,34 +320,68 @@ pub struct InfoSummary {
     pub complete: bool,
     /// Steps of an episode that was cut short, if any.
     pub unfinished_steps: Option<usize>,
+    /// With `--salvage`: the damage where reading stopped (what precedes it is summarised).
+    pub damage: Option<String>,
 }
 
-/// Reads and summarises a recording.
-pub fn info(path: &Path) -> Result<InfoSummary, String> {
-    let r = read(path).map_err(|e| e.to_string())?;
-    let fin: Vec<_> = r.finished().collect();
+/// Counts what `info` reports, episode by episode.
+#[derive(Default)]
+struct Count {
+    episodes: usize,
+    successes: usize,
+    steps: usize,
+    returns: f64,
+    /// Steps of the episode begun last, while it is open.
+    open: Option<usize>,
+}
+
+impl Visitor for Count {
+    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), String> {
+        self.open = Some(0);
+        Ok(())
+    }
+    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), String> {
+        if let Some(n) = self.open.as_mut() {
+            *n += 1;
+        }
+        Ok(())
+    }
+    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), String> {
+        self.open = None;
+        self.episodes += 1;
+        self.successes += end.success as usize;
+        self.steps += end.steps as usize;
+        self.returns += end.ret;
+        Ok(())
+    }
+}
+
+/// Reads and summarises a recording, streaming (memory bounded by one chunk). A damaged file
+/// is an error naming the byte offset and chunk; with `salvage`, what precedes the damage is
+/// summarised and the damage reported in [`InfoSummary::damage`].
+pub fn info(path: &Path, salvage: bool) -> Result<InfoSummary, String> {
+    let mut c = Count::default();
+    let end = stream(path, salvage, &mut c).map_err(|e| e.to_string())?;
+    let m = end.meta;
     Ok(InfoSummary {
         file: path.display().to_string(),
-        env: r.meta.env_id.clone(),
-        robot: r.meta.robot.clone(),
-        control_mode: r.meta.control_mode.clone(),
-        obs_mode: r.meta.obs_mode.clone(),
-        reward_mode: r.meta.reward_mode.clone(),
-        version: r.meta.version.clone(),
-        episodes: fin.len(),
-        successes: fin.iter().filter(|e| e.success).count(),
-        steps: fin.iter().map(|e| e.steps.len()).sum(),
-        mean_return: if fin.is_empty() {
+        env: m.env_id,
+        robot: m.robot,
+        control_mode: m.control_mode,
+        obs_mode: m.obs_mode,
+        reward_mode: m.reward_mode,
+        version: m.version,
+        episodes: c.episodes,
+        successes: c.successes,
+        steps: c.steps,
+        mean_return: if c.episodes == 0 {
             0.0 // not the -0.0 an empty f64 sum gives
         } else {
-            fin.iter().map(|e| e.ret).sum::<f64>() / fin.len() as f64
+            c.returns / c.episodes as f64
         },
-        complete: r.complete,
-        unfinished_steps: r
-            .episodes
-            .iter()
-            .find(|e| !e.finished)
-            .map(|e| e.steps.len()),
+        complete: end.complete,
+        unfinished_steps: c.open,
+        damage: end.damage.map(|e| e.to_string()),
     })
 }
 
@@ -246,6 +406,8 @@ pub struct ReplayReport {
     pub tolerance: f64,
     /// Whether every deviation is within the tolerance and every flag matches.
     pub ok: bool,
+    /// With `--salvage`: the damage where reading stopped (what precedes it was replayed).
+    pub damage: Option<String>,
 }
 
 fn max_dev(a: &[f32], b: &[f32]) -> f64 {
@@ -254,77 +416,210 @@ fn max_dev(a: &[f32], b: &[f32]) -> f64 {
     }
     a.iter()
         .zip(b)
-        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .map(|(x, y)| {
+            let d = (*x as f64 - *y as f64).abs();
+            // A NaN on either side (a non-finite value was recorded) is a deviation unless
+            // both sides hold the same non-finite value.
+            if d.is_nan() && x.to_bits() != y.to_bits() {
+                f64::INFINITY
+            } else if d.is_nan() {
+                0.0
+            } else {
+                d
+            }
+        })
         .fold(0.0, f64::max)
 }
 
-/// Re-simulates every finished episode of a recording from its seed and recorded actions.
+/// Deviations of the episode being replayed; they count once it is finished.
+#[derive(Debug, Default)]
+struct EpisodeDev {
+    index: u64,
+    obs: f64,
+    reward: f64,
+    info: f64,
+    flags: usize,
+    steps: usize,
+    /// The first error (e.g. a rejected action); reported only if the episode was finished.
+    error: Option<String>,
+}
+
+/// Re-simulates episodes as they are read.
+struct Replayer {
+    env: Option<Env>,
+    rep: ReplayReport,
+    cur: Option<EpisodeDev>,
+}
+
+impl Replayer {
+    fn new(path: &Path, tolerance: f64) -> Replayer {
+        Replayer {
+            env: None,
+            rep: ReplayReport {
+                file: path.display().to_string(),
+                tolerance,
+                ..Default::default()
+            },
+            cur: None,
+        }
+    }
+
+    fn finish(mut self) -> ReplayReport {
+        let t = self.rep.tolerance;
+        let r = &mut self.rep;
+        r.ok = r.max_obs_dev <= t
+            && r.max_reward_dev <= t
+            && r.max_info_dev <= t
+            && r.flag_mismatches == 0;
+        self.rep
+    }
+}
+
+impl Visitor for Replayer {
+    fn meta(&mut self, m: &Meta) -> Result<(), String> {
+        let config = EnvConfig {
+            robot: Some(m.robot.clone()),
+            obs_mode: ObsMode::parse(&m.obs_mode).map_err(|e| e.to_string())?,
+            reward_mode: RewardMode::parse(&m.reward_mode).map_err(|e| e.to_string())?,
+            control_mode: Some(m.control_mode.clone()),
+            robot_init_qpos_noise: m.robot_init_qpos_noise,
+            max_episode_steps: Some(m.max_episode_steps),
+            sim: m.sim(),
+        };
+        self.env = Some(crate::env::make(&m.env_id, config).map_err(|e| e.to_string())?);
+        Ok(())
+    }
+
+    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), String> {
+        let env = self.env.as_mut().ok_or("an episode before the metadata")?;
+        let mut dev = EpisodeDev {
+            index: s.index,
+            ..Default::default()
+        };
+        let r = match s.seed {
+            Some(seed) => {
+                env.reset(Some(seed));
+                Ok(())
+            }
+            None => env.set_state(&s.state).map_err(|e| e.to_string()),
+        };
+        match r {
+            Ok(()) => dev.obs = max_dev(env.obs(), &s.obs),
+            Err(e) => dev.error = Some(e),
+        }
+        self.cur = Some(dev);
+        Ok(())
+    }
+
+    fn step(&mut self, _: u64, _: u32, st: StepRec) -> Result<(), String> {
+        let (Some(env), Some(dev)) = (self.env.as_mut(), self.cur.as_mut()) else {
+            return Err("a step outside an episode".into());
+        };
+        if dev.error.is_some() {
+            return Ok(());
+        }
+        let s = match env.step(&st.action) {
+            Ok(s) => s,
+            Err(e) => {
+                dev.error = Some(e.to_string());
+                return Ok(());
+            }
+        };
+        dev.obs = dev.obs.max(max_dev(s.obs, &st.obs));
+        dev.reward = dev.reward.max(max_dev(&[s.reward], &[st.reward]));
+        dev.flags += usize::from(s.terminated != st.terminated || s.truncated != st.truncated);
+        for (k, v) in &st.info {
+            let now = if k == "elapsed_steps" {
+                Some(s.info.elapsed_steps as f64)
+            } else {
+                s.info.get(k)
+            };
+            let d = now.map_or(f64::INFINITY, |n| {
+                let d = (n - v).abs();
+                if d.is_nan() {
+                    f64::INFINITY
+                } else {
+                    d
+                }
+            });
+            dev.info = dev.info.max(d);
+        }
+        dev.steps += 1;
+        Ok(())
+    }
+
+    fn episode_end(&mut self, _: EpisodeEnd) -> Result<(), String> {
+        let dev = self.cur.take().ok_or("an episode end outside an episode")?;
+        if let Some(e) = dev.error {
+            return Err(format!("episode {}: {e}", dev.index));
+        }
+        let r = &mut self.rep;
+        r.max_obs_dev = r.max_obs_dev.max(dev.obs);
+        r.max_reward_dev = r.max_reward_dev.max(dev.reward);
+        r.max_info_dev = r.max_info_dev.max(dev.info);
+        r.flag_mismatches += dev.flags;
+        r.steps += dev.steps;
+        r.episodes += 1;
+        Ok(())
+    }
+}
+
+/// Re-simulates every finished episode of a recording read by [`crate::record::read`] from
+/// its seed (or initial state) and recorded actions.
 pub fn replay_recording(
     path: &Path,
     r: &Recording,
     tolerance: f64,
 ) -> Result<ReplayReport, String> {
-    let m = &r.meta;
-    let config = EnvConfig {
-        robot: Some(m.robot.clone()),
-        obs_mode: ObsMode::parse(&m.obs_mode).map_err(|e| e.to_string())?,
-        reward_mode: RewardMode::parse(&m.reward_mode).map_err(|e| e.to_string())?,
-        control_mode: Some(m.control_mode.clone()),
-        robot_init_qpos_noise: m.robot_init_qpos_noise,
-        max_episode_steps: Some(m.max_episode_steps),
-        sim: m.sim(),
-    };
-    let mut env = crate::env::make(&m.env_id, config).map_err(|e| e.to_string())?;
-    let mut rep = ReplayReport {
-        file: path.display().to_string(),
-        tolerance,
-        ..Default::default()
-    };
+    check_tolerance(tolerance)?;
+    let mut p = Replayer::new(path, tolerance);
+    p.meta(&r.meta)?;
     for ep in r.finished() {
-        match ep.seed {
-            Some(s) => {
-                env.reset(Some(s));
-            }
-            None => env
-                .set_state(&ep.initial_state)
-                .map_err(|e| e.to_string())?,
+        p.episode_start(EpisodeStart {
+            index: ep.index,
+            seed: ep.seed,
+            state: ep.initial_state.clone(),
+            obs: ep.initial_obs.clone(),
+            info: ep.initial_info.clone(),
+        })?;
+        for (t, st) in ep.steps.iter().enumerate() {
+            p.step(ep.index, t as u32, st.clone())?;
         }
-        rep.max_obs_dev = rep.max_obs_dev.max(max_dev(env.obs(), &ep.initial_obs));
-        for st in &ep.steps {
-            let s = env
-                .step(&st.action)
-                .map_err(|e| format!("episode {}: {e}", ep.index))?;
-            rep.max_obs_dev = rep.max_obs_dev.max(max_dev(s.obs, &st.obs));
-            rep.max_reward_dev = rep
-                .max_reward_dev
-                .max((s.reward as f64 - st.reward as f64).abs());
-            rep.flag_mismatches +=
-                usize::from(s.terminated != st.terminated || s.truncated != st.truncated);
-            for (k, v) in &st.info {
-                let now = if k == "elapsed_steps" {
-                    Some(s.info.elapsed_steps as f64)
-                } else {
-                    s.info.get(k)
-                };
-                let dev = now.map_or(f64::INFINITY, |n| (n - v).abs());
-                rep.max_info_dev = rep.max_info_dev.max(dev);
-            }
-            rep.steps += 1;
-        }
-        rep.episodes += 1;
+        p.episode_end(EpisodeEnd {
+            index: ep.index,
+            steps: ep.steps.len() as u32,
+            ret: ep.ret,
+            success: ep.success,
+        })?;
     }
-    rep.ok = rep.max_obs_dev <= tolerance
-        && rep.max_reward_dev <= tolerance
-        && rep.max_info_dev <= tolerance
-        && rep.flag_mismatches == 0;
-    Ok(rep)
+    Ok(p.finish())
 }
 
-/// `mjskill replay`: reads the file and re-simulates it.
-pub fn replay(path: &Path, tolerance: f64) -> Result<ReplayReport, String> {
-    let r = read(path).map_err(|e| e.to_string())?;
-    if r.finished().next().is_none() {
-        return Err(format!("{}: no finished episode to replay", path.display()));
+/// Checks a replay tolerance: a finite number ≥ 0.
+pub fn check_tolerance(tolerance: f64) -> Result<(), String> {
+    if !(tolerance.is_finite() && tolerance >= 0.0) {
+        return Err(format!(
+            "--tolerance must be a finite number ≥ 0, got {tolerance}"
+        ));
     }
-    replay_recording(path, &r, tolerance)
+    Ok(())
+}
+
+/// `mjskill replay`: reads the file and re-simulates each finished episode as it is read
+/// (memory bounded by one chunk and one env). A damaged file is an error naming the byte
+/// offset and chunk; with `salvage`, the episodes that precede the damage are replayed and the
+/// damage reported in [`ReplayReport::damage`].
+pub fn replay(path: &Path, tolerance: f64, salvage: bool) -> Result<ReplayReport, String> {
+    check_tolerance(tolerance)?;
+    let mut p = Replayer::new(path, tolerance);
+    let end = stream(path, salvage, &mut p).map_err(|e| e.to_string())?;
+    let mut rep = p.finish();
+    rep.damage = end.damage.map(|e| e.to_string());
+    if rep.episodes == 0 {
+        return Err(match rep.damage {
+            Some(d) => format!("no finished episode to replay before the damage: {d}"),
+            None => format!("{}: no finished episode to replay", path.display()),
+        });
+    }
+    Ok(rep)
 }

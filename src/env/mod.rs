@@ -5,6 +5,7 @@
 //! success, `truncated` once `elapsed_steps ≥ max_episode_steps` (50), and the env keeps
 //! running after either — nothing stops further `step` calls (`elapsed_steps` keeps
 //! counting, `truncated` stays true), exactly as upstream.
+pub mod checks;
 pub mod render;
 pub mod rng;
 pub mod state_dict;
@@ -68,9 +69,13 @@ pub enum EnvError {
         /// Value.
         value: f32,
     },
-    /// A state from another env or of the wrong size.
+    /// A state from another env, of the wrong size, or with a bad value (the message names
+    /// the field).
     #[error("cannot set state: {0}")]
     BadState(String),
+    /// A seed beyond ManiSkill's 32-bit seeds ([`checks::MAX_SEED`]).
+    #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
+    BadSeed(u64),
     /// Building the scene or model failed.
     #[error("{0}")]
     Build(String),
@@ -559,12 +564,7 @@ impl Env {
             .control_mode
             .clone()
             .unwrap_or_else(|| rs.control_modes[0].to_string());
-        if !config.robot_init_qpos_noise.is_finite() || config.robot_init_qpos_noise < 0.0 {
-            return Err(EnvError::Build(format!(
-                "robot_init_qpos_noise must be finite and ≥ 0, got {}",
-                config.robot_init_qpos_noise
-            )));
-        }
+        checks::check_qpos_noise(config.robot_init_qpos_noise)?;
         config.sim.validate()?;
         let (mjcf, desc, controller, mut task, drive_list) =
             build_scene(spec, rs, &mode, config.sim)?;
@@ -750,9 +750,23 @@ impl Env {
         self.episode_seed
     }
 
+    /// Like [`Env::reset`], but a seed above [`checks::MAX_SEED`] is an error
+    /// ([`EnvError::BadSeed`]) and the env is left unchanged.
+    pub fn try_reset(&mut self, seed: Option<u64>) -> Result<(&[f32], &Info), EnvError> {
+        if let Some(s) = seed {
+            checks::check_seed(s)?;
+        }
+        Ok(self.reset(seed))
+    }
+
     /// Resets (env.md §3): with a seed, both RNG streams restart from it; without, the numpy
     /// stream continues and placement draws come from the env's global torch generator.
     /// Returns the observation and info (`reconfigure = false`).
+    ///
+    /// Seeds are 32-bit as in ManiSkill: a seed above [`checks::MAX_SEED`] is reduced mod 2³²
+    /// by both RNG streams, so `reset(Some(s))` and `reset(Some(s + 2³²))` give the same
+    /// episode (the seed itself is kept as given, e.g. in recordings). Use [`Env::try_reset`]
+    /// to reject such seeds instead.
     pub fn reset(&mut self, seed: Option<u64>) -> (&[f32], &Info) {
         if let Some(s) = seed {
             self.main_seed = Some(s);
@@ -840,7 +854,7 @@ impl Env {
         // mj_step leaves poses at the start of its last substep; observations, rewards and
         // success must see the poses of the final state.
         self.data.update_kinematics();
-        self.elapsed_steps += 1;
+        self.elapsed_steps = self.elapsed_steps.saturating_add(1);
         finger_forces(
             &self.model,
             &self.data,
@@ -973,8 +987,9 @@ impl Env {
     }
 
     /// Restores a state from [`Env::get_state`]; the following steps equal the original
-    /// trajectory bitwise. A state of another env, robot or control mode is an error and the
-    /// env is left unchanged.
+    /// trajectory bitwise. A state of another env, robot or control mode, or with a
+    /// non-finite or out-of-range value ([`checks::check_state_values`]: the error names the
+    /// field), is an error and the env is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
         let mine = (self.id, self.spec.uid, self.controller.mode());
         if (s.env_id.as_str(), s.robot.as_str(), s.control_mode.as_str()) != mine {
@@ -994,6 +1009,7 @@ impl Env {
                 self.controller.save_len() + self.drives.save_len()
             )));
         }
+        checks::check_state_values(&self.model, s)?;
         self.data
             .set_state(&s.physics)
             .map_err(|e| EnvError::BadState(e.to_string()))?;

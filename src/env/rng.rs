@@ -68,10 +68,14 @@ impl TryFrom<Mt19937Repr> for Mt19937 {
         if r.index > N {
             return Err(format!("MT19937 index must be in 0..={N}, got {}", r.index));
         }
-        Ok(Mt19937 {
+        let mt = Mt19937 {
             state: r.state,
             index: r.index,
-        })
+        };
+        if mt.is_degenerate() {
+            return Err("MT19937 state is all zero (it would output zeros forever)".into());
+        }
+        Ok(mt)
     }
 }
 
@@ -89,6 +93,16 @@ impl Mt19937 {
                 .wrapping_add(i as u32);
         }
         Mt19937 { state, index: N }
+    }
+
+    /// Whether the generator is in the all-zero state it never leaves (it then outputs 0
+    /// forever): every word that still influences an output is zero. Only the upper bit of
+    /// word 0 enters the next twist, and word 0 is output as a whole only at index 0.
+    #[must_use]
+    pub fn is_degenerate(&self) -> bool {
+        self.state[1..].iter().all(|&w| w == 0)
+            && self.state[0] & UPPER_MASK == 0
+            && (self.index > 0 || self.state[0] == 0)
     }
 
     /// Regenerates all 624 words (the standard MT19937 twist).
@@ -204,6 +218,12 @@ impl NumpyRandomState {
         }
     }
 
+    /// Whether the underlying MT19937 is in its all-zero state ([`Mt19937::is_degenerate`]).
+    #[must_use]
+    pub fn is_degenerate(&self) -> bool {
+        self.mt.is_degenerate()
+    }
+
     /// Whether a cached second Gaussian is pending (numpy's `has_gauss`); the next
     /// [`normal`](Self::normal) then consumes no MT19937 output.
     #[must_use]
@@ -253,6 +273,12 @@ impl TorchGenerator {
     #[must_use]
     pub fn initial_seed(&self) -> u64 {
         self.seed
+    }
+
+    /// Whether the underlying MT19937 is in its all-zero state ([`Mt19937::is_degenerate`]).
+    #[must_use]
+    pub fn is_degenerate(&self) -> bool {
+        self.mt.is_degenerate()
     }
 
     /// Next raw 32-bit word (`CPUGeneratorImpl::random()`).

@@ -24,7 +24,9 @@
 //! `reset`/`step` (after an autoreset: the new episode's first frame, like `obs()`);
 //! [`VecEnv::sensor_names`] lists the cameras. A state-only VecEnv has no image cells.
 //!
-//! **Seeds.** `reset(Some(s))` seeds env i with `s + i` (ManiSkill's per-env seeding); every
+//! **Seeds.** `reset(Some(s))` seeds env i with `s + i` (ManiSkill's per-env seeding; seeds
+//! are 32-bit, so as for [`Env::reset`] the seeds act mod 2³², and [`VecEnv::try_reset`]
+//! rejects a range that leaves them); every
 //! env owns its random streams, so results do not depend on the thread count.
 //!
 //! **Panics.** A panic inside an env on a worker thread is caught there and re-raised on the
@@ -219,7 +221,7 @@ impl Worker {
                 let seed = sh
                     .has_seed
                     .load(Ordering::Relaxed)
-                    .then(|| sh.seed.load(Ordering::Relaxed) + g as u64);
+                    .then(|| sh.seed.load(Ordering::Relaxed).wrapping_add(g as u64));
                 self.envs[i].reset(seed);
                 self.needs_reset[i] = false;
                 sh.autoreset[g].store(false, Ordering::Relaxed);
@@ -477,7 +479,21 @@ impl VecEnv {
         }
     }
 
+    /// Like [`VecEnv::reset`], but seeds `s..s + N` that leave ManiSkill's 32-bit range
+    /// ([`super::checks::MAX_SEED`]) are an error ([`EnvError::BadSeed`] with the first bad
+    /// seed) and nothing is reset.
+    pub fn try_reset(&mut self, seed: Option<u64>) -> Result<&[f32], EnvError> {
+        if let Some(s) = seed {
+            let last = s as u128 + self.num_envs as u128 - 1;
+            if last > super::checks::MAX_SEED as u128 {
+                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+            }
+        }
+        Ok(self.reset(seed))
+    }
+
     /// Resets every env (env i with seed `s + i`, or unseeded) and returns the observations.
+    /// Seeds act mod 2³² as for [`Env::reset`] (env i gets `(s + i) mod 2³²`).
     pub fn reset(&mut self, seed: Option<u64>) -> &[f32] {
         self.shared
             .has_seed
@@ -533,9 +549,12 @@ impl VecEnv {
     pub fn obs(&self) -> &[f32] {
         &self.obs
     }
-    /// Observation of env `i`.
-    pub fn obs_of(&self, i: usize) -> &[f32] {
-        &self.obs[i * self.obs_dim..(i + 1) * self.obs_dim]
+    /// Observation of env `i`; `None` for `i ≥ N` (like [`VecEnv::image`]).
+    pub fn obs_of(&self, i: usize) -> Option<&[f32]> {
+        if i >= self.num_envs {
+            return None;
+        }
+        self.obs.get(i * self.obs_dim..(i + 1) * self.obs_dim)
     }
     /// Rewards of the last step.
     pub fn rewards(&self) -> &[f32] {

@@ -14,6 +14,18 @@ use std::fmt::Write as _;
 /// A point in the mesh (link) frame.
 pub type Point = Vector3<f64>;
 
+/// Most primitives of a decomposition or slabs of a segmentation.
+pub const MAX_PARTS: usize = 64;
+/// Largest `--scale`.
+pub const MAX_SCALE: f64 = 1e6;
+/// Largest vertex coordinate magnitude, after scaling (m): 1000 km, far beyond any robot part,
+/// and small enough that every distance and volume stays finite.
+pub const MAX_COORD: f64 = 1e6;
+/// Surface samples [`surface_points`] aims at: the spacing grows beyond [`SAMPLE_SPACING`] as
+/// needed to stay within it (but every triangle keeps its corners), so that time and memory
+/// stay proportional to the mesh.
+pub const MAX_SAMPLES: usize = 400_000;
+
 /// Why a mesh could not be read or fitted.
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
@@ -28,6 +40,22 @@ pub enum MeshError {
     /// Nothing left to fit (e.g. the crop box misses the mesh).
     #[error("no mesh points to fit{0}")]
     Empty(String),
+    /// A vertex is not finite or out of range, or an argument is out of range.
+    #[error("{0}")]
+    Invalid(String),
+    /// The points lie on a point, a line or a plane: no primitive of positive size fits.
+    #[error(
+        "the mesh is degenerate: the fitted {kind} has size {size} (its points lie on a point, \
+         a line or a plane{crop}); nothing with a positive size can be fitted"
+    )]
+    Degenerate {
+        /// Primitive kind.
+        kind: &'static str,
+        /// Its size as printed.
+        size: String,
+        /// Note about the crop box, if any.
+        crop: &'static str,
+    },
 }
 
 /// One triangle of a mesh.
@@ -46,7 +74,14 @@ pub fn read_triangles(bytes: &[u8], name: &str) -> Result<Vec<Triangle>, MeshErr
     if bytes.len() >= 84 {
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
         if n > 0 && n.checked_mul(50).and_then(|b| b.checked_add(84)) == Some(bytes.len()) {
-            return Ok(read_binary_stl(&bytes[84..], n));
+            let tris = read_binary_stl(&bytes[84..], n);
+            if let Some(k) = tris.iter().position(|t| t.iter().any(|v| !finite(v))) {
+                return Err(bad(format!(
+                    "triangle {k} has a non-finite vertex coordinate ({:?})",
+                    tris[k].iter().map(|v| [v.x, v.y, v.z]).collect::<Vec<_>>()
+                )));
+            }
+            return Ok(tris);
         }
     }
     if bytes.starts_with(b"solid") {
@@ -70,8 +105,12 @@ fn read_binary_stl(body: &[u8], n: usize) -> Vec<Triangle> {
         .collect()
 }
 
+fn finite(v: &Point) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
 fn parse_xyz<'a>(mut it: impl Iterator<Item = &'a str>, line: usize) -> Result<Point, String> {
-    let mut c = [0.0; 3];
+    let mut c = [0.0f64; 3];
     for x in &mut c {
         let s = it
             .next()
@@ -79,8 +118,33 @@ fn parse_xyz<'a>(mut it: impl Iterator<Item = &'a str>, line: usize) -> Result<P
         *x = s
             .parse()
             .map_err(|_| format!("line {line}: {s:?} is not a number"))?;
+        if !x.is_finite() {
+            return Err(format!("line {line}: coordinate {s:?} is not finite"));
+        }
     }
     Ok(Point::from(c))
+}
+
+/// Scales every vertex by `scale` (the URDF `<mesh scale>`) and checks the result: `scale`
+/// finite, positive and at most [`MAX_SCALE`], every coordinate within ±[`MAX_COORD`].
+pub fn scale_triangles(tris: &mut [Triangle], scale: f64) -> Result<(), MeshError> {
+    if !(scale.is_finite() && scale > 0.0 && scale <= MAX_SCALE) {
+        return Err(MeshError::Invalid(format!(
+            "--scale must be a positive number up to {MAX_SCALE:e}, got {scale}"
+        )));
+    }
+    for (k, t) in tris.iter_mut().enumerate() {
+        for v in t.iter_mut() {
+            *v *= scale;
+            if let Some(x) = v.iter().find(|x| !x.is_finite() || x.abs() > MAX_COORD) {
+                return Err(MeshError::Invalid(format!(
+                    "triangle {k} has a vertex coordinate {x:e} (after scaling by {scale}); \
+                     coordinates must lie within ±{MAX_COORD:e} m"
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn read_ascii_stl(bytes: &[u8]) -> Result<Vec<Triangle>, String> {
@@ -140,17 +204,49 @@ fn read_obj(bytes: &[u8]) -> Result<Vec<Triangle>, String> {
     Ok(tris)
 }
 
+/// Subdivisions of a triangle's longest edge at `spacing` (1..=200).
+fn subdivisions(t: &Triangle, spacing: f64) -> usize {
+    let longest = (t[1] - t[0])
+        .norm()
+        .max((t[2] - t[1]).norm())
+        .max((t[0] - t[2]).norm());
+    let n = (longest / spacing).ceil();
+    if n.is_nan() {
+        1
+    } else {
+        (n.clamp(1.0, 200.0)) as usize
+    }
+}
+
+/// The spacing [`surface_points`] samples `tris` at: `spacing`, or the smallest multiple of it
+/// (growing by 25 % steps) at which the samples number at most `budget`, or at which every
+/// triangle is sampled at its corners only.
+pub fn sample_spacing(tris: &[Triangle], spacing: f64, budget: usize) -> f64 {
+    let count = |s: f64| -> usize {
+        tris.iter()
+            .map(|t| {
+                let n = subdivisions(t, s);
+                (n + 1) * (n + 2) / 2
+            })
+            .sum()
+    };
+    let mut s = spacing;
+    for _ in 0..200 {
+        if count(s) <= budget || tris.iter().all(|t| subdivisions(t, s) == 1) {
+            break;
+        }
+        s *= 1.25;
+    }
+    s
+}
+
 /// Samples points on every triangle (corners, edges and interior) no further apart than
-/// `spacing` along its edges, so that fits of a cropped or cut part cover faces that cross the
-/// cut.
+/// `spacing` along its edges (at most 200 subdivisions per edge), so that fits of a cropped or
+/// cut part cover faces that cross the cut.
 pub fn sample_surface(tris: &[Triangle], spacing: f64) -> Vec<Point> {
     let mut out = Vec::new();
     for t in tris {
-        let longest = (t[1] - t[0])
-            .norm()
-            .max((t[2] - t[1]).norm())
-            .max((t[0] - t[2]).norm());
-        let n = ((longest / spacing).ceil() as usize).clamp(1, 200);
+        let n = subdivisions(t, spacing);
         for i in 0..=n {
             for j in 0..=n - i {
                 let (a, b) = (i as f64 / n as f64, j as f64 / n as f64);
@@ -553,10 +649,64 @@ fn fit_capsule_along(points: &[Point], axis: Unit<Vector3<f64>>, flat: bool) -> 
     }
 }
 
+/// Checks that a fitted primitive has finite, positive sizes (a capsule may have length 0: it
+/// is then a sphere).
+pub fn check_primitive(p: &Primitive, cropped: bool) -> Result<(), MeshError> {
+    let (kind, dims, ok) = match p {
+        Primitive::Box { center, half, .. } => (
+            "box",
+            vec![2.0 * half.x, 2.0 * half.y, 2.0 * half.z],
+            finite(center) && half.iter().all(|h| h.is_finite() && *h > 1e-9),
+        ),
+        Primitive::Capsule {
+            from,
+            to,
+            radius,
+            flat,
+        } => {
+            let len = (to - from).norm();
+            (
+                if *flat { "cylinder" } else { "capsule" },
+                vec![*radius, len],
+                finite(from)
+                    && finite(to)
+                    && radius.is_finite()
+                    && *radius > 1e-9
+                    && (!flat || len > 1e-9),
+            )
+        }
+        Primitive::Sphere { center, radius } => (
+            "sphere",
+            vec![*radius],
+            finite(center) && radius.is_finite() && *radius > 1e-9,
+        ),
+    };
+    if ok {
+        return Ok(());
+    }
+    Err(MeshError::Degenerate {
+        kind,
+        size: dims
+            .iter()
+            .map(|d| format!("{d:e}"))
+            .collect::<Vec<_>>()
+            .join(" "),
+        crop: if cropped { " inside the crop box" } else { "" },
+    })
+}
+
 /// Fits the smallest enclosing primitive of `kind` to `points`.
 pub fn fit(points: &[Point], kind: Kind) -> Result<Primitive, MeshError> {
     if points.is_empty() {
         return Err(MeshError::Empty(String::new()));
+    }
+    if let Some(p) = points
+        .iter()
+        .find(|p| !(finite(p) && p.amax() <= MAX_COORD))
+    {
+        return Err(MeshError::Invalid(format!(
+            "point {p:?} is not finite or beyond ±{MAX_COORD:e}"
+        )));
     }
     let pca = principal_axes(points);
     let candidates: Vec<Primitive> = match kind {
@@ -601,51 +751,81 @@ pub fn fit_any(points: &[Point], kinds: &[Kind]) -> Result<Primitive, MeshError>
 /// A part of a decomposition: its points and their primitive.
 type Piece = (Vec<Point>, Primitive);
 
-/// Greedy decomposition into at most `parts` primitives: repeatedly cuts one part with the
-/// axis-aligned plane (x, y or z; 15 positions per axis) that most reduces the total volume,
-/// and fits each side with the smallest of `kinds`. Every point stays enclosed.
+/// The best axis-aligned cut of one piece: (volume gain, the two sides).
+type Split = Option<(f64, [Piece; 2])>;
+
+/// The cut of `pts` (fitted by `prim`) with the plane (x, y or z; 15 positions per axis)
+/// that most reduces the total volume, or `None` for fewer than 8 points.
+fn best_split(pts: &[Point], prim: &Primitive, kinds: &[Kind]) -> Result<Split, MeshError> {
+    if pts.len() < 8 {
+        return Ok(None);
+    }
+    let mut best: Split = None;
+    for axis in 0..3 {
+        let lo = pts.iter().map(|p| p[axis]).fold(f64::INFINITY, f64::min);
+        let hi = pts
+            .iter()
+            .map(|p| p[axis])
+            .fold(f64::NEG_INFINITY, f64::max);
+        for k in 1..16 {
+            let cut = lo + (hi - lo) * k as f64 / 16.0;
+            let (a, b): (Vec<Point>, Vec<Point>) = pts.iter().partition(|p| p[axis] <= cut);
+            if a.is_empty() || b.is_empty() {
+                continue;
+            }
+            let (pa, pb) = (fit_any(&a, kinds)?, fit_any(&b, kinds)?);
+            // A side whose points lie on a plane cannot be a primitive: not a cut to take.
+            if check_primitive(&pa, false).is_err() || check_primitive(&pb, false).is_err() {
+                continue;
+            }
+            let gain = prim.volume() - pa.volume() - pb.volume();
+            if best.as_ref().is_none_or(|(g, _)| gain > *g) {
+                best = Some((gain, [(a, pa), (b, pb)]));
+            }
+        }
+    }
+    Ok(best)
+}
+
+/// Greedy decomposition into at most `parts` (1..=[`MAX_PARTS`]) primitives: repeatedly cuts
+/// the part whose best axis-aligned cut (x, y or z; 15 positions per axis) most reduces the
+/// total volume, and fits each side with the smallest of `kinds`. Every point stays enclosed.
+/// Each part's best cut is computed once, so the work grows with the points times the depth
+/// of the cuts, not with the square of `parts`.
 pub fn decompose(
     points: &[Point],
     kinds: &[Kind],
     parts: usize,
 ) -> Result<Vec<Primitive>, MeshError> {
-    let mut pieces: Vec<Piece> = vec![(points.to_vec(), fit_any(points, kinds)?)];
+    if !(1..=MAX_PARTS).contains(&parts) {
+        return Err(MeshError::Invalid(format!(
+            "--parts must be in 1..={MAX_PARTS}, got {parts}"
+        )));
+    }
+    let first = fit_any(points, kinds)?;
+    let split = best_split(points, &first, kinds)?;
+    let mut pieces: Vec<(Piece, Split)> = vec![((points.to_vec(), first), split)];
     while pieces.len() < parts {
-        let mut best: Option<(usize, f64, [Piece; 2])> = None;
-        for (i, (pts, prim)) in pieces.iter().enumerate() {
-            if pts.len() < 8 {
-                continue;
-            }
-            for axis in 0..3 {
-                let lo = pts.iter().map(|p| p[axis]).fold(f64::INFINITY, f64::min);
-                let hi = pts
-                    .iter()
-                    .map(|p| p[axis])
-                    .fold(f64::NEG_INFINITY, f64::max);
-                for k in 1..16 {
-                    let cut = lo + (hi - lo) * k as f64 / 16.0;
-                    let (a, b): (Vec<Point>, Vec<Point>) = pts.iter().partition(|p| p[axis] <= cut);
-                    if a.is_empty() || b.is_empty() {
-                        continue;
-                    }
-                    let (pa, pb) = (fit_any(&a, kinds)?, fit_any(&b, kinds)?);
-                    let gain = prim.volume() - pa.volume() - pb.volume();
-                    if best.as_ref().is_none_or(|(_, g, _)| gain > *g) {
-                        best = Some((i, gain, [(a, pa), (b, pb)]));
-                    }
+        // The first piece with the largest gain, as a scan over every piece's cuts finds it.
+        let mut best: Option<(usize, f64)> = None;
+        for (i, (_, s)) in pieces.iter().enumerate() {
+            if let Some((g, _)) = s {
+                if best.is_none_or(|(_, b)| *g > b) {
+                    best = Some((i, *g));
                 }
             }
         }
-        match best {
-            Some((i, gain, [a, b])) if gain > 0.0 => {
-                pieces.remove(i);
-                pieces.push(a);
-                pieces.push(b);
-            }
-            _ => break,
+        let Some((i, _)) = best.filter(|(_, g)| *g > 0.0) else {
+            break;
+        };
+        let (_, split) = pieces.remove(i);
+        let Some((_, [a, b])) = split else { break };
+        for piece in [a, b] {
+            let s = best_split(&piece.0, &piece.1, kinds)?;
+            pieces.push((piece, s));
         }
     }
-    Ok(pieces.into_iter().map(|(_, p)| p).collect())
+    Ok(pieces.into_iter().map(|((_, p), _)| p).collect())
 }
 
 /// Fits `segments` primitives of `kind`, splitting the points into equal slabs along their
@@ -655,7 +835,12 @@ pub fn fit_segments(
     kind: Kind,
     segments: usize,
 ) -> Result<Vec<Primitive>, MeshError> {
-    if segments <= 1 {
+    if !(1..=MAX_PARTS).contains(&segments) {
+        return Err(MeshError::Invalid(format!(
+            "--segments must be in 1..={MAX_PARTS}, got {segments}"
+        )));
+    }
+    if segments == 1 {
         return Ok(vec![fit(points, kind)?]);
     }
     let axis = principal_axes(points).column(0).into_owned();
@@ -687,9 +872,12 @@ pub fn fit_mesh(
     fit_segments(&surface_points(tris, crop)?, kind, segments)
 }
 
-/// Surface samples of a mesh, optionally restricted to a crop box.
+/// Surface samples of a mesh, optionally restricted to a crop box: [`SAMPLE_SPACING`] apart,
+/// or further apart for meshes that would give more than [`MAX_SAMPLES`] points
+/// ([`sample_spacing`]).
 pub fn surface_points(tris: &[Triangle], crop: Option<&Crop>) -> Result<Vec<Point>, MeshError> {
-    let pts: Vec<Point> = sample_surface(tris, SAMPLE_SPACING)
+    let spacing = sample_spacing(tris, SAMPLE_SPACING, MAX_SAMPLES);
+    let pts: Vec<Point> = sample_surface(tris, spacing)
         .into_iter()
         .filter(|p| crop.is_none_or(|c| c.contains(p)))
         .collect();

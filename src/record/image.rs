@@ -7,15 +7,27 @@ pub fn encode_png(
     height: usize,
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
-    if rgb.len() != width * height * 3 {
+    let need = width.checked_mul(height).and_then(|n| n.checked_mul(3));
+    if need != Some(rgb.len()) {
+        return Err(match need {
+            Some(n) => format!(
+                "image buffer has {} bytes, a {width}x{height} RGB image needs {n}",
+                rgb.len()
+            ),
+            None => format!("a {width}x{height} RGB image is too large (the size overflows)"),
+        });
+    }
+    let (Ok(w), Ok(h)) = (u32::try_from(width), u32::try_from(height)) else {
         return Err(format!(
-            "image buffer has {} bytes, a {width}x{height} RGB image needs {}",
-            rgb.len(),
-            width * height * 3
+            "a {width}x{height} image is too large for PNG (at most {} pixels a side)",
+            u32::MAX
         ));
+    };
+    if w == 0 || h == 0 {
+        return Err(format!("a {width}x{height} image is empty"));
     }
     out.clear();
-    let mut enc = png::Encoder::new(&mut *out, width as u32, height as u32);
+    let mut enc = png::Encoder::new(&mut *out, w, h);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_compression(png::Compression::Fast);
@@ -55,5 +67,14 @@ mod tests {
         assert!(encode_png(&rgb[1..], w, h, &mut buf)
             .unwrap_err()
             .contains("5x3"));
+        // A size whose byte count overflows is an error, not a wrapped size that passes.
+        let huge = usize::MAX / 2 + 1;
+        let e = encode_png(&[], huge, 2, &mut buf).unwrap_err();
+        assert!(e.contains("overflows"), "{e}");
+        // 2^63 × 2 × 3 wraps to 0 bytes in unchecked arithmetic: the empty buffer would pass.
+        assert_eq!(huge.wrapping_mul(2).wrapping_mul(3), 0);
+        assert!(encode_png(&[], 0, 0, &mut buf)
+            .unwrap_err()
+            .contains("empty"));
     }
 }

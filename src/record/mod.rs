@@ -21,24 +21,39 @@
 //!
 //! Float encoding: observations, actions, rewards and info values are JSON numbers in their
 //! shortest round-trip form (read back bitwise); a non-finite value is written as `null` and
-//! read back as NaN. Space bounds in the metadata are written as numbers or the strings
-//! `"inf"`, `"-inf"`, `"nan"`.
+//! read back as NaN. States must be finite: [`Recorder::record_step`] refuses a non-finite
+//! state or body pose ([`RecordError::Refused`]) before writing anything, so every file stays
+//! valid against its schemas and readable. Space bounds in the metadata are written as
+//! numbers or the strings `"inf"`, `"-inf"`, `"nan"`.
 //!
 //! Durability: messages go into zstd-compressed chunks that are buffered in memory and
 //! written whole. [`Recorder::end_episode`] closes the chunk and `fsync`s the file, so every
 //! finished episode survives a later crash or `SIGKILL`; [`read`] recovers such a file (no
 //! summary or footer) and reports [`Recording::complete`]` == false`.
+//!
+//! Damage: every chunk carries a CRC and a closed file carries data- and summary-section CRCs.
+//! Readers ([`stream`], [`read`], [`read_raw`]) check them and the file's structure, with
+//! records and chunks limited to [`MAX_RECORD`], and tell a file cut short (read up to the
+//! cut) from a damaged one ([`RecordError::Corrupt`], naming the byte offset and chunk).
 
 pub mod image;
 mod num;
+mod reader;
+mod scan;
 mod schema;
+
+pub use reader::{
+    read, read_raw, stream, EpisodeEnd, EpisodeRec, EpisodeStart, RawMessage, RawRecording,
+    Recording, StepRec, StreamEnd, Visitor,
+};
+pub use scan::{MAX_MESSAGE, MAX_RECORD};
 
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use mcap::records::{MessageHeader, Metadata, Record};
+use mcap::records::{MessageHeader, Metadata};
 use mcap::{Compression, WriteOptions};
 use serde::{Deserialize, Serialize};
 
@@ -110,6 +125,44 @@ pub enum RecordError {
         path: PathBuf,
         /// What went wrong.
         msg: String,
+    },
+    /// The file is damaged (not merely cut short): a chunk, data-section or summary CRC, or a
+    /// structure check failed at `offset`.
+    #[error("{}: damaged at byte offset {offset} (not a cut): {detail}", .path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// Byte offset of the damaged record (or of the chunk holding it).
+        offset: u64,
+        /// What is wrong.
+        detail: String,
+    },
+    /// The file was cut short before anything usable (e.g. before its metadata).
+    #[error("{}: truncated: {detail}", .path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Where the file ends.
+        offset: u64,
+        /// Where the cut lies.
+        detail: String,
+    },
+    /// A [`Visitor`] of [`stream`] stopped the reading.
+    #[error("{}: {msg}", .path.display())]
+    Visitor {
+        /// The file.
+        path: PathBuf,
+        /// The visitor's message.
+        msg: String,
+    },
+    /// A value to record is not finite (a state that could not be restored), or a message is
+    /// larger than [`MAX_MESSAGE`]; nothing was written.
+    #[error("{}: cannot record {what}", .path.display())]
+    Refused {
+        /// The file.
+        path: PathBuf,
+        /// What was refused and why.
+        what: String,
     },
     /// The env rejected a step made through [`Recorder::step`].
     #[error("{}: env error: {source}", .path.display())]
@@ -399,6 +452,16 @@ impl Recorder {
     /// Creates (truncates) `path` and writes the MCAP header (profile `"mjskill"`), the
     /// metadata of `env` and the channel definitions, flushed to disk before returning.
     pub fn create(path: &Path, env: &Env) -> Result<Recorder, RecordError> {
+        let file = File::create(path).map_err(|source| RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Recorder::from_file(file, path, env)
+    }
+
+    /// Like [`Recorder::create`], into a file already open for writing (e.g. a temporary file
+    /// the caller renames later, or one it holds a lock on); `path` names it in errors.
+    pub fn from_file(file: File, path: &Path, env: &Env) -> Result<Recorder, RecordError> {
         let io = |source| RecordError::Io {
             path: path.to_path_buf(),
             source,
@@ -407,13 +470,15 @@ impl Recorder {
             path: path.to_path_buf(),
             source,
         };
-        let file = File::create(path).map_err(io)?;
         let sync_handle = file.try_clone().map_err(io)?;
         let opts = WriteOptions::new()
             .profile(PROFILE)
             .library(format!("mjskill {}", env!("CARGO_PKG_VERSION")))
             .compression(Some(Compression::Zstd))
             .compression_threads(0)
+            // Chunks close at 1 MiB of records; with messages of at most MAX_MESSAGE, every
+            // chunk stays below the readers' MAX_RECORD.
+            .chunk_size(Some(1 << 20))
             // Buffer each chunk in memory and write it whole: the file never holds a
             // half-written chunk whose lengths are yet to be patched.
             .disable_seeking(true);
@@ -470,6 +535,12 @@ impl Recorder {
     /// The file being written.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Tells the recorder that its file was renamed (or linked) to `path`, the name its
+    /// errors use from now on; writing continues into the same open file.
+    pub fn renamed(&mut self, path: &Path) {
+        self.path = path.to_path_buf();
     }
 
     /// Adds the `/render_camera/image` channel (`foxglove.CompressedImage`, PNG) for the
@@ -555,6 +626,16 @@ impl Recorder {
     }
 
     fn write(&mut self, channel_id: u16, ns: u64, data: &[u8]) -> Result<(), RecordError> {
+        if data.len() > MAX_MESSAGE {
+            return Err(RecordError::Refused {
+                path: self.path.clone(),
+                what: format!(
+                    "a message of {} bytes: readers accept messages of up to {} MiB",
+                    data.len(),
+                    MAX_MESSAGE >> 20
+                ),
+            });
+        }
         let header = MessageHeader {
             channel_id,
             sequence: self.seq,
@@ -582,6 +663,32 @@ impl Recorder {
         self.write(channel_id, ns, &data)
     }
 
+    /// Refuses a state with a non-finite number (it could not be restored with
+    /// [`Env::set_state`]) or body poses that are not finite (the Foxglove schema needs
+    /// numbers), before anything of the step is written.
+    fn check_finite(&self, state: &EnvState, name: &str, env: &Env) -> Result<(), RecordError> {
+        let refuse = |what: String| {
+            Err(RecordError::Refused {
+                path: self.path.clone(),
+                what,
+            })
+        };
+        if let Some((field, value)) = crate::env::checks::first_non_finite(state) {
+            return refuse(format!(
+                "{name}.{field} = {value}: recorded states must be finite (the env has \
+                 diverged; nothing of this step was written)"
+            ));
+        }
+        let d = env.data();
+        if let Some(x) = d.xpos().iter().chain(d.xquat()).find(|x| !x.is_finite()) {
+            return refuse(format!(
+                "a body pose with {x}: recorded poses must be finite (nothing of this step was \
+                 written)"
+            ));
+        }
+        Ok(())
+    }
+
     /// Ends the current chunk and forces the file to disk.
     fn sync(&mut self) -> Result<(), RecordError> {
         self.writer.flush().map_err(|e| self.mcap_err(e))?;
@@ -594,7 +701,9 @@ impl Recorder {
     /// Starts an episode; call right after `env.reset(seed)`. Writes `/episode`, `/scene`
     /// and `/tf`. An episode still open is left unfinished (no `/episode_end`).
     pub fn begin_episode(&mut self, env: &Env, seed: Option<u64>) -> Result<(), RecordError> {
-        let start_ns = self.last_ns.map_or(0, |t| t + self.dt_ns);
+        let state = env.get_state();
+        self.check_finite(&state, "state", env)?;
+        let start_ns = self.last_ns.map_or(0, |t| t.saturating_add(self.dt_ns));
         let index = self.next_episode;
         self.next_episode += 1;
         self.open = Some(Open {
@@ -617,7 +726,7 @@ impl Recorder {
         let msg = EpisodeMsg {
             episode: index,
             seed,
-            state: env.get_state(),
+            state,
             obs: env.obs().to_vec(),
             info: info_pairs(env.info()),
         };
@@ -646,8 +755,12 @@ impl Recorder {
                 msg: "record_step called outside an episode (call begin_episode first)".into(),
             });
         };
+        self.check_finite(state_before, "state_before", env)?;
         let info = env.info();
-        let ns = open.start_ns + self.dt_ns * info.elapsed_steps.max(open.steps + 1) as u64;
+        let ns = open.start_ns.saturating_add(
+            self.dt_ns
+                .saturating_mul(info.elapsed_steps.max(open.steps.saturating_add(1)) as u64),
+        );
         let mut pairs = std::mem::take(&mut self.info_buf);
         pairs.clear();
         pairs.push(("elapsed_steps".to_string(), info.elapsed_steps as f64));
@@ -723,6 +836,20 @@ impl Recorder {
         self.sync()
     }
 
+    /// Stops recording without closing the file, as if the process had been killed: the
+    /// finished episodes (already synced) stay readable and readers report the file as cut
+    /// short (`complete == false`); an open episode is dropped. For a run that failed before
+    /// it was done, so that its file does not claim to be complete.
+    pub fn abandon(self) -> Result<(), RecordError> {
+        let path = self.path;
+        let file = self.file;
+        // `into_inner` without `finish` writes neither the open chunk nor the summary.
+        let mut buf = self.writer.into_inner();
+        buf.flush()
+            .and_then(|()| file.sync_data())
+            .map_err(|source| RecordError::Io { path, source })
+    }
+
     /// Writes the summary and footer and syncs the file. An open episode stays unfinished.
     pub fn finish(mut self) -> Result<(), RecordError> {
         self.writer.finish().map_err(|e| self.mcap_err(e))?;
@@ -735,313 +862,4 @@ impl Recorder {
         buf.flush().map_err(io)?;
         self.file.sync_all().map_err(io)
     }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Reader
-
-/// One recorded step.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StepRec {
-    /// Action.
-    pub action: Vec<f32>,
-    /// Observation after the step.
-    pub obs: Vec<f32>,
-    /// Reward.
-    pub reward: f32,
-    /// Terminated flag.
-    pub terminated: bool,
-    /// Truncated flag.
-    pub truncated: bool,
-    /// Info after the step: `elapsed_steps`, then the task keys in env order.
-    pub info: Vec<(String, f64)>,
-    /// Env state *before* the step: `set_state` + `step(action)` replays it.
-    pub state: EnvState,
-}
-
-/// One recorded episode.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EpisodeRec {
-    /// Episode index in the file (0-based).
-    pub index: u64,
-    /// Reset seed.
-    pub seed: Option<u64>,
-    /// State right after reset.
-    pub initial_state: EnvState,
-    /// Observation right after reset.
-    pub initial_obs: Vec<f32>,
-    /// Info right after reset.
-    pub initial_info: Vec<(String, f64)>,
-    /// Steps in order.
-    pub steps: Vec<StepRec>,
-    /// Whether the episode has its `/episode_end` message.
-    pub finished: bool,
-    /// Return (sum of rewards): from `/episode_end`, or summed over the steps if unfinished.
-    pub ret: f64,
-    /// Success flag of `/episode_end` (false if unfinished).
-    pub success: bool,
-}
-
-/// A recording read back by [`read`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct Recording {
-    /// File metadata.
-    pub meta: Meta,
-    /// Episodes in order, including an unfinished last one.
-    pub episodes: Vec<EpisodeRec>,
-    /// Whether the file ended with its footer (false: cut short, e.g. a killed recorder).
-    pub complete: bool,
-}
-
-impl Recording {
-    /// The episodes that have their `/episode_end`.
-    pub fn finished(&self) -> impl Iterator<Item = &EpisodeRec> {
-        self.episodes.iter().filter(|e| e.finished)
-    }
-}
-
-/// One message of any channel, undecoded.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RawMessage {
-    /// Channel topic.
-    pub topic: String,
-    /// Schema name of the channel (empty if none).
-    pub schema: String,
-    /// Message encoding of the channel.
-    pub encoding: String,
-    /// Log time (ns).
-    pub log_time: u64,
-    /// Payload.
-    pub data: Vec<u8>,
-}
-
-/// The records of an MCAP file read by [`read_raw`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct RawRecording {
-    /// Header profile.
-    pub profile: String,
-    /// Header library.
-    pub library: String,
-    /// The `"mjskill"` metadata map (empty if absent).
-    pub metadata: BTreeMap<String, String>,
-    /// The per-episode metadata maps (`episode-N` records), in file order.
-    pub episode_metadata: Vec<BTreeMap<String, String>>,
-    /// All messages in file order.
-    pub messages: Vec<RawMessage>,
-    /// Whether the file was read to its footer without error.
-    pub complete: bool,
-}
-
-/// Reads every complete record of an MCAP file, tolerating a file cut short (no summary or
-/// footer, a partial last record): records up to the damage are returned with
-/// `complete == false`. Errors if the file is unreadable, not MCAP, or damaged before its
-/// header.
-pub fn read_raw(path: &Path) -> Result<RawRecording, RecordError> {
-    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let not = |reason: &str| RecordError::NotRecording {
-        path: path.to_path_buf(),
-        reason: reason.to_string(),
-    };
-    if bytes.is_empty() {
-        return Err(not("the file is empty"));
-    }
-    if !bytes.starts_with(mcap::MAGIC) {
-        return Err(not("not an MCAP file (bad magic)"));
-    }
-    // The mcap parser returns errors for damaged input; the catch is a last line of defence
-    // so that a damaged file can never take the caller down.
-    let parsed = std::panic::catch_unwind(|| parse(&bytes));
-    let parsed = match parsed {
-        Ok(r) => r,
-        Err(_) => Err(ParseError::Fatal("the MCAP parser panicked".into())),
-    };
-    match parsed {
-        Ok(raw) => Ok(raw),
-        Err(ParseError::Fatal(reason)) => Err(RecordError::Decode {
-            path: path.to_path_buf(),
-            what: "MCAP file".into(),
-            reason,
-        }),
-        Err(ParseError::Mcap(source)) => Err(RecordError::Mcap {
-            path: path.to_path_buf(),
-            source,
-        }),
-    }
-}
-
-enum ParseError {
-    Mcap(mcap::McapError),
-    Fatal(String),
-}
-
-fn parse(bytes: &[u8]) -> Result<RawRecording, ParseError> {
-    let reader = mcap::read::ChunkFlattener::new_with_options(
-        bytes,
-        mcap::read::Options::IgnoreEndMagic.into(),
-    )
-    .map_err(ParseError::Mcap)?;
-    let mut header: Option<(String, String)> = None;
-    let mut metadata = BTreeMap::new();
-    let mut episode_metadata = Vec::new();
-    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
-    let mut channels: BTreeMap<u16, (String, u16, String)> = BTreeMap::new();
-    let mut messages = Vec::new();
-    let mut footer = false;
-    let mut damaged = false;
-    for rec in reader {
-        let rec = match rec {
-            Ok(r) => r,
-            Err(e) => {
-                if header.is_none() {
-                    return Err(ParseError::Mcap(e));
-                }
-                damaged = true;
-                break;
-            }
-        };
-        match rec {
-            Record::Header(h) => header = Some((h.profile, h.library)),
-            Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
-            Record::Metadata(m) if m.name.starts_with(EPISODE_METADATA_PREFIX) => {
-                episode_metadata.push(m.metadata)
-            }
-            Record::Schema { header: h, .. } => {
-                schemas.insert(h.id, h.name);
-            }
-            Record::Channel(c) => {
-                channels.insert(c.id, (c.topic, c.schema_id, c.message_encoding));
-            }
-            Record::Message { header: h, data } => {
-                let Some((topic, sid, enc)) = channels.get(&h.channel_id) else {
-                    return Err(ParseError::Fatal(format!(
-                        "message on unknown channel {}",
-                        h.channel_id
-                    )));
-                };
-                messages.push(RawMessage {
-                    topic: topic.clone(),
-                    schema: schemas.get(sid).cloned().unwrap_or_default(),
-                    encoding: enc.clone(),
-                    log_time: h.log_time,
-                    data: data.into_owned(),
-                });
-            }
-            Record::Footer(_) => footer = true,
-            _ => {}
-        }
-        if header.is_none() {
-            return Err(ParseError::Fatal("the first record is not a header".into()));
-        }
-    }
-    let Some((profile, library)) = header else {
-        return Err(ParseError::Fatal("no MCAP header".into()));
-    };
-    Ok(RawRecording {
-        profile,
-        library,
-        metadata,
-        episode_metadata,
-        messages,
-        complete: footer && !damaged && mcap::read::footer(bytes).is_ok(),
-    })
-}
-
-/// Reads an mjskill recording. A file cut short (e.g. the recorder was killed) is read up to
-/// its last complete chunk, with [`Recording::complete`]` == false`; only episodes with an
-/// `/episode_end` message are [`EpisodeRec::finished`]. Errors name the file: unreadable,
-/// empty, not MCAP, not an mjskill recording (profile or metadata missing), or a message that
-/// does not decode.
-pub fn read(path: &Path) -> Result<Recording, RecordError> {
-    let raw = read_raw(path)?;
-    let not = |reason: String| RecordError::NotRecording {
-        path: path.to_path_buf(),
-        reason,
-    };
-    if raw.profile != PROFILE {
-        return Err(not(format!(
-            "MCAP profile is {:?}, expected {PROFILE:?}",
-            raw.profile
-        )));
-    }
-    if raw.metadata.is_empty() {
-        return Err(not(format!("no {METADATA_NAME:?} metadata record")));
-    }
-    let meta = Meta::from_map(&raw.metadata).map_err(|reason| RecordError::Decode {
-        path: path.to_path_buf(),
-        what: "metadata".into(),
-        reason,
-    })?;
-    let mut episodes: Vec<EpisodeRec> = Vec::new();
-    for (n, m) in raw.messages.iter().enumerate() {
-        let bad = |reason: String| RecordError::Decode {
-            path: path.to_path_buf(),
-            what: format!("{} message #{n}", m.topic),
-            reason,
-        };
-        let current = |episodes: &mut Vec<EpisodeRec>, ep: u64| -> Result<usize, RecordError> {
-            match episodes.last() {
-                Some(e) if e.index == ep && !e.finished => Ok(episodes.len() - 1),
-                _ => Err(bad(format!("episode {ep} is not open"))),
-            }
-        };
-        match m.topic.as_str() {
-            TOPIC_EPISODE => {
-                let e: EpisodeMsg =
-                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
-                episodes.push(EpisodeRec {
-                    index: e.episode,
-                    seed: e.seed,
-                    initial_state: e.state,
-                    initial_obs: e.obs,
-                    initial_info: e.info,
-                    steps: Vec::new(),
-                    finished: false,
-                    ret: 0.0,
-                    success: false,
-                });
-            }
-            TOPIC_STEP => {
-                let s: StepMsgIn =
-                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
-                let i = current(&mut episodes, s.episode)?;
-                let ep = &mut episodes[i];
-                if s.step as usize != ep.steps.len() {
-                    return Err(bad(format!(
-                        "step {} of episode {} follows {} steps",
-                        s.step,
-                        s.episode,
-                        ep.steps.len()
-                    )));
-                }
-                ep.ret += s.reward as f64;
-                ep.steps.push(StepRec {
-                    action: s.action,
-                    obs: s.obs,
-                    reward: s.reward,
-                    terminated: s.terminated,
-                    truncated: s.truncated,
-                    info: s.info,
-                    state: s.state_before,
-                });
-            }
-            TOPIC_EPISODE_END => {
-                let e: EpisodeEndMsg =
-                    serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
-                let i = current(&mut episodes, e.episode)?;
-                let ep = &mut episodes[i];
-                ep.finished = true;
-                ep.ret = e.ret;
-                ep.success = e.success;
-            }
-            _ => {}
-        }
-    }
-    Ok(Recording {
-        meta,
-        episodes,
-        complete: raw.complete,
-    })
 }

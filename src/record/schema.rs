@@ -1,8 +1,8 @@
 //! JSON Schemas of the recording's channels and the Foxglove message builders.
 //!
-//! The Foxglove schemas follow the published `foxglove.FrameTransforms` and
-//! `foxglove.SceneUpdate` JSON schemas (field names and nesting), trimmed to the fields the
-//! recorder writes.
+//! The Foxglove schemas are the published JSON schemas of `@foxglove/schemas` 2.1.0 (MIT
+//! licence), embedded verbatim from `foxglove/*.json`; the messages written fill every field
+//! they require. The mjskill schemas list every field written (`additionalProperties: false`).
 
 use serde_json::{json, Value};
 
@@ -24,19 +24,96 @@ fn info_object() -> Value {
     })
 }
 
-fn env_state() -> Value {
+fn u32_array(len: usize) -> Value {
+    json!({
+        "type": "array",
+        "items": { "type": "integer", "minimum": 0, "maximum": 4294967295u64 },
+        "minItems": len,
+        "maxItems": len
+    })
+}
+
+fn mt19937() -> Value {
     json!({
         "type": "object",
-        "description": "mjskill EnvState (Env::get_state / Env::set_state)",
+        "description": "MT19937 state: the 624 words and the index of the next word",
+        "properties": {
+            "state": u32_array(624),
+            "index": { "type": "integer", "minimum": 0, "maximum": 624 }
+        },
+        "required": ["state", "index"],
+        "additionalProperties": false
+    })
+}
+
+fn env_state() -> Value {
+    let seed = json!({ "type": ["integer", "null"], "minimum": 0 });
+    json!({
+        "type": "object",
+        "description": "mjskill EnvState (Env::get_state / Env::set_state): every field written",
         "properties": {
             "env_id": { "type": "string" },
             "robot": { "type": "string" },
             "control_mode": { "type": "string" },
-            "physics": { "type": "array", "items": { "type": "number" } },
-            "controller": { "type": "array", "items": { "type": "number" } },
-            "elapsed_steps": { "type": "integer" }
+            "physics": {
+                "type": "array",
+                "description": "MuJoCo state: time, qpos, qvel, act, ctrl, qacc_warmstart, \
+                                qfrc_applied, xfrc_applied, mocap_pos, mocap_quat",
+                "items": { "type": "number" }
+            },
+            "controller": {
+                "type": "array",
+                "description": "controller targets",
+                "items": { "type": "number" }
+            },
+            "elapsed_steps": { "type": "integer", "minimum": 0, "maximum": 4294967294u64 },
+            "finger_forces": {
+                "type": "array",
+                "description": "contact forces on the two fingers in the last substep",
+                "items": {
+                    "type": "array",
+                    "items": { "type": "number" },
+                    "minItems": 3,
+                    "maxItems": 3
+                },
+                "minItems": 2,
+                "maxItems": 2
+            },
+            "numpy": {
+                "type": "object",
+                "description": "numpy RandomState of the episode (joint noise)",
+                "properties": {
+                    "mt": mt19937(),
+                    "gauss_bits": {
+                        "type": ["integer", "null"],
+                        "minimum": 0,
+                        "description": "IEEE-754 bits of the cached Gaussian"
+                    }
+                },
+                "required": ["mt", "gauss_bits"],
+                "additionalProperties": false
+            },
+            "torch_global": {
+                "type": "object",
+                "description": "the global torch generator (unseeded resets)",
+                "properties": {
+                    "seed": { "type": "integer", "minimum": 0 },
+                    "mt": mt19937()
+                },
+                "required": ["seed", "mt"],
+                "additionalProperties": false
+            },
+            "seeds": {
+                "type": "array",
+                "description": "main and episode seeds",
+                "items": seed,
+                "minItems": 2,
+                "maxItems": 2
+            }
         },
-        "required": ["env_id", "robot", "control_mode", "physics", "controller", "elapsed_steps"]
+        "required": ["env_id", "robot", "control_mode", "physics", "controller", "elapsed_steps",
+                     "finger_forces", "numpy", "torch_global", "seeds"],
+        "additionalProperties": false
     })
 }
 
@@ -54,7 +131,8 @@ pub(crate) fn episode() -> Value {
             "obs": num_array(),
             "info": info_object()
         },
-        "required": ["episode", "seed", "state", "obs", "info"]
+        "required": ["episode", "seed", "state", "obs", "info"],
+        "additionalProperties": false
     })
 }
 
@@ -77,7 +155,8 @@ pub(crate) fn step() -> Value {
             "state_before": env_state()
         },
         "required": ["episode", "step", "action", "obs", "reward", "terminated", "truncated",
-                     "info", "state_before"]
+                     "info", "state_before"],
+        "additionalProperties": false
     })
 }
 
@@ -93,153 +172,25 @@ pub(crate) fn episode_end() -> Value {
             "return": num_or_null(),
             "success": { "type": "boolean" }
         },
-        "required": ["episode", "steps", "return", "success"]
+        "required": ["episode", "steps", "return", "success"],
+        "additionalProperties": false
     })
 }
 
-fn time_schema() -> Value {
-    json!({
-        "type": "object",
-        "properties": {
-            "sec": { "type": "integer", "minimum": 0 },
-            "nsec": { "type": "integer", "minimum": 0, "maximum": 999999999 }
-        }
-    })
+/// A published Foxglove schema, embedded verbatim (`foxglove/*.json`).
+fn published(text: &str) -> Value {
+    // The files are part of the source and checked by the unit test below.
+    serde_json::from_str(text).unwrap_or(Value::Null)
 }
 
-fn vector3_schema() -> Value {
-    json!({
-        "type": "object",
-        "properties": {
-            "x": { "type": "number" }, "y": { "type": "number" }, "z": { "type": "number" }
-        }
-    })
-}
-
-fn quaternion_schema() -> Value {
-    json!({
-        "type": "object",
-        "properties": {
-            "x": { "type": "number" }, "y": { "type": "number" },
-            "z": { "type": "number" }, "w": { "type": "number" }
-        }
-    })
-}
-
-fn pose_schema() -> Value {
-    json!({
-        "type": "object",
-        "properties": { "position": vector3_schema(), "orientation": quaternion_schema() }
-    })
-}
-
-fn color_schema() -> Value {
-    json!({
-        "type": "object",
-        "properties": {
-            "r": { "type": "number" }, "g": { "type": "number" },
-            "b": { "type": "number" }, "a": { "type": "number" }
-        }
-    })
-}
-
-/// Schema `foxglove.FrameTransforms`.
+/// Schema `foxglove.FrameTransforms`: `@foxglove/schemas` 2.1.0, verbatim.
 pub(crate) fn frame_transforms() -> Value {
-    json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": "foxglove.FrameTransforms",
-        "description": "An array of FrameTransform messages",
-        "type": "object",
-        "properties": {
-            "transforms": {
-                "type": "array",
-                "items": {
-                    "title": "foxglove.FrameTransform",
-                    "type": "object",
-                    "properties": {
-                        "timestamp": time_schema(),
-                        "parent_frame_id": { "type": "string" },
-                        "child_frame_id": { "type": "string" },
-                        "translation": vector3_schema(),
-                        "rotation": quaternion_schema()
-                    }
-                }
-            }
-        }
-    })
+    published(include_str!("foxglove/FrameTransforms.json"))
 }
 
-/// Schema `foxglove.SceneUpdate`.
+/// Schema `foxglove.SceneUpdate`: `@foxglove/schemas` 2.1.0, verbatim.
 pub(crate) fn scene_update() -> Value {
-    let prim = |title: &str, extra: Value| {
-        let mut p = json!({
-            "pose": pose_schema(),
-            "size": vector3_schema(),
-            "color": color_schema()
-        });
-        if let (Some(p), Value::Object(e)) = (p.as_object_mut(), extra) {
-            p.extend(e);
-        }
-        json!({ "title": title, "type": "object", "properties": p })
-    };
-    let any_array = json!({ "type": "array" });
-    json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": "foxglove.SceneUpdate",
-        "description": "An update to the entities displayed in a 3D scene",
-        "type": "object",
-        "properties": {
-            "deletions": {
-                "type": "array",
-                "items": {
-                    "title": "foxglove.SceneEntityDeletion",
-                    "type": "object",
-                    "properties": {
-                        "timestamp": time_schema(),
-                        "type": { "type": "integer", "enum": [0, 1] },
-                        "id": { "type": "string" }
-                    }
-                }
-            },
-            "entities": {
-                "type": "array",
-                "items": {
-                    "title": "foxglove.SceneEntity",
-                    "type": "object",
-                    "properties": {
-                        "timestamp": time_schema(),
-                        "frame_id": { "type": "string" },
-                        "id": { "type": "string" },
-                        "lifetime": time_schema(),
-                        "frame_locked": { "type": "boolean" },
-                        "metadata": {
-                            "type": "array",
-                            "items": {
-                                "type": "object",
-                                "properties": {
-                                    "key": { "type": "string" }, "value": { "type": "string" }
-                                }
-                            }
-                        },
-                        "arrows": any_array,
-                        "cubes": { "type": "array",
-                                   "items": prim("foxglove.CubePrimitive", json!({})) },
-                        "spheres": { "type": "array",
-                                     "items": prim("foxglove.SpherePrimitive", json!({})) },
-                        "cylinders": { "type": "array",
-                                       "items": prim("foxglove.CylinderPrimitive", json!({
-                                           "bottom_scale": { "type": "number" },
-                                           "top_scale": { "type": "number" }
-                                       })) },
-                        "lines": any_array,
-                        "triangles": any_array,
-                        "texts": any_array,
-                        "models": any_array
-                    }
-                }
-            }
-        }
-    })
+    published(include_str!("foxglove/SceneUpdate.json"))
 }
 
 /// `{sec, nsec}` of a time in nanoseconds.
@@ -367,27 +318,10 @@ pub(crate) fn scene_update_msg(model: &Model, frames: &[String], ns: u64) -> Val
     json!({ "deletions": [], "entities": entities })
 }
 
-/// Schema `foxglove.CompressedImage` (JSON encoding: `data` is base64).
+/// Schema `foxglove.CompressedImage` (JSON encoding: `data` is base64): `@foxglove/schemas`
+/// 2.1.0, verbatim.
 pub(crate) fn compressed_image() -> Value {
-    json!({
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": "foxglove.CompressedImage",
-        "description": "A compressed image",
-        "type": "object",
-        "properties": {
-            "timestamp": time_schema(),
-            "frame_id": {
-                "type": "string",
-                "description": "Frame of reference for the image (the camera's name)"
-            },
-            "data": {
-                "type": "string",
-                "contentEncoding": "base64",
-                "description": "Compressed image data"
-            },
-            "format": { "type": "string", "description": "Image format: png" }
-        }
-    })
+    published(include_str!("foxglove/CompressedImage.json"))
 }
 
 /// A `foxglove.CompressedImage` message with base64 `data`.
@@ -397,4 +331,64 @@ pub(crate) struct CompressedImageMsg<'a> {
     pub(crate) frame_id: &'a str,
     pub(crate) data: &'a str,
     pub(crate) format: &'a str,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every `"type": "array"` in `v` has an item schema, every object with properties lists
+    /// the required ones; returns the paths that break the rule.
+    fn loose(v: &Value, path: &str, out: &mut Vec<String>) {
+        if let Some(o) = v.as_object() {
+            if o.get("type") == Some(&json!("array")) && !o.contains_key("items") {
+                out.push(format!("{path}: array without items"));
+            }
+            for (k, c) in o {
+                loose(c, &format!("{path}/{k}"), out);
+            }
+        } else if let Some(a) = v.as_array() {
+            for (i, c) in a.iter().enumerate() {
+                loose(c, &format!("{path}/{i}"), out);
+            }
+        }
+    }
+
+    #[test]
+    fn schemas_are_complete() {
+        for (name, s) in [
+            ("foxglove.FrameTransforms", frame_transforms()),
+            ("foxglove.SceneUpdate", scene_update()),
+            ("foxglove.CompressedImage", compressed_image()),
+            ("mjskill.Episode", episode()),
+            ("mjskill.Step", step()),
+            ("mjskill.EpisodeEnd", episode_end()),
+        ] {
+            assert_eq!(s["title"], json!(name));
+            let mut bad = Vec::new();
+            loose(&s, name, &mut bad);
+            assert!(bad.is_empty(), "{bad:?}");
+        }
+        // The published SceneUpdate: required lists, the deletion type as a oneOf of consts.
+        let su = scene_update();
+        let del = &su["properties"]["deletions"]["items"];
+        assert_eq!(del["required"], json!(["timestamp", "type", "id"]));
+        assert_eq!(del["properties"]["type"]["oneOf"][1]["const"], json!(1));
+        let ent = &su["properties"]["entities"]["items"];
+        assert_eq!(ent["required"].as_array().map(Vec::len), Some(14));
+        for k in ["arrows", "lines", "triangles", "texts", "models"] {
+            assert!(ent["properties"][k]["items"]["required"].is_array(), "{k}");
+        }
+        // The state schema names every field of EnvState.
+        let st = &episode()["properties"]["state"];
+        let required: Vec<&str> = st["required"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        for k in ["finger_forces", "numpy", "torch_global", "seeds"] {
+            assert!(required.contains(&k), "{k}");
+        }
+    }
 }

@@ -1,0 +1,199 @@
+//! The output file of `mjskill rollout`: written under a temporary name in the same directory
+//! and published under its final name once it holds a finished episode, with an exclusive
+//! lock that makes two rollouts writing the same file a reported clash.
+//!
+//! * Before anything is simulated, an existing file at the final name is locked (`flock`
+//!   through [`File::try_lock`]); if another rollout holds it, that is the clash. The
+//!   temporary file `.<name>.<pid>.part` is created and locked.
+//! * After the first finished episode, the temporary file becomes the final name: a hard link
+//!   when no file is there (atomic, never replacing a file another rollout published
+//!   meanwhile), else a rename over the old file (whose lock this rollout holds). Recording
+//!   then continues into the same open file, so a rollout killed later leaves every finished
+//!   episode under the final name.
+//! * A run that fails or is killed before its first episode is finished never touches the
+//!   final name (a failed run removes its temporary file).
+
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::ErrorKind;
+use std::path::{Path, PathBuf};
+
+/// The rollout's output file (see the module documentation).
+#[derive(Debug)]
+pub struct Output {
+    out: PathBuf,
+    temp: PathBuf,
+    /// The lock on the file found at the final name at start, held until the end.
+    _held: Option<File>,
+    published: bool,
+}
+
+/// Whether `f` is locked by someone else; Ok(false) after taking the lock (or where the file
+/// system has no locks).
+fn locked_elsewhere(f: &File) -> std::io::Result<bool> {
+    match f.try_lock() {
+        Ok(()) => Ok(false),
+        Err(TryLockError::WouldBlock) => Ok(true),
+        Err(TryLockError::Error(e)) if e.kind() == ErrorKind::Unsupported => Ok(false),
+        Err(TryLockError::Error(e)) => Err(e),
+    }
+}
+
+/// Whether two open files are the same file (the lock this rollout already holds).
+fn same_file(a: &File, b: &File) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (a.metadata(), b.metadata()) {
+            (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (a, b);
+        false
+    }
+}
+
+fn clash(out: &Path) -> String {
+    format!(
+        "{} is being written by another mjskill rollout (it holds the file's lock); choose \
+         another --out or wait for that rollout to finish",
+        out.display()
+    )
+}
+
+impl Output {
+    /// Checks the final name and creates the locked temporary file next to it; returns it
+    /// with the file to write. Errors name `out`: a directory, a clash with a running
+    /// rollout, an unwritable directory.
+    pub fn start(out: &Path) -> Result<(Output, File), String> {
+        let cannot = |e: std::io::Error| format!("cannot write {}: {e}", out.display());
+        let name = out
+            .file_name()
+            .ok_or_else(|| format!("--out {} names no file", out.display()))?;
+        if out.is_dir() {
+            return Err(format!("--out {} is a directory", out.display()));
+        }
+        let old = match File::open(out) {
+            Ok(f) => {
+                if locked_elsewhere(&f).map_err(cannot)? {
+                    return Err(clash(out));
+                }
+                Some(f)
+            }
+            Err(e) if e.kind() == ErrorKind::NotFound => None,
+            Err(e) => return Err(cannot(e)),
+        };
+        let dir = match out.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let temp = dir.join(format!(
+            ".{}.{}.part",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
+        let file = OpenOptions::new()
+            .write(true)
+            .read(true)
+            .create_new(true)
+            .open(&temp)
+            .map_err(cannot)?;
+        if let Err(e) = locked_elsewhere(&file) {
+            std::fs::remove_file(&temp).ok();
+            return Err(cannot(e));
+        }
+        Ok((
+            Output {
+                out: out.to_path_buf(),
+                temp,
+                _held: old,
+                published: false,
+            },
+            file,
+        ))
+    }
+
+    /// The name the file has now (temporary until [`Output::publish`]).
+    pub fn current(&self) -> &Path {
+        if self.published {
+            &self.out
+        } else {
+            &self.temp
+        }
+    }
+
+    /// Whether the file is under its final name.
+    pub fn published(&self) -> bool {
+        self.published
+    }
+
+    /// Gives the file its final name (idempotent). A file at the final name that another
+    /// rollout has locked is a clash: the error says where this run's recording was left.
+    pub fn publish(&mut self) -> Result<(), String> {
+        if self.published {
+            return Ok(());
+        }
+        let fail = |e: std::io::Error| {
+            format!(
+                "cannot move the recording to {}: {e}; it was left in {}",
+                self.out.display(),
+                self.temp.display()
+            )
+        };
+        for _ in 0..3 {
+            match File::open(&self.out) {
+                Ok(f) => {
+                    // The file found at start is locked by this rollout already (a lock is
+                    // per open file: opening it again does not share it).
+                    let mine = self._held.as_ref().is_some_and(|h| same_file(h, &f));
+                    if !mine && locked_elsewhere(&f).map_err(fail)? {
+                        return Err(format!(
+                            "{}; this run's recording was left in {}",
+                            clash(&self.out),
+                            self.temp.display()
+                        ));
+                    }
+                    std::fs::rename(&self.temp, &self.out).map_err(fail)?;
+                    if !mine {
+                        self._held = Some(f);
+                    }
+                }
+                Err(e) if e.kind() == ErrorKind::NotFound => {
+                    match std::fs::hard_link(&self.temp, &self.out) {
+                        Ok(()) => {
+                            std::fs::remove_file(&self.temp).map_err(fail)?;
+                        }
+                        // Another rollout published meanwhile: look again.
+                        Err(e) if e.kind() == ErrorKind::AlreadyExists => continue,
+                        // No hard links here (some file systems): a plain rename.
+                        Err(_) => std::fs::rename(&self.temp, &self.out).map_err(fail)?,
+                    }
+                }
+                Err(e) => return Err(fail(e)),
+            }
+            self.published = true;
+            // Make the new name durable too.
+            if let Some(dir) = self.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                if let Ok(d) = File::open(dir) {
+                    d.sync_all().ok();
+                }
+            }
+            return Ok(());
+        }
+        Err(format!(
+            "{}; this run's recording was left in {}",
+            clash(&self.out),
+            self.temp.display()
+        ))
+    }
+
+    /// Removes the temporary file of a run that ends before publishing, and releases the
+    /// lock on the old file.
+    pub fn discard(self) {
+        if !self.published {
+            std::fs::remove_file(&self.temp).ok();
+        }
+    }
+}
