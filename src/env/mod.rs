@@ -670,6 +670,11 @@ impl Env {
     pub fn id(&self) -> &'static str {
         self.id
     }
+    /// Contact forces (N, world frame) on the two grasp fingers from the task's grasp object
+    /// in the last physics substep (what `is_grasping` reads).
+    pub fn finger_forces(&self) -> &[[f64; 3]; 2] {
+        &self.finger_forces
+    }
     /// The robot's joint drives (targets and force law).
     pub fn drives(&self) -> &Drives {
         &self.drives

@@ -1,0 +1,389 @@
+//! Agreement with ManiSkill 3 itself: the reference trajectories recorded from ManiSkill
+//! (PhysX CPU) in `tests/data/maniskill/` (format: `docs/reference-trajectories.md`), one
+//! file per registered (env, robot) pair.
+//!
+//! * Seeded initial states equal ManiSkill's.
+//! * Observation, rewards and info computed on ManiSkill's own recorded states (imported
+//!   through `set_state_dict`) equal ManiSkill's; the grasp flag wherever the finger contacts
+//!   agree.
+//! * Open-loop replay of ManiSkill's actions tracks ManiSkill's joints, TCP and objects within
+//!   limits set from measurement (`MEASURED`), and motion-planning episodes succeed where
+//!   ManiSkill's did.
+use std::path::PathBuf;
+
+use mjskill::maniskill::fidelity::{env_for, replay_file, FidelityOptions, StepError};
+use mjskill::maniskill::reference::{RefFile, Snapshot};
+use mjskill::{Env, SimConfig};
+
+mod common;
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill")
+}
+
+/// Every reference file, one per registered (env, robot) pair.
+fn files() -> Vec<RefFile> {
+    let mut out = Vec::new();
+    for e in mjskill::registry() {
+        for (robot, _) in &e.robots {
+            let p = data_dir().join(format!("{}__{robot}.json.gz", e.id));
+            out.push(RefFile::open(&p).unwrap_or_else(|err| panic!("{err}")));
+        }
+    }
+    assert_eq!(out.len(), 11, "one file per registered pair");
+    out
+}
+
+fn max_abs(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// ManiSkill's quaternions are neither normalised nor sign-canonical: compare rotations.
+fn quat_angle(a: &[f64], b: &[f64]) -> f64 {
+    let q = |v: &[f64]| {
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[0], v[1], v[2], v[3]))
+    };
+    q(a).angle_to(&q(b))
+}
+
+fn robot_qpos(env: &Env) -> Vec<f64> {
+    let mut q = vec![0.0; env.robot().qpos_adr.len()];
+    env.robot().qpos(env.data(), &mut q);
+    q
+}
+
+/// Compares everything that is a function of the state: poses, TCP, obs (except the grasp
+/// flag, `skip_obs`), rewards and the info flags.
+fn check_state_quantities(
+    env: &Env,
+    s: &Snapshot,
+    grasp_key: &str,
+    grasp_obs: Option<usize>,
+    ctx: &str,
+) -> bool {
+    assert!(
+        max_abs(&robot_qpos(env), &s.robot_qpos) < 1e-6,
+        "{ctx}: qpos"
+    );
+    for (name, pose) in &s.actors {
+        if name == "ground" {
+            continue;
+        }
+        let got = env
+            .actor_pose(name)
+            .unwrap_or_else(|| panic!("{ctx}: no actor {name}"));
+        assert!(
+            max_abs(&got[..3], &pose[..3]) < 2e-6,
+            "{ctx}: {name} position"
+        );
+        assert!(
+            quat_angle(&got[3..], &pose[3..]) < 2e-6,
+            "{ctx}: {name} rotation"
+        );
+    }
+    let (p, q) = env.robot().tcp_pose(env.data());
+    assert!(max_abs(&p, &s.tcp_pose[..3]) < 2e-6, "{ctx}: tcp position");
+    // Fetch's TCP quaternion is an unnormalised average in ManiSkill: compare as written.
+    assert!(
+        max_abs(&q, &s.tcp_pose[3..]) < 1e-5,
+        "{ctx}: tcp quaternion"
+    );
+    let obs = env.obs();
+    assert_eq!(obs.len(), s.obs_state.len(), "{ctx}: obs length");
+    for (i, (a, b)) in obs.iter().zip(&s.obs_state).enumerate() {
+        if Some(i) == grasp_obs {
+            continue;
+        }
+        assert!(
+            (a - b).abs() <= 2e-5 * (1.0 + b.abs()),
+            "{ctx}: obs[{i}] {a} vs {b}"
+        );
+    }
+    let info = env.info();
+    let grasp_agrees = info.flag(grasp_key) == s.flag(grasp_key);
+    for k in info.keys {
+        if !env.task().bool_info(k) || (*k == grasp_key) || (*k == "success" && !grasp_agrees) {
+            continue;
+        }
+        assert_eq!(info.flag(k), s.flag(k), "{ctx}: info {k}");
+    }
+    if grasp_agrees {
+        let dense = env.dense_reward();
+        assert!(
+            (dense - s.reward_dense as f64).abs() < 1e-4 * (1.0 + dense.abs()),
+            "{ctx}: dense reward {dense} vs {}",
+            s.reward_dense
+        );
+    }
+    grasp_agrees
+}
+
+#[test]
+fn seeded_initial_states_equal_maniskills() {
+    for f in files() {
+        for ep in &f.episodes {
+            let mut env =
+                env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
+            env.reset(Some(ep.seed));
+            let ctx = format!("{} {} seed {}", f.env_id, f.robot, ep.seed);
+            let key = env.task().grasp_flag();
+            // A fresh env's first reset sees no previous contacts: the grasp flag is false
+            // in both.
+            check_state_quantities(&env, &ep.initial, key, None, &ctx);
+            assert_eq!(env.info().flag(key), ep.initial.flag(key), "{ctx}: grasp");
+        }
+    }
+}
+
+/// The position of the grasp flag in the flat `state` observation, if it is there.
+fn grasp_obs_index(f: &RefFile, mode: &str) -> Option<usize> {
+    f.control_modes[mode]
+        .obs_state_layout
+        .iter()
+        .find(|(k, ..)| k == "extra.is_grasped")
+        .map(|(_, a, _)| *a)
+}
+
+#[test]
+fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
+    for f in files() {
+        let (mut steps, mut grasp_checked, mut grasp_agree) = (0, 0, 0);
+        for ep in &f.episodes {
+            let mut env =
+                env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
+            env.reset(Some(ep.seed));
+            let key = env.task().grasp_flag();
+            let gi = grasp_obs_index(&f, &ep.control_mode);
+            for s in &ep.steps {
+                env.set_state_dict(&s.state_dict).unwrap();
+                env.set_elapsed_steps(s.t);
+                let ctx = format!("{} {} seed {} t {}", f.env_id, f.robot, ep.seed, s.t);
+                let agree = check_state_quantities(&env, s, key, gi, &ctx);
+                steps += 1;
+                // "Where contacts agree": both sims see the fingers touching the object or
+                // both see them free.
+                let touching_ms = [s.grasp_contact.finger1, s.grasp_contact.finger2]
+                    .iter()
+                    .map(|f| f.iter().map(|x| x * x).sum::<f64>().sqrt() > 0.5)
+                    .collect::<Vec<_>>();
+                let ff = env.finger_forces();
+                let touching_mj = ff
+                    .iter()
+                    .map(|f| f.iter().map(|x| x * x).sum::<f64>().sqrt() > 0.5)
+                    .collect::<Vec<_>>();
+                if touching_ms == touching_mj {
+                    grasp_checked += 1;
+                    grasp_agree += agree as usize;
+                }
+            }
+        }
+        assert!(steps > 0);
+        let rate = grasp_agree as f64 / grasp_checked.max(1) as f64;
+        assert!(
+            rate >= 0.99,
+            "{} {}: grasp flag agrees on {grasp_agree} of {grasp_checked} states with agreeing contacts",
+            f.env_id,
+            f.robot
+        );
+    }
+}
+
+/// Measured agreement of open-loop replays (sim_freq 100) with ManiSkill's trajectories:
+/// mean joint (rad or m), TCP and object position (m) errors in the step buckets 1, 6–10 and
+/// 26–50, then the one-step (re-synchronised every step) joint, TCP and object errors. A
+/// pair passes when every figure is within 30 % of what was measured — tight enough that a
+/// wrong drive gain, limit, armature or law shows (README: "Physics", agreement table).
+const MEASURED: [(&str, [f64; 12]); 11] = [
+    (
+        "PickCube-v1__fetch",
+        [
+            2.41e-3, 9.46e-3, 3.72e-2, 7.88e-4, 9.17e-3, 2.43e-2, 8.01e-7, 8.73e-7, 9.63e-7,
+            4.41e-3, 1.70e-3, 4.87e-7,
+        ],
+    ),
+    (
+        "PickCube-v1__panda",
+        [
+            7.42e-4, 2.06e-3, 4.18e-3, 3.76e-4, 1.35e-3, 1.72e-3, 7.69e-7, 8.45e-7, 1.36e-4,
+            1.47e-3, 7.17e-4, 7.12e-5,
+        ],
+    ),
+    (
+        "PickCube-v1__so100",
+        [
+            9.88e-4, 1.09e-3, 5.52e-3, 3.74e-5, 5.49e-5, 2.66e-4, 7.63e-7, 8.44e-7, 1.05e-6,
+            1.27e-3, 6.53e-5, 4.63e-7,
+        ],
+    ),
+    (
+        "PickCube-v1__widowxai",
+        [
+            1.37e-4, 1.91e-4, 2.23e-3, 3.21e-5, 7.35e-5, 7.95e-4, 8.09e-7, 8.69e-7, 8.81e-7,
+            7.18e-4, 2.18e-4, 4.84e-7,
+        ],
+    ),
+    (
+        "PickCube-v1__xarm6_robotiq",
+        [
+            1.15e-2, 5.73e-3, 1.88e-1, 1.53e-4, 7.70e-4, 1.34e-2, 7.87e-7, 8.64e-7, 5.97e-3,
+            7.40e-2, 2.57e-3, 7.57e-4,
+        ],
+    ),
+    (
+        "PickCubeSO100-v1__so100",
+        [
+            9.88e-4, 1.09e-3, 5.52e-3, 3.74e-5, 5.49e-5, 2.66e-4, 7.63e-7, 8.44e-7, 1.05e-6,
+            1.27e-3, 6.53e-5, 4.63e-7,
+        ],
+    ),
+    (
+        "PickCubeWidowXAI-v1__widowxai",
+        [
+            1.37e-4, 1.91e-4, 2.23e-3, 3.21e-5, 7.35e-5, 7.95e-4, 8.09e-7, 8.69e-7, 8.81e-7,
+            7.18e-4, 2.18e-4, 4.84e-7,
+        ],
+    ),
+    (
+        "PlaceSphere-v1__fetch",
+        [
+            2.41e-3, 9.46e-3, 3.72e-2, 7.88e-4, 9.17e-3, 2.43e-2, 7.31e-7, 9.70e-7, 9.71e-7,
+            4.41e-3, 1.70e-3, 7.24e-7,
+        ],
+    ),
+    (
+        "PlaceSphere-v1__panda",
+        [
+            7.42e-4, 2.08e-3, 4.18e-3, 3.76e-4, 1.36e-3, 1.70e-3, 7.31e-7, 9.71e-7, 1.13e-4,
+            1.57e-3, 6.43e-4, 1.18e-4,
+        ],
+    ),
+    (
+        "PokeCube-v1__fetch",
+        [
+            2.41e-3, 9.46e-3, 3.79e-2, 7.88e-4, 9.17e-3, 2.45e-2, 1.10e-6, 1.17e-6, 5.50e-3,
+            4.53e-3, 1.74e-3, 1.35e-4,
+        ],
+    ),
+    (
+        "PokeCube-v1__panda",
+        [
+            7.42e-4, 2.09e-3, 4.34e-3, 3.76e-4, 1.37e-3, 1.75e-3, 1.09e-6, 1.18e-6, 8.54e-5,
+            1.69e-3, 5.18e-4, 2.93e-4,
+        ],
+    ),
+];
+
+const NAMES: [&str; 12] = [
+    "joint@1",
+    "joint@6-10",
+    "joint@26-50",
+    "tcp@1",
+    "tcp@6-10",
+    "tcp@26-50",
+    "obj@1",
+    "obj@6-10",
+    "obj@26-50",
+    "one-step joint",
+    "one-step tcp",
+    "one-step obj",
+];
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n.max(1) as f64
+}
+
+/// The twelve figures of [`MEASURED`] for one file.
+fn agreement(f: &RefFile) -> [f64; 12] {
+    let open = replay_file(f, FidelityOptions::default()).unwrap();
+    let one = replay_file(
+        f,
+        FidelityOptions {
+            resync: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let bucket = |from: u32, k: fn(&StepError) -> f64| {
+        mean(open.episodes.iter().flat_map(|e| {
+            e.per_step
+                .iter()
+                .enumerate()
+                .filter(move |(i, _)| {
+                    let t = *i as u32 + 1;
+                    match from {
+                        1 => t == 1,
+                        6 => (6..=10).contains(&t),
+                        _ => (26..=50).contains(&t),
+                    }
+                })
+                .map(move |(_, s)| k(s))
+        }))
+    };
+    let all =
+        |k: fn(&StepError) -> f64| mean(one.episodes.iter().flat_map(|e| e.per_step.iter().map(k)));
+    [
+        bucket(1, |s| s.joint),
+        bucket(6, |s| s.joint),
+        bucket(26, |s| s.joint),
+        bucket(1, |s| s.tcp_pos),
+        bucket(6, |s| s.tcp_pos),
+        bucket(26, |s| s.tcp_pos),
+        bucket(1, |s| s.obj_pos),
+        bucket(6, |s| s.obj_pos),
+        bucket(26, |s| s.obj_pos),
+        all(|s| s.joint),
+        all(|s| s.tcp_pos),
+        all(|s| s.obj_pos),
+    ]
+}
+
+#[test]
+fn open_loop_replay_tracks_maniskill_within_the_measured_agreement() {
+    let mut failures = Vec::new();
+    for f in files() {
+        let name = format!("{}__{}", f.env_id, f.robot);
+        let want = MEASURED.iter().find(|(n, _)| *n == name).unwrap().1;
+        let got = agreement(&f);
+        for k in 0..12 {
+            if got[k] > 1.3 * want[k] {
+                failures.push(format!(
+                    "{name} {}: {:.3e} > 1.3 × {:.3e}",
+                    NAMES[k], got[k], want[k]
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn motion_planning_episodes_succeed_where_maniskills_did() {
+    for f in files().into_iter().filter(|f| f.robot == "panda") {
+        let report = replay_file(&f, FidelityOptions::default()).unwrap();
+        for (e, ep) in report.episodes.iter().zip(&f.episodes) {
+            if ep.source != "motion_planning" {
+                continue;
+            }
+            let ctx = format!("{} seed {}", f.env_id, ep.seed);
+            if f.env_id == "PlaceSphere-v1" {
+                // PlaceSphere's `success` also needs the released sphere to be still. In
+                // ManiSkill it stops within a step of landing between the bin's wall edges;
+                // in MuJoCo it can keep rocking there for a while (README: "Physics"), so for
+                // this task the placement itself is compared: the sphere never strays 1 cm
+                // from ManiSkill's.
+                assert_eq!(e.first_object_divergence, None, "{ctx}: sphere placement");
+            } else {
+                assert_eq!(e.ever_success.0, e.ever_success.1, "{ctx}: success reached");
+                assert_eq!(
+                    e.reference_success, e.mjskill_success,
+                    "{ctx}: final success"
+                );
+            }
+        }
+    }
+}
