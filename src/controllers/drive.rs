@@ -48,7 +48,7 @@ use crate::mujoco::{Data, Model, ObjType};
 /// Implicit micro-steps of the drive dynamics per physics substep.
 pub const MICRO_STEPS: usize = 10;
 /// Gauss–Seidel sweeps over the coupled drive equations per micro-step.
-pub const SWEEPS: usize = 4;
+pub const SWEEPS: usize = 2;
 
 /// One resolved drive.
 #[derive(Debug, Clone, PartialEq)]
@@ -339,6 +339,17 @@ impl Drives {
         data.mul_m(&mut self.mc, &self.cvec);
         for (f, mc) in data.qfrc_applied_mut().iter_mut().zip(&self.mc) {
             *f = mc / (h * h);
+        }
+    }
+
+    /// Sizes the buffers that depend on the model's constraint rows, so that
+    /// [`Drives::apply`] never allocates: call once after a [`Data::forward`] of the model.
+    pub fn prepare(&mut self, data: &mut Data) {
+        let nv = data.model().nv();
+        let n = self.dofs.len();
+        if n > 0 {
+            data.solve_m(&mut self.minv, &self.unit, n);
+            self.fold_in_equalities(data, nv);
         }
     }
 

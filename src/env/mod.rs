@@ -663,6 +663,7 @@ impl Env {
             render_options,
         };
         env.reset(Some(CONSTRUCTION_SEED));
+        env.drives.prepare(&mut env.data);
         Ok(env)
     }
 
