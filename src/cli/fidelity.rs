@@ -1,8 +1,9 @@
-//! `mjskill fidelity`: per-step deviations of mjskill from a ManiSkill reference trajectory.
+//! `mjskill fidelity`: per-step deviations of mjskill from a ManiSkill reference trajectory,
+//! or of a recording replayed with other physics settings.
 use std::path::PathBuf;
 
 use crate::env::SimConfig;
-use crate::maniskill::fidelity::{replay_file, FidelityOptions};
+use crate::maniskill::fidelity::{replay_file, replay_recording, FidelityOptions, FileFidelity};
 use crate::maniskill::reference::RefFile;
 
 /// Arguments of `mjskill fidelity`.
@@ -28,6 +29,46 @@ pub fn run(args: &FidelityArgs) -> Result<(), String> {
         return Err("--resync must be at least 1 (re-import every K ≥ 1 steps)".into());
     }
     args.sim.validate().map_err(|e| e.to_string())?;
+    let opts = FidelityOptions {
+        resync: args.resync,
+        sim: args.sim,
+    };
+    let mut report = if is_mcap(&args.file)? {
+        if args.control_mode.is_some() {
+            return Err("--control-mode selects episodes of a reference file; a recording has one control mode".into());
+        }
+        let rec = crate::record::read(&args.file).map_err(|e| e.to_string())?;
+        replay_recording(&rec, opts).map_err(|e| e.to_string())?
+    } else {
+        reference_report(args, opts)?
+    };
+    if let Some(p) = &args.plot {
+        super::plot::error_curves(&report, p)?;
+    }
+    if args.summary {
+        for e in &mut report.episodes {
+            e.per_step.clear();
+        }
+    }
+    super::emit(format_args!(
+        "{}",
+        serde_json::to_string(&report).map_err(|e| e.to_string())?
+    ))
+}
+
+/// Whether `path` is an MCAP file (its magic), as opposed to a reference trajectory file.
+fn is_mcap(path: &std::path::Path) -> Result<bool, String> {
+    use std::io::Read;
+    let mut magic = [0u8; 8];
+    let mut f =
+        std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let n = f
+        .read(&mut magic)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    Ok(n == 8 && magic == *mcap::MAGIC)
+}
+
+fn reference_report(args: &FidelityArgs, opts: FidelityOptions) -> Result<FileFidelity, String> {
     let mut file = RefFile::open(&args.file).map_err(|e| e.to_string())?;
     if let Some(m) = &args.control_mode {
         if !file.control_modes.contains_key(m) {
@@ -43,24 +84,5 @@ pub fn run(args: &FidelityArgs) -> Result<(), String> {
         }
         file.episodes.retain(|e| &e.control_mode == m);
     }
-    let mut report = replay_file(
-        &file,
-        FidelityOptions {
-            resync: args.resync,
-            sim: args.sim,
-        },
-    )
-    .map_err(|e| e.to_string())?;
-    if let Some(p) = &args.plot {
-        super::plot::error_curves(&report, p)?;
-    }
-    if args.summary {
-        for e in &mut report.episodes {
-            e.per_step.clear();
-        }
-    }
-    super::emit(format_args!(
-        "{}",
-        serde_json::to_string(&report).map_err(|e| e.to_string())?
-    ))
+    replay_file(&file, opts).map_err(|e| e.to_string())
 }

@@ -210,10 +210,11 @@ pub enum Command {
         #[arg(long)]
         salvage: bool,
     },
-    /// Replay a ManiSkill reference trajectory file (`<env>__<robot>.json.gz`) in mjskill and
-    /// print the per-step deviations of joints, TCP, objects, rewards and flags (JSON).
+    /// Replay a ManiSkill reference trajectory file (`<env>__<robot>.json.gz`) in mjskill, or
+    /// an mjskill recording (`.mcap`) with the given physics settings, and print the per-step
+    /// deviations of joints, TCP, objects, rewards and flags (JSON).
     Fidelity {
-        /// The reference file.
+        /// The reference file (.json.gz) or recording (.mcap).
         file: PathBuf,
         /// Re-import the reference state every K steps (1: one-step errors only).
         #[arg(long)]

@@ -6,7 +6,7 @@ use serde::Serialize;
 
 use super::output::Output;
 use crate::env::checks::MAX_SEED;
-use crate::env::{Env, EnvConfig, ObsMode, RewardMode};
+use crate::env::{Env, EnvConfig};
 use crate::record::image::write_png;
 use crate::record::{
     stream, EpisodeEnd, EpisodeStart, Meta, Recorder, Recording, StepRec, Visitor,
@@ -477,15 +477,7 @@ impl Replayer {
 
 impl Visitor for Replayer {
     fn meta(&mut self, m: &Meta) -> Result<(), String> {
-        let config = EnvConfig {
-            robot: Some(m.robot.clone()),
-            obs_mode: ObsMode::parse(&m.obs_mode).map_err(|e| e.to_string())?,
-            reward_mode: RewardMode::parse(&m.reward_mode).map_err(|e| e.to_string())?,
-            control_mode: Some(m.control_mode.clone()),
-            robot_init_qpos_noise: m.robot_init_qpos_noise,
-            max_episode_steps: Some(m.max_episode_steps),
-            sim: m.sim(),
-        };
+        let config = m.config().map_err(|e| e.to_string())?;
         self.env = Some(crate::env::make(&m.env_id, config).map_err(|e| e.to_string())?);
         Ok(())
     }

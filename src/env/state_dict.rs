@@ -265,6 +265,15 @@ impl Env {
         self.actors.iter().map(|a| a.name).collect()
     }
 
+    /// Names of the dynamic actors (the task's movable objects).
+    pub fn dynamic_actor_names(&self) -> Vec<&'static str> {
+        self.actors
+            .iter()
+            .filter(|a| matches!(a.body, ActorBody::Free { .. }))
+            .map(|a| a.name)
+            .collect()
+    }
+
     fn actor_state(&self, a: &Actor) -> [f64; 13] {
         let d = &self.data;
         let mut s = [0.0; 13];

@@ -381,6 +381,72 @@ pub fn replay_episode(
     })
 }
 
+/// Replays the finished episodes of an mjskill recording with the physics settings `opts`:
+/// the reference is the recording replayed with its own settings (bitwise what was
+/// recorded), so this measures how far other settings (`--sim-freq`) take the same actions.
+pub fn replay_recording(
+    rec: &crate::record::Recording,
+    opts: FidelityOptions,
+) -> Result<FileFidelity, EnvError> {
+    let m = &rec.meta;
+    let recorded = m.config()?;
+    let mut reference = make(&m.env_id, recorded.clone())?;
+    let mut candidate = make(
+        &m.env_id,
+        EnvConfig {
+            sim: opts.sim,
+            ..recorded
+        },
+    )?;
+    let objects: Vec<String> = reference
+        .dynamic_actor_names()
+        .into_iter()
+        .map(String::from)
+        .collect();
+    let grasp_key = reference.task().grasp_flag();
+    let mut episodes = Vec::new();
+    for ep in rec.finished() {
+        reference.set_state(&ep.initial_state)?;
+        candidate.set_state(&ep.initial_state)?;
+        let mut frames = vec![Frame::from_env(&reference, None)];
+        let mut success = Vec::with_capacity(ep.steps.len());
+        for s in &ep.steps {
+            let term = reference.step(&s.action)?.terminated;
+            success.push(term);
+            frames.push(Frame::from_env(&reference, Some(&s.action)));
+        }
+        let (initial, per_step, mj_success) =
+            replay_frames(&mut candidate, &frames, &objects, grasp_key, opts.resync)?;
+        let first_object_divergence = per_step
+            .iter()
+            .position(|e| e.obj_pos > DIVERGENCE_DISTANCE)
+            .map(|i| i as u32 + 1);
+        episodes.push(EpisodeFidelity {
+            index: ep.index as usize,
+            source: "recording".into(),
+            control_mode: m.control_mode.clone(),
+            seed: ep.seed.unwrap_or(0),
+            steps: per_step.len(),
+            initial,
+            reference_success: success.last().copied().unwrap_or(false),
+            mjskill_success: mj_success.last().copied().unwrap_or(false),
+            ever_success: (success.iter().any(|&s| s), mj_success.iter().any(|&s| s)),
+            first_object_divergence,
+            buckets: buckets(&[&per_step]),
+            per_step,
+        });
+    }
+    let all: Vec<&[StepError]> = episodes.iter().map(|e| e.per_step.as_slice()).collect();
+    Ok(FileFidelity {
+        env_id: m.env_id.clone(),
+        robot: m.robot.clone(),
+        sim: opts.sim,
+        resync: opts.resync,
+        buckets: buckets(&all),
+        episodes,
+    })
+}
+
 /// Replays every episode of a ManiSkill reference file.
 pub fn replay_file(file: &RefFile, opts: FidelityOptions) -> Result<FileFidelity, EnvError> {
     let episodes = file

@@ -305,6 +305,19 @@ impl Meta {
         serde_json::from_value(serde_json::Value::Object(obj)).map_err(|e| e.to_string())
     }
 
+    /// The env configuration the file was recorded with.
+    pub fn config(&self) -> Result<crate::env::EnvConfig, crate::env::EnvError> {
+        Ok(crate::env::EnvConfig {
+            robot: Some(self.robot.clone()),
+            obs_mode: crate::env::ObsMode::parse(&self.obs_mode)?,
+            reward_mode: crate::env::RewardMode::parse(&self.reward_mode)?,
+            control_mode: Some(self.control_mode.clone()),
+            robot_init_qpos_noise: self.robot_init_qpos_noise,
+            max_episode_steps: Some(self.max_episode_steps),
+            sim: self.sim(),
+        })
+    }
+
     /// The physics settings the file was recorded with.
     pub fn sim(&self) -> crate::env::SimConfig {
         crate::env::SimConfig {
