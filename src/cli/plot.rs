@@ -35,7 +35,8 @@ pub fn error_curves(report: &FileFidelity, path: &Path) -> Result<(), String> {
     if steps == 0 {
         return Err("nothing to plot: no steps were replayed".into());
     }
-    let metrics: [(&str, fn(&StepError) -> f64); 3] = [
+    type Metric = fn(&StepError) -> f64;
+    let metrics: [(&str, Metric); 3] = [
         ("joint error (rad or m)", |e| e.joint),
         ("TCP position error (m)", |e| e.tcp_pos),
         ("object position error (m)", |e| e.obj_pos),

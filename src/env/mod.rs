@@ -209,7 +209,10 @@ impl SimConfig {
     }
     /// Checks that `sim_freq` is a positive multiple of the control frequency.
     pub fn validate(&self) -> Result<(), EnvError> {
-        if self.sim_freq == 0 || self.sim_freq % CONTROL_FREQ != 0 || self.sim_freq > 100_000 {
+        if self.sim_freq == 0
+            || !self.sim_freq.is_multiple_of(CONTROL_FREQ)
+            || self.sim_freq > 100_000
+        {
             return Err(EnvError::Build(format!(
                 "sim_freq {} is not a multiple of the control frequency {CONTROL_FREQ} Hz \
                  between {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)",

@@ -317,7 +317,7 @@ pub fn replay_frames(
     for (i, f) in frames.iter().enumerate().skip(1) {
         if let Some(k) = resync {
             let prev = &frames[i - 1];
-            if (i as u32 - 1) % k.max(1) == 0 {
+            if (i as u32 - 1).is_multiple_of(k.max(1)) {
                 env.set_state_dict(&prev.state)?;
                 env.set_elapsed_steps(prev.t);
             }
