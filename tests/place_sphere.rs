@@ -204,7 +204,12 @@ fn every_reward_stage_of_a_solved_episode_matches_the_spec_formula() {
     // Stages: reaching, grasped in the air, grasped over the bin, released on the bin
     // (not yet static), success.
     let mut seen = [false; 5];
-    for seed in 0..4 {
+    // Seeds until every stage has been seen (stage 2, the sphere lowered onto the bin still
+    // in the gripper, lasts a step or two and not every episode samples it).
+    for seed in 0..20 {
+        if seen == [true; 5] {
+            break;
+        }
         e.reset(Some(seed));
         policy.reset(&e);
         for _ in 0..50 {
