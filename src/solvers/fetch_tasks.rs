@@ -6,9 +6,11 @@
 //! (`agent.tcp` of both tasks).
 //!
 //! Fetch-specific choices (each measured to matter): PlaceSphere does not drive the torso
-//! (moving it while carrying or releasing sets the sphere rolling) and releases the sphere
-//! only within 1 mm of the bin centre (released off-centre it keeps rolling between the wall
-//! edges); PokeCube grasps the peg by its tail end with the flattest gripper (the head then
+//! (moving it while carrying or releasing sets the sphere rolling), releases the sphere only
+//! within 1 mm of the bin centre (released off-centre it keeps rolling between the wall
+//! edges) and only once it has come to rest there (the settle phase of `place_sphere.rs`:
+//! the arm still creeps when the lowering ends, and a sphere let go while it moves rolls on);
+//! PokeCube grasps the peg by its tail end with the flattest gripper (the head then
 //! reaches goals up to x = 0.42), accepts a descent that stalls up to 1 cm above the grasp
 //! point (the arm sags under small commands), lowers the torso only once the peg is held, and
 //! stops the push 6.2 cm short of the goal (the cube still ends inside the 5 cm goal radius).
@@ -43,6 +45,11 @@ const TORSO_GAIN: f64 = 0.5;
 /// Fetch's lowering drifts sideways, and a sphere released off-centre keeps rolling between
 /// the wall edges.
 const RELEASE_ALIGN: f64 = 0.001;
+/// The lowered sphere is held until it moves slower than this (m/s; half `is_obj_static`'s
+/// 0.01 m/s), then released. The arm still creeps (≈ 1 cm/s) while it centres the sphere over
+/// the bin, and a sphere let go at that speed rolls on (MuJoCo has no rolling resistance), so
+/// it was still moving at step 50 in 7 % of the episodes (seeds 0–99).
+const RELEASE_SPEED: f64 = 0.005;
 
 /// Once the carried or lowered sphere has stalled short of the bin centre (the farthest bins,
 /// at the edge of the arm's reach): the horizontal distance to the bin centre that ends the
@@ -72,6 +79,7 @@ impl FetchPlaceSphere {
     pub fn new(env: &Env) -> Result<Self, String> {
         let mut inner = PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended_tilted);
         inner.release_align = RELEASE_ALIGN;
+        inner.release_speed = RELEASE_SPEED;
         Ok(FetchPlaceSphere {
             inner,
             arm: FetchArm::new(env)?,
