@@ -175,14 +175,17 @@ fn scripted_grasp_closes_on_the_cube_and_lifts_it() {
     let (id, mode) = ("PickCubeWidowXAI-v1", "pd_joint_pos");
     common::solver_grasps_and_lifts(id, mode, 0.08, 0.07, |e, seed| {
         // The carriages stop at the cube faces (half size 0.018) instead of their 0 target,
-        // and the right one mirrors the left one.
+        // and the right one mirrors the left one. The mirror is the mimic equality, which the
+        // squeezed cube strains: measured 0.3 mm at the 0.002 s step, 2.9 mm at the default
+        // 0.01 s step (left 0.0160, right 0.0189 on every seed); an unfollowing right
+        // carriage would stay at its 0.044 opening.
         let q = e.obs_part("agent/qpos").unwrap();
         assert!(
             (q[7] - 0.018).abs() < 0.003,
             "seed {seed}: left carriage {}",
             q[7]
         );
-        assert!((q[6] - q[7]).abs() < 5e-4, "seed {seed}: carriages {q:?}");
+        assert!((q[6] - q[7]).abs() < 4e-3, "seed {seed}: carriages {q:?}");
     });
 }
 
