@@ -202,7 +202,9 @@ fn every_reward_stage_of_a_solved_episode_matches_the_spec_formula() {
     let mut policy = mjskill::solvers::make_policy("solver", &e, 0).unwrap();
     let mut action = vec![0.0f32; e.action_space().shape[0]];
     // Stages: reaching, grasped in the air, grasped over the bin, released on the bin
-    // (not yet static), success.
+    // (not yet static), success. At the 0.01 s step the sphere is mostly released before it
+    // is within `is_obj_on_bin`'s 5 mm of the floor: of seeds 0–11 only seed 6 passes
+    // through "grasped over the bin" (the other stages occur on every seed).
     let mut seen = [false; 5];
     // Seeds until every stage has been seen (stage 2, the sphere lowered onto the bin still
     // in the gripper, lasts a step or two and not every episode samples it).
