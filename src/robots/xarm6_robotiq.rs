@@ -23,18 +23,18 @@ pub const PASSIVE: [&str; 4] = [
 const ARM_GAINS: (f64, f64, f64) = (1e4, 1e3, 100.0);
 /// ManiSkill's active-gripper drive: stiffness, damping, force limit (robots.md §4).
 pub const MANISKILL_GRIPPER_GAINS: (f64, f64, f64) = (1e5, 2000.0, 0.1);
-/// The drive mjskill installs on the knuckles: ManiSkill's force limit with a stiffness and
-/// damping MuJoCo's integrator can resolve on a ~1e-4 kg·m² linkage (README "Physics": the
-/// implicit integrator linearises the drive's damping without its force clamp, so D = 2000
-/// would add dt·D = 4 kg·m² of inertia and the gripper would take minutes to close). Both
-/// drives push with the full 0.1 N·m except within F/kp of the target (1e-6 rad upstream,
-/// 0.02 rad here), so the squeeze of a ±0.15 rad delta command is the same.
+/// The drive mjskill installs on the knuckles: ManiSkill's force limit with a softer stiffness
+/// and damping. It was needed under MuJoCo's implicit integrator (which linearised D = 2000
+/// without the force clamp); with PhysX's drive law (`controllers::drive`) the upstream gains
+/// work too, and this one still tracks ManiSkill's linkage closer (one-step knuckle error
+/// 0.7–1.1e-2 rad against 1.0–1.5e-2; README "Physics"). Both drives push with the full
+/// 0.1 N·m except within F/kp of the target (1e-6 rad upstream, 0.02 rad here), so the squeeze
+/// of a ±0.15 rad delta command is the same.
 const GRIPPER_GAINS: (f64, f64, f64) = (GRIPPER_KP, GRIPPER_KD, MANISKILL_GRIPPER_GAINS.2);
 /// Knuckle drive stiffness in MuJoCo (N·m/rad).
 pub const GRIPPER_KP: f64 = 5.0;
-/// Knuckle drive damping in MuJoCo (N·m·s/rad). Its implicit share dt·kd = 6e-5 kg·m² stays
-/// below the linkage inertia, so the gripper closes in ~3 control steps (measured: faster
-/// closing grasps PickCube's cube more reliably).
+/// Knuckle drive damping in MuJoCo (N·m·s/rad): the gripper closes in ~3 control steps
+/// (measured: faster closing grasps PickCube's cube more reliably).
 pub const GRIPPER_KD: f64 = 0.05;
 /// Arm delta bound (rad) of the joint-delta modes.
 const JOINT_DELTA: f32 = 0.1;
@@ -88,7 +88,7 @@ pub const LOOP_CLOSURES: [(&str, [f64; 3], &str, [f64; 3]); 2] = [
 /// gripper in ~1.3 s instead of a few control steps. See the README's "Physics".
 pub const GRIPPER_ARMATURE: f64 = 3e-5;
 /// Passive damping (N·m·s/rad) on the undriven linkage joints, which keeps the closed chain
-/// from ringing under the stiff connect constraints at dt = 0.002 s.
+/// from ringing under the stiff connect constraints.
 pub const PASSIVE_DAMPING: f64 = 1e-3;
 
 /// The finger pads (material friction 2.0, PhysX patch radius 0.1 m).
