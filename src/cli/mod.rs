@@ -461,7 +461,7 @@ fn fit_primitives(
     crop: Option<&str>,
     scale: f64,
 ) -> Result<(), String> {
-    use crate::mjcf::mesh_fit;
+    use crate::tools::mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())

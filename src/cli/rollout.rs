@@ -186,7 +186,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
     Ok(RolloutSummary {
         out: a.out.display().to_string(),
         env: a.env.clone(),
-        robot: env.robot_spec().uid.to_string(),
+        robot: env.robot_spec().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         policy: a.policy.clone(),
         episodes: a.episodes,

@@ -1,4 +1,4 @@
-//! Fetch mobile manipulator (robots.md §3): a virtual planar base (x, y, yaw), a torso lift,
+//! Fetch mobile manipulator (docs/robots.md §3): a virtual planar base (x, y, yaw), a torso lift,
 //! a pan/tilt head, a 7-dof arm (three continuous roll joints) and two prismatic fingers.
 //!
 //! Control modes have four parts in upstream order: arm, gripper, body (head pan, head tilt,
@@ -15,7 +15,7 @@ use super::{GraspDef, InitNoise, MountedCamera, RobotSpec, StaticRule, TcpDef};
 use crate::controllers::{PartKind, PartSpec};
 use crate::mjcf::RobotOptions;
 
-/// Fetch's initial qpos in the table scene (ManiSkill's breadth-first order, robots.md §3).
+/// Fetch's initial qpos in the table scene (ManiSkill's breadth-first order, docs/robots.md §3).
 pub const TABLE_QPOS: [f64; 15] = [
     0.0,
     0.0,
@@ -34,7 +34,7 @@ pub const TABLE_QPOS: [f64; 15] = [
     0.015,
 ];
 
-/// Joint names in ManiSkill's qpos order (breadth-first; robots.md §3 table).
+/// Joint names in ManiSkill's qpos order (breadth-first; docs/robots.md §3 table).
 pub const JOINT_ORDER: [&str; 15] = [
     "root_x_axis_joint",
     "root_y_axis_joint",
@@ -90,7 +90,7 @@ const EE_ROOT: &str = "torso_lift_link";
 /// Finger range (m) of the normalised absolute gripper action.
 const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.05);
 
-/// Fetch control modes (robots.md §3), default first.
+/// Fetch control modes (docs/robots.md §3), default first.
 pub const CONTROL_MODES: [&str; 11] = [
     "pd_joint_delta_pos",
     "pd_joint_pos",
@@ -150,7 +150,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
     ])
 }
 
-/// Fetch's two cameras (robots.md §3 "robot cameras"): 128×128, fovy 2 rad (near 0.01 and
+/// Fetch's two cameras (docs/robots.md §3 "robot cameras"): 128×128, fovy 2 rad (near 0.01 and
 /// far 100 are the renderer's clip planes, shared by every camera).
 pub const CAMERAS: [MountedCamera; 2] = [
     MountedCamera {
@@ -172,14 +172,14 @@ pub const CAMERAS: [MountedCamera; 2] = [
 ];
 
 /// Fetch's scene options: the wheels never touch the ground (upstream puts them and the
-/// ground in one collision group, robots.md §3).
+/// ground in one collision group, docs/robots.md §3).
 fn customize(opts: &mut RobotOptions) {
     opts.no_ground_contact = vec!["l_wheel_link".into(), "r_wheel_link".into()];
 }
 
 /// Fetch as ManiSkill configures it.
 pub static FETCH: RobotSpec = RobotSpec {
-    uid: "fetch",
+    id: super::RobotId::Fetch,
     urdf: "fetch/fetch.urdf",
     srdf: "fetch/fetch.srdf",
     arm_joints: &ARM,

@@ -1,4 +1,4 @@
-//! Franka Emika Panda (robots.md §2): 7 arm joints, two mimic-coupled prismatic fingers.
+//! Franka Emika Panda (docs/robots.md §2): 7 arm joints, two mimic-coupled prismatic fingers.
 use std::f64::consts::PI;
 
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
@@ -40,7 +40,7 @@ const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.04);
 /// The TCP / EE link.
 const TCP: &str = "panda_hand_tcp";
 
-/// Panda control modes (robots.md §2), default first.
+/// Panda control modes (docs/robots.md §2), default first.
 pub const CONTROL_MODES: [&str; 11] = super::ARM_EE_MODES;
 
 /// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
@@ -72,7 +72,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
 
 /// The Panda as ManiSkill configures it.
 pub static PANDA: RobotSpec = RobotSpec {
-    uid: "panda",
+    id: super::RobotId::Panda,
     urdf: "panda/panda.urdf",
     srdf: "panda/panda.srdf",
     arm_joints: &ARM,

@@ -1,4 +1,4 @@
-//! Trossen WidowX AI (robots.md §6): 6 arm joints and two prismatic carriages; the right
+//! Trossen WidowX AI (docs/robots.md §6): 6 arm joints and two prismatic carriages; the right
 //! carriage follows the left one through the URDF `<mimic>` tag (upstream a stiff PhysX
 //! tendon, here a MuJoCo joint equality) and has no drive of its own.
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
@@ -35,7 +35,7 @@ const JOINT_DELTA: f32 = 0.1;
 /// Carriage opening range of the (normalised, absolute) gripper action (m).
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
-/// WidowX AI control modes (robots.md §6), default first.
+/// WidowX AI control modes (docs/robots.md §6), default first.
 pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
 
 /// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
@@ -55,7 +55,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
 
 /// The WidowX AI as ManiSkill configures it.
 pub static WIDOWXAI: RobotSpec = RobotSpec {
-    uid: "widowxai",
+    id: super::RobotId::WidowxAi,
     urdf: "widowxai/widowxai.urdf",
     srdf: "widowxai/widowxai.srdf",
     arm_joints: &ARM,
