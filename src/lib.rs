@@ -29,9 +29,10 @@ pub mod tasks;
 pub mod tools;
 
 pub use env::{
-    make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode,
+    make, registry, BoxSpace, Env, EnvConfig, EnvError, EnvId, EnvState, Info, ObsMode, RewardMode,
     SimConfig, StateDict, Step, VecEnv,
 };
+pub use robots::RobotId;
 
 /// The README's examples, compiled and run as doc tests.
 #[doc = include_str!("../README.md")]

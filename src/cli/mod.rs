@@ -363,7 +363,7 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = rollout::replay(&file, tolerance, salvage)?;
+            let r = crate::record::replay::replay(&file, tolerance, salvage)?;
             out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())

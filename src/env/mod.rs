@@ -17,7 +17,7 @@ pub use config::{
     EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, CONSTRUCTION_SEED, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use registry::{default_robot, registry, scene_mjcf, EnvInfo, EnvSpec};
+pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo, EnvSpec};
 pub use render::CameraImage;
 pub use state_dict::{ActionPart, StateDict};
 pub use types::{BoxSpace, EnvState, Info, Step};
@@ -197,7 +197,7 @@ impl Env {
             _ => None,
         };
         let mut env = Env {
-            id: spec.id,
+            id: spec.id.id(),
             config: EnvConfig {
                 robot: Some(rs.uid().to_string()),
                 control_mode: Some(mode),

@@ -7,13 +7,65 @@ use crate::mjcf::Mjcf;
 use crate::robots::{RobotId, RobotSpec, TableScene};
 use crate::tasks::Task;
 
+/// The registered envs. Parsed once from an id at the API edge ([`EnvId::parse`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EnvId {
+    /// `PickCube-v1`.
+    PickCube,
+    /// `PickCubeSO100-v1`.
+    PickCubeSo100,
+    /// `PickCubeWidowXAI-v1`.
+    PickCubeWidowxAi,
+    /// `PlaceSphere-v1`.
+    PlaceSphere,
+    /// `PokeCube-v1`.
+    PokeCube,
+}
+
+impl EnvId {
+    /// Every env, in the registry's order.
+    pub const ALL: [EnvId; 5] = [
+        EnvId::PickCube,
+        EnvId::PickCubeSo100,
+        EnvId::PickCubeWidowxAi,
+        EnvId::PlaceSphere,
+        EnvId::PokeCube,
+    ];
+
+    /// The id as ManiSkill registers it.
+    pub const fn id(self) -> &'static str {
+        match self {
+            EnvId::PickCube => "PickCube-v1",
+            EnvId::PickCubeSo100 => "PickCubeSO100-v1",
+            EnvId::PickCubeWidowxAi => "PickCubeWidowXAI-v1",
+            EnvId::PlaceSphere => "PlaceSphere-v1",
+            EnvId::PokeCube => "PokeCube-v1",
+        }
+    }
+
+    /// Parses an env id; the error lists the valid ids.
+    pub fn parse(id: &str) -> Result<EnvId, EnvError> {
+        EnvId::ALL
+            .into_iter()
+            .find(|e| e.id() == id)
+            .ok_or_else(|| {
+                EnvError::UnknownEnv(id.to_string(), EnvId::ALL.map(EnvId::id).join(", "))
+            })
+    }
+
+    /// The env's registration.
+    pub fn spec(self) -> &'static EnvSpec {
+        &REGISTRY[self as usize]
+    }
+}
+
 /// A registered env.
 #[derive(Debug, Clone)]
 pub struct EnvSpec {
     /// Env id.
-    pub id: &'static str,
+    pub id: EnvId,
     /// Supported robots (the first is the default).
-    pub robots: &'static [&'static str],
+    pub robots: &'static [RobotId],
     /// Steps until truncation.
     pub max_episode_steps: u32,
     pub(super) make_task: fn(RobotId) -> Box<dyn Task>,
@@ -50,49 +102,44 @@ fn poke_cube(_robot: RobotId) -> Box<dyn Task> {
 
 static REGISTRY: [EnvSpec; 5] = [
     EnvSpec {
-        id: "PickCube-v1",
-        robots: &["panda", "fetch", "xarm6_robotiq", "so100", "widowxai"],
+        id: EnvId::PickCube,
+        robots: &RobotId::ALL,
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
     EnvSpec {
-        id: "PickCubeSO100-v1",
-        robots: &["so100"],
+        id: EnvId::PickCubeSo100,
+        robots: &[RobotId::So100],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
     EnvSpec {
-        id: "PickCubeWidowXAI-v1",
-        robots: &["widowxai"],
+        id: EnvId::PickCubeWidowxAi,
+        robots: &[RobotId::WidowxAi],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
     EnvSpec {
-        id: "PlaceSphere-v1",
-        robots: &["panda", "fetch"],
+        id: EnvId::PlaceSphere,
+        robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: place_sphere,
     },
     EnvSpec {
-        id: "PokeCube-v1",
-        robots: &["panda", "fetch"],
+        id: EnvId::PokeCube,
+        robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: poke_cube,
     },
 ];
 
 pub(super) fn env_spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
-    REGISTRY.iter().find(|e| e.id == id).ok_or_else(|| {
-        EnvError::UnknownEnv(
-            id.to_string(),
-            REGISTRY.iter().map(|e| e.id).collect::<Vec<_>>().join(", "),
-        )
-    })
+    Ok(EnvId::parse(id)?.spec())
 }
 
 /// The default robot of a registered env.
 pub fn default_robot(env_id: &str) -> Result<&'static str, EnvError> {
-    Ok(env_spec(env_id)?.robots[0])
+    Ok(env_spec(env_id)?.robots[0].uid())
 }
 
 /// Every registered env id with its robots, their control modes, and the modes.
@@ -100,19 +147,12 @@ pub fn registry() -> Vec<EnvInfo> {
     REGISTRY
         .iter()
         .map(|e| EnvInfo {
-            id: e.id,
-            default_robot: e.robots[0],
+            id: e.id.id(),
+            default_robot: e.robots[0].uid(),
             robots: e
                 .robots
                 .iter()
-                .map(|r| {
-                    (
-                        *r,
-                        crate::robots::spec(r)
-                            .map(|s| s.control_modes.to_vec())
-                            .unwrap_or_default(),
-                    )
-                })
+                .map(|r| (r.uid(), r.spec().control_modes.to_vec()))
                 .collect(),
             obs_modes: ObsMode::ALL.iter().map(|(n, _)| *n).collect(),
             reward_modes: RewardMode::ALL.iter().map(|(n, _)| *n).collect(),
@@ -125,16 +165,23 @@ pub(super) fn resolve_robot(
     spec: &EnvSpec,
     robot: Option<&str>,
 ) -> Result<&'static RobotSpec, EnvError> {
-    let uid = robot.unwrap_or(spec.robots[0]);
-    crate::robots::spec(uid).map_err(EnvError::Build)?;
-    if !spec.robots.contains(&uid) {
+    let id = match robot {
+        Some(uid) => RobotId::parse(uid).map_err(EnvError::Build)?,
+        None => spec.robots[0],
+    };
+    if !spec.robots.contains(&id) {
         return Err(EnvError::UnsupportedRobot {
-            env: spec.id.into(),
-            robot: uid.into(),
-            valid: spec.robots.join(", "),
+            env: spec.id.id().into(),
+            robot: id.uid().into(),
+            valid: spec
+                .robots
+                .iter()
+                .map(|r| r.uid())
+                .collect::<Vec<_>>()
+                .join(", "),
         });
     }
-    crate::robots::spec(uid).map_err(EnvError::Build)
+    Ok(id.spec())
 }
 
 /// Builds the MJCF of an env's scene for `robot` with its default control mode.
@@ -167,10 +214,28 @@ pub(super) fn build_scene(
         .map_err(EnvError::UnknownMode)?;
     TableScene::build(
         rs,
-        &format!("{}-{}", spec.id, rs.uid()),
+        &format!("{}-{}", spec.id.id(), rs.uid()),
         control_mode,
         sim.timestep(),
         |scene| task.build(scene),
     )
     .map_err(EnvError::Build)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_env_id_finds_its_own_registration() {
+        for id in EnvId::ALL {
+            assert_eq!(id.spec().id, id);
+            assert_eq!(EnvId::parse(id.id()), Ok(id));
+        }
+        assert_eq!(
+            EnvId::parse("PickCube-v2").unwrap_err().to_string(),
+            "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
+             PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1"
+        );
+    }
 }

@@ -39,6 +39,7 @@
 pub mod image;
 mod num;
 mod reader;
+pub mod replay;
 mod scan;
 mod schema;
 
