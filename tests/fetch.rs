@@ -194,7 +194,7 @@ fn every_control_mode_has_the_specified_action_and_observation_dims() {
     ];
     assert_eq!(
         modes.iter().map(|m| m.0).collect::<Vec<_>>(),
-        fetch::CONTROL_MODES
+        fetch::CONTROL_MODES.map(|m| m.name())
     );
     for (mode, adim, odim) in modes {
         let mut e = env("PickCube-v1", mode);

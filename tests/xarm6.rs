@@ -275,7 +275,11 @@ fn control_modes_have_the_upstream_action_and_observation_shapes() {
     ];
     assert_eq!(
         table.map(|t| t.0).to_vec(),
-        spec().control_modes.to_vec(),
+        spec()
+            .control_modes
+            .iter()
+            .map(|m| m.name())
+            .collect::<Vec<_>>(),
         "all 11 modes, default first"
     );
     for (mode, dim, obs, (lo, hi)) in table {

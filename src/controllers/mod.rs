@@ -7,6 +7,7 @@
 pub mod drive;
 pub mod ik;
 pub mod joints;
+pub mod mode;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -17,6 +18,7 @@ use crate::obs::ObsWriter;
 pub use drive::Drives;
 use ik::Chain;
 pub use joints::JointMap;
+pub use mode::ControlMode;
 
 /// What a part does with its action slice.
 #[derive(Debug, Clone, PartialEq)]
@@ -255,7 +257,7 @@ struct Part {
 /// A constructed controller for one robot and control mode.
 #[derive(Debug, Clone)]
 pub struct Controller {
-    mode: String,
+    mode: ControlMode,
     parts: Vec<Part>,
     low: Vec<f32>,
     high: Vec<f32>,
@@ -289,7 +291,11 @@ pub fn standardize(q: UnitQuaternion<f64>) -> UnitQuaternion<f64> {
 impl Controller {
     /// Builds the controller for `mode` from its parts. Bounds that default to joint limits
     /// are read from `desc`.
-    pub fn new(mode: &str, parts: Vec<PartSpec>, desc: &RobotDesc) -> Result<Controller, String> {
+    pub fn new(
+        mode: ControlMode,
+        parts: Vec<PartSpec>,
+        desc: &RobotDesc,
+    ) -> Result<Controller, String> {
         let active = desc.active_joints();
         let index = |name: &str| {
             active
@@ -420,7 +426,7 @@ impl Controller {
             });
         }
         Ok(Controller {
-            mode: mode.to_string(),
+            mode,
             parts: built,
             low,
             high,
@@ -430,9 +436,9 @@ impl Controller {
         })
     }
 
-    /// The control mode name.
-    pub fn mode(&self) -> &str {
-        &self.mode
+    /// The control mode's name.
+    pub fn mode(&self) -> &'static str {
+        self.mode.name()
     }
     /// Action length.
     pub fn action_dim(&self) -> usize {

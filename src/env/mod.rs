@@ -128,7 +128,7 @@ impl Env {
         let mode = config
             .control_mode
             .clone()
-            .unwrap_or_else(|| rs.control_modes[0].to_string());
+            .unwrap_or_else(|| rs.control_modes[0].name().to_string());
         checks::check_qpos_noise(config.robot_init_qpos_noise)?;
         config.sim.validate()?;
         let mut task = (spec.make_task)(rs.id);

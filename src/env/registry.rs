@@ -152,7 +152,10 @@ pub fn registry() -> Vec<EnvInfo> {
             robots: e
                 .robots
                 .iter()
-                .map(|r| (r.uid(), r.spec().control_modes.to_vec()))
+                .map(|r| {
+                    let modes = r.spec().control_modes.iter().map(|m| m.name()).collect();
+                    (r.uid(), modes)
+                })
                 .collect(),
             obs_modes: ObsMode::ALL.iter().map(|(n, _)| *n).collect(),
             reward_modes: RewardMode::ALL.iter().map(|(n, _)| *n).collect(),
@@ -192,7 +195,7 @@ pub fn scene_mjcf(env_id: &str, robot: &str) -> Result<Mjcf, String> {
     let scene = build_scene(
         spec,
         rs,
-        rs.control_modes[0],
+        rs.control_modes[0].name(),
         SimConfig::default(),
         task.as_ref(),
     )

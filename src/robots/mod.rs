@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::controllers::{Controller, Drives, JointMap, PartSpec};
+use crate::controllers::{ControlMode, Controller, Drives, JointMap, PartSpec};
 use crate::mjcf::urdf::RobotDesc;
 use crate::mjcf::{Drive, LinkCamera, RobotOptions, GRAVITY};
 use crate::mujoco::{Data, Model, ObjType};
@@ -90,25 +90,25 @@ pub const ROBOT_UIDS: [&str; 5] = [
 
 /// Control modes of an arm with joint, velocity and EE controllers (Panda, xArm6), in
 /// upstream's order, default first.
-pub const ARM_EE_MODES: [&str; 11] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_pose",
-    "pd_joint_target_delta_pos",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
+pub const ARM_EE_MODES: [ControlMode; 11] = [
+    ControlMode::PdJointDeltaPos,
+    ControlMode::PdJointPos,
+    ControlMode::PdEeDeltaPos,
+    ControlMode::PdEeDeltaPose,
+    ControlMode::PdEePose,
+    ControlMode::PdJointTargetDeltaPos,
+    ControlMode::PdEeTargetDeltaPos,
+    ControlMode::PdEeTargetDeltaPose,
+    ControlMode::PdJointVel,
+    ControlMode::PdJointPosVel,
+    ControlMode::PdJointDeltaPosVel,
 ];
 
 /// Control modes of a joint-position-only arm (SO100, WidowX AI), default first.
-pub const JOINT_POS_MODES: [&str; 3] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
+pub const JOINT_POS_MODES: [ControlMode; 3] = [
+    ControlMode::PdJointDeltaPos,
+    ControlMode::PdJointPos,
+    ControlMode::PdJointTargetDeltaPos,
 ];
 
 /// Armature (kg·m² or kg) of every robot joint not listed otherwise. PhysX has none and the
@@ -275,9 +275,9 @@ pub struct RobotSpec {
     /// Noise rule of the table scene.
     pub init_noise: InitNoise,
     /// Control modes, the default (ManiSkill's first) first.
-    pub control_modes: &'static [&'static str],
+    pub control_modes: &'static [ControlMode],
     /// The parts of a control mode (None for an unknown mode).
-    pub parts: fn(&str) -> Option<Vec<PartSpec>>,
+    pub parts: fn(ControlMode) -> Option<Vec<PartSpec>>,
     /// Cameras mounted on the robot's links, rendered in the visual obs modes besides the
     /// task's sensor camera (empty for most robots).
     pub cameras: &'static [MountedCamera],
@@ -376,15 +376,22 @@ impl RobotSpec {
         opts
     }
 
-    /// The parts of `mode`; the error lists this robot's control modes.
-    pub fn control_mode(&self, mode: &str) -> Result<Vec<PartSpec>, String> {
-        (self.parts)(mode).ok_or_else(|| {
-            format!(
-                "unknown control mode {mode:?} for robot {}; valid modes: {}",
-                self.uid(),
-                self.control_modes.join(", ")
-            )
-        })
+    /// The control mode named `mode` with its parts; the error (an unknown name or a mode
+    /// this robot lacks) lists this robot's control modes.
+    pub fn control_mode(&self, mode: &str) -> Result<(ControlMode, Vec<PartSpec>), String> {
+        ControlMode::from_name(mode)
+            .and_then(|m| Some((m, (self.parts)(m)?)))
+            .ok_or_else(|| {
+                format!(
+                    "unknown control mode {mode:?} for robot {}; valid modes: {}",
+                    self.uid(),
+                    self.control_modes
+                        .iter()
+                        .map(|m| m.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })
     }
 
     /// Drives with this robot's default gains on every arm and gripper joint.
@@ -587,7 +594,8 @@ impl TableScene {
         extra: impl FnOnce(&mut crate::mjcf::Scene),
     ) -> Result<TableScene, String> {
         let desc = spec.description()?;
-        let controller = Controller::new(mode, spec.control_mode(mode)?, &desc)?;
+        let (mode, parts) = spec.control_mode(mode)?;
+        let controller = Controller::new(mode, parts, &desc)?;
         let drive_list = controller.drives(&desc);
         let mut scene = crate::mjcf::Scene::new(name, timestep);
         scene.add_table_scene();
@@ -627,7 +635,13 @@ pub fn table_scene_at(
     timestep: f64,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
 ) -> Result<TableScene, String> {
-    TableScene::build(spec, spec.uid(), spec.control_modes[0], timestep, extra)
+    TableScene::build(
+        spec,
+        spec.uid(),
+        spec.control_modes[0].name(),
+        timestep,
+        extra,
+    )
 }
 
 /// Unit vector helper: the local y axis of a body in world coordinates.

@@ -3,7 +3,7 @@
 use std::f64::consts::FRAC_PI_2;
 
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 
 /// Joints in ManiSkill order (5 arm joints, then the gripper).
 pub const JOINTS: [&str; 6] = [
@@ -31,18 +31,18 @@ pub const FIXED_JAW_TIP: [f64; 3] = [0.01, -0.097, 0.0];
 pub const MOVING_JAW_TIP: [f64; 3] = [-0.01, -0.073, 0.0];
 
 /// SO100 control modes (docs/robots.md §5), default first.
-pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
+pub const CONTROL_MODES: [ControlMode; 3] = super::JOINT_POS_MODES;
 
 /// The parts of an SO100 control mode: always one part over all six joints.
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let delta = |use_target| {
         let bounds = [[ARM_DELTA; 5].as_slice(), &[GRIPPER_DELTA]].concat();
         PartKind::joint_delta_per(bounds, use_target)
     };
     let kind = match mode {
-        "pd_joint_delta_pos" => delta(false),
-        "pd_joint_target_delta_pos" => delta(true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
+        ControlMode::PdJointDeltaPos => delta(false),
+        ControlMode::PdJointTargetDeltaPos => delta(true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
         _ => return None,
     };
     Some(vec![PartSpec::new("arm", &JOINTS, kind, GAINS)])

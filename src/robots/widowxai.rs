@@ -2,7 +2,7 @@
 //! carriage follows the left one through the URDF `<mimic>` tag (upstream a stiff PhysX
 //! tendon, here a MuJoCo joint equality) and has no drive of its own.
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 
 /// Arm joints (ManiSkill order).
 const ARM: [&str; 6] = [
@@ -36,14 +36,14 @@ const JOINT_DELTA: f32 = 0.1;
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
 /// WidowX AI control modes (docs/robots.md §6), default first.
-pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
+pub const CONTROL_MODES: [ControlMode; 3] = super::JOINT_POS_MODES;
 
 /// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let kind = match mode {
-        "pd_joint_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, false),
-        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
+        ControlMode::PdJointDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, false),
+        ControlMode::PdJointTargetDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
         _ => return None,
     };
     let gripper = PartKind::joint_range(1, GRIPPER_RANGE, true);
