@@ -2,6 +2,24 @@
 //! extras, `evaluate()`, dense reward — with every constant named once. This module holds
 //! what they share: the [`Task`] trait, the per-step [`TaskCtx`], the grasp check and pose
 //! helpers.
+/// Declares a task's `info` keys once: `pub const INFO_KEYS` (the names in upstream
+/// insertion order) and a `usize` index constant per key, from one list of
+/// `INDEX = "name"` pairs.
+macro_rules! info_keys {
+    ($($idx:ident = $name:literal),+ $(,)?) => {
+        /// `evaluate()` keys in upstream insertion order.
+        pub const INFO_KEYS: [&str; info_keys!(@count $($idx)+)] = [$($name),+];
+        info_keys!(@index 0usize; $($idx)+);
+    };
+    (@count) => { 0usize };
+    (@count $head:ident $($tail:ident)*) => { 1usize + info_keys!(@count $($tail)*) };
+    (@index $n:expr;) => {};
+    (@index $n:expr; $head:ident $($tail:ident)*) => {
+        const $head: usize = $n;
+        info_keys!(@index $n + 1usize; $($tail)*);
+    };
+}
+
 pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;

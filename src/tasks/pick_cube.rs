@@ -93,12 +93,12 @@ pub fn config_for(robot: RobotId) -> PickCubeConfig {
     }
 }
 
-/// `info` keys, in upstream order.
-pub const INFO_KEYS: [&str; 4] = ["success", "is_obj_placed", "is_robot_static", "is_grasped"];
-const SUCCESS: usize = 0;
-const IS_OBJ_PLACED: usize = 1;
-const IS_ROBOT_STATIC: usize = 2;
-const IS_GRASPED: usize = 3;
+info_keys! {
+    SUCCESS = "success",
+    IS_OBJ_PLACED = "is_obj_placed",
+    IS_ROBOT_STATIC = "is_robot_static",
+    IS_GRASPED = "is_grasped",
+}
 
 /// PickCube-v1.
 #[derive(Debug, Clone)]

@@ -34,17 +34,12 @@ const STATIC_ANG: f64 = 0.5;
 /// The `ungrasp` term when the sphere is not grasped.
 const UNGRASP_FREE: f64 = 16.0;
 
-/// `evaluate()` keys in upstream order.
-pub const INFO_KEYS: [&str; 4] = [
-    "is_obj_grasped",
-    "is_obj_on_bin",
-    "is_obj_static",
-    "success",
-];
-const IS_OBJ_GRASPED: usize = 0;
-const IS_OBJ_ON_BIN: usize = 1;
-const IS_OBJ_STATIC: usize = 2;
-const SUCCESS: usize = 3;
+info_keys! {
+    IS_OBJ_GRASPED = "is_obj_grasped",
+    IS_OBJ_ON_BIN = "is_obj_on_bin",
+    IS_OBJ_STATIC = "is_obj_static",
+    SUCCESS = "success",
+}
 
 /// The five bin boxes (centre, half extents) in the bin frame: floor, walls −x, +x, −y, +y.
 pub fn bin_boxes() -> [([f64; 3], [f64; 3]); 5] {

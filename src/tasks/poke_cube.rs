@@ -62,21 +62,14 @@ const REACHED_DIST: f64 = 0.01;
 /// Trailing qvel entries the static reward term ignores (both supported robots).
 const STATIC_DROP: usize = 2;
 
-/// `evaluate()` keys in upstream order.
-pub const INFO_KEYS: [&str; 6] = [
-    "success",
-    "is_cube_placed",
-    "is_peg_cube_fit",
-    "is_peg_grasped",
-    "angle_diff",
-    "head_to_cube_dist",
-];
-const SUCCESS: usize = 0;
-const IS_CUBE_PLACED: usize = 1;
-const IS_PEG_CUBE_FIT: usize = 2;
-const IS_PEG_GRASPED: usize = 3;
-const ANGLE_DIFF: usize = 4;
-const HEAD_TO_CUBE_DIST: usize = 5;
+info_keys! {
+    SUCCESS = "success",
+    IS_CUBE_PLACED = "is_cube_placed",
+    IS_PEG_CUBE_FIT = "is_peg_cube_fit",
+    IS_PEG_GRASPED = "is_peg_grasped",
+    ANGLE_DIFF = "angle_diff",
+    HEAD_TO_CUBE_DIST = "head_to_cube_dist",
+}
 
 /// The target's rings `(radius, half thickness, colour)`, outermost first:
 /// radii 0.05·{1, 4/5, 3/5, 2/5, 1/5}, alternating red and white.
