@@ -1,4 +1,4 @@
-//! Fetch (robots.md §3): generated kinematics against an independent URDF implementation,
+//! Fetch (docs/robots.md §3): generated kinematics against an independent URDF implementation,
 //! ManiSkill's joint order, holding and tracking, every control mode's spaces, the EE modes,
 //! base velocity drives, the scripted PickCube grasp, seeding, PlaceSphere, export-mjcf.
 use nalgebra::{Isometry3, Vector3};
@@ -24,7 +24,7 @@ fn env(task: &str, mode: &str) -> mjskill::Env {
 
 fn qpos(env: &mjskill::Env) -> Vec<f64> {
     let mut q = vec![0.0; 15];
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     q
 }
 
@@ -38,8 +38,8 @@ fn forward_kinematics_matches_independent_urdf_fk() {
     // Continuous joints: several turns; the planar base: a few metres.
     let sample = |rng: &mut rand::rngs::StdRng, ids: &RobotIds| {
         let mut qv = vec![0.0; 15];
-        for (k, name) in ids.joint_names.iter().enumerate() {
-            let (lo, hi) = ids.limits[k];
+        for (k, name) in ids.joints.names.iter().enumerate() {
+            let (lo, hi) = ids.joints.limits[k];
             let (lo, hi) = (lo.max(-7.0), hi.min(7.0));
             let (lo, hi) = if name.starts_with("root_") && !name.contains("rotation") {
                 (lo.max(-2.0), hi.min(2.0))
@@ -58,12 +58,15 @@ fn forward_kinematics_matches_independent_urdf_fk() {
 #[test]
 fn joint_order_is_maniskills_breadth_first_order() {
     let e = env("PickCube-v1", "pd_joint_delta_pos");
-    assert_eq!(e.robot().joint_names, fetch::JOINT_ORDER);
+    assert_eq!(e.robot().joints.names, fetch::JOINT_ORDER);
     // Continuous joints are unlimited; the fingers' upper limit sets PlaceSphere's width.
     for k in [2, 8, 10, 12] {
-        assert_eq!(e.robot().limits[k], (f64::NEG_INFINITY, f64::INFINITY));
+        assert_eq!(
+            e.robot().joints.limits[k],
+            (f64::NEG_INFINITY, f64::INFINITY)
+        );
     }
-    assert_eq!(e.robot().limits[14], (0.0, 0.05));
+    assert_eq!(e.robot().joints.limits[14], (0.0, 0.05));
 }
 
 #[test]
@@ -88,7 +91,7 @@ fn seeded_reset_is_deterministic_and_exactly_the_table_pose() {
         let ob = b.step(&act).unwrap().obs.to_vec();
         assert_eq!(oa, ob);
     }
-    // ManiSkill's rest TCP (robots.md §3): p (−0.17747, 0, 0.23717), q (0.86603, 0, 0.5, 0).
+    // ManiSkill's rest TCP (docs/robots.md §3): p (−0.17747, 0, 0.23717), q (0.86603, 0, 0.5, 0).
     a.reset(Some(0));
     let tcp = a.obs_part("extra/tcp_pose").unwrap();
     let want = [-0.17747, 0.0, 0.23717, 0.86603, 0.0, 0.5, 0.0];
@@ -175,7 +178,7 @@ fn tracks_absolute_joint_targets_of_arm_and_body() {
 
 #[test]
 fn every_control_mode_has_the_specified_action_and_observation_dims() {
-    // robots.md §3 action dims; tasks.md §4 state dims (54, +7 for target_qpos/target_pose).
+    // docs/robots.md §3 action dims; docs/tasks.md §4 state dims (54, +7 for target_qpos/target_pose).
     let modes = [
         ("pd_joint_delta_pos", 13, 54),
         ("pd_joint_pos", 13, 54),
@@ -191,7 +194,7 @@ fn every_control_mode_has_the_specified_action_and_observation_dims() {
     ];
     assert_eq!(
         modes.iter().map(|m| m.0).collect::<Vec<_>>(),
-        fetch::CONTROL_MODES
+        fetch::CONTROL_MODES.map(|m| m.name())
     );
     for (mode, adim, odim) in modes {
         let mut e = env("PickCube-v1", mode);

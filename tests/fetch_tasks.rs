@@ -1,4 +1,4 @@
-//! PokeCube-v1 and PlaceSphere-v1 with Fetch (tasks.md §2–§5): state dims, seeded objects
+//! PokeCube-v1 and PlaceSphere-v1 with Fetch (docs/tasks.md §2–§5): state dims, seeded objects
 //! independent of the robot, the Fetch's TCP link (`gripper_link`) in the PokeCube reward,
 //! the static term over `qvel[:-2]` and Fetch's signed static rule, and the scripted solvers.
 mod common;
@@ -52,7 +52,7 @@ fn seeded_pokecube_objects_do_not_depend_on_the_robot() {
     ] {
         assert_eq!(part(&f, key), part(&p, key), "{key}");
     }
-    // tasks.md §5, PokeCube seed 0.
+    // docs/tasks.md §5, PokeCube seed 0.
     let peg = part(&f, "extra/peg_pose");
     let cube = part(&f, "extra/cube_pose");
     let c2g = part(&f, "extra/cube_to_goal_pos");

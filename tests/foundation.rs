@@ -51,7 +51,7 @@ fn panda_holds_pose_under_gravity_and_tracks_a_step_target() {
     let steps_5s = (5.0 / model.timestep()).round() as usize;
     run(&mut d, &mut dr, steps_5s);
     let mut q = vec![0.0; 9];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate().take(7) {
         let sag = (qk - rest).abs();
         assert!(sag < 1e-3, "joint {k} sagged {sag} rad over 5 s");
@@ -66,7 +66,7 @@ fn panda_holds_pose_under_gravity_and_tracks_a_step_target() {
     }
     run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
     assert_eq!(d.ncon(), 0, "the moved arm touches nothing");
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for k in 0..7 {
         let e = (q[k] - target[k]).abs();
         assert!(e < 2e-3, "joint {k} tracking error {e} after 1.5 s");
@@ -106,7 +106,7 @@ fn pick_box_and_swing(timestep: f64, slip: f64) {
     let arm = &spec.arm_joints[..7];
     let chain = mjskill::controllers::ik::Chain::new(&desc, "panda_hand_tcp", arm).unwrap();
     let mut q = vec![0.0; 9];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     let here = chain.fk(&q);
     // The chain works in the robot's base frame: move the TCP straight down by its height
     // above the box centre.
@@ -126,7 +126,7 @@ fn pick_box_and_swing(timestep: f64, slip: f64) {
     dr.set_joint_target(7, -0.01, 0.0);
     dr.set_joint_target(8, -0.01, 0.0);
     run(&mut d, &mut dr, 50 * k);
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     assert!(
         (q[7] - 0.02).abs() < 2e-3 && (q[8] - 0.02).abs() < 2e-3,
         "fingers stop at the box faces: {:?}",
@@ -165,7 +165,7 @@ fn pick_box_and_swing(timestep: f64, slip: f64) {
         (rel1 - rel0).norm() < slip,
         "dt {timestep}: box slipped in the gripper: {rel0:?} -> {rel1:?}"
     );
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     assert!((q[0] - target[0]).abs() < 0.01, "the arm swung: {}", q[0]);
     assert!(d.xpos()[3 * bx + 2] > 0.1, "box is still up in the air");
     assert!(!d.warnings().diverged());

@@ -51,8 +51,8 @@ fn quat_angle(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn robot_qpos(env: &Env) -> Vec<f64> {
-    let mut q = vec![0.0; env.robot().qpos_adr.len()];
-    env.robot().qpos(env.data(), &mut q);
+    let mut q = vec![0.0; env.robot().joints.len()];
+    env.robot().joints.qpos(env.data(), &mut q);
     q
 }
 

@@ -18,7 +18,7 @@ fn env_with(mode: &str) -> mjskill::Env {
 
 #[test]
 fn seeded_resets_reproduce_maniskills_initial_states() {
-    // tasks.md §5 (panda, noise 0.02).
+    // docs/tasks.md §5 (panda, noise 0.02).
     let cases = [
         (
             0u64,
@@ -240,7 +240,7 @@ fn info_keys_and_reward_modes() {
 
 #[test]
 fn a_scripted_grasp_lifts_the_cube_and_reports_is_grasped() {
-    // EE-space policy (solvers.md §7.1): above the cube, down, close, lift to the goal.
+    // EE-space policy (docs/solvers.md §7.1): above the cube, down, close, lift to the goal.
     let mut env = env_with("pd_ee_delta_pos");
     env.reset(Some(0));
     let mut grasped = false;
@@ -470,7 +470,7 @@ fn registry_lists_envs_robots_and_modes() {
 #[test]
 fn ee_delta_pose_rotation_follows_maniskills_sign_and_root_axes() {
     // rot_lower = −0.1 ⇒ a positive normalised rotation action turns by −0.1·a rad about the
-    // root-frame axis through the EE (controllers.md §1, §3.2).
+    // root-frame axis through the EE (docs/controllers.md §1, §3.2).
     let mut env = env_with("pd_ee_delta_pose");
     env.reset(Some(2));
     let q0 = quat(env.obs_part("extra/tcp_pose").unwrap());

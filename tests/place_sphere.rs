@@ -12,7 +12,7 @@ fn env() -> mjskill::Env {
 
 #[test]
 fn seeded_resets_reproduce_maniskills_initial_states() {
-    // tasks.md §5.
+    // docs/tasks.md §5.
     let mut e = env();
     for (seed, qpos, sphere, bin) in [
         (
@@ -155,7 +155,7 @@ fn reward_stages_follow_the_spec() {
     }
 }
 
-/// The dense reward recomputed independently (tasks.md §3.5) from the observation, the info
+/// The dense reward recomputed independently (docs/tasks.md §3.5) from the observation, the info
 /// flags and the sphere's velocity.
 fn spec_dense_reward(e: &mjskill::Env, sphere_body: usize) -> f64 {
     let part = |k: &str| -> Vec<f64> { e.obs_part(k).unwrap().iter().map(|&x| x as f64).collect() };

@@ -28,7 +28,7 @@ fn rotz(yaw: f64) -> [f64; 4] {
 
 #[test]
 fn seeded_resets_reproduce_maniskills_initial_states() {
-    // tasks.md §5 (PokeCube rows).
+    // docs/tasks.md §5 (PokeCube rows).
     let mut e = env_with(None);
     for (seed, qpos, peg, cube, cube_q, goal) in [
         (
@@ -114,7 +114,7 @@ fn state_layout_is_54_long_in_maniskills_order() {
         ]
     );
     // Without state only the TCP pose is an extra (the other keys are privileged).
-    assert_eq!(e.task().extra_layout(false), vec![("tcp_pose", 7)]);
+    assert_eq!(e.extra_layout(false), vec![("tcp_pose".to_string(), 7)]);
     assert_eq!(
         e.info().keys,
         &[

@@ -65,7 +65,7 @@ fn reference_trajectories_replay_within_tolerance() {
         );
         assert_eq!(rec.finished().count(), episodes, "{name}");
         let rep =
-            mjskill::cli::rollout::replay_recording(&path, &rec, REFERENCE_TOLERANCE).unwrap();
+            mjskill::record::replay::replay_recording(&path, &rec, REFERENCE_TOLERANCE).unwrap();
         assert!(rep.ok, "{name}: {rep:?}");
         assert_eq!(rep.flag_mismatches, 0, "{name}: success per step matches");
         assert_eq!(

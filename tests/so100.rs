@@ -1,4 +1,4 @@
-//! SO100 (robots.md §5) and PickCubeSO100-v1: model kinematics against the URDF, the
+//! SO100 (docs/robots.md §5) and PickCubeSO100-v1: model kinematics against the URDF, the
 //! jaw-tip TCP, drives, control modes, the table-scene noise rule, the scripted grasp and
 //! robot/env errors.
 mod common;
@@ -13,7 +13,7 @@ use mjskill::{make, EnvConfig};
 fn qpos_order_is_maniskills() {
     let e = env("PickCubeSO100-v1", "pd_joint_delta_pos");
     assert_eq!(
-        e.robot().joint_names,
+        e.robot().joints.names,
         [
             "shoulder_pan",
             "shoulder_lift",
@@ -23,7 +23,7 @@ fn qpos_order_is_maniskills() {
             "gripper"
         ]
     );
-    let lim = &e.robot().limits;
+    let lim = &e.robot().joints.limits;
     assert_eq!(lim[0], (-2.0, 2.0));
     assert_eq!(lim[3], (-1.8, 1.8));
     assert_eq!(lim[5], (-1.1, 1.1));
@@ -61,7 +61,7 @@ fn forward_kinematics_and_tcp_match_an_independent_urdf_computation() {
 
 #[test]
 fn rest_tcp_equals_maniskills_measured_pose() {
-    // robots.md §5: table-scene rest without noise.
+    // docs/robots.md §5: table-scene rest without noise.
     let e = make(
         "PickCubeSO100-v1",
         EnvConfig {

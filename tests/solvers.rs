@@ -77,7 +77,7 @@ fn sparse_reward_is_success_and_dense_reaches_its_maximum_stage() {
     )
     .unwrap();
     assert!(successes > 0);
-    // Success with a static robot earns the full dense reward of 5 (tasks.md §1.7).
+    // Success with a static robot earns the full dense reward of 5 (docs/tasks.md §1.7).
     assert!((dense_max - 5.0).abs() < 1e-9, "{dense_max}");
 }
 

@@ -1,4 +1,4 @@
-//! WidowX AI (robots.md §6) and PickCubeWidowXAI-v1: model kinematics against the URDF, the
+//! WidowX AI (docs/robots.md §6) and PickCubeWidowXAI-v1: model kinematics against the URDF, the
 //! TCP link, the mimic-coupled carriages, the arm/gripper controllers that both drive the
 //! left carriage, the noise-free table scene, the scripted grasp and robot/env errors.
 mod common;
@@ -14,7 +14,7 @@ use mjskill::{make, EnvConfig};
 fn qpos_order_is_maniskills() {
     let e = env("PickCubeWidowXAI-v1", "pd_joint_delta_pos");
     assert_eq!(
-        e.robot().joint_names,
+        e.robot().joints.names,
         [
             "joint_0",
             "joint_1",
@@ -26,8 +26,8 @@ fn qpos_order_is_maniskills() {
             "left_carriage_joint"
         ]
     );
-    assert_eq!(e.robot().limits[6], (0.0, 0.044));
-    assert_eq!(e.robot().limits[2], (0.0, 2.356194490192345));
+    assert_eq!(e.robot().joints.limits[6], (0.0, 0.044));
+    assert_eq!(e.robot().joints.limits[2], (0.0, 2.356194490192345));
     let b = e.robot().body("ee_gripper_link").unwrap();
     assert_eq!(e.model().body_mass()[b], 1e-6);
 }
@@ -59,7 +59,7 @@ fn table_scene_is_ready_to_grasp_without_noise_and_the_tcp_matches_maniskill() {
         let q = e.obs_part("agent/qpos").unwrap();
         let want: Vec<f32> = widowxai::READY_TO_GRASP.iter().map(|&x| x as f32).collect();
         assert_eq!(q, want.as_slice(), "seed {seed}: exactly ready_to_grasp");
-        // robots.md §6: rest TCP p (−0.40146, 0, 0.08492), q (0.69671, 0, 0.71736, 0).
+        // docs/robots.md §6: rest TCP p (−0.40146, 0, 0.08492), q (0.69671, 0, 0.71736, 0).
         let tcp = e.obs_part("extra/tcp_pose").unwrap();
         let want = [-0.40146, 0.0, 0.08492, 0.69671, 0.0, 0.71736, 0.0];
         for (k, (g, w)) in tcp.iter().zip(want).enumerate() {
@@ -89,14 +89,14 @@ fn right_carriage_follows_the_left_one_and_has_no_drive() {
     let m = e.model();
     let ids = e.robot();
     assert!(
-        ids.actuator[6].is_none(),
+        ids.joints.actuator[6].is_none(),
         "right_carriage_joint is undriven"
     );
-    let left = ids.actuator[7].expect("left carriage driven");
+    let left = ids.joints.actuator[7].expect("left carriage driven");
     // The gripper part (no force limit ⇒ 1e10) overrides the arm part's 100 on the left
     // carriage; the arm joints keep 100.
     assert_eq!(m.actuator_forcerange()[2 * left + 1], 1e10);
-    let j0 = ids.actuator[0].unwrap();
+    let j0 = ids.joints.actuator[0].unwrap();
     assert_eq!(m.actuator_forcerange()[2 * j0 + 1], 100.0);
     assert!(m
         .id(ObjType::Equality, "mimic_right_carriage_joint")

@@ -47,7 +47,7 @@ fn set_gripper(dr: &mut Drives, target: f64) {
 fn qpos_order_is_maniskills_breadth_first_order() {
     let (_, ids, _, _) = setup(|_| {});
     assert_eq!(
-        ids.joint_names,
+        ids.joints.names,
         [
             "joint1",
             "joint2",
@@ -64,7 +64,7 @@ fn qpos_order_is_maniskills_breadth_first_order() {
         ]
     );
     // Only the arm and the two outer knuckles are driven; the linkage is passive.
-    let driven: Vec<bool> = ids.actuator.iter().map(|a| a.is_some()).collect();
+    let driven: Vec<bool> = ids.joints.actuator.iter().map(|a| a.is_some()).collect();
     assert_eq!(
         driven,
         [true, true, true, true, true, true, true, false, true, false, false, false]
@@ -75,7 +75,7 @@ fn qpos_order_is_maniskills_breadth_first_order() {
 fn forward_kinematics_matches_independent_urdf_fk() {
     let sample = |rng: &mut rand::rngs::StdRng, ids: &RobotIds| {
         let mut qv = vec![0.0; 12];
-        for (v, &(lo, hi)) in qv.iter_mut().zip(&ids.limits).take(6) {
+        for (v, &(lo, hi)) in qv.iter_mut().zip(&ids.joints.limits).take(6) {
             *v = rng.random_range(lo..=hi);
         }
         // A consistent linkage configuration: both knuckles at θ, inner fingers at −θ.
@@ -92,13 +92,13 @@ fn forward_kinematics_matches_independent_urdf_fk() {
         for g in anchor_gaps(ids, d) {
             assert!(g < 1e-5, "loop closure gap {g} at {:?}", {
                 let mut q = vec![0.0; 12];
-                ids.qpos(d, &mut q);
+                ids.joints.qpos(d, &mut q);
                 q
             });
         }
     });
     let (_, ids, d, _) = setup(|_| {});
-    // The TCP at rest (robots.md §4, measured upstream): p (−0.00044, 0, 0.16943), q (0, −1, 0, 0).
+    // The TCP at rest (docs/robots.md §4, measured upstream): p (−0.00044, 0, 0.16943), q (0, −1, 0, 0).
     let (p, q) = ids.tcp_pose(&d);
     let want = [-0.00044, 0.0, 0.16943];
     for k in 0..3 {
@@ -115,7 +115,7 @@ fn linkage_closes_to_the_upstream_width_with_anchors_together() {
     run(&mut d, &mut dr, 1000);
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
     let mut q = vec![0.0; 12];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for (k, want) in [
         (6, 0.81),
         (7, 0.81),
@@ -145,7 +145,7 @@ fn linkage_closes_to_the_upstream_width_with_anchors_together() {
     assert!(v < 1e-2, "max |qvel| {v}");
     set_gripper(&mut dr, 0.0);
     run(&mut d, &mut dr, 1000);
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     assert!(q[6].abs() < 5e-3 && q[8].abs() < 5e-3, "{q:?}");
 }
 
@@ -154,7 +154,7 @@ fn holds_rest_pose_and_tracks_joint_targets() {
     let (model, ids, mut d, mut dr) = setup(|_| {});
     run(&mut d, &mut dr, (5.0 / model.timestep()) as usize);
     let mut q = vec![0.0; 12];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for k in 0..12 {
         assert!(
             (q[k] - REST[k]).abs() < 1e-3,
@@ -168,7 +168,7 @@ fn holds_rest_pose_and_tracks_joint_targets() {
         dr.set_joint_target(k, *t, 0.0);
     }
     run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for k in 0..6 {
         assert!(
             (q[k] - target[k]).abs() < 2e-3,
@@ -199,7 +199,7 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     )
     .unwrap();
     let mut q = vec![0.0; 12];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     let here = chain.fk(&q);
     let down = Isometry3::from_parts(
         Translation3::from(here.translation.vector - Vector3::new(0.0, 0.0, 0.1494)),
@@ -218,7 +218,7 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     );
     set_gripper(&mut dr, 0.81);
     run(&mut d, &mut dr, 500);
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     assert!(
         q[6] > 0.3 && q[6] < 0.6 && q[8] > 0.3 && q[8] < 0.6,
         "knuckles stop at the cube: {:?}",
@@ -275,7 +275,11 @@ fn control_modes_have_the_upstream_action_and_observation_shapes() {
     ];
     assert_eq!(
         table.map(|t| t.0).to_vec(),
-        spec().control_modes.to_vec(),
+        spec()
+            .control_modes
+            .iter()
+            .map(|m| m.name())
+            .collect::<Vec<_>>(),
         "all 11 modes, default first"
     );
     for (mode, dim, obs, (lo, hi)) in table {
@@ -312,13 +316,13 @@ fn gripper_action_semantics_absolute_and_delta() {
     let mut env = pickcube("pd_joint_pos");
     env.reset(Some(3));
     let mut q = vec![0.0; 12];
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     let mut a: Vec<f32> = q[..6].iter().map(|&x| x as f32).collect();
     a.push(0.81);
     for _ in 0..10 {
         env.step(&a).unwrap();
     }
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     assert!(
         (q[8] - 0.81).abs() < 0.01 && (q[6] - 0.81).abs() < 0.01,
         "{:?}",
@@ -328,12 +332,12 @@ fn gripper_action_semantics_absolute_and_delta() {
     // overshoot it by a few mrad).
     let mut env = pickcube("pd_joint_delta_pos");
     env.reset(Some(3));
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     let start = q[8];
     let mut a = vec![0.0f32; 7];
     a[6] = 1.0;
     env.step(&a).unwrap();
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     let moved = q[8] - start;
     assert!(
         moved > 0.1 && moved < 0.15 + 0.01,
@@ -350,7 +354,7 @@ fn seeded_reset_reproduces_maniskills_noise() {
     let mut env = pickcube("pd_joint_delta_pos");
     env.reset(Some(0));
     let mut q = vec![0.0; 12];
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     for k in 0..12 {
         let want = (REST[k] + 0.02 * N0[k]) as f32 as f64;
         assert_eq!(q[k], want, "joint {k}: noise on all 12 entries");
@@ -358,10 +362,10 @@ fn seeded_reset_reproduces_maniskills_noise() {
     // Same seed ⇒ same start; another seed differs.
     let first = q.clone();
     env.reset(Some(0));
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     assert_eq!(q, first);
     env.reset(Some(1));
-    env.robot().qpos(env.data(), &mut q);
+    env.robot().joints.qpos(env.data(), &mut q);
     assert_ne!(q, first);
 }
 

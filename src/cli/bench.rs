@@ -205,7 +205,7 @@ pub fn run(
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
-        robot: env.robot_spec().uid.to_string(),
+        robot: env.robot_spec().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         obs_mode: env.config().obs_mode.name().to_string(),
         steps,

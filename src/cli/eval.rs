@@ -143,7 +143,7 @@ pub fn run(
     let n = episodes.max(1) as f64;
     Ok(EvalReport {
         env: env_id.to_string(),
-        robot: env.robot_spec().uid.to_string(),
+        robot: env.robot_spec().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         policy: policy.to_string(),
         episodes,

@@ -363,7 +363,7 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = rollout::replay(&file, tolerance, salvage)?;
+            let r = crate::record::replay::replay(&file, tolerance, salvage)?;
             out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())
@@ -461,7 +461,7 @@ fn fit_primitives(
     crop: Option<&str>,
     scale: f64,
 ) -> Result<(), String> {
-    use crate::mjcf::mesh_fit;
+    use crate::tools::mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())

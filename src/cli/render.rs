@@ -42,7 +42,7 @@ pub fn run(
         let mut env = make(env_id, config).map_err(|e| e.to_string())?;
         env.reset(Some(seed));
         let frame = env.render().map_err(|e| e.to_string())?.to_vec();
-        (frame, human.size, env.robot_spec().uid)
+        (frame, human.size, env.robot_spec().uid())
     } else if camera == sensor.name || mounted.iter().any(|c| c.name == camera) {
         let config = EnvConfig {
             obs_mode: ObsMode::Rgb,
@@ -54,7 +54,7 @@ pub fn run(
             .image(camera)
             .expect("a sensor camera of the rgb obs mode");
         let frame = img.rgb.expect("rgb obs mode").to_vec();
-        (frame, (img.width, img.height), env.robot_spec().uid)
+        (frame, (img.width, img.height), env.robot_spec().uid())
     } else {
         let valid: Vec<&str> = [human.name, sensor.name]
             .into_iter()

@@ -1,4 +1,4 @@
-//! Inverse kinematics for the end-effector controllers (controllers.md §3.3).
+//! Inverse kinematics for the end-effector controllers (docs/controllers.md §3.3).
 //!
 //! Kinematics come from the robot's URDF chain (root link → EE link), independent of MuJoCo,
 //! as ManiSkill's Pinocchio model is built from the URDF. The solver is damped least squares

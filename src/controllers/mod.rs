@@ -1,4 +1,4 @@
-//! Controllers: ManiSkill's action → PD-target semantics (controllers.md), per control mode.
+//! Controllers: ManiSkill's action → PD-target semantics (docs/controllers.md), per control mode.
 //!
 //! A control mode is a list of parts ([`PartSpec`]: arm, gripper, body, base) that each take
 //! a slice of the action in order. Arithmetic follows upstream's float32 path: actions are
@@ -6,15 +6,19 @@
 //! measured position. Targets go to the robot's [`Drives`], which turn them into forces.
 pub mod drive;
 pub mod ik;
+pub mod joints;
+pub mod mode;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::mjcf::urdf::RobotDesc;
 use crate::mjcf::Drive;
 use crate::mujoco::Data;
-use crate::robots::RobotIds;
+use crate::obs::ObsWriter;
 pub use drive::Drives;
 use ik::Chain;
+pub use joints::JointMap;
+pub use mode::ControlMode;
 
 /// What a part does with its action slice.
 #[derive(Debug, Clone, PartialEq)]
@@ -253,7 +257,7 @@ struct Part {
 /// A constructed controller for one robot and control mode.
 #[derive(Debug, Clone)]
 pub struct Controller {
-    mode: String,
+    mode: ControlMode,
     parts: Vec<Part>,
     low: Vec<f32>,
     high: Vec<f32>,
@@ -287,7 +291,11 @@ pub fn standardize(q: UnitQuaternion<f64>) -> UnitQuaternion<f64> {
 impl Controller {
     /// Builds the controller for `mode` from its parts. Bounds that default to joint limits
     /// are read from `desc`.
-    pub fn new(mode: &str, parts: Vec<PartSpec>, desc: &RobotDesc) -> Result<Controller, String> {
+    pub fn new(
+        mode: ControlMode,
+        parts: Vec<PartSpec>,
+        desc: &RobotDesc,
+    ) -> Result<Controller, String> {
         let active = desc.active_joints();
         let index = |name: &str| {
             active
@@ -418,7 +426,7 @@ impl Controller {
             });
         }
         Ok(Controller {
-            mode: mode.to_string(),
+            mode,
             parts: built,
             low,
             high,
@@ -428,9 +436,9 @@ impl Controller {
         })
     }
 
-    /// The control mode name.
-    pub fn mode(&self) -> &str {
-        &self.mode
+    /// The control mode's name.
+    pub fn mode(&self) -> &'static str {
+        self.mode.name()
     }
     /// Action length.
     pub fn action_dim(&self) -> usize {
@@ -469,68 +477,33 @@ impl Controller {
         out
     }
 
-    /// Number of controller-state values in the observation (target_qpos / target_pose).
-    pub fn state_len(&self) -> usize {
-        self.parts
-            .iter()
-            .map(|p| match p.spec.kind {
-                PartKind::JointPos {
-                    use_target: true, ..
-                } => p.idx.len(),
-                PartKind::Ee {
-                    use_target: true, ..
-                } => 7,
-                _ => 0,
-            })
-            .sum()
-    }
-
-    /// Names of the controller-state observation entries: (key, length).
-    pub fn state_layout(&self) -> Vec<(String, usize)> {
+    /// Writes the controller state of the observation (ManiSkill's `agent/controller`):
+    /// `target_qpos` / `target_pose` of the parts that accumulate targets, nested under the
+    /// part name when the mode has several parts.
+    pub fn observe(&self, out: &mut ObsWriter) {
         let nested = self.parts.len() > 1;
-        let mut v = Vec::new();
         for p in &self.parts {
-            let prefix = if nested {
-                format!("agent/controller/{}/", p.spec.name)
-            } else {
-                "agent/controller/".to_string()
+            let path = |key: &'static str| -> ([&'static str; 2], usize) {
+                if nested {
+                    ([p.spec.name, key], 0)
+                } else {
+                    (["", key], 1)
+                }
             };
             match p.spec.kind {
                 PartKind::JointPos {
                     use_target: true, ..
-                } => v.push((format!("{prefix}target_qpos"), p.idx.len())),
-                PartKind::Ee {
-                    use_target: true, ..
-                } => v.push((format!("{prefix}target_pose"), 7)),
-                _ => {}
-            }
-        }
-        v
-    }
-
-    /// Writes the controller state (target_qpos / target_pose) into `out`.
-    pub fn write_state(&self, out: &mut [f32]) {
-        let mut k = 0;
-        for p in &self.parts {
-            match p.spec.kind {
-                PartKind::JointPos {
-                    use_target: true, ..
                 } => {
-                    out[k..k + p.idx.len()].copy_from_slice(&p.target_q);
-                    k += p.idx.len();
+                    let (segs, skip) = path("target_qpos");
+                    out.put_path(&segs[skip..], p.target_q.iter().map(|&x| x as f64));
                 }
                 PartKind::Ee {
                     use_target: true, ..
                 } => {
                     let t = p.target_pose.translation.vector;
                     let q = standardize(p.target_pose.rotation);
-                    for (o, v) in out[k..k + 7]
-                        .iter_mut()
-                        .zip([t.x, t.y, t.z, q.w, q.i, q.j, q.k])
-                    {
-                        *o = v as f32;
-                    }
-                    k += 7;
+                    let (segs, skip) = path("target_pose");
+                    out.put_path(&segs[skip..], [t.x, t.y, t.z, q.w, q.i, q.j, q.k]);
                 }
                 _ => {}
             }
@@ -593,12 +566,12 @@ impl Controller {
     /// hold the accumulated joint targets (or the measured positions).
     pub fn set_targets_from_state(
         &mut self,
-        robot: &RobotIds,
+        joints: &JointMap,
         data: &Data,
         drives: &mut Drives,
         entries: &indexmap::IndexMap<String, Vec<f64>>,
     ) {
-        self.reset(robot, data, drives);
+        self.reset(joints, data, drives);
         let nested = self.parts.len() > 1;
         for p in &mut self.parts {
             let key = |k: &str| {
@@ -678,8 +651,8 @@ impl Controller {
     /// `reset()` of every part: targets := measured joint positions / EE pose; the drive
     /// targets are written right away (upstream writes them on the first action; identical
     /// whenever the first step carries an action).
-    pub fn reset(&mut self, robot: &RobotIds, data: &Data, drives: &mut Drives) {
-        robot.qpos(data, &mut self.q);
+    pub fn reset(&mut self, joints: &JointMap, data: &Data, drives: &mut Drives) {
+        joints.qpos(data, &mut self.q);
         for p in &mut self.parts {
             for (t, &i) in p.target_q.iter_mut().zip(&p.idx) {
                 *t = self.q[i] as f32;
@@ -699,11 +672,11 @@ impl Controller {
     pub fn set_action(
         &mut self,
         action: &[f32],
-        robot: &RobotIds,
+        joints: &JointMap,
         data: &Data,
         drives: &mut Drives,
     ) {
-        robot.qpos(data, &mut self.q);
+        joints.qpos(data, &mut self.q);
         let mut off = 0;
         for p in &mut self.parts {
             let n = p.low.len();
@@ -722,11 +695,11 @@ impl Controller {
                             let lo = low
                                 .as_ref()
                                 .map(|l| l[k])
-                                .unwrap_or(robot.limits[i].0 as f32);
+                                .unwrap_or(joints.limits[i].0 as f32);
                             let hi = high
                                 .as_ref()
                                 .map(|h| h[k])
-                                .unwrap_or(robot.limits[i].1 as f32);
+                                .unwrap_or(joints.limits[i].1 as f32);
                             clip_scale(a[k], lo, hi)
                         } else {
                             a[k]
@@ -754,7 +727,7 @@ impl Controller {
                     let n = p.idx.len();
                     for (k, &i) in p.idx.iter().enumerate() {
                         let (x, v) = if *normalize {
-                            let (lo, hi) = robot.limits[i];
+                            let (lo, hi) = joints.limits[i];
                             let x = if *use_delta {
                                 clip_scale(a[k], pos.0, pos.1)
                             } else if lo.is_finite() && hi.is_finite() {

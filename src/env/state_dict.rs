@@ -275,7 +275,7 @@ impl Env {
     }
 
     fn actor_state(&self, a: &Actor) -> [f64; 13] {
-        let d = &self.data;
+        let d = &self.sim.data;
         let mut s = [0.0; 13];
         match a.body {
             ActorBody::Free { body, qadr, .. } => {
@@ -296,8 +296,9 @@ impl Env {
     /// The per-part split of the action vector (ManiSkill's `action_space` dict), in action
     /// order. Parts that take no action (the xArm6's passive linkage) are left out.
     pub fn action_parts(&self) -> Vec<ActionPart> {
-        let (low, high) = self.controller.bounds();
-        self.controller
+        let (low, high) = self.sim.controller.bounds();
+        self.sim
+            .controller
             .part_ranges()
             .into_iter()
             .filter(|(_, r)| !r.is_empty())
@@ -316,19 +317,20 @@ impl Env {
         for a in &self.actors {
             sd.actors.insert(a.name.to_string(), self.actor_state(a));
         }
-        let root = self.robot.root_body;
-        let mut art = Vec::with_capacity(13 + 2 * self.qpos.len());
-        art.extend_from_slice(&self.data.xpos()[3 * root..3 * root + 3]);
-        art.extend_from_slice(&self.data.xquat()[4 * root..4 * root + 4]);
+        let root = self.sim.robot.root_body;
+        let mut art = Vec::with_capacity(13 + 2 * self.sim.qpos.len());
+        art.extend_from_slice(&self.sim.data.xpos()[3 * root..3 * root + 3]);
+        art.extend_from_slice(&self.sim.data.xquat()[4 * root..4 * root + 4]);
         art.extend_from_slice(&[0.0; 6]);
-        let n = self.qpos.len();
+        let n = self.sim.qpos.len();
         let mut q = vec![0.0; n];
-        self.robot.qpos(&self.data, &mut q);
+        self.sim.robot.joints.qpos(&self.sim.data, &mut q);
         art.extend_from_slice(&q);
-        self.robot.qvel(&self.data, &mut q);
+        self.sim.robot.joints.qvel(&self.sim.data, &mut q);
         art.extend_from_slice(&q);
-        sd.articulations.insert(self.spec.uid.to_string(), art);
-        for (key, v) in self.controller.state_entries() {
+        sd.articulations
+            .insert(self.sim.spec.uid().to_string(), art);
+        for (key, v) in self.sim.controller.state_entries() {
             sd.controller.insert(key, v);
         }
         sd
@@ -370,7 +372,7 @@ impl Env {
                 }
             }
         }
-        let uid = self.spec.uid;
+        let uid = self.sim.spec.uid();
         if let Some(other) = sd.articulations.keys().find(|k| k.as_str() != uid) {
             return Err(EnvError::BadState(format!(
                 "unknown articulation {other:?}; this env's robot is {uid:?}"
@@ -380,7 +382,7 @@ impl Env {
             .articulations
             .get(uid)
             .ok_or_else(|| EnvError::BadState(format!("state dict lacks articulation {uid:?}")))?;
-        let n = self.qpos.len();
+        let n = self.sim.qpos.len();
         if art.len() != 13 + 2 * n {
             return Err(EnvError::BadState(format!(
                 "articulations.{uid} has {} values, expected {} (root pose 7, root velocity 6, \
@@ -390,9 +392,9 @@ impl Env {
             )));
         }
         check_finite(&format!("articulations.{uid}"), art)?;
-        let root = self.robot.root_body;
-        let rp = &self.data.xpos()[3 * root..3 * root + 3];
-        let rq = &self.data.xquat()[4 * root..4 * root + 4];
+        let root = self.sim.robot.root_body;
+        let rp = &self.sim.data.xpos()[3 * root..3 * root + 3];
+        let rq = &self.sim.data.xquat()[4 * root..4 * root + 4];
         let dp = Vector3::from_column_slice(&art[..3]) - Vector3::from_column_slice(rp);
         if dp.norm() > ROOT_POSE_TOLERANCE
             || rotation_distance(&art[3..7], rq) > ROOT_POSE_TOLERANCE
@@ -407,6 +409,7 @@ impl Env {
             )));
         }
         let expected: Vec<(String, usize)> = self
+            .sim
             .controller
             .state_entries()
             .into_iter()
@@ -417,7 +420,7 @@ impl Env {
                 None => {
                     return Err(EnvError::BadState(format!(
                         "unknown controller state {k:?} for control mode {}; valid: {}",
-                        self.controller.mode(),
+                        self.sim.controller.mode(),
                         if expected.is_empty() {
                             "none".to_string()
                         } else {
@@ -444,39 +447,44 @@ impl Env {
             let s = &sd.actors[a.name];
             match a.body {
                 ActorBody::Free { qadr, dadr, body } => {
-                    self.data.qpos_mut()[qadr..qadr + 7].copy_from_slice(&s[..7]);
+                    self.sim.data.qpos_mut()[qadr..qadr + 7].copy_from_slice(&s[..7]);
                     // qvel of a free joint: linear velocity of the body origin (world) and
                     // angular velocity in the body frame; ManiSkill gives the centre of mass's
                     // linear velocity and the world angular velocity.
                     let r = quat_of(&s[3..7]).to_rotation_matrix();
                     let w = Vector3::from_column_slice(&s[10..13]);
-                    let ipos = &self.model.body_ipos()[3 * body..3 * body + 3];
+                    let ipos = &self.sim.model.body_ipos()[3 * body..3 * body + 3];
                     let com_offset: Vector3<f64> = r * Vector3::from_column_slice(ipos);
                     let v_origin = Vector3::from_column_slice(&s[7..10]) - w.cross(&com_offset);
                     let w_local: Vector3<f64> = Matrix3::from(r).transpose() * w;
-                    let qv = &mut self.data.qvel_mut()[dadr..dadr + 6];
+                    let qv = &mut self.sim.data.qvel_mut()[dadr..dadr + 6];
                     qv[..3].copy_from_slice(v_origin.as_slice());
                     qv[3..].copy_from_slice(w_local.as_slice());
                 }
                 ActorBody::Mocap { mocap, .. } => {
-                    self.data.mocap_pos_mut()[3 * mocap..3 * mocap + 3].copy_from_slice(&s[..3]);
-                    self.data.mocap_quat_mut()[4 * mocap..4 * mocap + 4].copy_from_slice(&s[3..7]);
+                    self.sim.data.mocap_pos_mut()[3 * mocap..3 * mocap + 3]
+                        .copy_from_slice(&s[..3]);
+                    self.sim.data.mocap_quat_mut()[4 * mocap..4 * mocap + 4]
+                        .copy_from_slice(&s[3..7]);
                 }
                 ActorBody::Fixed(_) => {}
             }
         }
-        self.robot.set_qpos(&mut self.data, &art[13..13 + n]);
-        let qv = self.data.qvel_mut();
-        for (&a, &v) in self.robot.dof_adr.iter().zip(&art[13 + n..]) {
+        self.sim
+            .robot
+            .joints
+            .set_qpos(&mut self.sim.data, &art[13..13 + n]);
+        let qv = self.sim.data.qvel_mut();
+        for (&a, &v) in self.sim.robot.joints.dof_adr.iter().zip(&art[13 + n..]) {
             qv[a] = v;
         }
-        self.controller.set_targets_from_state(
-            &self.robot,
-            &self.data,
-            &mut self.drives,
+        self.sim.controller.set_targets_from_state(
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
             &sd.controller,
         );
-        self.data.qacc_warmstart_mut().fill(0.0);
+        self.sim.data.qacc_warmstart_mut().fill(0.0);
         self.refresh_after_state_change();
         Ok(())
     }
@@ -485,18 +493,19 @@ impl Env {
     /// finger forces, info and observation) after the state was written from outside.
     fn refresh_after_state_change(&mut self) {
         // The drive forces of the new state take part in the contact forces.
-        self.data.forward();
-        self.drives.apply(&mut self.data, self.model.timestep());
-        self.data.forward();
+        self.sim.data.forward();
+        self.sim
+            .drives
+            .apply(&mut self.sim.data, self.sim.model.timestep());
+        self.sim.data.forward();
         crate::tasks::finger_forces(
-            &self.model,
-            &self.data,
-            self.robot.fingers,
-            self.task.grasp_object(),
-            &mut self.finger_forces,
+            &self.sim.model,
+            &self.sim.data,
+            self.sim.robot.fingers,
+            self.sim.task.grasp_object(),
+            &mut self.sim.finger_forces,
         );
-        self.evaluate();
-        self.write_obs();
+        self.update_outputs();
     }
 
     /// Sets `elapsed_steps` (ManiSkill's state dict does not carry it; `info` and

@@ -60,8 +60,8 @@ impl Frame {
     pub fn from_env(env: &Env, action: Option<&[f32]>) -> Frame {
         let info = env.info();
         let (p, q) = env.robot().tcp_pose(env.data());
-        let mut qpos = vec![0.0; env.robot().qpos_adr.len()];
-        env.robot().qpos(env.data(), &mut qpos);
+        let mut qpos = vec![0.0; env.robot().joints.len()];
+        env.robot().joints.qpos(env.data(), &mut qpos);
         Frame {
             action: action.map(|a| a.to_vec()),
             t: info.elapsed_steps,

@@ -12,7 +12,6 @@
 //! * Friction: every shape has ManiSkill's default material μ = 0.3; shapes with their own
 //!   material (finger pads, μ = 2.0) get the PhysX *average* with the default, because
 //!   MuJoCo combines by *max* and every partner of a finger has μ = 0.3.
-pub mod mesh_fit;
 pub mod props;
 pub mod urdf;
 pub mod xml;
@@ -91,7 +90,7 @@ impl Mjcf {
     }
 }
 
-/// A PD drive on one joint (controllers.md §5).
+/// A PD drive on one joint (docs/controllers.md §5).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Drive {
     /// Joint name.

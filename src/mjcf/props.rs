@@ -1,4 +1,4 @@
-//! Task props: the table scene (tasks.md §0.1) and builders for the objects the tasks use.
+//! Task props: the table scene (docs/tasks.md §0.1) and builders for the objects the tasks use.
 //!
 //! Dynamic props are free bodies with density [`DENSITY`] (mass from volume, as SAPIEN's
 //! `add_*_collision(density=1000)`); kinematic props are MuJoCo mocap bodies (moved by
@@ -13,7 +13,7 @@ use super::{
     GROUP_HIDDEN, TABLE,
 };
 
-/// Half extents of the table-workspace box in its actor frame (tasks.md §0.1).
+/// Half extents of the table-workspace box in its actor frame (docs/tasks.md §0.1).
 pub const TABLE_HALF: [f64; 3] = [1.209, 0.6045, 0.45982145];
 /// Table actor position (its box centre is `TABLE_HALF[2]` above it).
 pub const TABLE_POS: [f64; 3] = [-0.12, 0.0, -0.9196429];
@@ -140,7 +140,7 @@ impl Scene {
         self.add_free_body(name, pos, rgba, geom);
     }
 
-    /// PokeCube's peg (tasks.md §2.1): one collision box of half extents
+    /// PokeCube's peg (docs/tasks.md §2.1): one collision box of half extents
     /// (half_length, half_width, half_width) along local x, drawn as two visual half-boxes.
     pub fn add_peg(
         &mut self,

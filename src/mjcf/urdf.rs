@@ -1,7 +1,7 @@
 //! Reading a robot: URDF (with urdf-rs) and SRDF (the "Default" collision exclusions) into a
 //! [`RobotDesc`] that the MJCF writer and the kinematics code share.
 //!
-//! Loader rules follow ManiSkill/SAPIEN (robots.md §1.1): joint order is breadth-first over
+//! Loader rules follow ManiSkill/SAPIEN (docs/robots.md §1.1): joint order is breadth-first over
 //! the kinematic tree with siblings in URDF declaration order; `continuous` joints are
 //! unlimited revolute joints; fixed links stay separate links.
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};

@@ -490,11 +490,6 @@ impl Model {
         unsafe { &*self.ptr }
     }
 
-    fn raw_mut(&mut self) -> &mut sys::mjModel {
-        // SAFETY: ptr is non-null; `&mut self` makes the access exclusive.
-        unsafe { &mut *self.ptr }
-    }
-
     /// Number of generalised coordinates.
     pub fn nq(&self) -> usize {
         self.raw().nq as usize
@@ -594,32 +589,6 @@ impl Model {
             sys::mjtJoint__mjJNT_SLIDE => JointType::Slide,
             _ => JointType::Hinge,
         }
-    }
-
-    /// Mutable actuator gain parameters (10 per actuator), e.g. to change PD gains.
-    pub fn actuator_gainprm_mut(&mut self) -> &mut [f64] {
-        let n = self.raw().nu * 10;
-        view_mut!(self.raw_mut().actuator_gainprm, n)
-    }
-    /// Mutable actuator bias parameters (10 per actuator).
-    pub fn actuator_biasprm_mut(&mut self) -> &mut [f64] {
-        let n = self.raw().nu * 10;
-        view_mut!(self.raw_mut().actuator_biasprm, n)
-    }
-    /// Mutable actuator force ranges (2 per actuator).
-    pub fn actuator_forcerange_mut(&mut self) -> &mut [f64] {
-        let n = self.raw().nu * 2;
-        view_mut!(self.raw_mut().actuator_forcerange, n)
-    }
-    /// Sets the simulation timestep.
-    pub fn set_timestep(&mut self, dt: f64) -> Result<()> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(MjError::Invalid(format!(
-                "timestep must be positive and finite, got {dt}"
-            )));
-        }
-        self.raw_mut().opt.timestep = dt;
-        Ok(())
     }
 }
 

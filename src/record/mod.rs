@@ -39,6 +39,7 @@
 pub mod image;
 mod num;
 mod reader;
+pub mod replay;
 mod scan;
 mod schema;
 
@@ -253,7 +254,7 @@ impl Meta {
         Meta {
             format: FORMAT_VERSION,
             env_id: env.id().to_string(),
-            robot: env.robot_spec().uid.to_string(),
+            robot: env.robot_spec().uid().to_string(),
             obs_mode: cfg.obs_mode.name().to_string(),
             reward_mode: cfg.reward_mode.name().to_string(),
             control_mode: env.control_mode().to_string(),

@@ -1,4 +1,4 @@
-//! Fetch mobile manipulator (robots.md §3): a virtual planar base (x, y, yaw), a torso lift,
+//! Fetch mobile manipulator (docs/robots.md §3): a virtual planar base (x, y, yaw), a torso lift,
 //! a pan/tilt head, a 7-dof arm (three continuous roll joints) and two prismatic fingers.
 //!
 //! Control modes have four parts in upstream order: arm, gripper, body (head pan, head tilt,
@@ -12,10 +12,10 @@
 use std::f64::consts::PI;
 
 use super::{GraspDef, InitNoise, MountedCamera, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 use crate::mjcf::RobotOptions;
 
-/// Fetch's initial qpos in the table scene (ManiSkill's breadth-first order, robots.md §3).
+/// Fetch's initial qpos in the table scene (ManiSkill's breadth-first order, docs/robots.md §3).
 pub const TABLE_QPOS: [f64; 15] = [
     0.0,
     0.0,
@@ -34,7 +34,7 @@ pub const TABLE_QPOS: [f64; 15] = [
     0.015,
 ];
 
-/// Joint names in ManiSkill's qpos order (breadth-first; robots.md §3 table).
+/// Joint names in ManiSkill's qpos order (breadth-first; docs/robots.md §3 table).
 pub const JOINT_ORDER: [&str; 15] = [
     "root_x_axis_joint",
     "root_y_axis_joint",
@@ -90,39 +90,39 @@ const EE_ROOT: &str = "torso_lift_link";
 /// Finger range (m) of the normalised absolute gripper action.
 const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.05);
 
-/// Fetch control modes (robots.md §3), default first.
-pub const CONTROL_MODES: [&str; 11] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
-    "pd_joint_delta_pos_stiff_body",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
+/// Fetch control modes (docs/robots.md §3), default first.
+pub const CONTROL_MODES: [ControlMode; 11] = [
+    ControlMode::PdJointDeltaPos,
+    ControlMode::PdJointPos,
+    ControlMode::PdJointTargetDeltaPos,
+    ControlMode::PdJointVel,
+    ControlMode::PdJointPosVel,
+    ControlMode::PdJointDeltaPosVel,
+    ControlMode::PdJointDeltaPosStiffBody,
+    ControlMode::PdEeDeltaPos,
+    ControlMode::PdEeDeltaPose,
+    ControlMode::PdEeTargetDeltaPos,
+    ControlMode::PdEeTargetDeltaPose,
 ];
 
 /// The parts of a Fetch control mode (arm, gripper, body, base).
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let ee = |rotation, use_target| {
         PartKind::ee_delta(EE_LINK, Some(EE_ROOT), rotation, use_target, EE_DELTA)
     };
     let kind = match mode {
-        "pd_joint_delta_pos" | "pd_joint_delta_pos_stiff_body" => {
+        ControlMode::PdJointDeltaPos | ControlMode::PdJointDeltaPosStiffBody => {
             PartKind::joint_delta(7, JOINT_DELTA, false)
         }
-        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
-        "pd_joint_vel" => PartKind::joint_vel(1.0),
-        "pd_joint_pos_vel" => PartKind::joint_pos_vel(true, 1.0),
-        "pd_joint_delta_pos_vel" => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
-        "pd_ee_delta_pos" => ee(false, false),
-        "pd_ee_delta_pose" => ee(true, false),
-        "pd_ee_target_delta_pos" => ee(false, true),
-        "pd_ee_target_delta_pose" => ee(true, true),
+        ControlMode::PdJointTargetDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
+        ControlMode::PdJointVel => PartKind::joint_vel(1.0),
+        ControlMode::PdJointPosVel => PartKind::joint_pos_vel(true, 1.0),
+        ControlMode::PdJointDeltaPosVel => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
+        ControlMode::PdEeDeltaPos => ee(false, false),
+        ControlMode::PdEeDeltaPose => ee(true, false),
+        ControlMode::PdEeTargetDeltaPos => ee(false, true),
+        ControlMode::PdEeTargetDeltaPose => ee(true, true),
         _ => return None,
     };
     let gripper = PartSpec::new(
@@ -132,7 +132,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
         GRIPPER_GAINS,
     )
     .with_follower("r_gripper_finger_joint", "l_gripper_finger_joint", 1.0, 0.0);
-    let body = if mode == "pd_joint_delta_pos_stiff_body" {
+    let body = if mode == ControlMode::PdJointDeltaPosStiffBody {
         PartSpec::new("body", &BODY, PartKind::joint_absolute(), STIFF_BODY_GAINS)
     } else {
         let kind = PartKind::joint_delta(3, JOINT_DELTA, false);
@@ -150,7 +150,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
     ])
 }
 
-/// Fetch's two cameras (robots.md §3 "robot cameras"): 128×128, fovy 2 rad (near 0.01 and
+/// Fetch's two cameras (docs/robots.md §3 "robot cameras"): 128×128, fovy 2 rad (near 0.01 and
 /// far 100 are the renderer's clip planes, shared by every camera).
 pub const CAMERAS: [MountedCamera; 2] = [
     MountedCamera {
@@ -172,14 +172,14 @@ pub const CAMERAS: [MountedCamera; 2] = [
 ];
 
 /// Fetch's scene options: the wheels never touch the ground (upstream puts them and the
-/// ground in one collision group, robots.md §3).
+/// ground in one collision group, docs/robots.md §3).
 fn customize(opts: &mut RobotOptions) {
     opts.no_ground_contact = vec!["l_wheel_link".into(), "r_wheel_link".into()];
 }
 
 /// Fetch as ManiSkill configures it.
 pub static FETCH: RobotSpec = RobotSpec {
-    uid: "fetch",
+    id: super::RobotId::Fetch,
     urdf: "fetch/fetch.urdf",
     srdf: "fetch/fetch.srdf",
     arm_joints: &ARM,

@@ -1,4 +1,4 @@
-//! Robots: what ManiSkill defines per robot (robots.md) on top of its URDF — joint roles,
+//! Robots: what ManiSkill defines per robot (docs/robots.md) on top of its URDF — joint roles,
 //! drive gains, the TCP, the grasp check, keyframes and the table-scene placement — and the
 //! ids a compiled scene resolves them to ([`RobotIds`]).
 pub mod fetch;
@@ -11,35 +11,104 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::controllers::PartSpec;
+use crate::controllers::{ControlMode, Controller, Drives, JointMap, PartSpec};
 use crate::mjcf::urdf::RobotDesc;
-use crate::mjcf::{actuator_name, Drive, LinkCamera, RobotOptions, GRAVITY};
+use crate::mjcf::{Drive, LinkCamera, RobotOptions, GRAVITY};
 use crate::mujoco::{Data, Model, ObjType};
+use crate::rng::NumpyRandomState;
 
-/// Robot uids, as ManiSkill spells them.
-pub const ROBOT_UIDS: [&str; 5] = ["panda", "fetch", "xarm6_robotiq", "so100", "widowxai"];
+/// The five robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
+/// depends on the robot matches on this exhaustively.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RobotId {
+    /// Franka Emika Panda.
+    Panda,
+    /// Fetch mobile manipulator.
+    Fetch,
+    /// UFactory xArm6 with a Robotiq 2F-85 gripper.
+    Xarm6Robotiq,
+    /// SO-ARM100.
+    So100,
+    /// Trossen WidowX AI.
+    WidowxAi,
+}
+
+impl RobotId {
+    /// Every robot, in ManiSkill's order of `SUPPORTED_ROBOTS`.
+    pub const ALL: [RobotId; 5] = [
+        RobotId::Panda,
+        RobotId::Fetch,
+        RobotId::Xarm6Robotiq,
+        RobotId::So100,
+        RobotId::WidowxAi,
+    ];
+
+    /// ManiSkill's uid.
+    pub const fn uid(self) -> &'static str {
+        match self {
+            RobotId::Panda => "panda",
+            RobotId::Fetch => "fetch",
+            RobotId::Xarm6Robotiq => "xarm6_robotiq",
+            RobotId::So100 => "so100",
+            RobotId::WidowxAi => "widowxai",
+        }
+    }
+
+    /// Parses a uid; the error lists the valid uids.
+    pub fn parse(uid: &str) -> Result<RobotId, String> {
+        RobotId::ALL
+            .into_iter()
+            .find(|r| r.uid() == uid)
+            .ok_or_else(|| {
+                format!(
+                    "unknown robot {uid:?}; valid robots: {}",
+                    ROBOT_UIDS.join(", ")
+                )
+            })
+    }
+
+    /// The robot's spec.
+    pub fn spec(self) -> &'static RobotSpec {
+        match self {
+            RobotId::Panda => &panda::PANDA,
+            RobotId::Fetch => &fetch::FETCH,
+            RobotId::Xarm6Robotiq => &xarm6_robotiq::XARM6_ROBOTIQ,
+            RobotId::So100 => &so100::SO100,
+            RobotId::WidowxAi => &widowxai::WIDOWXAI,
+        }
+    }
+}
+
+/// Robot uids, as ManiSkill spells them ([`RobotId::ALL`]).
+pub const ROBOT_UIDS: [&str; 5] = [
+    RobotId::ALL[0].uid(),
+    RobotId::ALL[1].uid(),
+    RobotId::ALL[2].uid(),
+    RobotId::ALL[3].uid(),
+    RobotId::ALL[4].uid(),
+];
 
 /// Control modes of an arm with joint, velocity and EE controllers (Panda, xArm6), in
 /// upstream's order, default first.
-pub const ARM_EE_MODES: [&str; 11] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_ee_delta_pos",
-    "pd_ee_delta_pose",
-    "pd_ee_pose",
-    "pd_joint_target_delta_pos",
-    "pd_ee_target_delta_pos",
-    "pd_ee_target_delta_pose",
-    "pd_joint_vel",
-    "pd_joint_pos_vel",
-    "pd_joint_delta_pos_vel",
+pub const ARM_EE_MODES: [ControlMode; 11] = [
+    ControlMode::PdJointDeltaPos,
+    ControlMode::PdJointPos,
+    ControlMode::PdEeDeltaPos,
+    ControlMode::PdEeDeltaPose,
+    ControlMode::PdEePose,
+    ControlMode::PdJointTargetDeltaPos,
+    ControlMode::PdEeTargetDeltaPos,
+    ControlMode::PdEeTargetDeltaPose,
+    ControlMode::PdJointVel,
+    ControlMode::PdJointPosVel,
+    ControlMode::PdJointDeltaPosVel,
 ];
 
 /// Control modes of a joint-position-only arm (SO100, WidowX AI), default first.
-pub const JOINT_POS_MODES: [&str; 3] = [
-    "pd_joint_delta_pos",
-    "pd_joint_pos",
-    "pd_joint_target_delta_pos",
+pub const JOINT_POS_MODES: [ControlMode; 3] = [
+    ControlMode::PdJointDeltaPos,
+    ControlMode::PdJointPos,
+    ControlMode::PdJointTargetDeltaPos,
 ];
 
 /// Armature (kg·m² or kg) of every robot joint not listed otherwise. PhysX has none and the
@@ -54,7 +123,7 @@ pub const ARMATURE: f64 = 0.01;
 /// ManiSkill with it and fail without it).
 pub const GRIPPER_ARMATURE: f64 = 0.1;
 
-/// How the tool-centre point is defined (robots.md: "TCP").
+/// How the tool-centre point is defined (docs/robots.md: "TCP").
 #[derive(Debug, Clone, PartialEq)]
 pub enum TcpDef {
     /// The pose of a link (a site named `tcp` is placed at its origin).
@@ -73,7 +142,7 @@ pub enum TcpDef {
     },
 }
 
-/// The grasp check of robots.md §1.3.
+/// The grasp check of docs/robots.md §1.3.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraspDef {
     /// First finger link and the sign of its local y axis that is its opening direction.
@@ -99,7 +168,7 @@ impl GraspDef {
     }
 }
 
-/// Which joints get initial-pose noise in the table scene (tasks.md §0.2).
+/// Which joints get initial-pose noise in the table scene (docs/tasks.md §0.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum InitNoise {
     /// Draw `n_dof` normals, keep noise on all joints.
@@ -110,7 +179,7 @@ pub enum InitNoise {
     None,
 }
 
-/// `agent.is_static(threshold)` per robot (env.md §10).
+/// `agent.is_static(threshold)` per robot (docs/env.md §10).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum StaticRule {
     /// max |qvel[..n]| ≤ threshold over the first `n` dofs (the arm).
@@ -159,7 +228,7 @@ pub struct MountedCamera {
 impl MountedCamera {
     /// The MuJoCo camera's orientation (w, x, y, z) in the link frame: the mount rotation
     /// composed with the map from SAPIEN's camera frame to MuJoCo's (x right = −left,
-    /// y up, z backward = −forward), as [`crate::tasks::look_at_mujoco`] does for world cameras.
+    /// y up, z backward = −forward), as the tasks' `look_at` does for world cameras.
     pub fn mujoco_quat(&self) -> [f64; 4] {
         let q = self.quat;
         let mount =
@@ -175,8 +244,8 @@ impl MountedCamera {
 /// Everything mjskill knows about one robot besides its URDF.
 #[derive(Debug, Clone)]
 pub struct RobotSpec {
-    /// ManiSkill uid.
-    pub uid: &'static str,
+    /// Which robot this is (its uid: [`RobotSpec::uid`]).
+    pub id: RobotId,
     /// URDF path inside `models/`.
     pub urdf: &'static str,
     /// SRDF path inside `models/`.
@@ -206,9 +275,9 @@ pub struct RobotSpec {
     /// Noise rule of the table scene.
     pub init_noise: InitNoise,
     /// Control modes, the default (ManiSkill's first) first.
-    pub control_modes: &'static [&'static str],
+    pub control_modes: &'static [ControlMode],
     /// The parts of a control mode (None for an unknown mode).
-    pub parts: fn(&str) -> Option<Vec<PartSpec>>,
+    pub parts: fn(ControlMode) -> Option<Vec<PartSpec>>,
     /// Cameras mounted on the robot's links, rendered in the visual obs modes besides the
     /// task's sensor camera (empty for most robots).
     pub cameras: &'static [MountedCamera],
@@ -219,6 +288,11 @@ pub struct RobotSpec {
 }
 
 impl RobotSpec {
+    /// ManiSkill's uid of the robot.
+    pub fn uid(&self) -> &'static str {
+        self.id.uid()
+    }
+
     /// The root pose in the table scene.
     pub fn table_base(&self) -> Isometry3<f64> {
         let (p, q) = self.table_pose;
@@ -226,6 +300,34 @@ impl RobotSpec {
             Translation3::new(p[0], p[1], p[2]),
             UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
         )
+    }
+
+    /// The initial joint positions of a table-scene reset (docs/tasks.md §0.2): `table_qpos`
+    /// plus this robot's noise rule ([`InitNoise`]) drawn from the numpy episode stream
+    /// (`N(0, sigma)`, into `noise`), then rounded to float32 as PhysX stores joint positions.
+    /// `noise` and `qpos` have the robot's dof; nothing is allocated.
+    pub fn init_qpos(
+        &self,
+        numpy: &mut NumpyRandomState,
+        sigma: f64,
+        noise: &mut [f64],
+        qpos: &mut [f64],
+    ) {
+        qpos.copy_from_slice(self.table_qpos);
+        let keep = match self.init_noise {
+            InitNoise::None => 0,
+            InitNoise::All => noise.len(),
+            InitNoise::AllButLast(k) => noise.len() - k,
+        };
+        if self.init_noise != InitNoise::None {
+            numpy.fill_normal(0.0, sigma, noise);
+        }
+        for (q, z) in qpos.iter_mut().zip(noise.iter()).take(keep) {
+            *q += z;
+        }
+        for q in qpos.iter_mut() {
+            *q = *q as f32 as f64;
+        }
     }
 
     /// Loads and parses this robot's URDF and SRDF from `models/`.
@@ -274,15 +376,22 @@ impl RobotSpec {
         opts
     }
 
-    /// The parts of `mode`; the error lists this robot's control modes.
-    pub fn control_mode(&self, mode: &str) -> Result<Vec<PartSpec>, String> {
-        (self.parts)(mode).ok_or_else(|| {
-            format!(
-                "unknown control mode {mode:?} for robot {}; valid modes: {}",
-                self.uid,
-                self.control_modes.join(", ")
-            )
-        })
+    /// The control mode named `mode` with its parts; the error (an unknown name or a mode
+    /// this robot lacks) lists this robot's control modes.
+    pub fn control_mode(&self, mode: &str) -> Result<(ControlMode, Vec<PartSpec>), String> {
+        ControlMode::from_name(mode)
+            .and_then(|m| Some((m, (self.parts)(m)?)))
+            .ok_or_else(|| {
+                format!(
+                    "unknown control mode {mode:?} for robot {}; valid modes: {}",
+                    self.uid(),
+                    self.control_modes
+                        .iter()
+                        .map(|m| m.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })
     }
 
     /// Drives with this robot's default gains on every arm and gripper joint.
@@ -307,17 +416,7 @@ impl RobotSpec {
 
 /// Looks up a robot spec by uid; the error lists the valid uids.
 pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
-    match uid {
-        "panda" => Ok(&panda::PANDA),
-        "fetch" => Ok(&fetch::FETCH),
-        "xarm6_robotiq" => Ok(&xarm6_robotiq::XARM6_ROBOTIQ),
-        "so100" => Ok(&so100::SO100),
-        "widowxai" => Ok(&widowxai::WIDOWXAI),
-        _ => Err(format!(
-            "unknown robot {uid:?}; valid robots: {}",
-            ROBOT_UIDS.join(", ")
-        )),
-    }
+    Ok(RobotId::parse(uid)?.spec())
 }
 
 /// Resolved form of [`TcpDef`].
@@ -334,14 +433,8 @@ pub enum TcpIds {
 /// A robot's ids in a compiled model, resolved once when an env is built.
 #[derive(Debug, Clone)]
 pub struct RobotIds {
-    /// qpos address of each active joint, ManiSkill (breadth-first) order.
-    pub qpos_adr: Vec<usize>,
-    /// dof address of each active joint, ManiSkill order.
-    pub dof_adr: Vec<usize>,
-    /// Joint names, ManiSkill order.
-    pub joint_names: Vec<String>,
-    /// Joint limits, ManiSkill order.
-    pub limits: Vec<(f64, f64)>,
+    /// The active joints (ManiSkill order): addresses, names, limits, actuators.
+    pub joints: JointMap,
     /// Body ids of all robot links.
     pub bodies: Vec<usize>,
     /// Body of the root link (fixed to the world at the robot's table pose).
@@ -356,8 +449,6 @@ pub struct RobotIds {
     pub tcp_parts: TcpIds,
     /// Body ids of the two grasp fingers.
     pub fingers: [usize; 2],
-    /// Actuator id per active joint (None if undriven), ManiSkill order.
-    pub actuator: Vec<Option<usize>>,
     /// Upward force m·g per robot body (gravity compensation), aligned with `bodies`.
     pub weight: Vec<f64>,
 }
@@ -366,10 +457,7 @@ impl RobotIds {
     /// Resolves the ids of `robot` in `model`. Errors name what is missing.
     pub fn resolve(model: &Model, robot: &RobotDesc, spec: &RobotSpec) -> Result<RobotIds, String> {
         let mut r = RobotIds {
-            qpos_adr: Vec::new(),
-            dof_adr: Vec::new(),
-            joint_names: Vec::new(),
-            limits: Vec::new(),
+            joints: JointMap::resolve(model, robot)?,
             bodies: Vec::new(),
             root_body: 0,
             link_bodies: Vec::new(),
@@ -377,21 +465,8 @@ impl RobotIds {
             tcp_body: None,
             tcp_parts: TcpIds::Body(0),
             fingers: [0, 0],
-            actuator: Vec::new(),
             weight: Vec::new(),
         };
-        for j in robot.active_joints() {
-            let jd = &robot.joints[j];
-            let id = model
-                .require_id(ObjType::Joint, &jd.name)
-                .map_err(|e| e.to_string())?;
-            r.qpos_adr.push(model.jnt_qposadr()[id] as usize);
-            r.dof_adr.push(model.jnt_dofadr()[id] as usize);
-            r.joint_names.push(jd.name.clone());
-            r.limits.push(jd.limits);
-            r.actuator
-                .push(model.id(ObjType::Actuator, &actuator_name(&jd.name)));
-        }
         for l in &robot.links {
             let b = model
                 .require_id(ObjType::Body, &l.name)
@@ -435,34 +510,6 @@ impl RobotIds {
         let x = data.xfrc_applied_mut();
         for (&b, &w) in self.bodies.iter().zip(&self.weight) {
             x[6 * b..6 * b + 6].copy_from_slice(&[0.0, 0.0, w, 0.0, 0.0, 0.0]);
-        }
-    }
-
-    /// Reads the robot qpos in ManiSkill order into `out`.
-    pub fn qpos(&self, data: &Data, out: &mut [f64]) {
-        let q = data.qpos();
-        for (o, &a) in out.iter_mut().zip(&self.qpos_adr) {
-            *o = q[a];
-        }
-    }
-
-    /// Reads the robot qvel in ManiSkill order into `out`.
-    pub fn qvel(&self, data: &Data, out: &mut [f64]) {
-        let v = data.qvel();
-        for (o, &a) in out.iter_mut().zip(&self.dof_adr) {
-            *o = v[a];
-        }
-    }
-
-    /// Writes a robot qpos (ManiSkill order) and zeroes the robot's velocities.
-    pub fn set_qpos(&self, data: &mut Data, q: &[f64]) {
-        let qp = data.qpos_mut();
-        for (&a, &x) in self.qpos_adr.iter().zip(q) {
-            qp[a] = x;
-        }
-        let qv = data.qvel_mut();
-        for &a in &self.dof_adr {
-            qv[a] = 0.0;
         }
     }
 
@@ -514,8 +561,10 @@ impl RobotIds {
     }
 }
 
-/// A robot alone at its table pose: the compiled model, its description and ids, the MJCF
-/// and the robot's drives (those of its default control mode).
+/// A robot in the table scene (plus whatever a task or test adds): the compiled model, the
+/// robot's description and ids, the MJCF, and the controller of the chosen control mode with
+/// its drives. Built by [`TableScene::build`], the one scene builder (envs, tests and
+/// `export-mjcf` all use it).
 #[derive(Debug)]
 pub struct TableScene {
     /// The compiled model.
@@ -526,13 +575,53 @@ pub struct TableScene {
     pub ids: RobotIds,
     /// The generated MJCF.
     pub mjcf: crate::mjcf::Mjcf,
-    /// The drives (targets at zero until set).
-    pub drives: crate::controllers::Drives,
+    /// The controller of the scene's control mode.
+    pub controller: Controller,
+    /// The drives of that controller (targets at zero until set).
+    pub drives: Drives,
 }
 
-/// Builds a scene with the table, this robot at its table pose with the drives of its
-/// default control mode, plus whatever `extra` adds (used by tests and `export-mjcf`), at the
-/// default physics timestep.
+impl TableScene {
+    /// Builds the scene named `name` at physics timestep `timestep` (s): the table, this robot
+    /// at its table pose with the drives of control mode `mode`, then whatever `extra` adds (a
+    /// task's props and cameras). Errors name what failed (an unknown mode lists the robot's
+    /// modes).
+    pub fn build(
+        spec: &RobotSpec,
+        name: &str,
+        mode: &str,
+        timestep: f64,
+        extra: impl FnOnce(&mut crate::mjcf::Scene),
+    ) -> Result<TableScene, String> {
+        let desc = spec.description()?;
+        let (mode, parts) = spec.control_mode(mode)?;
+        let controller = Controller::new(mode, parts, &desc)?;
+        let drive_list = controller.drives(&desc);
+        let mut scene = crate::mjcf::Scene::new(name, timestep);
+        scene.add_table_scene();
+        scene.add_robot(
+            &desc,
+            &spec.options(spec.table_base(), drive_list.clone()),
+            &|_| None,
+        )?;
+        extra(&mut scene);
+        let mjcf = scene.finish();
+        let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
+        let ids = RobotIds::resolve(&model, &desc, spec)?;
+        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)?;
+        Ok(TableScene {
+            model,
+            desc,
+            ids,
+            mjcf,
+            controller,
+            drives,
+        })
+    }
+}
+
+/// The table scene of this robot alone with the drives of its default control mode, plus
+/// whatever `extra` adds (used by tests and `export-mjcf`), at the default physics timestep.
 pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
@@ -546,36 +635,13 @@ pub fn table_scene_at(
     timestep: f64,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
 ) -> Result<TableScene, String> {
-    let desc = spec.description()?;
-    // The drives of the default control mode (for arm-and-gripper robots these are
-    // `default_drives`; Fetch's also cover its body and base).
-    let mode = spec.control_modes[0];
-    let drive_list =
-        crate::controllers::Controller::new(mode, spec.control_mode(mode)?, &desc)?.drives(&desc);
-    let mut scene = crate::mjcf::Scene::new(spec.uid, timestep);
-    scene.add_table_scene();
-    scene.add_robot(
-        &desc,
-        &spec.options(spec.table_base(), drive_list.clone()),
-        &|_| None,
-    )?;
-    extra(&mut scene);
-    let mjcf = scene.finish();
-    let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
-    let ids = RobotIds::resolve(&model, &desc, spec)?;
-    let drives = crate::controllers::Drives::new(
-        &model,
-        &drive_list,
-        &ids.joint_names,
-        spec.gripper_joints,
-    )?;
-    Ok(TableScene {
-        model,
-        desc,
-        ids,
-        mjcf,
-        drives,
-    })
+    TableScene::build(
+        spec,
+        spec.uid(),
+        spec.control_modes[0].name(),
+        timestep,
+        extra,
+    )
 }
 
 /// Unit vector helper: the local y axis of a body in world coordinates.

@@ -1,8 +1,8 @@
-//! Franka Emika Panda (robots.md §2): 7 arm joints, two mimic-coupled prismatic fingers.
+//! Franka Emika Panda (docs/robots.md §2): 7 arm joints, two mimic-coupled prismatic fingers.
 use std::f64::consts::PI;
 
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 
 /// The Panda's rest keyframe (ManiSkill order).
 pub const REST: [f64; 9] = [
@@ -40,24 +40,24 @@ const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.04);
 /// The TCP / EE link.
 const TCP: &str = "panda_hand_tcp";
 
-/// Panda control modes (robots.md §2), default first.
-pub const CONTROL_MODES: [&str; 11] = super::ARM_EE_MODES;
+/// Panda control modes (docs/robots.md §2), default first.
+pub const CONTROL_MODES: [ControlMode; 11] = super::ARM_EE_MODES;
 
 /// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let ee = |rotation, use_target| PartKind::ee_delta(TCP, None, rotation, use_target, EE_DELTA);
     let kind = match mode {
-        "pd_joint_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, false),
-        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
-        "pd_ee_delta_pos" => ee(false, false),
-        "pd_ee_delta_pose" => ee(true, false),
-        "pd_ee_target_delta_pos" => ee(false, true),
-        "pd_ee_target_delta_pose" => ee(true, true),
-        "pd_ee_pose" => PartKind::ee_pose(TCP, None, EE_POS_ABS, EE_ROT_ABS),
-        "pd_joint_vel" => PartKind::joint_vel(1.0),
-        "pd_joint_pos_vel" => PartKind::joint_pos_vel(false, 1.0),
-        "pd_joint_delta_pos_vel" => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
+        ControlMode::PdJointDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, false),
+        ControlMode::PdJointTargetDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
+        ControlMode::PdEeDeltaPos => ee(false, false),
+        ControlMode::PdEeDeltaPose => ee(true, false),
+        ControlMode::PdEeTargetDeltaPos => ee(false, true),
+        ControlMode::PdEeTargetDeltaPose => ee(true, true),
+        ControlMode::PdEePose => PartKind::ee_pose(TCP, None, EE_POS_ABS, EE_ROT_ABS),
+        ControlMode::PdJointVel => PartKind::joint_vel(1.0),
+        ControlMode::PdJointPosVel => PartKind::joint_pos_vel(false, 1.0),
+        ControlMode::PdJointDeltaPosVel => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
         _ => return None,
     };
     let gripper = PartSpec::new(
@@ -72,7 +72,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
 
 /// The Panda as ManiSkill configures it.
 pub static PANDA: RobotSpec = RobotSpec {
-    uid: "panda",
+    id: super::RobotId::Panda,
     urdf: "panda/panda.urdf",
     srdf: "panda/panda.srdf",
     arm_joints: &ARM,

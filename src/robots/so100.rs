@@ -1,9 +1,9 @@
-//! SO-100 arm (robots.md §5): 5 arm joints and a revolute moving jaw, all driven by one
+//! SO-100 arm (docs/robots.md §5): 5 arm joints and a revolute moving jaw, all driven by one
 //! joint-position controller (no arm/gripper split).
 use std::f64::consts::FRAC_PI_2;
 
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 
 /// Joints in ManiSkill order (5 arm joints, then the gripper).
 pub const JOINTS: [&str; 6] = [
@@ -15,7 +15,7 @@ pub const JOINTS: [&str; 6] = [
     "gripper",
 ];
 
-/// Table-scene initial qpos (tasks.md §0.2) before noise.
+/// Table-scene initial qpos (docs/tasks.md §0.2) before noise.
 pub const TABLE_QPOS: [f64; 6] = [0.0, 0.0, 0.0, FRAC_PI_2, FRAC_PI_2, 0.0];
 
 /// Drive (stiffness, damping, force limit) of every joint.
@@ -30,19 +30,19 @@ pub const FIXED_JAW_TIP: [f64; 3] = [0.01, -0.097, 0.0];
 /// Moving_Jaw_tip in the Moving_Jaw frame.
 pub const MOVING_JAW_TIP: [f64; 3] = [-0.01, -0.073, 0.0];
 
-/// SO100 control modes (robots.md §5), default first.
-pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
+/// SO100 control modes (docs/robots.md §5), default first.
+pub const CONTROL_MODES: [ControlMode; 3] = super::JOINT_POS_MODES;
 
 /// The parts of an SO100 control mode: always one part over all six joints.
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let delta = |use_target| {
         let bounds = [[ARM_DELTA; 5].as_slice(), &[GRIPPER_DELTA]].concat();
         PartKind::joint_delta_per(bounds, use_target)
     };
     let kind = match mode {
-        "pd_joint_delta_pos" => delta(false),
-        "pd_joint_target_delta_pos" => delta(true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
+        ControlMode::PdJointDeltaPos => delta(false),
+        ControlMode::PdJointTargetDeltaPos => delta(true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
         _ => return None,
     };
     Some(vec![PartSpec::new("arm", &JOINTS, kind, GAINS)])
@@ -50,7 +50,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
 
 /// The SO100 as ManiSkill configures it.
 pub static SO100: RobotSpec = RobotSpec {
-    uid: "so100",
+    id: super::RobotId::So100,
     urdf: "so100/so100.urdf",
     srdf: "so100/so100.srdf",
     arm_joints: JOINTS.split_at(5).0,

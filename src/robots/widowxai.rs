@@ -1,8 +1,8 @@
-//! Trossen WidowX AI (robots.md §6): 6 arm joints and two prismatic carriages; the right
+//! Trossen WidowX AI (docs/robots.md §6): 6 arm joints and two prismatic carriages; the right
 //! carriage follows the left one through the URDF `<mimic>` tag (upstream a stiff PhysX
 //! tendon, here a MuJoCo joint equality) and has no drive of its own.
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 
 /// Arm joints (ManiSkill order).
 const ARM: [&str; 6] = [
@@ -35,15 +35,15 @@ const JOINT_DELTA: f32 = 0.1;
 /// Carriage opening range of the (normalised, absolute) gripper action (m).
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
-/// WidowX AI control modes (robots.md §6), default first.
-pub const CONTROL_MODES: [&str; 3] = super::JOINT_POS_MODES;
+/// WidowX AI control modes (docs/robots.md §6), default first.
+pub const CONTROL_MODES: [ControlMode; 3] = super::JOINT_POS_MODES;
 
 /// The parts of a WidowX AI control mode: arm (7 joints) then gripper (1).
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let kind = match mode {
-        "pd_joint_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, false),
-        "pd_joint_target_delta_pos" => PartKind::joint_delta(7, JOINT_DELTA, true),
-        "pd_joint_pos" => PartKind::joint_absolute(),
+        ControlMode::PdJointDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, false),
+        ControlMode::PdJointTargetDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, true),
+        ControlMode::PdJointPos => PartKind::joint_absolute(),
         _ => return None,
     };
     let gripper = PartKind::joint_range(1, GRIPPER_RANGE, true);
@@ -55,7 +55,7 @@ pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
 
 /// The WidowX AI as ManiSkill configures it.
 pub static WIDOWXAI: RobotSpec = RobotSpec {
-    uid: "widowxai",
+    id: super::RobotId::WidowxAi,
     urdf: "widowxai/widowxai.urdf",
     srdf: "widowxai/widowxai.srdf",
     arm_joints: &ARM,

@@ -1,7 +1,7 @@
-//! UFactory xArm6 with a Robotiq 2F-85 gripper (robots.md §4): 6 arm joints, a four-bar
+//! UFactory xArm6 with a Robotiq 2F-85 gripper (docs/robots.md §4): 6 arm joints, a four-bar
 //! linkage per finger with two loop closures, the right outer knuckle driving both sides.
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
-use crate::controllers::{PartKind, PartSpec};
+use crate::controllers::{ControlMode, PartKind, PartSpec};
 use crate::mjcf::{Connect, RobotOptions};
 
 /// The `rest` keyframe (ManiSkill order: arm, then the gripper joints in breadth-first order).
@@ -21,7 +21,7 @@ pub const PASSIVE: [&str; 4] = [
     "right_inner_finger_joint",
 ];
 const ARM_GAINS: (f64, f64, f64) = (1e4, 1e3, 100.0);
-/// ManiSkill's active-gripper drive: stiffness, damping, force limit (robots.md §4).
+/// ManiSkill's active-gripper drive: stiffness, damping, force limit (docs/robots.md §4).
 pub const MANISKILL_GRIPPER_GAINS: (f64, f64, f64) = (1e5, 2000.0, 0.1);
 /// The drive mjskill installs on the knuckles: ManiSkill's force limit with a softer stiffness
 /// and damping. It was needed under MuJoCo's implicit integrator (which linearised D = 2000
@@ -65,7 +65,7 @@ pub const NO_SELF_COLLISION: [&str; 12] = [
     "link5",
 ];
 
-/// The loop closures (robots.md §4): (inner knuckle, anchor in it, inner finger, anchor in it).
+/// The loop closures (docs/robots.md §4): (inner knuckle, anchor in it, inner finger, anchor in it).
 /// Both anchors coincide at q = 0, so MuJoCo's `connect` (anchor in the first body, the second
 /// body's anchor derived at qpos0 = 0) reproduces both; a test checks the derived anchor.
 pub const LOOP_CLOSURES: [(&str, [f64; 3], &str, [f64; 3]); 2] = [
@@ -98,33 +98,33 @@ const PAD_PATCH_RADIUS: f64 = 0.1;
 /// The pads' friction against default-material objects (PhysX average of 2.0 and 0.3).
 const PAD_FRICTION_AVG: f64 = (2.0 + crate::mjcf::DEFAULT_FRICTION) / 2.0;
 
-/// xArm6 control modes (robots.md §4), default first.
-pub const CONTROL_MODES: [&str; 11] = super::ARM_EE_MODES;
+/// xArm6 control modes (docs/robots.md §4), default first.
+pub const CONTROL_MODES: [ControlMode; 11] = super::ARM_EE_MODES;
 
 /// The parts of an xArm6 control mode: the arm, then the active gripper (the right outer
 /// knuckle takes the action, the left one mimics it ×1 + 0). The passive linkage joints
 /// (ManiSkill's 0-dim `gripper_passive`: stiffness 0, damping 0) take no action and get no
 /// drive. The gripper is absolute (radians in [0, 0.81], not normalised, not clipped) or a
 /// normalised ±0.15 rad delta from the measured position, as upstream pairs it per mode.
-pub fn parts(mode: &str) -> Option<Vec<PartSpec>> {
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let ee =
         |rotation, use_target| PartKind::ee_delta(EE_LINK, None, rotation, use_target, EE_DELTA);
     let (kind, absolute_gripper) = match mode {
-        "pd_joint_delta_pos" => (PartKind::joint_delta(6, JOINT_DELTA, false), false),
-        "pd_joint_target_delta_pos" => (PartKind::joint_delta(6, JOINT_DELTA, true), false),
-        "pd_joint_pos" => (PartKind::joint_absolute(), true),
-        "pd_ee_delta_pos" => (ee(false, false), false),
-        // Upstream pairs the EE delta pose with the absolute gripper (robots.md §4).
-        "pd_ee_delta_pose" => (ee(true, false), true),
-        "pd_ee_target_delta_pos" => (ee(false, true), false),
-        "pd_ee_target_delta_pose" => (ee(true, true), false),
-        "pd_ee_pose" => (
+        ControlMode::PdJointDeltaPos => (PartKind::joint_delta(6, JOINT_DELTA, false), false),
+        ControlMode::PdJointTargetDeltaPos => (PartKind::joint_delta(6, JOINT_DELTA, true), false),
+        ControlMode::PdJointPos => (PartKind::joint_absolute(), true),
+        ControlMode::PdEeDeltaPos => (ee(false, false), false),
+        // Upstream pairs the EE delta pose with the absolute gripper (docs/robots.md §4).
+        ControlMode::PdEeDeltaPose => (ee(true, false), true),
+        ControlMode::PdEeTargetDeltaPos => (ee(false, true), false),
+        ControlMode::PdEeTargetDeltaPose => (ee(true, true), false),
+        ControlMode::PdEePose => (
             PartKind::ee_pose(EE_LINK, None, EE_POS_ABS, EE_ROT_ABS),
             true,
         ),
-        "pd_joint_vel" => (PartKind::joint_vel(1.0), true),
-        "pd_joint_pos_vel" => (PartKind::joint_pos_vel(false, 1.0), true),
-        "pd_joint_delta_pos_vel" => (PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0), false),
+        ControlMode::PdJointVel => (PartKind::joint_vel(1.0), true),
+        ControlMode::PdJointPosVel => (PartKind::joint_pos_vel(false, 1.0), true),
+        ControlMode::PdJointDeltaPosVel => (PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0), false),
         _ => return None,
     };
     let gripper_kind = if absolute_gripper {
@@ -173,7 +173,7 @@ fn customize(opts: &mut RobotOptions) {
 
 /// The xArm6 + Robotiq as ManiSkill configures it.
 pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
-    uid: "xarm6_robotiq",
+    id: super::RobotId::Xarm6Robotiq,
     urdf: "xarm6_robotiq/xarm6_robotiq.urdf",
     srdf: "xarm6_robotiq/xarm6_robotiq.srdf",
     arm_joints: &ARM,

@@ -1,6 +1,6 @@
 //! The scripted PickCube solver for Fetch (control mode `pd_ee_delta_pose`).
 //!
-//! It runs the phases of solvers.md §7.1 (above the cube, down to it, close for H steps,
+//! It runs the phases of docs/solvers.md §7.1 (above the cube, down to it, close for H steps,
 //! carry to the goal) with Fetch-specific additions that its geometry requires:
 //! * Fetch stands 1.05 m behind the table centre and, at its table pose, holds the gripper
 //!   60° below the horizontal; with that orientation the arm cannot reach the cube spawn
@@ -74,7 +74,7 @@ fn approached_tilted(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
 /// Approach tolerance along the tilted fingers (m).
 const APPROACH_TOL_ALONG: f64 = 0.015;
 
-/// solvers.md §7.1 for Fetch.
+/// docs/solvers.md §7.1 for Fetch.
 #[derive(Debug)]
 pub struct FetchPickCube {
     cube: usize,

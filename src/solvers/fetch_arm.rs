@@ -98,7 +98,7 @@ pub struct ArmCommand {
 impl FetchArm {
     /// Resolves the Fetch's bodies.
     pub fn new(env: &Env) -> Result<Self, String> {
-        if env.robot().qpos_adr.len() != 15 {
+        if env.robot().joints.len() != 15 {
             return Err("the Fetch solvers need the 15-dof Fetch".into());
         }
         Ok(FetchArm {
@@ -120,7 +120,7 @@ impl FetchArm {
 
     /// The torso lift joint's position (m).
     pub fn torso(&self, env: &Env) -> f64 {
-        env.data().qpos()[env.robot().qpos_adr[3]]
+        env.data().qpos()[env.robot().joints.qpos_adr[3]]
     }
 
     /// Orientation error (rad) of the gripper from `pitch`.
@@ -133,7 +133,7 @@ impl FetchArm {
     /// `cmd.torso`, the base towards `BASE_FORWARD` with yaw 0.
     pub fn drive(&mut self, env: &Env, cmd: ArmCommand, action: &mut [f32]) {
         let data = env.data();
-        env.robot().qpos(data, &mut self.q);
+        env.robot().joints.qpos(data, &mut self.q);
         let cur = body_quat(env, self.gripper_link);
         let rot_err = (pitched(cmd.pitch) * cur.inverse()).scaled_axis();
         // Keep the target within reach at the gripper's current pitch (the IK keeps the

@@ -1,5 +1,5 @@
 //! Scripted PlaceSphere-v1 and PokeCube-v1 solvers for Fetch (control mode
-//! `pd_ee_delta_pose`): the Panda solvers' phases (solvers.md §7.2, §7.3; `place_sphere.rs`,
+//! `pd_ee_delta_pose`): the Panda solvers' phases (docs/solvers.md §7.2, §7.3; `place_sphere.rs`,
 //! `poke_cube.rs`) plan the TCP targets, and [`FetchArm`] turns them into Fetch actions the
 //! way the Fetch PickCube solver does (`fetch_arm.rs`: flatter gripper pitch, lowered torso, base
 //! a little forward, targets clamped to the arm's reach). The TCP is `gripper_link`
@@ -64,7 +64,7 @@ const RELEASE_BELOW_STALLED: f64 = 0.033;
 const STALL_STEPS: usize = 2;
 const STALL_MOVE: f64 = 0.002;
 
-/// solvers.md §7.2 with Fetch.
+/// docs/solvers.md §7.2 with Fetch.
 #[derive(Debug)]
 pub struct FetchPlaceSphere {
     inner: PlaceSphereSolver,
@@ -188,7 +188,7 @@ fn descended_on_peg(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
     e.y.abs() < 0.004 && e.z.abs() < 0.01 && e.x.abs() < 0.012
 }
 
-/// solvers.md §7.3 with Fetch.
+/// docs/solvers.md §7.3 with Fetch.
 #[derive(Debug)]
 pub struct FetchPokeCube {
     inner: PokeCubeSolver,

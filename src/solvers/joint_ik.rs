@@ -1,6 +1,6 @@
 //! Scripted PickCube solver for robots without end-effector controllers (SO100, WidowX AI;
-//! solvers.md §8): an IK of its own on the robot's URDF chain turns the phase targets of
-//! solvers.md §7.1 into `pd_joint_pos` actions.
+//! docs/solvers.md §8): an IK of its own on the robot's URDF chain turns the phase targets of
+//! docs/solvers.md §7.1 into `pd_joint_pos` actions.
 //!
 //! The IK works on a *grasp point* fixed in the gripper (the spot between the jaws where the
 //! cube centre ends up) and a top-down grasp frame: it minimises, by damped least squares
@@ -124,16 +124,19 @@ impl JointIkPickCube {
     pub fn new(env: &Env, robot: JointIkRobot) -> Result<Self, String> {
         let spec = env.robot_spec();
         let desc = spec.description()?;
-        let arm: Vec<&str> = env.robot().joint_names[..robot.n_arm]
+        let arm: Vec<&str> = env.robot().joints.names[..robot.n_arm]
             .iter()
             .map(|s| s.as_str())
             .collect();
         let chain = Chain::new(&desc, robot.link, &arm)?;
         let mut limits = [(0.0, 0.0); MAX_ARM];
-        for (l, r) in limits.iter_mut().zip(&env.robot().limits[..robot.n_arm]) {
+        for (l, r) in limits
+            .iter_mut()
+            .zip(&env.robot().joints.limits[..robot.n_arm])
+        {
             *l = *r;
         }
-        let n = env.robot().qpos_adr.len();
+        let n = env.robot().joints.len();
         Ok(JointIkPickCube {
             robot,
             chain,
@@ -267,7 +270,7 @@ impl Policy for JointIkPickCube {
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
-        env.robot().qpos(env.data(), &mut self.q);
+        env.robot().joints.qpos(env.data(), &mut self.q);
         let (p, _, c) = self.frame(&self.q);
         let cube = body_xyz(env, self.cube);
         let goal = body_xyz(env, self.goal);

@@ -1,4 +1,4 @@
-//! Policies for rollouts: the scripted `solver`s of solvers.md §7 and the `random` and `zero`
+//! Policies for rollouts: the scripted `solver`s of docs/solvers.md §7 and the `random` and `zero`
 //! baselines.
 //!
 //! The solvers are the EE-space scripted policies (control mode `pd_ee_delta_pos`): every step
@@ -20,6 +20,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
 use crate::env::Env;
+use crate::robots::RobotId;
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -41,12 +42,14 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     if policy != "solver" {
         return None;
     }
+    // An unknown robot needs no mode: building the env reports it.
+    let robot = RobotId::parse(robot).ok()?;
     Some(match robot {
-        "so100" | "widowxai" => "pd_joint_pos",
+        RobotId::So100 | RobotId::WidowxAi => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
         // its gripper to the cube's faces (solvers/xarm6.rs).
-        "fetch" | "xarm6_robotiq" => "pd_ee_delta_pose",
-        _ => "pd_ee_delta_pos",
+        RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
+        RobotId::Panda => "pd_ee_delta_pos",
     })
 }
 
@@ -115,7 +118,7 @@ fn boxed<P: Policy + 'static>(policy: Result<P, String>) -> Result<Box<dyn Polic
 
 /// Which scripted solver fits an (env, robot) pair.
 fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
-    let robot = env.robot_spec().uid;
+    let robot = env.robot_spec().uid();
     let mode = env.control_mode();
     let required = required_control_mode("solver", robot).unwrap_or(mode);
     if mode != required {
@@ -171,14 +174,14 @@ pub const FETCH_GRIPPER: Gripper = Gripper {
     close: -1.0,
 };
 
-/// xArm6 + Robotiq in `pd_ee_delta_pose`: the absolute gripper (robots.md §4) takes target
+/// xArm6 + Robotiq in `pd_ee_delta_pose`: the absolute gripper (docs/robots.md §4) takes target
 /// 0 rad (open) and 0.81 rad (closed).
 pub const XARM6_ABS_GRIPPER: Gripper = Gripper {
     open: 0.0,
     close: 0.81,
 };
 
-/// Height of the approach point above the grasp point (m; the grasp phases of solvers.md §7).
+/// Height of the approach point above the grasp point (m; the grasp phases of docs/solvers.md §7).
 pub const APPROACH_HEIGHT: f64 = 0.05;
 /// Approach tolerance (m).
 pub const APPROACH_TOL: f64 = 0.01;
@@ -190,7 +193,7 @@ pub const CLOSE_STEPS: usize = 3;
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
 /// Rotation per unit action of `pd_ee_delta_pose` (rad; upstream scales by rot_lower = −0.1,
-/// controllers.md §1, so +1 turns −0.1 rad).
+/// docs/controllers.md §1, so +1 turns −0.1 rad).
 const ROT_SCALE: f64 = -0.1;
 
 /// Phase bookkeeping of the scripted solvers: phases are checked in order and fall through
@@ -257,7 +260,7 @@ fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
     (target - tcp).norm() < DESCEND_TOL
 }
 
-/// Phases 0–2 that every EE-space solver starts with (solvers.md §7): above the grasp point
+/// Phases 0–2 that every EE-space solver starts with (docs/solvers.md §7): above the grasp point
 /// (open), down to it (open), close for `hold` steps.
 #[derive(Debug, Clone, Copy)]
 pub struct Grasp {

@@ -1,4 +1,4 @@
-//! solvers.md §7.1: the EE-space scripted PickCube policy (`pd_ee_delta_pos`).
+//! docs/solvers.md §7.1: the EE-space scripted PickCube policy (`pd_ee_delta_pos`).
 //!
 //! Above the cube, down to it, close for [`CLOSE_STEPS`](super::CLOSE_STEPS) steps, carry to the goal. Positions
 //! are the robot's `tcp_pose` and the cube and goal centres, read before each step.

@@ -1,4 +1,4 @@
-//! solvers.md §7.2: the EE-space scripted PlaceSphere policy (`pd_ee_delta_pos`).
+//! docs/solvers.md §7.2: the EE-space scripted PlaceSphere policy (`pd_ee_delta_pos`).
 //!
 //! Above the sphere, down to it, close, lift to 8 cm, carry the sphere over the bin, lower
 //! it until it is just above the floor, open, retreat. Positions are the TCP **link**
@@ -84,7 +84,7 @@ impl PlaceSphereSolver {
         self
     }
 
-    /// The current phase: 0–5 as solvers.md §7.2, 6 the settle (hold until the sphere is
+    /// The current phase: 0–5 as docs/solvers.md §7.2, 6 the settle (hold until the sphere is
     /// slower than [`Self::release_speed`]; skipped by the spec's phases), 7 and 8 the spec's
     /// 6 (open) and 7 (retreat).
     pub fn phase(&self) -> usize {

@@ -1,4 +1,4 @@
-//! solvers.md §7.3: the EE-space scripted PokeCube policy (`pd_ee_delta_pos`).
+//! docs/solvers.md §7.3: the EE-space scripted PokeCube policy (`pd_ee_delta_pos`).
 //!
 //! Grasp the peg top-down 8 cm behind its centre (its head then reaches the far goals),
 //! slide it on the table — never lift it — until the head sits just behind the cube, push
@@ -80,7 +80,7 @@ impl PokeCubeSolver {
         self
     }
 
-    /// The current phase (0–5, as solvers.md §7.3).
+    /// The current phase (0–5, as docs/solvers.md §7.3).
     pub fn phase(&self) -> usize {
         self.phases.phase
     }

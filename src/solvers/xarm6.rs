@@ -1,7 +1,7 @@
 //! The scripted PickCube solver for the xArm6 with the Robotiq 2F-85 (control mode
 //! `pd_ee_delta_pose`).
 //!
-//! It runs the phases of solvers.md §7.1 (above the cube, down to it, close for H steps,
+//! It runs the phases of docs/solvers.md §7.1 (above the cube, down to it, close for H steps,
 //! carry to the goal) and, while approaching, turns the gripper about the vertical so that its
 //! closing axis is perpendicular to a cube face (the smallest turn, at most 45°). The Robotiq's
 //! closing drive is limited to 0.1 N·m (ManiSkill's force limit): a cube lying at 25–65° to the
@@ -11,8 +11,8 @@
 //! The carry to the goal is slower than the spec's (action limit [`CARRY_LIMIT`]), so that the
 //! pinched cube does not slide in the fingers.
 //!
-//! The rotation part of the action is scaled by upstream's rot_lower = −0.1 (controllers.md §1),
-//! so +1 turns −0.1 rad. The absolute gripper of this mode (robots.md §4) takes 0 (open) and
+//! The rotation part of the action is scaled by upstream's rot_lower = −0.1 (docs/controllers.md §1),
+//! so +1 turns −0.1 rad. The absolute gripper of this mode (docs/robots.md §4) takes 0 (open) and
 //! 0.81 rad (closed) as targets.
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -39,7 +39,7 @@ const GRASP: Grasp = Grasp {
     hold: HOLD,
 };
 
-/// solvers.md §7.1 for the xArm6, with the gripper turned to the cube's faces.
+/// docs/solvers.md §7.1 for the xArm6, with the gripper turned to the cube's faces.
 #[derive(Debug)]
 pub struct Xarm6PickCube {
     cube: usize,

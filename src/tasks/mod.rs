@@ -2,15 +2,34 @@
 //! extras, `evaluate()`, dense reward — with every constant named once. This module holds
 //! what they share: the [`Task`] trait, the per-step [`TaskCtx`], the grasp check and pose
 //! helpers.
+/// Declares a task's `info` keys once: `pub const INFO_KEYS` (the names in upstream
+/// insertion order) and a `usize` index constant per key, from one list of
+/// `INDEX = "name"` pairs.
+macro_rules! info_keys {
+    ($($idx:ident = $name:literal),+ $(,)?) => {
+        /// `evaluate()` keys in upstream insertion order.
+        pub const INFO_KEYS: [&str; info_keys!(@count $($idx)+)] = [$($name),+];
+        info_keys!(@index 0usize; $($idx)+);
+    };
+    (@count) => { 0usize };
+    (@count $head:ident $($tail:ident)*) => { 1usize + info_keys!(@count $($tail)*) };
+    (@index $n:expr;) => {};
+    (@index $n:expr; $head:ident $($tail:ident)*) => {
+        const $head: usize = $n;
+        info_keys!(@index $n + 1usize; $($tail)*);
+    };
+}
+
 pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use crate::env::rng::TorchGenerator;
 use crate::mjcf::Scene;
 use crate::mujoco::{Data, Model, ObjType};
+pub use crate::obs::ObsWriter;
+use crate::rng::TorchGenerator;
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
 
 /// Threshold of `agent.is_static` as every task calls it (rad/s or m/s).
@@ -54,7 +73,7 @@ pub struct TaskCtx<'a> {
 }
 
 impl TaskCtx<'_> {
-    /// `agent.is_grasping(object)` with the forces the env computed (robots.md §1.3).
+    /// `agent.is_grasping(object)` with the forces the env computed (docs/robots.md §1.3).
     pub fn is_grasping(&self) -> bool {
         is_grasping(
             &self.spec.grasp,
@@ -63,7 +82,7 @@ impl TaskCtx<'_> {
             self.finger_forces,
         )
     }
-    /// `agent.is_static(0.2)` with the robot's rule (env.md §10).
+    /// `agent.is_static(0.2)` with the robot's rule (docs/env.md §10).
     pub fn is_robot_static(&self) -> bool {
         self.spec
             .static_rule
@@ -111,10 +130,9 @@ pub trait Task: Send + std::fmt::Debug {
     fn info_keys(&self) -> &'static [&'static str];
     /// Computes `evaluate()` into `info` (aligned with [`Task::info_keys`]; bools as 0/1).
     fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]);
-    /// Observation extras: (key, length), in insertion order; `state` = privileged keys too.
-    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)>;
-    /// Writes the extras (same order as [`Task::extra_layout`]).
-    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]);
+    /// Writes the observation extras (ManiSkill's `_get_obs_extra`), each named where it is
+    /// written, in insertion order; `state` = the privileged keys too.
+    fn observe_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut ObsWriter);
     /// Dense reward.
     fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64;
     /// Sensor and human-render cameras.
@@ -167,20 +185,6 @@ pub fn set_mocap_pose(model: &Model, data: &mut Data, body: usize, pos: [f64; 3]
     data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&quat);
 }
 
-/// Writes a pose (p, q wxyz) as 7 f32s.
-pub fn write_pose(out: &mut [f32], p: Vector3<f64>, q: [f64; 4]) {
-    for (o, v) in out.iter_mut().zip([p.x, p.y, p.z, q[0], q[1], q[2], q[3]]) {
-        *o = v as f32;
-    }
-}
-
-/// Writes a 3-vector as f32s.
-pub fn write_vec(out: &mut [f32], v: Vector3<f64>) {
-    for (o, x) in out.iter_mut().zip([v.x, v.y, v.z]) {
-        *o = x as f32;
-    }
-}
-
 /// quat(euler XYZ (0, 0, yaw)) standardised to w ≥ 0, computed in float32 like upstream.
 pub fn yaw_quat_f32(yaw: f32) -> [f64; 4] {
     let (s, c) = ((yaw / 2.0).sin(), (yaw / 2.0).cos());
@@ -199,7 +203,7 @@ pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     n(a).dot(&n(b)).clamp(-1.0, 1.0).acos()
 }
 
-/// The grasp check of robots.md §1.3 from the finger forces and the fingers' y axes.
+/// The grasp check of docs/robots.md §1.3 from the finger forces and the fingers' y axes.
 pub fn is_grasping(g: &GraspDef, data: &Data, fingers: [usize; 2], forces: &[[f64; 3]; 2]) -> bool {
     let mut ok = true;
     for (k, (&body, sign)) in fingers.iter().zip([g.finger1.1, g.finger2.1]).enumerate() {

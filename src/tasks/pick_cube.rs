@@ -1,16 +1,17 @@
-//! PickCube-v1 (tasks.md §1): grasp a red cube and move it to a green goal point.
+//! PickCube-v1 (docs/tasks.md §1): grasp a red cube and move it to a green goal point.
 //! Registered variants PickCubeSO100-v1 / PickCubeWidowXAI-v1 force the robot.
 use std::f32::consts::PI;
 
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
-    yaw_quat_f32, CameraDef, Task, TaskCtx,
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, yaw_quat_f32, CameraDef,
+    ObsWriter, Task, TaskCtx,
 };
-use crate::env::rng::{uniform_scaled, TorchGenerator};
 use crate::mjcf::Scene;
 use crate::mujoco::{Data, Model};
+use crate::rng::{uniform_scaled, TorchGenerator};
+use crate::robots::RobotId;
 
 /// Maximum dense reward.
 pub const MAX_REWARD: f64 = 5.0;
@@ -23,7 +24,7 @@ const SENSOR_FOVY: f64 = std::f64::consts::FRAC_PI_2;
 /// Human camera field of view.
 const HUMAN_FOVY: f64 = 1.0;
 
-/// Per-robot task configuration (`PICK_CUBE_CONFIGS`, tasks.md §1.2).
+/// Per-robot task configuration (`PICK_CUBE_CONFIGS`, docs/tasks.md §1.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PickCubeConfig {
     /// Half edge of the cube.
@@ -50,7 +51,7 @@ const PANDA_CAMS: (Eye, Eye) = (
     ([0.6, 0.7, 0.6], [0.0, 0.0, 0.35]),
 );
 
-/// The panda/fetch/xarm6 configuration (robots without an entry fall back to it).
+/// The panda configuration (fetch and xarm6_robotiq have identical entries).
 pub const PANDA_CONFIG: PickCubeConfig = PickCubeConfig {
     cube_half_size: 0.02,
     goal_thresh: 0.025,
@@ -84,27 +85,27 @@ pub const WIDOWXAI_CONFIG: PickCubeConfig = PickCubeConfig {
 };
 
 /// The configuration ManiSkill uses for `robot`.
-pub fn config_for(robot: &str) -> PickCubeConfig {
+pub fn config_for(robot: RobotId) -> PickCubeConfig {
     match robot {
-        "so100" => SO100_CONFIG,
-        "widowxai" => WIDOWXAI_CONFIG,
-        _ => PANDA_CONFIG,
+        RobotId::Panda | RobotId::Fetch | RobotId::Xarm6Robotiq => PANDA_CONFIG,
+        RobotId::So100 => SO100_CONFIG,
+        RobotId::WidowxAi => WIDOWXAI_CONFIG,
     }
 }
 
-/// `info` keys, in upstream order.
-pub const INFO_KEYS: [&str; 4] = ["success", "is_obj_placed", "is_robot_static", "is_grasped"];
-const SUCCESS: usize = 0;
-const IS_OBJ_PLACED: usize = 1;
-const IS_ROBOT_STATIC: usize = 2;
-const IS_GRASPED: usize = 3;
+info_keys! {
+    SUCCESS = "success",
+    IS_OBJ_PLACED = "is_obj_placed",
+    IS_ROBOT_STATIC = "is_robot_static",
+    IS_GRASPED = "is_grasped",
+}
 
 /// PickCube-v1.
 #[derive(Debug, Clone)]
 pub struct PickCube {
     cfg: PickCubeConfig,
-    /// Robot uid (the dense reward's static term depends on it).
-    robot: &'static str,
+    /// The robot (the dense reward's static term depends on it).
+    robot: RobotId,
     cube: usize,
     cube_qadr: usize,
     goal: usize,
@@ -112,7 +113,7 @@ pub struct PickCube {
 
 impl PickCube {
     /// PickCube with the configuration of `robot`.
-    pub fn new(robot: &'static str) -> Self {
+    pub fn new(robot: RobotId) -> Self {
         PickCube {
             cfg: config_for(robot),
             robot,
@@ -127,12 +128,12 @@ impl PickCube {
         &self.cfg
     }
 
-    /// Number of trailing qvel entries the static bonus ignores (tasks.md §1.7).
+    /// Number of trailing qvel entries the static bonus ignores (docs/tasks.md §1.7).
     fn static_drop(&self) -> usize {
         match self.robot {
-            "panda" | "widowxai" => 2,
-            "so100" => 1,
-            _ => 0,
+            RobotId::Panda | RobotId::WidowxAi => 2,
+            RobotId::So100 => 1,
+            RobotId::Fetch | RobotId::Xarm6Robotiq => 0,
         }
     }
 }
@@ -209,28 +210,16 @@ impl Task for PickCube {
     }
 
     // ---- observation extras ------------------------------------------------------------------
-    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
-        let mut v = vec![("is_grasped", 1), ("tcp_pose", 7), ("goal_pos", 3)];
-        if state {
-            v.extend([
-                ("obj_pose", 7),
-                ("tcp_to_obj_pos", 3),
-                ("obj_to_goal_pos", 3),
-            ]);
-        }
-        v
-    }
-
-    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]) {
+    fn observe_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut ObsWriter) {
         let tcp = Vector3::from(ctx.tcp_pos);
         let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
-        out[0] = info[IS_GRASPED] as f32;
-        write_pose(&mut out[1..8], tcp, ctx.tcp_quat);
-        write_vec(&mut out[8..11], goal);
+        out.scalar("is_grasped", info[IS_GRASPED]);
+        out.pose("tcp_pose", tcp, ctx.tcp_quat);
+        out.vec3("goal_pos", goal);
         if state {
-            write_pose(&mut out[11..18], cube, ctx.body_quat(self.cube));
-            write_vec(&mut out[18..21], cube - tcp);
-            write_vec(&mut out[21..24], goal - cube);
+            out.pose("obj_pose", cube, ctx.body_quat(self.cube));
+            out.vec3("tcp_to_obj_pos", cube - tcp);
+            out.vec3("obj_to_goal_pos", goal - cube);
         }
     }
 

@@ -1,15 +1,15 @@
-//! PlaceSphere-v1 (tasks.md §3): grasp a small blue sphere and release it in a shallow bin.
+//! PlaceSphere-v1 (docs/tasks.md §3): grasp a small blue sphere and release it in a shallow bin.
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
-    CameraDef, Task, TaskCtx,
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, CameraDef, ObsWriter,
+    Task, TaskCtx,
 };
-use crate::env::rng::TorchGenerator;
 use crate::mjcf::Scene;
 use crate::mujoco::{Data, Model};
+use crate::rng::TorchGenerator;
 
-// ---- constants (tasks.md §3) ---------------------------------------------------------------
+// ---- constants (docs/tasks.md §3) ---------------------------------------------------------------
 /// Maximum dense reward.
 pub const MAX_REWARD: f64 = 13.0;
 /// Sphere radius (m).
@@ -34,17 +34,12 @@ const STATIC_ANG: f64 = 0.5;
 /// The `ungrasp` term when the sphere is not grasped.
 const UNGRASP_FREE: f64 = 16.0;
 
-/// `evaluate()` keys in upstream order.
-pub const INFO_KEYS: [&str; 4] = [
-    "is_obj_grasped",
-    "is_obj_on_bin",
-    "is_obj_static",
-    "success",
-];
-const IS_OBJ_GRASPED: usize = 0;
-const IS_OBJ_ON_BIN: usize = 1;
-const IS_OBJ_STATIC: usize = 2;
-const SUCCESS: usize = 3;
+info_keys! {
+    IS_OBJ_GRASPED = "is_obj_grasped",
+    IS_OBJ_ON_BIN = "is_obj_on_bin",
+    IS_OBJ_STATIC = "is_obj_static",
+    SUCCESS = "success",
+}
 
 /// The five bin boxes (centre, half extents) in the bin frame: floor, walls −x, +x, −y, +y.
 pub fn bin_boxes() -> [([f64; 3], [f64; 3]); 5] {
@@ -140,23 +135,15 @@ impl Task for PlaceSphere {
     }
 
     // ---- observation extras ------------------------------------------------------------------
-    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
-        let mut v = vec![("is_grasped", 1), ("tcp_pose", 7), ("bin_pos", 3)];
-        if state {
-            v.extend([("obj_pose", 7), ("tcp_to_obj_pos", 3)]);
-        }
-        v
-    }
-
-    fn write_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut [f32]) {
+    fn observe_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut ObsWriter) {
         let tcp = ctx.tcp_link_pos();
         let sphere = ctx.body_pos(self.sphere);
-        out[0] = info[IS_OBJ_GRASPED] as f32;
-        write_pose(&mut out[1..8], tcp, ctx.tcp_quat);
-        write_vec(&mut out[8..11], ctx.body_pos(self.bin));
+        out.scalar("is_grasped", info[IS_OBJ_GRASPED]);
+        out.pose("tcp_pose", tcp, ctx.tcp_quat);
+        out.vec3("bin_pos", ctx.body_pos(self.bin));
         if state {
-            write_pose(&mut out[11..18], sphere, ctx.body_quat(self.sphere));
-            write_vec(&mut out[18..21], sphere - tcp);
+            out.pose("obj_pose", sphere, ctx.body_quat(self.sphere));
+            out.vec3("tcp_to_obj_pos", sphere - tcp);
         }
     }
 
@@ -171,7 +158,7 @@ impl Task for PlaceSphere {
         if grasped {
             r = 4.0 + place;
         }
-        let gripper_width = 2.0 * ctx.robot.limits.last().map_or(0.0, |l| l.1);
+        let gripper_width = 2.0 * ctx.robot.joints.limits.last().map_or(0.0, |l| l.1);
         let n = ctx.qpos.len();
         let ungrasp = if grasped {
             (ctx.qpos[n - 2] + ctx.qpos[n - 1]) / gripper_width

@@ -1,4 +1,4 @@
-//! PokeCube-v1 (tasks.md §2): grasp a blue peg and push a red cube with the peg's head onto
+//! PokeCube-v1 (docs/tasks.md §2): grasp a blue peg and push a red cube with the peg's head onto
 //! a red/white target on the table.
 //!
 //! Robot-generic: every robot-dependent quantity goes through the robot spec — `agent.tcp`
@@ -20,15 +20,15 @@ use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_3, FRAC_PI_6};
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, write_pose, write_vec,
-    yaw_quat_f32, CameraDef, Task, TaskCtx,
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, yaw_quat_f32, CameraDef,
+    ObsWriter, Task, TaskCtx,
 };
-use crate::env::rng::TorchGenerator;
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
 use crate::mujoco::{Data, Model};
+use crate::rng::TorchGenerator;
 
-// ---- constants (tasks.md §2) ---------------------------------------------------------------
+// ---- constants (docs/tasks.md §2) ---------------------------------------------------------------
 /// Maximum dense reward.
 pub const MAX_REWARD: f64 = 10.0;
 /// Cube half edge (m).
@@ -62,21 +62,14 @@ const REACHED_DIST: f64 = 0.01;
 /// Trailing qvel entries the static reward term ignores (both supported robots).
 const STATIC_DROP: usize = 2;
 
-/// `evaluate()` keys in upstream order.
-pub const INFO_KEYS: [&str; 6] = [
-    "success",
-    "is_cube_placed",
-    "is_peg_cube_fit",
-    "is_peg_grasped",
-    "angle_diff",
-    "head_to_cube_dist",
-];
-const SUCCESS: usize = 0;
-const IS_CUBE_PLACED: usize = 1;
-const IS_PEG_CUBE_FIT: usize = 2;
-const IS_PEG_GRASPED: usize = 3;
-const ANGLE_DIFF: usize = 4;
-const HEAD_TO_CUBE_DIST: usize = 5;
+info_keys! {
+    SUCCESS = "success",
+    IS_CUBE_PLACED = "is_cube_placed",
+    IS_PEG_CUBE_FIT = "is_peg_cube_fit",
+    IS_PEG_GRASPED = "is_peg_grasped",
+    ANGLE_DIFF = "angle_diff",
+    HEAD_TO_CUBE_DIST = "head_to_cube_dist",
+}
 
 /// The target's rings `(radius, half thickness, colour)`, outermost first:
 /// radii 0.05·{1, 4/5, 3/5, 2/5, 1/5}, alternating red and white.
@@ -215,38 +208,22 @@ impl Task for PokeCube {
     }
 
     // ---- observation extras ------------------------------------------------------------------
-    fn extra_layout(&self, state: bool) -> Vec<(&'static str, usize)> {
-        let mut v = vec![("tcp_pose", 7)];
-        if state {
-            v.extend([
-                ("cube_pose", 7),
-                ("peg_pose", 7),
-                ("goal_pos", 3),
-                ("tcp_to_peg_pos", 3),
-                ("peg_to_cube_pos", 3),
-                ("cube_to_goal_pos", 3),
-                ("peghead_to_cube_pos", 3),
-            ]);
-        }
-        v
-    }
-
-    fn write_extra(&self, ctx: &TaskCtx, _info: &[f64], state: bool, out: &mut [f32]) {
+    fn observe_extra(&self, ctx: &TaskCtx, _info: &[f64], state: bool, out: &mut ObsWriter) {
         let (tcp, tcp_q) = self.tcp(ctx);
-        write_pose(&mut out[0..7], tcp, tcp_q);
+        out.pose("tcp_pose", tcp, tcp_q);
         if state {
             let (cube, peg, goal) = (
                 ctx.body_pos(self.cube),
                 ctx.body_pos(self.peg),
                 ctx.body_pos(self.goal),
             );
-            write_pose(&mut out[7..14], cube, ctx.body_quat(self.cube));
-            write_pose(&mut out[14..21], peg, ctx.body_quat(self.peg));
-            write_vec(&mut out[21..24], peg); // `goal_pos` = peg position (upstream quirk)
-            write_vec(&mut out[24..27], peg - tcp);
-            write_vec(&mut out[27..30], cube - peg);
-            write_vec(&mut out[30..33], goal - cube);
-            write_vec(&mut out[33..36], peg_head(peg) - cube);
+            out.pose("cube_pose", cube, ctx.body_quat(self.cube));
+            out.pose("peg_pose", peg, ctx.body_quat(self.peg));
+            out.vec3("goal_pos", peg); // the peg position (upstream quirk)
+            out.vec3("tcp_to_peg_pos", peg - tcp);
+            out.vec3("peg_to_cube_pos", cube - peg);
+            out.vec3("cube_to_goal_pos", goal - cube);
+            out.vec3("peghead_to_cube_pos", peg_head(peg) - cube);
         }
     }
 

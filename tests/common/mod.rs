@@ -115,7 +115,8 @@ impl IndependentFk {
 
 /// Uniform joint values within the limits (ManiSkill order).
 pub fn uniform_q(rng: &mut rand::rngs::StdRng, ids: &RobotIds) -> Vec<f64> {
-    ids.limits
+    ids.joints
+        .limits
         .iter()
         .map(|&(lo, hi)| rng.random_range(lo..=hi))
         .collect()
@@ -149,8 +150,8 @@ pub fn check_fk_with(
     let root = &desc.links[desc.root].name;
     for _ in 0..samples {
         let qv = sample(&mut rng, &ids);
-        let q: HashMap<String, f64> = ids.joint_names.iter().cloned().zip(qv.clone()).collect();
-        ids.set_qpos(&mut d, &qv);
+        let q: HashMap<String, f64> = ids.joints.names.iter().cloned().zip(qv.clone()).collect();
+        ids.joints.set_qpos(&mut d, &qv);
         d.forward();
         let want = fk.links(&spec.table_base(), root, &q);
         assert_eq!(
@@ -197,7 +198,7 @@ pub fn table_scene_at(
         ..
     } = robots::table_scene_at(spec, timestep, extra).unwrap();
     let mut d = Data::new(model.clone()).unwrap();
-    ids.set_qpos(&mut d, spec.table_qpos);
+    ids.joints.set_qpos(&mut d, spec.table_qpos);
     ids.apply_gravity_compensation(&mut d);
     for (k, &q) in spec.table_qpos.iter().enumerate() {
         drives.set_joint_target(k, q, 0.0);
@@ -211,13 +212,17 @@ pub fn table_scene_at(
 pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
     let (model, ids, mut d, mut dr) = table_scene(spec);
     assert!(model.gravity()[2] < -9.0);
-    let n = ids.qpos_adr.len();
+    let n = ids.joints.qpos_adr.len();
     run(&mut d, &mut dr, (5.0 / model.timestep()).round() as usize);
     let mut q = vec![0.0; n];
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for (k, (qk, rest)) in q.iter().zip(spec.table_qpos).enumerate() {
         let sag = (qk - rest).abs();
-        assert!(sag < 1e-3, "{} joint {k} drifted {sag} over 5 s", spec.uid);
+        assert!(
+            sag < 1e-3,
+            "{} joint {k} drifted {sag} over 5 s",
+            spec.uid()
+        );
     }
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
     let target: Vec<f64> = spec
@@ -230,14 +235,14 @@ pub fn holds_and_tracks(spec: &RobotSpec, delta: &[f64], tol: f64) {
         dr.set_joint_target(k, t, 0.0);
     }
     run(&mut d, &mut dr, (1.5 / model.timestep()) as usize);
-    ids.qpos(&d, &mut q);
+    ids.joints.qpos(&d, &mut q);
     for k in 0..n {
-        if ids.actuator[k].is_some() {
+        if ids.joints.actuator[k].is_some() {
             let e = (q[k] - target[k]).abs();
             assert!(
                 e < tol,
                 "{} joint {k}: tracking error {e} after 1.5 s",
-                spec.uid
+                spec.uid()
             );
         }
     }
@@ -433,7 +438,7 @@ pub fn put_free_body(e: &mut mjskill::Env, joint: &str, pos: [f64; 3], quat: [f6
 /// Sets the robot's joint velocities (ManiSkill order) through the env state.
 pub fn set_robot_qvel(e: &mut mjskill::Env, qvel: &[f64]) {
     let nq = e.model().nq();
-    let dofs = e.robot().dof_adr.clone();
+    let dofs = e.robot().joints.dof_adr.clone();
     let mut st = e.get_state();
     for (&a, &v) in dofs.iter().zip(qvel) {
         st.physics[1 + nq + a] = v;

@@ -1,5 +1,5 @@
 //! Bit-exact emulation of the two random streams ManiSkill3 draws from at reset
-//! (env.md §9 "Exact emulation recipe", tasks.md §0.3).
+//! (docs/env.md §9 "Exact emulation recipe", docs/tasks.md §0.3).
 //!
 //! * [`NumpyRandomState`] — numpy's legacy `np.random.RandomState(seed)`, used by the table
 //!   scene for the robot's initial joint noise (`normal(0, σ, (1, n))`).
@@ -310,7 +310,7 @@ impl Default for TorchGenerator {
     }
 }
 
-/// Upstream's `torch.rand(..) * s * 2 - s + c` (tasks.md §1.4, env.md §9) in float32, in that
+/// Upstream's `torch.rand(..) * s * 2 - s + c` (docs/tasks.md §1.4, docs/env.md §9) in float32, in that
 /// exact order: `((u·s)·2 − s) + c`, each operation rounded to f32 (no fused multiply-add).
 /// Maps `u ∈ [0, 1)` to `U(c − s, c + s)`. Because ×2 is exact, `u·s·2 == u·(2s)`, so this
 /// also equals the `u·2s − s + c` spelling (and `u·0.2 − 0.1` for `s = 0.1`, `c = 0`, since
@@ -498,7 +498,19 @@ mod tests {
     /// Panda rest qpos + N(0, 0.02) noise on all 9 entries (fingers then reset to 0.04),
     /// float64 sum then the float32 round trip of PhysX.
     fn panda_qpos(seed: u64) -> Vec<f64> {
-        let rest = crate::robots::panda::REST;
+        // The Panda's table-scene rest pose (docs/tasks.md §0.2).
+        use std::f64::consts::PI;
+        let rest = [
+            0.0,
+            PI / 8.0,
+            0.0,
+            -5.0 * PI / 8.0,
+            0.0,
+            3.0 * PI / 4.0,
+            PI / 4.0,
+            0.04,
+            0.04,
+        ];
         let mut noise = [0.0; 9];
         NumpyRandomState::new(seed).fill_normal(0.0, 0.02, &mut noise);
         let mut q: Vec<f64> = rest.iter().zip(&noise).map(|(r, n)| r + n).collect();
@@ -507,7 +519,7 @@ mod tests {
         q.iter().map(|&x| x as f32 as f64).collect()
     }
 
-    /// tasks.md §1.4 for panda: s = 0.1, c = (0, 0), h = 0.02, max_goal_height = 0.3.
+    /// docs/tasks.md §1.4 for panda: s = 0.1, c = (0, 0), h = 0.02, max_goal_height = 0.3.
     /// Returns (cube xyz, cube yaw quaternion wxyz, goal xyz).
     fn pick_cube(seed: u64) -> ([f64; 3], [f64; 4], [f64; 3]) {
         let (s, c, h, max_h) = (0.1f32, [0.0f32, 0.0], 0.02f32, 0.3f32);
@@ -579,7 +591,7 @@ mod tests {
         }
     }
 
-    /// tasks.md §2.2 (PokeCube) — extra cross-check of the torch stream and f32 order.
+    /// docs/tasks.md §2.2 (PokeCube) — extra cross-check of the torch stream and f32 order.
     #[test]
     fn poke_cube_seeds_0_1() {
         let cases = [
@@ -599,7 +611,7 @@ mod tests {
         }
     }
 
-    /// tasks.md §3.2 (PlaceSphere) — extra cross-check of the torch stream.
+    /// docs/tasks.md §3.2 (PlaceSphere) — extra cross-check of the torch stream.
     #[test]
     fn place_sphere_seeds_0_1() {
         let cases = [

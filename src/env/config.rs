@@ -1,0 +1,245 @@
+//! Env construction options and modes: [`EnvConfig`], [`SimConfig`], [`ObsMode`],
+//! [`RewardMode`], and the env API's errors ([`EnvError`]).
+use serde::{Deserialize, Serialize};
+
+use crate::mjcf::CONTROL_DT;
+
+/// Seed of the reset ManiSkill performs at the end of env construction.
+pub const CONSTRUCTION_SEED: u64 = 2022;
+/// Default std-dev of the initial joint noise.
+pub const DEFAULT_QPOS_NOISE: f64 = 0.02;
+/// Default episode length of every registered env.
+pub const MAX_EPISODE_STEPS: u32 = 50;
+
+/// Errors of the env API; each names the bad value and the valid choices.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EnvError {
+    /// Unknown env id.
+    #[error("unknown env id {0:?}; valid env ids: {1}")]
+    UnknownEnv(String, String),
+    /// Robot not supported by this env.
+    #[error("robot {robot:?} is not supported by {env}; supported robots: {valid}")]
+    UnsupportedRobot {
+        /// Env id.
+        env: String,
+        /// Requested robot.
+        robot: String,
+        /// Valid robots.
+        valid: String,
+    },
+    /// Unknown mode (obs, reward or control).
+    #[error("{0}")]
+    UnknownMode(String),
+    /// Action of the wrong length.
+    #[error("action has {got} values, but {mode} expects {expected}")]
+    ActionLength {
+        /// Given length.
+        got: usize,
+        /// Expected length.
+        expected: usize,
+        /// Control mode.
+        mode: String,
+    },
+    /// NaN or infinite action entry.
+    #[error("action[{index}] = {value} is not finite; actions must not contain NaN or infinity")]
+    ActionNotFinite {
+        /// Index.
+        index: usize,
+        /// Value.
+        value: f32,
+    },
+    /// A state from another env, of the wrong size, or with a bad value (the message names
+    /// the field).
+    #[error("cannot set state: {0}")]
+    BadState(String),
+    /// A seed beyond ManiSkill's 32-bit seeds ([`checks::MAX_SEED`]).
+    #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
+    BadSeed(u64),
+    /// Building the scene or model failed.
+    #[error("{0}")]
+    Build(String),
+    /// Rendering is unavailable or failed (the message names what to install).
+    #[error("{0}")]
+    Render(String),
+}
+
+/// Observation modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ObsMode {
+    /// One flat f32 vector.
+    State,
+    /// The same values with named parts ([`Env::obs_layout`]).
+    StateDict,
+    /// No observation.
+    None,
+    /// State-free vector (agent, controller, non-privileged extras) plus the sensor camera's
+    /// colour image ([`Env::sensor_rgb`]).
+    Rgb,
+    /// As `Rgb` with the depth image ([`Env::sensor_depth`]) instead of colour.
+    Depth,
+    /// As `Rgb` with both colour and depth.
+    Rgbd,
+}
+
+impl ObsMode {
+    /// All modes, by name.
+    pub const ALL: [(&'static str, ObsMode); 6] = [
+        ("state", ObsMode::State),
+        ("state_dict", ObsMode::StateDict),
+        ("none", ObsMode::None),
+        ("rgb", ObsMode::Rgb),
+        ("depth", ObsMode::Depth),
+        ("rgbd", ObsMode::Rgbd),
+    ];
+    /// Whether the mode renders camera images.
+    pub fn is_visual(self) -> bool {
+        matches!(self, ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd)
+    }
+    /// Whether the observation includes privileged state (object poses): ManiSkill's
+    /// `"state" in obs_mode`.
+    pub fn is_state(self) -> bool {
+        matches!(self, ObsMode::State | ObsMode::StateDict)
+    }
+    /// Parses a mode name.
+    pub fn parse(s: &str) -> Result<ObsMode, EnvError> {
+        parse_named(&Self::ALL, s, "obs_mode")
+    }
+    /// The mode's name.
+    pub fn name(self) -> &'static str {
+        name_of(&Self::ALL, self)
+    }
+}
+
+/// Reward modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RewardMode {
+    /// Dense reward divided by the task maximum.
+    NormalizedDense,
+    /// Dense reward.
+    Dense,
+    /// 1 on success, else 0.
+    Sparse,
+    /// Always 0.
+    None,
+}
+
+impl RewardMode {
+    /// All modes, by name (default first).
+    pub const ALL: [(&'static str, RewardMode); 4] = [
+        ("normalized_dense", RewardMode::NormalizedDense),
+        ("dense", RewardMode::Dense),
+        ("sparse", RewardMode::Sparse),
+        ("none", RewardMode::None),
+    ];
+    /// Parses a mode name.
+    pub fn parse(s: &str) -> Result<RewardMode, EnvError> {
+        parse_named(&Self::ALL, s, "reward_mode")
+    }
+    /// The mode's name.
+    pub fn name(self) -> &'static str {
+        name_of(&Self::ALL, self)
+    }
+}
+
+/// Looks `s` up in a (name, value) table; the error lists the valid names.
+fn parse_named<T: Copy>(all: &[(&'static str, T)], s: &str, what: &str) -> Result<T, EnvError> {
+    all.iter()
+        .find(|(n, _)| *n == s)
+        .map(|(_, m)| *m)
+        .ok_or_else(|| {
+            EnvError::UnknownMode(format!(
+                "unknown {what} {s:?}; valid {}s: {}",
+                what.replace('_', " "),
+                names(all)
+            ))
+        })
+}
+
+/// The name of `m` in a (name, value) table (every value is listed, so the lookup succeeds).
+fn name_of<T: PartialEq>(all: &[(&'static str, T)], m: T) -> &'static str {
+    all.iter().find(|(_, v)| *v == m).map_or("", |(n, _)| *n)
+}
+
+fn names<T>(v: &[(&str, T)]) -> String {
+    v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+}
+
+/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
+pub const CONTROL_FREQ: u32 = 20;
+
+/// Physics settings (ManiSkill's `sim_config`): how many physics steps simulate one 20 Hz
+/// control step. A higher `sim_freq` is slower and closer to the continuous-time dynamics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SimConfig {
+    /// Physics steps per second; a positive multiple of [`CONTROL_FREQ`].
+    pub sim_freq: u32,
+}
+
+impl SimConfig {
+    /// The default physics rate: ManiSkill's own (0.01 s steps).
+    pub const DEFAULT_SIM_FREQ: u32 = 100;
+    /// Physics steps per control step.
+    pub fn substeps(&self) -> usize {
+        (self.sim_freq / CONTROL_FREQ) as usize
+    }
+    /// Physics timestep (s).
+    pub fn timestep(&self) -> f64 {
+        CONTROL_DT / self.substeps() as f64
+    }
+    /// Checks that `sim_freq` is a positive multiple of the control frequency.
+    pub fn validate(&self) -> Result<(), EnvError> {
+        if self.sim_freq == 0
+            || !self.sim_freq.is_multiple_of(CONTROL_FREQ)
+            || self.sim_freq > 100_000
+        {
+            return Err(EnvError::Build(format!(
+                "sim_freq {} is not a multiple of the control frequency {CONTROL_FREQ} Hz \
+                 between {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)",
+                self.sim_freq
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            sim_freq: Self::DEFAULT_SIM_FREQ,
+        }
+    }
+}
+
+/// Env construction options; `Default` equals ManiSkill's defaults (docs/env.md §2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvConfig {
+    /// Robot uid (None: the env's default robot).
+    pub robot: Option<String>,
+    /// Observation mode.
+    pub obs_mode: ObsMode,
+    /// Reward mode.
+    pub reward_mode: RewardMode,
+    /// Control mode (None: the robot's default, `pd_joint_delta_pos`).
+    pub control_mode: Option<String>,
+    /// Std-dev of the initial joint noise.
+    pub robot_init_qpos_noise: f64,
+    /// Episode length for truncation (None: 50).
+    pub max_episode_steps: Option<u32>,
+    /// Physics settings.
+    #[serde(default)]
+    pub sim: SimConfig,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        EnvConfig {
+            robot: None,
+            obs_mode: ObsMode::State,
+            reward_mode: RewardMode::NormalizedDense,
+            control_mode: None,
+            robot_init_qpos_noise: DEFAULT_QPOS_NOISE,
+            max_episode_steps: None,
+            sim: SimConfig::default(),
+        }
+    }
+}
