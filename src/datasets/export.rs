@@ -100,7 +100,18 @@ pub(crate) fn episode_states(
     imported: Option<&Vec<StateDict>>,
 ) -> Result<Vec<StateDict>, DatasetError> {
     if let Some(s) = imported.filter(|s| s.len() == ep.steps.len() + 1) {
-        return Ok(s.clone());
+        // JSON objects come back in name order: restore ManiSkill's scene order.
+        let order = env.actor_names();
+        return Ok(s
+            .iter()
+            .map(|sd| {
+                let mut sd = sd.clone();
+                sd.actors.sort_by_key(|name, _| {
+                    order.iter().position(|o| o == name).unwrap_or(usize::MAX)
+                });
+                sd
+            })
+            .collect());
     }
     let mut out = Vec::with_capacity(ep.steps.len() + 1);
     let restore = |env: &mut Env, s| env.set_state(s).map_err(DatasetError::env(path));

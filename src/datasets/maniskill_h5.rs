@@ -235,6 +235,16 @@ fn read_bools(
     Ok(Some(v))
 }
 
+/// A group's member names in creation order when the file tracks it (h5py's
+/// `track_order=True`, and mjskill's exports), else in name order.
+fn members(path: &Path, g: &h5::Group) -> Result<Vec<String>, DatasetError> {
+    use h5::{IndexType, IterationOrder};
+    match g.member_names_by(IndexType::CreationOrder, IterationOrder::Increasing) {
+        Ok(v) => Ok(v),
+        Err(_) => g.member_names().map_err(DatasetError::hdf5(path)),
+    }
+}
+
 fn read_episode(path: &Path, name: &str, g: &h5::Group) -> Result<EpisodeData, DatasetError> {
     let (actions, steps, action_dim) = read_matrix(path, g, name, "actions")?;
     let terminated = read_bools(path, g, name, "terminated", steps, true)?.unwrap_or_default();
@@ -316,14 +326,14 @@ fn read_episode(path: &Path, name: &str, g: &h5::Group) -> Result<EpisodeData, D
         let sub = es.group(kind).map_err(|_| {
             DatasetError::format(path, format!("{name}: missing group env_states/{kind}"))
         })?;
-        for m in sub.member_names().map_err(DatasetError::hdf5(path))? {
+        for m in members(path, &sub)? {
             leaf(kind, m.clone(), &sub, &m, &mut states)?;
         }
     }
     if let Ok(ctrl) = es.group("controller") {
-        for m in ctrl.member_names().map_err(DatasetError::hdf5(path))? {
+        for m in members(path, &ctrl)? {
             if let Ok(part) = ctrl.group(&m) {
-                for k in part.member_names().map_err(DatasetError::hdf5(path))? {
+                for k in members(path, &part)? {
                     leaf("controller", format!("{m}.{k}"), &part, &k, &mut states)?;
                 }
             } else {
