@@ -132,8 +132,8 @@ impl ImageStats {
             self.max = [0.0; 3];
         }
         for px in rgb.chunks_exact(3) {
-            for c in 0..3 {
-                let v = px[c] as f64 / 255.0;
+            for (c, &p) in px.iter().enumerate() {
+                let v = p as f64 / 255.0;
                 self.min[c] = self.min[c].min(v);
                 self.max[c] = self.max[c].max(v);
                 self.sum[c] += v;
