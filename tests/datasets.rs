@@ -212,6 +212,35 @@ fn imported_demos_round_trip_to_maniskill_format() {
             let order: Vec<String> = env.actor_names().iter().map(|s| s.to_string()).collect();
             assert_eq!(names, order);
         }
+        // h5py (as ManiSkill reads it) sees the same layout: groups in ManiSkill's order,
+        // numpy bools, float32 actions.
+        if let Some(py) = python() {
+            let script = "import h5py, json, sys\n\
+                f = h5py.File(sys.argv[1], 'r')\n\
+                g = f['traj_0']\n\
+                print(json.dumps({'trajs': list(f), 'actors': list(g['env_states/actors']),\
+                'success': str(g['success'].dtype), 'actions': str(g['actions'].dtype),\
+                'shape': list(g['actions'].shape)}))";
+            let o = Command::new(py)
+                .args(["-c", script])
+                .arg(&out)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let env = make(&orig.json.env_info.env_id, EnvConfig::default()).unwrap();
+            assert_eq!(
+                v["trajs"],
+                serde_json::json!(["traj_0", "traj_1", "traj_2"])
+            );
+            assert_eq!(v["actors"], serde_json::json!(env.actor_names()));
+            assert_eq!(v["success"], "bool");
+            assert_eq!(v["actions"], "float32");
+            assert_eq!(
+                v["shape"],
+                serde_json::json!([orig.episodes[0].steps(), orig.episodes[0].action_dim])
+            );
+        }
         std::fs::remove_file(&out).unwrap();
         std::fs::remove_file(out.with_extension("json")).unwrap();
     }
@@ -298,7 +327,7 @@ fn python() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
     let ok = p.exists()
         && Command::new(&p)
-            .args(["-c", "import pyarrow, pandas, av"])
+            .args(["-c", "import pyarrow, pandas, av, h5py"])
             .status()
             .is_ok_and(|s| s.success());
     if ok {
@@ -306,7 +335,7 @@ fn python() -> Option<PathBuf> {
     }
     assert!(
         std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
-        "{} with pyarrow, pandas and av is missing: run `bash .ci/setup`",
+        "{} with pyarrow, pandas, av and h5py is missing: run `bash .ci/setup`",
         p.display()
     );
     eprintln!(

@@ -11,6 +11,7 @@
 //! | `/episode_end` | `mjskill.EpisodeEnd` | once per finished episode: steps, return, success |
 //! | `/tf` | `foxglove.FrameTransforms` | after reset and every step: the world pose of every body |
 //! | `/scene` | `foxglove.SceneUpdate` | once per episode: the drawn geoms of every body, in the body frame |
+//! | `/<camera>/video` | `foxglove.CompressedVideo` | with [`Recorder::enable_video`]: a camera's H.264 frames ([`video`]) |
 //!
 //! Because `/step` carries the state before the step, `env.set_state(&step.state)` followed
 //! by `env.step(&step.action)` reproduces the recorded step bitwise.
