@@ -401,6 +401,11 @@ fn lerobot_export_reads_back_with_pyarrow_and_pyav() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("not an empty directory"), "{e}");
+    // An existing empty directory is filled.
+    let ds3 = dir.join("ds3");
+    std::fs::create_dir(&ds3).unwrap();
+    mjskill::datasets::lerobot::write(&mcap, &ds3, Some(false)).unwrap();
+    assert!(ds3.join("meta/info.json").is_file());
 
     let Some(py) = python() else { return };
     let o = Command::new(py)
@@ -738,5 +743,120 @@ fn rollout_records_sensor_camera_video_that_exports_to_lerobot() {
         info["features"]["observation.images.base_camera"]["shape"],
         serde_json::json!([128, 128, 3])
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Rewrites a recording as mjskill wrote it before H.264 video: the camera's frames as PNG
+/// `foxglove.CompressedImage` messages on `/render_camera/image` (decoded from the H.264
+/// frames with OpenH264, re-encoded losslessly), every other record as it was.
+fn to_png_recording(src: &Path, dst: &Path) -> Vec<Vec<u8>> {
+    use base64::Engine;
+    use openh264::formats::YUVSource;
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let raw = record::read_raw(src).unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .profile(raw.profile.clone())
+        .library(raw.library.clone())
+        .create(std::io::BufWriter::new(std::fs::File::create(dst).unwrap()))
+        .unwrap();
+    w.write_metadata(&mcap::records::Metadata {
+        name: "mjskill".into(),
+        metadata: raw.metadata.clone(),
+    })
+    .unwrap();
+    let mut channels = std::collections::BTreeMap::new();
+    let mut dec = openh264::decoder::Decoder::new().unwrap();
+    let mut pngs = Vec::new();
+    let mut episode = 0;
+    for (seq, m) in raw.messages.iter().enumerate() {
+        let (topic, schema, data) = if m.schema == "foxglove.CompressedVideo" {
+            let mut v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+            let unit = b64.decode(v["data"].as_str().unwrap()).unwrap();
+            let pic = dec.decode(&unit).unwrap().expect("one picture per frame");
+            let (pw, ph) = pic.dimensions();
+            let mut rgb = vec![0; pw * ph * 3];
+            pic.write_rgb8(&mut rgb);
+            let mut png = Vec::new();
+            mjskill::record::image::encode_png(&rgb, pw, ph, &mut png).unwrap();
+            v["data"] = b64.encode(&png).into();
+            v["format"] = "png".into();
+            pngs.push(rgb);
+            (
+                record::TOPIC_RENDER_IMAGE.to_string(),
+                "foxglove.CompressedImage",
+                serde_json::to_vec(&v).unwrap(),
+            )
+        } else {
+            (m.topic.clone(), m.schema.as_str(), m.data.clone())
+        };
+        if m.topic == record::TOPIC_EPISODE {
+            w.write_metadata(&mcap::records::Metadata {
+                name: format!("episode-{episode}"),
+                metadata: raw.episode_metadata[episode].clone(),
+            })
+            .unwrap();
+            episode += 1;
+        }
+        let id = match channels.get(&topic) {
+            Some(&id) => id,
+            None => {
+                let sid = w.add_schema(schema, "jsonschema", b"{}").unwrap();
+                let id = w
+                    .add_channel(sid, &topic, "json", &std::collections::BTreeMap::new())
+                    .unwrap();
+                channels.insert(topic.clone(), id);
+                id
+            }
+        };
+        let header = mcap::records::MessageHeader {
+            channel_id: id,
+            sequence: seq as u32,
+            log_time: m.log_time,
+            publish_time: m.log_time,
+        };
+        w.write_to_known_channel(&header, &data).unwrap();
+    }
+    w.finish().unwrap();
+    pngs
+}
+
+#[test]
+fn recordings_with_png_frames_still_read_and_export_to_lerobot() {
+    let dir = tmp_dir("png");
+    let h264 = dir.join("h264.mcap");
+    record_rollout(&h264, 2, 4, true);
+    let old = dir.join("old.mcap");
+    let pngs = to_png_recording(&h264, &old);
+    assert_eq!(pngs.len(), 10);
+    // The old file reads as before.
+    let (a, b) = (record::read(&h264).unwrap(), record::read(&old).unwrap());
+    assert!(b.complete);
+    assert_eq!(a.episodes, b.episodes);
+    let raw = record::read_raw(&old).unwrap();
+    assert_eq!(
+        raw.messages
+            .iter()
+            .filter(|m| m.topic == record::TOPIC_RENDER_IMAGE)
+            .count(),
+        10
+    );
+    // Its PNG frames are encoded to H.264 by the LeRobot export: one per row.
+    let ds = dir.join("ds");
+    let s = mjskill::datasets::lerobot::write(&old, &ds, Some(true)).unwrap();
+    assert_eq!(s.videos, [("render_camera".to_string(), 8)]);
+    let mp4 = ds.join("videos/observation.images.render_camera/chunk-000/file-000.mp4");
+    assert!(std::fs::metadata(&mp4).unwrap().len() > 1000);
+    if let Some(py) = python() {
+        let script = "import av, sys\n\
+            c = av.open(sys.argv[1]); s = c.streams.video[0]\n\
+            print(sum(1 for _ in c.decode(s)), s.codec_context.name, s.codec_context.has_b_frames)";
+        let o = Command::new(py)
+            .args(["-c", script])
+            .arg(&mp4)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "8 h264 False");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

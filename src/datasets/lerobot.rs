@@ -531,10 +531,8 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     }
 
     // Write everything under a temporary directory.
+    // The temporary directory replaces an empty `dir` on commit (rename(2) does that).
     let mut staged = super::Staged::default();
-    if dir.exists() {
-        std::fs::remove_dir(dir).map_err(DatasetError::io(dir))?;
-    }
     let tmp = staged.add(dir);
     std::fs::create_dir_all(&tmp).map_err(DatasetError::io(dir))?;
     write_parquet(
