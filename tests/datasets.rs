@@ -178,8 +178,8 @@ fn imported_demos_round_trip_to_maniskill_format() {
         let s = export::to_maniskill(&mcap, &out, None).unwrap();
         assert_eq!(s.episodes, 3);
         assert_eq!(listing(&dir), ["demo.mcap", "traj.h5", "traj.json"]);
-        let orig = maniskill_h5::read(&h5, None).unwrap();
-        let back = maniskill_h5::read(&out, None).unwrap();
+        let orig = maniskill_h5::read(&h5, None).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let back = maniskill_h5::read(&out, None).unwrap_or_else(|e| panic!("{file}: {e}"));
         assert_eq!(back.json.env_info.env_id, orig.json.env_info.env_id);
         assert_eq!(back.episodes.len(), orig.episodes.len());
         for (k, (a, b)) in orig.episodes.iter().zip(&back.episodes).enumerate() {
