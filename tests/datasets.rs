@@ -104,6 +104,13 @@ fn sample_demos_import_with_the_reported_success() {
                 .collect();
             eprintln!("{file} by {}: {got:?}", by.name());
             assert_eq!(got, want, "{file}");
+            // By states, mjskill's success flag is ManiSkill's at every step.
+            assert!(
+                r.episodes
+                    .iter()
+                    .all(|e| e.by_states_success_mismatches == 0),
+                "{file}"
+            );
             // ManiSkill's figures are those of the demos' own summary.
             let env = file.split('/').next().unwrap();
             if !file.contains("pd_ee") {
