@@ -15,6 +15,7 @@
 
 pub mod cli;
 pub mod controllers;
+pub mod datasets;
 pub mod env;
 pub mod maniskill;
 pub mod mjcf;

@@ -21,6 +21,7 @@ const LAYERS: &[&[&str]] = &[
     &["env"],
     &["record"],
     &["maniskill", "solvers", "tools"],
+    &["datasets"],
     &["cli"],
 ];
 

@@ -136,7 +136,7 @@ fn every_message_validates_against_its_schema() {
         .render()
         .is_ok();
     if !video {
-        eprintln!("note: no EGL: the foxglove.CompressedImage channel is not validated");
+        eprintln!("note: no EGL: the foxglove.CompressedVideo channel is not validated");
     }
     for (name, killed) in [("schemas.mcap", false), ("schemas-killed.mcap", true)] {
         let path = tmp(name);
@@ -149,7 +149,7 @@ fn every_message_validates_against_its_schema() {
         assert_eq!(counts["/scene"], 2, "{name}: {counts}");
         assert_eq!(counts["/tf"], 8, "{name}: {counts}");
         if video {
-            assert_eq!(counts["/render_camera/image"], 8, "{name}: {counts}");
+            assert_eq!(counts["/render_camera/video"], 8, "{name}: {counts}");
         }
     }
 }

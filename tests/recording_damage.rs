@@ -340,12 +340,22 @@ fn the_recorder_refuses_what_it_could_not_read_back() {
         .record_step(&env, &vec![0.0; dim], reward, term, trunc, &state)
         .unwrap_err();
     assert!(e.to_string().contains("controller[0] = inf"), "{e}");
-    // A message larger than the readers accept (a 3000×3000 noise frame: ~36 MB of base64).
-    rec.enable_video("render_camera").unwrap();
+    // A message larger than the readers accept (~36 MB of JSON on a channel of the caller's).
+    let ch = rec
+        .add_json_channel("test.Big", &serde_json::json!({"type": "object"}), "/big")
+        .unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-    let noise: Vec<u8> = (0..3000 * 3000 * 3).map(|_| rng.random()).collect();
-    let e = rec.record_frame(&noise, 3000, 3000).unwrap_err();
+    let noise: String = (0..36_000_000)
+        .map(|_| (b'a' + rng.random_range(0..26u8)) as char)
+        .collect();
+    let e = rec
+        .write_message(ch, &serde_json::json!({ "noise": noise }))
+        .unwrap_err();
     assert!(e.to_string().contains("MiB"), "{e}");
+    // A frame of an odd size cannot be H.264: refused, nothing written.
+    rec.enable_video("render_camera").unwrap();
+    let e = rec.record_frame(&[0; 3 * 3 * 3], 3, 3).unwrap_err();
+    assert!(e.to_string().contains("even"), "{e}");
     rec.end_episode(false).unwrap();
     rec.finish().unwrap();
     // The file is complete and reads back with the one good step.

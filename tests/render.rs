@@ -277,10 +277,37 @@ fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
     (info.width as usize, info.height as usize, buf)
 }
 
+/// Decodes an H.264 stream (Annex B access units, in order) with OpenH264's decoder.
+fn decode_h264(units: &[Vec<u8>]) -> Vec<(usize, usize, Vec<u8>)> {
+    use openh264::formats::YUVSource;
+    let mut dec = openh264::decoder::Decoder::new().unwrap();
+    let mut out = Vec::new();
+    for u in units {
+        if let Some(p) = dec.decode(u).unwrap() {
+            let (w, h) = p.dimensions();
+            let mut rgb = vec![0; w * h * 3];
+            p.write_rgb8(&mut rgb);
+            out.push((w, h, rgb));
+        }
+    }
+    out
+}
+
+/// Peak signal-to-noise ratio of two RGB images (dB).
+fn psnr(a: &[u8], b: &[u8]) -> f64 {
+    let mse = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| (x as f64 - y as f64).powi(2))
+        .sum::<f64>()
+        / a.len() as f64;
+    10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()
+}
+
 #[test]
 fn recorded_video_frames_decode_to_the_rendered_images() {
     use base64::Engine;
-    use mjskill::record::{read_raw, Recorder, TOPIC_RENDER_IMAGE};
+    use mjskill::record::{read_raw, video, Recorder, TOPIC_RENDER_VIDEO};
     let path = tmp("video.mcap");
     let mut e = env(ObsMode::State, 7);
     let mut rec = Recorder::create(&path, &e).unwrap();
@@ -289,41 +316,49 @@ fn recorded_video_frames_decode_to_the_rendered_images() {
         "video not enabled yet"
     );
     rec.enable_video("render_camera").unwrap();
-    rec.reset(&mut e, Some(7)).unwrap();
-    let mut frames = vec![e.render().unwrap().to_vec()];
-    rec.record_frame(&frames[0], 512, 512).unwrap();
+    let mut frames = Vec::new();
     let a = vec![0.3f32; e.action_space().shape[0]];
-    for _ in 0..2 {
-        rec.step(&mut e, &a).unwrap();
+    for (ep, seed) in [7u64, 8].into_iter().enumerate() {
+        rec.reset(&mut e, Some(seed)).unwrap();
         frames.push(e.render().unwrap().to_vec());
         rec.record_frame(frames.last().unwrap(), 512, 512).unwrap();
+        for _ in 0..2 + ep {
+            rec.step(&mut e, &a).unwrap();
+            frames.push(e.render().unwrap().to_vec());
+            rec.record_frame(frames.last().unwrap(), 512, 512).unwrap();
+        }
+        rec.end_episode(false).unwrap();
     }
-    rec.end_episode(false).unwrap();
-    assert_eq!(rec.frames(), 3);
+    assert_eq!(rec.frames(), 7);
+    assert!(
+        rec.record_frame(&frames[0], 256, 256).is_err(),
+        "size change"
+    );
     rec.finish().unwrap();
 
     let raw = read_raw(&path).unwrap();
     let imgs: Vec<_> = raw
         .messages
         .iter()
-        .filter(|m| m.topic == TOPIC_RENDER_IMAGE)
+        .filter(|m| m.topic == TOPIC_RENDER_VIDEO)
         .collect();
-    assert_eq!(imgs.len(), 3);
+    assert_eq!(imgs.len(), 7);
     let steps: Vec<u64> = raw
         .messages
         .iter()
         .filter(|m| m.topic == "/step")
         .map(|m| m.log_time)
         .collect();
+    let mut units = Vec::new();
     for (k, m) in imgs.iter().enumerate() {
-        assert_eq!(m.schema, "foxglove.CompressedImage");
+        assert_eq!(m.schema, "foxglove.CompressedVideo");
         assert_eq!(m.encoding, "json");
-        if k > 0 {
+        if k > 0 && k < 3 {
             assert_eq!(m.log_time, steps[k - 1], "frame stamped with its step");
         }
         let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
         assert_eq!(v["frame_id"], "render_camera");
-        assert_eq!(v["format"], "png");
+        assert_eq!(v["format"], "h264");
         assert_eq!(
             v["timestamp"]["nsec"].as_u64().unwrap(),
             m.log_time % 1_000_000_000
@@ -331,10 +366,29 @@ fn recorded_video_frames_decode_to_the_rendered_images() {
         let bytes = base64::engine::general_purpose::STANDARD
             .decode(v["data"].as_str().unwrap())
             .unwrap();
-        let (w, h, rgb) = decode_png(&bytes);
-        assert_eq!((w, h), (512, 512));
-        assert_eq!(rgb, frames[k], "frame {k}");
+        // Each episode starts with a keyframe carrying SPS (7) and PPS (8), as Foxglove needs.
+        let types: Vec<u8> = video::nal_types(&bytes).collect();
+        let first_of_episode = k == 0 || k == 3;
+        assert_eq!(
+            video::is_idr(&bytes),
+            first_of_episode,
+            "frame {k}: {types:?}"
+        );
+        if first_of_episode {
+            assert!(types.contains(&7) && types.contains(&8), "{types:?}");
+        }
+        units.push(bytes);
     }
+    // The frames decode (OpenH264's decoder) to the rendered images, closely.
+    let decoded = decode_h264(&units);
+    assert_eq!(decoded.len(), 7);
+    for (k, (w, h, rgb)) in decoded.iter().enumerate() {
+        assert_eq!((*w, *h), (512, 512));
+        let p = psnr(rgb, &frames[k]);
+        assert!(p > 35.0, "frame {k}: PSNR {p:.1} dB");
+    }
+    // The second episode decodes on its own, from its keyframe.
+    assert_eq!(decode_h264(&units[3..]).len(), 4);
     assert_ne!(frames[0], frames[2]);
     // The episode itself still reads back.
     let r = mjskill::record::read(&path).unwrap();
@@ -411,7 +465,7 @@ fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
     let n = raw
         .messages
         .iter()
-        .filter(|m| m.topic == mjskill::record::TOPIC_RENDER_IMAGE)
+        .filter(|m| m.topic == mjskill::record::TOPIC_RENDER_VIDEO)
         .count();
     assert_eq!(n, 51);
 }

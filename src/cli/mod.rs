@@ -25,6 +25,7 @@ macro_rules! out {
 
 pub mod args;
 pub mod bench;
+pub mod datasets;
 pub mod eval;
 pub mod fidelity;
 pub mod output;
@@ -180,10 +181,15 @@ pub enum Command {
         /// (rollout.mcap → rollout.png) when rendering is available.
         #[arg(long, default_value = "rollout.mcap")]
         out: PathBuf,
-        /// Also record the human render camera's frames (512x512 PNG) on
-        /// /render_camera/image (foxglove.CompressedImage).
+        /// Also record the human render camera's frames (512x512, H.264) on
+        /// /render_camera/video (foxglove.CompressedVideo).
         #[arg(long)]
         video: bool,
+        /// Also record a sensor camera's colour frames (H.264) on /<camera>/video
+        /// (foxglove.CompressedVideo); repeatable. Needs --obs-mode rgb or rgbd (cameras:
+        /// base_camera; Fetch also fetch_head, fetch_hand).
+        #[arg(long = "camera")]
+        cameras: Vec<String>,
         /// Do not write the PNG of the first episode's last frame next to the recording.
         #[arg(long)]
         no_frame: bool,
@@ -231,6 +237,45 @@ pub enum Command {
         /// Draw the error curves (joint, TCP, object error against the step) to this PNG.
         #[arg(long)]
         plot: Option<PathBuf>,
+    },
+    /// Replay ManiSkill demos (trajectory.h5 + .json) in mjskill, by actions (open loop from
+    /// each episode's seed) or by states (importing every env_states row), record them to
+    /// MCAP and print per-episode success and divergence (JSON).
+    ImportManiskill {
+        /// ManiSkill's trajectory.h5.
+        h5: PathBuf,
+        /// Its json (default: the h5 path with extension .json).
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Output MCAP file (written under a temporary name, moved into place when complete).
+        #[arg(long)]
+        out: PathBuf,
+        /// What the recording replays: actions or states (both are reported).
+        #[arg(long, default_value = "actions")]
+        by: String,
+        /// Physics steps per second of the replaying env.
+        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        sim_freq: u32,
+    },
+    /// Export a recording's finished episodes to ManiSkill's trajectory format (h5 + json)
+    /// or to a LeRobotDataset v3 directory; prints a JSON summary.
+    Export {
+        /// The .mcap recording.
+        file: PathBuf,
+        /// maniskill or lerobot.
+        #[arg(long)]
+        format: String,
+        /// Output: the .h5 (maniskill; the json goes next to it) or the dataset directory
+        /// (lerobot; must not exist or be empty). Default: next to the recording.
+        #[arg(short = 'o', long = "output")]
+        output: Option<PathBuf>,
+        /// The json of --format maniskill (default: the h5 path with extension .json).
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// LeRobot videos: yes (fail if the recording has no camera frames), no, or by
+        /// default whatever frames the recording has.
+        #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
+        video: Option<bool>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -326,6 +371,7 @@ fn run(cli: Cli) -> Result<(), String> {
             seed,
             out,
             video,
+            cameras,
             no_frame,
         } => {
             use std::io::IsTerminal;
@@ -344,6 +390,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 out,
                 progress: std::io::stderr().is_terminal(),
                 video,
+                cameras,
                 frame: !no_frame,
             };
             let summary = rollout::rollout(&args)?;
@@ -373,6 +420,30 @@ fn run(cli: Cli) -> Result<(), String> {
                     file.display()
                 ))
             }
+        }
+        Command::ImportManiskill {
+            h5,
+            json,
+            out,
+            by,
+            sim_freq,
+        } => {
+            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)
+                .map_err(|e| e.to_string())?;
+            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            Ok(())
+        }
+        Command::Export {
+            file,
+            format,
+            output,
+            json,
+            video,
+        } => {
+            let r = datasets::export(&file, &format, output, json.as_deref(), video)
+                .map_err(|e| e.to_string())?;
+            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            Ok(())
         }
         Command::Render {
             target,

@@ -38,7 +38,8 @@ pub struct RolloutSummary {
     /// PNG of the human render camera at the end of the first episode, written next to the
     /// recording (None when rendering is unavailable; the reason goes to stderr).
     pub frame: Option<String>,
-    /// Human-camera frames recorded on `/render_camera/image` (with `--video`).
+    /// Camera frames recorded (H.264, `/render_camera/video` with `--video` and
+    /// `/<camera>/video` with `--camera`), all cameras together.
     pub video_frames: u64,
 }
 
@@ -59,8 +60,11 @@ pub struct RolloutArgs {
     pub out: std::path::PathBuf,
     /// Show a progress bar (on a terminal).
     pub progress: bool,
-    /// Record the human render camera's frames (`/render_camera/image`, PNG).
+    /// Record the human render camera's frames (`/render_camera/video`, H.264).
     pub video: bool,
+    /// Also record these sensor cameras' colour frames (`/<camera>/video`, H.264); they need a
+    /// visual obs mode with colour (`rgb`, `rgbd`).
+    pub cameras: Vec<String>,
     /// Write the first episode's last human-camera frame next to `out` ([`frame_path`]).
     pub frame: bool,
 }
@@ -144,6 +148,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         // Fail before creating anything when rendering is unavailable.
         env.render().map_err(|e| e.to_string())?;
     }
+    check_cameras(&env, &a.cameras)?;
     let (mut output, file) = Output::start(&a.out)?;
     let mut rec = match Recorder::from_file(file, output.current(), &env) {
         Ok(r) => r,
@@ -198,6 +203,56 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
     })
 }
 
+/// Checks that every `--camera` names a sensor camera with colour images in this env's obs
+/// mode.
+fn check_cameras(env: &Env, cameras: &[String]) -> Result<(), String> {
+    for c in cameras {
+        match env.image(c) {
+            Some(img) if img.rgb.is_some() => {}
+            Some(_) => {
+                return Err(format!(
+                    "--camera {c}: obs mode {} renders no colour; use --obs-mode rgb or rgbd",
+                    env.config().obs_mode.name()
+                ))
+            }
+            None if env.config().obs_mode.is_visual() => {
+                return Err(format!(
+                    "--camera {c}: no such sensor camera; valid: {}",
+                    env.sensor_names().join(", ")
+                ))
+            }
+            None => {
+                return Err(format!(
+                    "--camera {c}: sensor cameras render only in a visual obs mode; use \
+                     --obs-mode rgb or rgbd (cameras: {})",
+                    env.sensor_names().join(", ")
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Records the current frame of every `--camera`.
+fn record_sensors(
+    env: &Env,
+    rec: &mut Recorder,
+    cameras: &[String],
+    ids: &[usize],
+) -> Result<(), String> {
+    for (c, &id) in cameras.iter().zip(ids) {
+        let img = env
+            .image(c)
+            .ok_or_else(|| format!("camera {c} has no image"))?;
+        let rgb = img
+            .rgb
+            .ok_or_else(|| format!("camera {c} has no colour image"))?;
+        rec.record_camera_frame(id, rgb, img.width, img.height)
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
 /// Totals of a rollout.
 struct Run {
     successes: usize,
@@ -221,6 +276,11 @@ fn record_all(
     if a.video {
         rec.enable_video(camera).map_err(|e| e.to_string())?;
     }
+    let sensors: Vec<usize> = a
+        .cameras
+        .iter()
+        .map(|c| rec.enable_video(c).map_err(|e| e.to_string()))
+        .collect::<Result<_, _>>()?;
     let bar = if a.progress {
         indicatif::ProgressBar::new(a.episodes as u64)
     } else {
@@ -244,6 +304,7 @@ fn record_all(
             rec.record_frame(rgb, render_w, render_h)
                 .map_err(|e| e.to_string())?;
         }
+        record_sensors(env, rec, &a.cameras, &sensors)?;
         let (mut ret, mut success) = (0.0f64, false);
         loop {
             policy.act(env, &mut action);
@@ -257,6 +318,7 @@ fn record_all(
                 rec.record_frame(rgb, render_w, render_h)
                     .map_err(|e| e.to_string())?;
             }
+            record_sensors(env, rec, &a.cameras, &sensors)?;
             ret += reward as f64;
             success |= terminated;
             run.steps += 1;

@@ -11,6 +11,7 @@
 //! | `/episode_end` | `mjskill.EpisodeEnd` | once per finished episode: steps, return, success |
 //! | `/tf` | `foxglove.FrameTransforms` | after reset and every step: the world pose of every body |
 //! | `/scene` | `foxglove.SceneUpdate` | once per episode: the drawn geoms of every body, in the body frame |
+//! | `/<camera>/video` | `foxglove.CompressedVideo` | with [`Recorder::enable_video`]: a camera's H.264 frames ([`video`]) |
 //!
 //! Because `/step` carries the state before the step, `env.set_state(&step.state)` followed
 //! by `env.step(&step.action)` reproduces the recorded step bitwise.
@@ -42,6 +43,7 @@ mod reader;
 pub mod replay;
 mod scan;
 mod schema;
+pub mod video;
 
 pub use reader::{
     read, read_raw, stream, EpisodeEnd, EpisodeRec, EpisodeStart, RawMessage, RawRecording,
@@ -78,9 +80,19 @@ pub const TOPIC_EPISODE_END: &str = "/episode_end";
 pub const TOPIC_TF: &str = "/tf";
 /// Topic of the scene geometry (`foxglove.SceneUpdate`).
 pub const TOPIC_SCENE: &str = "/scene";
-/// Topic of the human render camera's frames (`foxglove.CompressedImage`, PNG), written when
-/// video is enabled ([`Recorder::enable_video`]).
+/// Topic of the human render camera's frames in recordings made before H.264 video
+/// (`foxglove.CompressedImage`, one PNG per frame); still read by the exporters.
 pub const TOPIC_RENDER_IMAGE: &str = "/render_camera/image";
+/// Topic of the human render camera's video (`foxglove.CompressedVideo`, H.264), written when
+/// video is enabled ([`Recorder::enable_video`]); other cameras use [`camera_topic`].
+pub const TOPIC_RENDER_VIDEO: &str = "/render_camera/video";
+/// Frame rate of recorded video: one frame per control step (ManiSkill's 20 Hz).
+pub const VIDEO_FPS: f32 = 20.0;
+
+/// Topic of a camera's H.264 video: `/<camera>/video`.
+pub fn camera_topic(camera: &str) -> String {
+    format!("/{camera}/video")
+}
 
 /// Errors of recording and reading; every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -439,15 +451,19 @@ pub struct Recorder {
     next_episode: u64,
     open: Option<Open>,
     info_buf: Vec<(String, f64)>,
-    video: Option<Video>,
+    videos: Vec<Video>,
 }
 
-/// The video channel and its reused encoding buffers.
+/// A camera's video channel, its encoder (made at the first frame) and reused buffers.
 #[derive(Debug)]
 struct Video {
     channel: u16,
     frame_id: String,
-    png: Vec<u8>,
+    encoder: Option<video::H264Encoder>,
+    /// The next frame starts an episode: encode it as a keyframe (IDR with SPS/PPS), so
+    /// every episode decodes on its own.
+    keyframe: bool,
+    h264: Vec<u8>,
     b64: String,
     frames: u64,
 }
@@ -540,7 +556,7 @@ impl Recorder {
             next_episode: 0,
             open: None,
             info_buf: Vec::new(),
-            video: None,
+            videos: Vec::new(),
         };
         rec.sync()?;
         Ok(rec)
@@ -557,74 +573,140 @@ impl Recorder {
         self.path = path.to_path_buf();
     }
 
-    /// Adds the `/render_camera/image` channel (`foxglove.CompressedImage`, PNG) for the
-    /// frames of the camera `frame_id`, written by [`Recorder::record_frame`]. Idempotent.
-    pub fn enable_video(&mut self, frame_id: &str) -> Result<(), RecordError> {
-        if self.video.is_some() {
-            return Ok(());
+    /// Adds the `/<frame_id>/video` channel (`foxglove.CompressedVideo`, H.264) for the
+    /// frames of the camera `frame_id` (the human camera's is [`TOPIC_RENDER_VIDEO`]);
+    /// returns the camera's index for [`Recorder::record_camera_frame`]. Idempotent.
+    pub fn enable_video(&mut self, frame_id: &str) -> Result<usize, RecordError> {
+        if let Some(i) = self.videos.iter().position(|v| v.frame_id == frame_id) {
+            return Ok(i);
         }
-        let text = serde_json::to_vec(&schema::compressed_image()).expect("schema serializes");
+        let text = serde_json::to_vec(&schema::compressed_video()).expect("schema serializes");
+        let topic = camera_topic(frame_id);
         let channel = (|| -> mcap::McapResult<u16> {
             let sid = self
                 .writer
-                .add_schema("foxglove.CompressedImage", "jsonschema", &text)?;
+                .add_schema("foxglove.CompressedVideo", "jsonschema", &text)?;
             self.writer
-                .add_channel(sid, TOPIC_RENDER_IMAGE, "json", &BTreeMap::new())
+                .add_channel(sid, &topic, "json", &BTreeMap::new())
         })()
         .map_err(|e| self.mcap_err(e))?;
-        self.video = Some(Video {
+        self.videos.push(Video {
             channel,
             frame_id: frame_id.to_string(),
-            png: Vec::new(),
+            encoder: None,
+            keyframe: true,
+            h264: Vec::new(),
             b64: String::new(),
             frames: 0,
         });
-        Ok(())
+        Ok(self.videos.len() - 1)
     }
 
-    /// Frames written by [`Recorder::record_frame`].
+    /// Frames written by [`Recorder::record_frame`] / [`Recorder::record_camera_frame`],
+    /// all cameras together.
     pub fn frames(&self) -> u64 {
-        self.video.as_ref().map_or(0, |v| v.frames)
+        self.videos.iter().map(|v| v.frames).sum()
     }
 
-    /// Writes an RGB frame (H×W×3 bytes, top row first) as a PNG `foxglove.CompressedImage`
-    /// stamped with the time of the last message (call it right after
-    /// [`Recorder::begin_episode`] or [`Recorder::record_step`]).
+    /// [`Recorder::record_camera_frame`] for the first camera enabled.
     pub fn record_frame(
         &mut self,
         rgb: &[u8],
         width: usize,
         height: usize,
     ) -> Result<(), RecordError> {
+        self.record_camera_frame(0, rgb, width, height)
+    }
+
+    /// Writes an RGB frame (H×W×3 bytes, top row first) of camera `camera` (the index
+    /// [`Recorder::enable_video`] returned) as an H.264 `foxglove.CompressedVideo` message
+    /// stamped with the time of the last message (call it right after
+    /// [`Recorder::begin_episode`] or [`Recorder::record_step`]). The first frame of every
+    /// episode is a keyframe carrying SPS and PPS; the size must not change.
+    pub fn record_camera_frame(
+        &mut self,
+        camera: usize,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+    ) -> Result<(), RecordError> {
         use base64::Engine;
-        let Some(mut v) = self.video.take() else {
+        if camera >= self.videos.len() {
             return Err(RecordError::Usage {
                 path: self.path.clone(),
-                msg: "record_frame called without enable_video".into(),
+                msg: format!(
+                    "record_camera_frame({camera}) with {} camera(s) enabled (call enable_video)",
+                    self.videos.len()
+                ),
             });
-        };
+        }
+        let mut v = self.videos.swap_remove(camera);
         let ns = self.last_ns.unwrap_or(0);
         let r = (|| {
-            image::encode_png(rgb, width, height, &mut v.png).map_err(|reason| {
-                RecordError::Decode {
-                    path: self.path.clone(),
-                    what: "frame to write".into(),
-                    reason,
-                }
-            })?;
+            let bad = |e: video::VideoError| RecordError::Refused {
+                path: self.path.clone(),
+                what: format!("a frame of camera {}: {e}", v.frame_id),
+            };
+            if v.encoder.is_none() {
+                v.encoder = Some(video::H264Encoder::new(width, height, VIDEO_FPS).map_err(bad)?);
+            }
+            let enc = v.encoder.as_mut().expect("made above");
+            if enc.size() != (width, height) {
+                return Err(bad(video::VideoError::Size {
+                    width,
+                    height,
+                    why: format!("the camera's video is {:?}", enc.size()),
+                }));
+            }
+            enc.encode(rgb, v.keyframe, &mut v.h264).map_err(bad)?;
             v.b64.clear();
-            base64::engine::general_purpose::STANDARD.encode_string(&v.png, &mut v.b64);
+            base64::engine::general_purpose::STANDARD.encode_string(&v.h264, &mut v.b64);
             let msg = schema::CompressedImageMsg {
                 timestamp: schema::time(ns),
                 frame_id: &v.frame_id,
                 data: &v.b64,
-                format: "png",
+                format: "h264",
             };
             self.write_json(v.channel, ns, &msg)
         })();
-        v.frames += r.is_ok() as u64;
-        self.video = Some(v);
+        if r.is_ok() {
+            v.frames += 1;
+            v.keyframe = false;
+        }
+        self.videos.push(v);
+        let last = self.videos.len() - 1;
+        self.videos.swap(camera, last);
         r
+    }
+
+    /// Adds a JSON channel of the caller's own (a `jsonschema` schema named `schema_name`,
+    /// e.g. for data an importer keeps next to the standard topics); returns its id for
+    /// [`Recorder::write_message`].
+    pub fn add_json_channel(
+        &mut self,
+        schema_name: &str,
+        schema: &serde_json::Value,
+        topic: &str,
+    ) -> Result<u16, RecordError> {
+        let text = serde_json::to_vec(schema).expect("schema serializes");
+        (|| -> mcap::McapResult<u16> {
+            let sid = self.writer.add_schema(schema_name, "jsonschema", &text)?;
+            self.writer
+                .add_channel(sid, topic, "json", &BTreeMap::new())
+        })()
+        .map_err(|e| self.mcap_err(e))
+    }
+
+    /// Writes `msg` as JSON on a channel made by [`Recorder::add_json_channel`], stamped with
+    /// the time of the last message (call it right after [`Recorder::begin_episode`] or
+    /// [`Recorder::record_step`]).
+    pub fn write_message<T: Serialize>(
+        &mut self,
+        channel: u16,
+        msg: &T,
+    ) -> Result<(), RecordError> {
+        let ns = self.last_ns.unwrap_or(0);
+        self.write_json(channel, ns, msg)
     }
 
     /// Number of episodes begun so far.
@@ -720,6 +802,9 @@ impl Recorder {
         let start_ns = self.last_ns.map_or(0, |t| t.saturating_add(self.dt_ns));
         let index = self.next_episode;
         self.next_episode += 1;
+        for v in &mut self.videos {
+            v.keyframe = true;
+        }
         self.open = Some(Open {
             index,
             start_ns,

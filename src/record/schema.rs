@@ -320,11 +320,19 @@ pub(crate) fn scene_update_msg(model: &Model, frames: &[String], ns: u64) -> Val
 
 /// Schema `foxglove.CompressedImage` (JSON encoding: `data` is base64): `@foxglove/schemas`
 /// 2.1.0, verbatim.
+#[cfg(test)]
 pub(crate) fn compressed_image() -> Value {
     published(include_str!("foxglove/CompressedImage.json"))
 }
 
-/// A `foxglove.CompressedImage` message with base64 `data`.
+/// Schema `foxglove.CompressedVideo` (JSON encoding: `data` is base64): `@foxglove/schemas`
+/// 2.1.0, verbatim.
+pub(crate) fn compressed_video() -> Value {
+    published(include_str!("foxglove/CompressedVideo.json"))
+}
+
+/// A `foxglove.CompressedImage` (or, with the same fields, `foxglove.CompressedVideo`)
+/// message with base64 `data`.
 #[derive(serde::Serialize, serde::Deserialize)]
 pub(crate) struct CompressedImageMsg<'a> {
     pub(crate) timestamp: Value,
@@ -360,6 +368,7 @@ mod tests {
             ("foxglove.FrameTransforms", frame_transforms()),
             ("foxglove.SceneUpdate", scene_update()),
             ("foxglove.CompressedImage", compressed_image()),
+            ("foxglove.CompressedVideo", compressed_video()),
             ("mjskill.Episode", episode()),
             ("mjskill.Step", step()),
             ("mjskill.EpisodeEnd", episode_end()),

@@ -1,0 +1,258 @@
+//! `mjskill export`: a recording's finished episodes in ManiSkill's trajectory format
+//! ([`to_maniskill`]) or as a LeRobotDataset v3 ([`super::lerobot::write`]).
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use serde_json::{json, Map, Value};
+
+use super::import::TOPIC_MANISKILL_STATE;
+use super::maniskill_h5::{self, EnvInfo, EpisodeData, EpisodeInfo, Trajectory, TrajectoryJson};
+use super::DatasetError;
+use crate::env::{make, Env, StateDict};
+use crate::record::{EpisodeRec, Recording};
+
+/// Export formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// ManiSkill's `trajectory.h5` + `.json`.
+    ManiSkill,
+    /// LeRobotDataset v3 (a directory).
+    LeRobot,
+}
+
+impl Format {
+    /// Parses `maniskill` / `lerobot`.
+    pub fn parse(s: &str) -> Result<Format, DatasetError> {
+        match s {
+            "maniskill" => Ok(Format::ManiSkill),
+            "lerobot" => Ok(Format::LeRobot),
+            _ => Err(DatasetError::Invalid {
+                msg: format!("unknown --format {s:?}; valid: maniskill, lerobot"),
+            }),
+        }
+    }
+}
+
+/// What was exported (printed as JSON by the command).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportSummary {
+    /// The recording.
+    pub file: String,
+    /// `maniskill` or `lerobot`.
+    pub format: &'static str,
+    /// Files or directory written.
+    pub outputs: Vec<String>,
+    /// Episodes exported (the recording's finished episodes).
+    pub episodes: usize,
+    /// Steps exported.
+    pub steps: usize,
+    /// Video frames written per camera (LeRobot).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub videos: Vec<(String, usize)>,
+}
+
+/// Reads a recording and its ManiSkill-state messages (written by `import-maniskill`),
+/// indexed `[episode][step]`.
+pub(crate) fn read_recording(
+    path: &Path,
+) -> Result<(Recording, Vec<Vec<StateDict>>), DatasetError> {
+    let rec = crate::record::read(path)?;
+    let raw = crate::record::read_raw(path)?;
+    let mut states: Vec<Vec<StateDict>> = Vec::new();
+    for m in raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == TOPIC_MANISKILL_STATE)
+    {
+        let bad =
+            |msg: String| DatasetError::format(path, format!("{TOPIC_MANISKILL_STATE}: {msg}"));
+        let v: Value = serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
+        let ep = v["episode"]
+            .as_u64()
+            .ok_or_else(|| bad("no episode".into()))? as usize;
+        let step = v["step"].as_u64().ok_or_else(|| bad("no step".into()))? as usize;
+        let sd = StateDict::from_json(&v["state"]).map_err(bad)?;
+        if states.len() <= ep {
+            states.resize(ep + 1, Vec::new());
+        }
+        if states[ep].len() != step {
+            return Err(bad(format!("episode {ep}: step {step} out of order")));
+        }
+        states[ep].push(sd);
+    }
+    Ok((rec, states))
+}
+
+/// The env a recording was made with.
+pub(crate) fn env_of(path: &Path, rec: &Recording) -> Result<Env, DatasetError> {
+    let config = rec.meta.config().map_err(DatasetError::env(path))?;
+    make(&rec.meta.env_id, config).map_err(DatasetError::env(path))
+}
+
+/// The ManiSkill-layout states of an episode (T+1): the importer's messages when the
+/// recording has them, else the recorded mjskill states converted through `env` (the state
+/// after the last step is re-simulated from the state before it, which is exact: replay is
+/// bitwise deterministic).
+pub(crate) fn episode_states(
+    path: &Path,
+    env: &mut Env,
+    ep: &EpisodeRec,
+    imported: Option<&Vec<StateDict>>,
+) -> Result<Vec<StateDict>, DatasetError> {
+    if let Some(s) = imported.filter(|s| s.len() == ep.steps.len() + 1) {
+        // JSON objects come back in name order: restore ManiSkill's scene order.
+        let order = env.actor_names();
+        return Ok(s
+            .iter()
+            .map(|sd| {
+                let mut sd = sd.clone();
+                sd.actors.sort_by_key(|name, _| {
+                    order.iter().position(|o| o == name).unwrap_or(usize::MAX)
+                });
+                sd
+            })
+            .collect());
+    }
+    let mut out = Vec::with_capacity(ep.steps.len() + 1);
+    let restore = |env: &mut Env, s| env.set_state(s).map_err(DatasetError::env(path));
+    restore(env, &ep.initial_state)?;
+    out.push(env.get_state_dict());
+    for s in ep.steps.iter().skip(1) {
+        restore(env, &s.state)?;
+        out.push(env.get_state_dict());
+    }
+    if let Some(last) = ep.steps.last() {
+        restore(env, &last.state)?;
+        env.step(&last.action).map_err(DatasetError::env(path))?;
+        out.push(env.get_state_dict());
+    }
+    Ok(out)
+}
+
+fn info_flag(info: &[(String, f64)], key: &str) -> Option<bool> {
+    info.iter().find(|(k, _)| k == key).map(|(_, v)| *v != 0.0)
+}
+
+/// Exports the finished episodes of the recording `path` to ManiSkill's format: `h5` and
+/// `json` (default: `h5` with extension `.json`).
+pub fn to_maniskill(
+    path: &Path,
+    h5: &Path,
+    json_path: Option<&Path>,
+) -> Result<ExportSummary, DatasetError> {
+    let json_path = json_path.map_or_else(|| maniskill_h5::json_path_for(h5), Path::to_path_buf);
+    let (rec, imported) = read_recording(path)?;
+    let mut env = env_of(path, &rec)?;
+    let m = &rec.meta;
+    let mut infos = Vec::new();
+    let mut episodes = Vec::new();
+    let mut steps = 0;
+    for (k, ep) in rec.finished().enumerate() {
+        let env_states = episode_states(path, &mut env, ep, imported.get(ep.index as usize))?;
+        let t = ep.steps.len();
+        steps += t;
+        let has_fail = ep
+            .steps
+            .first()
+            .is_some_and(|s| info_flag(&s.info, "fail").is_some());
+        let obs = (m.obs_mode == "state").then(|| {
+            let mut o = ep.initial_obs.clone();
+            for s in &ep.steps {
+                o.extend_from_slice(&s.obs);
+            }
+            (o, ep.initial_obs.len())
+        });
+        let data = EpisodeData {
+            actions: ep
+                .steps
+                .iter()
+                .flat_map(|s| s.action.iter().copied())
+                .collect(),
+            action_dim: m.action_space.low.len(),
+            env_states,
+            terminated: ep.steps.iter().map(|s| s.terminated).collect(),
+            truncated: ep.steps.iter().map(|s| s.truncated).collect(),
+            success: Some(
+                ep.steps
+                    .iter()
+                    .map(|s| info_flag(&s.info, "success").unwrap_or(false))
+                    .collect(),
+            ),
+            fail: has_fail.then(|| {
+                ep.steps
+                    .iter()
+                    .map(|s| info_flag(&s.info, "fail").unwrap_or(false))
+                    .collect()
+            }),
+            rewards: Some(ep.steps.iter().map(|s| s.reward).collect()),
+            obs,
+        };
+        infos.push(EpisodeInfo {
+            episode_id: k,
+            episode_seed: ep.seed,
+            control_mode: m.control_mode.clone(),
+            elapsed_steps: t as u32,
+            reset_kwargs: json!({"options": null, "seed": ep.seed}),
+            success: Some(ep.success),
+        });
+        episodes.push(data);
+    }
+    if episodes.is_empty() {
+        return Err(DatasetError::format(
+            path,
+            "has no finished episode to export",
+        ));
+    }
+    let mut env_kwargs = Map::new();
+    env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
+    env_kwargs.insert("control_mode".into(), json!(m.control_mode));
+    env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
+    env_kwargs.insert("robot_uids".into(), json!(m.robot));
+    env_kwargs.insert("render_mode".into(), Value::Null);
+    env_kwargs.insert("num_envs".into(), json!(1));
+    let mut extra = Map::new();
+    extra.insert("source_type".into(), json!("mjskill"));
+    extra.insert(
+        "source_desc".into(),
+        json!(format!(
+            "exported by mjskill {} from {}",
+            env!("CARGO_PKG_VERSION"),
+            path.display()
+        )),
+    );
+    let traj = Trajectory {
+        json: TrajectoryJson {
+            env_info: EnvInfo {
+                env_id: m.env_id.clone(),
+                env_kwargs,
+                max_episode_steps: Some(m.max_episode_steps),
+            },
+            commit_info: Value::Null,
+            episodes: infos,
+            extra,
+        },
+        episodes,
+    };
+    maniskill_h5::write(&traj, h5, &json_path)?;
+    Ok(ExportSummary {
+        file: path.display().to_string(),
+        format: "maniskill",
+        outputs: vec![h5.display().to_string(), json_path.display().to_string()],
+        episodes: traj.episodes.len(),
+        steps,
+        videos: Vec::new(),
+    })
+}
+
+/// The default output of a format: `<recording stem>.h5` / `<recording stem>_lerobot`.
+pub fn default_output(path: &Path, format: Format) -> PathBuf {
+    match format {
+        Format::ManiSkill => path.with_extension("h5"),
+        Format::LeRobot => {
+            let stem = path
+                .file_stem()
+                .map_or_else(|| "dataset".into(), |s| s.to_string_lossy().into_owned());
+            path.with_file_name(format!("{stem}_lerobot"))
+        }
+    }
+}

@@ -1,0 +1,750 @@
+//! LeRobotDataset v3 export: a directory that `lerobot.datasets.LeRobotDataset` loads.
+//!
+//! ```text
+//! meta/info.json                                   codebase_version v3.0, fps 20, robot_type, features
+//! meta/stats.json                                  min / max / mean / std / count per feature
+//! meta/tasks.parquet                               task (the pandas index) → task_index
+//! meta/episodes/chunk-000/file-000.parquet         per episode: length, tasks, data and video locations
+//! data/chunk-000/file-000.parquet                  one row per step
+//! videos/observation.images.<camera>/chunk-000/file-000.mp4   H.264, every episode one after another
+//! ```
+//!
+//! Row t of an episode holds `observation.state` (the obs before action t), `action`,
+//! `next.reward`, `next.done` (true on the episode's last row), `next.success`, `timestamp`
+//! (t / fps), `frame_index` (t), `episode_index`, `index` (the row's position in the dataset)
+//! and `task_index`. The video frame of row t is the camera's frame before action t (a
+//! recording has one frame more per episode: the one after the last step, which is left
+//! out). Videos are H.264 (Constrained Baseline: no B-frames) in MP4; H.264 recordings are
+//! muxed without re-encoding, PNG frames of older recordings are encoded.
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use arrow_array::builder::{ListBuilder, StringBuilder};
+use arrow_array::{
+    ArrayRef, BooleanArray, FixedSizeListArray, Float32Array, Float64Array, Int64Array, RecordBatch,
+};
+use arrow_schema::{DataType, Field, Schema};
+use serde_json::{json, Map, Value};
+
+use super::export::{env_of, ExportSummary};
+use super::DatasetError;
+use crate::record::video::{is_idr, H264Encoder};
+use crate::record::{EpisodeRec, RawMessage, VIDEO_FPS};
+
+/// Frames per second of the dataset (ManiSkill's control frequency).
+pub const FPS: u32 = 20;
+/// LeRobot's format version written.
+pub const CODEBASE_VERSION: &str = "v3.0";
+
+/// The task description of an env (ManiSkill's own wording), stored in `meta/tasks.parquet`.
+pub fn task_description(env_id: &str) -> String {
+    match env_id {
+        "PickCube-v1" | "PickCubeSO100-v1" | "PickCubeWidowXAI-v1" => {
+            "Grasp the red cube and move it to the goal position.".into()
+        }
+        "PokeCube-v1" => "Grasp the peg and push the cube with it into the goal region.".into(),
+        "PlaceSphere-v1" => "Pick up the sphere and place it in the bin.".into(),
+        other => other.to_string(),
+    }
+}
+
+/// One camera's frames in a recording.
+struct Camera {
+    /// Name (`render_camera`, `base_camera`, ...).
+    name: String,
+    /// `h264` or `png`.
+    format: String,
+    /// Per episode index: the frames, in order.
+    frames: BTreeMap<u64, Vec<Vec<u8>>>,
+}
+
+/// The cameras of a recording: `foxglove.CompressedVideo` (H.264) and, from recordings made
+/// before video, `foxglove.CompressedImage` (PNG) messages, grouped by episode.
+fn cameras(path: &Path, messages: &[RawMessage]) -> Result<Vec<Camera>, DatasetError> {
+    use base64::Engine;
+    let mut cams: Vec<Camera> = Vec::new();
+    let mut episode: Option<u64> = None;
+    for m in messages {
+        if m.topic == crate::record::TOPIC_EPISODE {
+            let v: Value = serde_json::from_slice(&m.data)
+                .map_err(|e| DatasetError::format(path, format!("/episode: {e}")))?;
+            episode = v["episode"].as_u64();
+            continue;
+        }
+        if m.schema != "foxglove.CompressedVideo" && m.schema != "foxglove.CompressedImage" {
+            continue;
+        }
+        let bad = |msg: String| DatasetError::format(path, format!("{}: {msg}", m.topic));
+        let v: Value = serde_json::from_slice(&m.data).map_err(|e| bad(e.to_string()))?;
+        let name = v["frame_id"]
+            .as_str()
+            .ok_or_else(|| bad("no frame_id".into()))?;
+        let format = v["format"]
+            .as_str()
+            .ok_or_else(|| bad("no format".into()))?;
+        if !matches!(format, "h264" | "png") {
+            return Err(bad(format!(
+                "frame format {format:?} cannot be exported; valid: h264, png"
+            )));
+        }
+        let data = base64::engine::general_purpose::STANDARD
+            .decode(v["data"].as_str().ok_or_else(|| bad("no data".into()))?)
+            .map_err(|e| bad(format!("data is not base64: {e}")))?;
+        let ep = episode.ok_or_else(|| bad("a frame before the first episode".into()))?;
+        let i = match cams.iter().position(|c| c.name == name) {
+            Some(i) => i,
+            None => {
+                cams.push(Camera {
+                    name: name.to_string(),
+                    format: format.to_string(),
+                    frames: BTreeMap::new(),
+                });
+                cams.len() - 1
+            }
+        };
+        if cams[i].format != format {
+            return Err(bad(format!(
+                "camera {name} mixes {} and {format} frames",
+                cams[i].format
+            )));
+        }
+        cams[i].frames.entry(ep).or_default().push(data);
+    }
+    Ok(cams)
+}
+
+/// Running per-channel statistics of RGB frames (values scaled to 0..1, as LeRobot's).
+#[derive(Default)]
+struct ImageStats {
+    min: [f64; 3],
+    max: [f64; 3],
+    sum: [f64; 3],
+    sum_sq: [f64; 3],
+    pixels: u64,
+    frames: u64,
+}
+
+impl ImageStats {
+    fn add(&mut self, rgb: &[u8]) {
+        if self.pixels == 0 {
+            self.min = [1.0; 3];
+            self.max = [0.0; 3];
+        }
+        for px in rgb.chunks_exact(3) {
+            for (c, &p) in px.iter().enumerate() {
+                let v = p as f64 / 255.0;
+                self.min[c] = self.min[c].min(v);
+                self.max[c] = self.max[c].max(v);
+                self.sum[c] += v;
+                self.sum_sq[c] += v * v;
+            }
+        }
+        self.pixels += (rgb.len() / 3) as u64;
+        self.frames += 1;
+    }
+
+    fn to_json(&self) -> Value {
+        let n = self.pixels.max(1) as f64;
+        let mean: Vec<f64> = self.sum.iter().map(|s| s / n).collect();
+        let std: Vec<f64> = (0..3)
+            .map(|c| (self.sum_sq[c] / n - mean[c] * mean[c]).max(0.0).sqrt())
+            .collect();
+        let chw = |v: &[f64]| json!(v.iter().map(|x| json!([[x]])).collect::<Vec<_>>());
+        json!({
+            "min": chw(&self.min), "max": chw(&self.max), "mean": chw(&mean), "std": chw(&std),
+            "count": [self.frames]
+        })
+    }
+}
+
+/// min / max / mean / std / count of the rows of a (rows × dim) matrix.
+fn vector_stats(values: &[f64], dim: usize) -> Value {
+    let rows = values.len() / dim.max(1);
+    let mut min = vec![f64::INFINITY; dim];
+    let mut max = vec![f64::NEG_INFINITY; dim];
+    let mut sum = vec![0.0; dim];
+    let mut sq = vec![0.0; dim];
+    for r in values.chunks_exact(dim.max(1)) {
+        for (j, &x) in r.iter().enumerate() {
+            min[j] = min[j].min(x);
+            max[j] = max[j].max(x);
+            sum[j] += x;
+            sq[j] += x * x;
+        }
+    }
+    let n = rows.max(1) as f64;
+    let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
+    let std: Vec<f64> = (0..dim)
+        .map(|j| (sq[j] / n - mean[j] * mean[j]).max(0.0).sqrt())
+        .collect();
+    json!({"min": min, "max": max, "mean": mean, "std": std, "count": [rows]})
+}
+
+fn names(prefix: &str, n: usize) -> Vec<String> {
+    if n == 1 {
+        vec![prefix.to_string()]
+    } else {
+        (0..n).map(|i| format!("{prefix}_{i}")).collect()
+    }
+}
+
+fn fixed_list(values: Vec<f32>, dim: usize) -> Result<ArrayRef, arrow_schema::ArrowError> {
+    Ok(Arc::new(FixedSizeListArray::try_new(
+        Arc::new(Field::new_list_field(DataType::Float32, false)),
+        dim as i32,
+        Arc::new(Float32Array::from(values)),
+        None,
+    )?))
+}
+
+fn write_parquet(out: &Path, final_path: &Path, batch: &RecordBatch) -> Result<(), DatasetError> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::basic::Compression;
+    use parquet::file::properties::WriterProperties;
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).map_err(DatasetError::io(final_path))?;
+    }
+    let file = std::fs::File::create(out).map_err(DatasetError::io(final_path))?;
+    let props = WriterProperties::builder()
+        .set_compression(Compression::SNAPPY)
+        .build();
+    let perr = |source| DatasetError::Parquet {
+        path: final_path.to_path_buf(),
+        source,
+    };
+    let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props)).map_err(perr)?;
+    w.write(batch).map_err(perr)?;
+    w.close().map_err(perr)?;
+    Ok(())
+}
+
+/// One camera's video, muxed into `out`; returns (width, height, image stats).
+fn write_video(
+    out: &Path,
+    final_path: &Path,
+    cam: &Camera,
+    episodes: &[&EpisodeRec],
+) -> Result<(usize, usize, ImageStats), DatasetError> {
+    use openh264::formats::YUVSource;
+    let verr = |msg: String| DatasetError::Video {
+        path: final_path.to_path_buf(),
+        msg,
+    };
+    // The access units, re-encoding PNG frames.
+    let mut units: Vec<Vec<u8>> = Vec::new();
+    let mut stats = ImageStats::default();
+    let mut size: Option<(usize, usize)> = None;
+    let mut encoder: Option<H264Encoder> = None;
+    for ep in episodes {
+        let frames = cam.frames.get(&ep.index).map_or(&[][..], Vec::as_slice);
+        let rows = ep.steps.len();
+        if frames.len() != rows + 1 {
+            return Err(verr(format!(
+                "camera {} has {} frames in episode {}, expected {} (one after the reset and \
+                 one per step)",
+                cam.name,
+                frames.len(),
+                ep.index,
+                rows + 1
+            )));
+        }
+        for (t, f) in frames[..rows].iter().enumerate() {
+            if cam.format == "png" {
+                let dec = png::Decoder::new(std::io::Cursor::new(f.as_slice()));
+                let mut reader = dec
+                    .read_info()
+                    .map_err(|e| verr(format!("episode {} frame {t}: {e}", ep.index)))?;
+                let mut buf = vec![0; reader.output_buffer_size().unwrap_or(0)];
+                let info = reader
+                    .next_frame(&mut buf)
+                    .map_err(|e| verr(format!("episode {} frame {t}: {e}", ep.index)))?;
+                if info.color_type != png::ColorType::Rgb || info.bit_depth != png::BitDepth::Eight
+                {
+                    return Err(verr(format!(
+                        "episode {} frame {t}: PNG is {:?} {:?}, expected 8-bit RGB",
+                        ep.index, info.color_type, info.bit_depth
+                    )));
+                }
+                let (w, h) = (info.width as usize, info.height as usize);
+                let rgb = &buf[..w * h * 3];
+                if encoder.is_none() {
+                    encoder =
+                        Some(H264Encoder::new(w, h, VIDEO_FPS).map_err(|e| verr(e.to_string()))?);
+                    size = Some((w, h));
+                }
+                let mut unit = Vec::new();
+                encoder
+                    .as_mut()
+                    .expect("made above")
+                    .encode(rgb, t == 0, &mut unit)
+                    .map_err(|e| verr(format!("episode {} frame {t}: {e}", ep.index)))?;
+                stats.add(rgb);
+                units.push(unit);
+            } else {
+                if t == 0 && !is_idr(f) {
+                    return Err(verr(format!(
+                        "camera {}: episode {} does not start with a keyframe",
+                        cam.name, ep.index
+                    )));
+                }
+                units.push(f.clone());
+            }
+        }
+    }
+    if cam.format == "h264" {
+        // Decode everything once: image statistics, frame size, and a check that the
+        // stream decodes to one picture per row.
+        let mut dec = openh264::decoder::Decoder::new().map_err(|e| verr(e.to_string()))?;
+        let mut rgb = Vec::new();
+        for (i, u) in units.iter().enumerate() {
+            let pic = dec
+                .decode(u)
+                .map_err(|e| verr(format!("frame {i} does not decode: {e}")))?;
+            if let Some(p) = pic {
+                let (w, h) = p.dimensions();
+                rgb.resize(w * h * 3, 0);
+                p.write_rgb8(&mut rgb);
+                size.get_or_insert((w, h));
+                stats.add(&rgb);
+            }
+        }
+        for p in dec
+            .flush_remaining()
+            .map_err(|e| verr(format!("flushing the decoder: {e}")))?
+        {
+            let (w, h) = p.dimensions();
+            rgb.resize(w * h * 3, 0);
+            p.write_rgb8(&mut rgb);
+            stats.add(&rgb);
+        }
+        if stats.frames != units.len() as u64 {
+            return Err(verr(format!(
+                "camera {}: {} frames decode to {} pictures",
+                cam.name,
+                units.len(),
+                stats.frames
+            )));
+        }
+    }
+    let (w, h) = size.ok_or_else(|| verr(format!("camera {} has no frame", cam.name)))?;
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).map_err(DatasetError::io(final_path))?;
+    }
+    let file = std::fs::File::create(out).map_err(DatasetError::io(final_path))?;
+    let mut mux = muxide::api::MuxerBuilder::new(std::io::BufWriter::new(file))
+        .video(
+            muxide::api::VideoCodec::H264,
+            w as u32,
+            h as u32,
+            FPS as f64,
+        )
+        .with_fast_start(true)
+        .build()
+        .map_err(|e| verr(e.to_string()))?;
+    for (i, u) in units.iter().enumerate() {
+        mux.write_video(i as f64 / FPS as f64, u, is_idr(u))
+            .map_err(|e| verr(format!("frame {i}: {e}")))?;
+    }
+    mux.finish().map_err(|e| verr(e.to_string()))?;
+    Ok((w, h, stats))
+}
+
+/// Exports the finished episodes of the recording `path` as a LeRobotDataset v3 in `dir`
+/// (which must not exist, or be empty). `video`: `Some(true)` requires camera frames,
+/// `Some(false)` leaves them out, `None` exports whatever cameras the recording has.
+pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSummary, DatasetError> {
+    if dir.exists() {
+        let empty = dir.is_dir()
+            && std::fs::read_dir(dir)
+                .map_err(DatasetError::io(dir))?
+                .next()
+                .is_none();
+        if !empty {
+            return Err(DatasetError::Invalid {
+                msg: format!(
+                    "{}: exists and is not an empty directory; choose another -o or remove it",
+                    dir.display()
+                ),
+            });
+        }
+    }
+    let (rec, _) = super::export::read_recording(path)?;
+    let raw = crate::record::read_raw(path)?;
+    let cams = if video == Some(false) {
+        Vec::new()
+    } else {
+        cameras(path, &raw.messages)?
+    };
+    if video == Some(true) && cams.is_empty() {
+        return Err(DatasetError::Invalid {
+            msg: format!(
+                "{}: the recording has no camera frames, so there is no video to export; record \
+                 with `mjskill rollout --video` (or --camera base_camera --obs-mode rgb), or \
+                 pass --video no",
+                path.display()
+            ),
+        });
+    }
+    let env = env_of(path, &rec)?;
+    let m = &rec.meta;
+    let episodes: Vec<&EpisodeRec> = rec.finished().collect();
+    if episodes.is_empty() {
+        return Err(DatasetError::format(
+            path,
+            "has no finished episode to export",
+        ));
+    }
+    let obs_dim = episodes[0].initial_obs.len();
+    let act_dim = m.action_space.low.len();
+
+    // Rows.
+    let mut state = Vec::new();
+    let mut action = Vec::new();
+    let (mut reward, mut done, mut success) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut timestamp, mut frame_index, mut episode_index, mut index) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut ep_rows = Vec::new();
+    for (k, ep) in episodes.iter().enumerate() {
+        let from = index.len();
+        let mut obs = &ep.initial_obs;
+        for (t, s) in ep.steps.iter().enumerate() {
+            state.extend_from_slice(obs);
+            action.extend_from_slice(&s.action);
+            reward.push(s.reward);
+            done.push(t + 1 == ep.steps.len());
+            success.push(
+                s.info
+                    .iter()
+                    .find(|(k, _)| k == "success")
+                    .is_some_and(|(_, v)| *v != 0.0),
+            );
+            timestamp.push(t as f32 / FPS as f32);
+            frame_index.push(t as i64);
+            episode_index.push(k as i64);
+            index.push(index.len() as i64);
+            obs = &s.obs;
+        }
+        ep_rows.push((from, index.len()));
+    }
+    let rows = index.len();
+    let task_index = vec![0i64; rows];
+
+    // Feature metadata.
+    let mut obs_names = Vec::new();
+    for sl in &m.obs_layout {
+        obs_names.extend(names(&sl.name, sl.end - sl.start));
+    }
+    if obs_names.len() != obs_dim {
+        obs_names = names("state", obs_dim);
+    }
+    let mut act_names = Vec::new();
+    for p in env.action_parts() {
+        act_names.extend(names(p.name, p.range.len()));
+    }
+    if act_names.len() != act_dim {
+        act_names = names("action", act_dim);
+    }
+    let scalar = |dtype: &str| json!({"dtype": dtype, "shape": [1], "names": null});
+    let mut features = Map::new();
+    if obs_dim > 0 {
+        features.insert(
+            "observation.state".into(),
+            json!({"dtype": "float32", "shape": [obs_dim], "names": obs_names}),
+        );
+    }
+    features.insert(
+        "action".into(),
+        json!({"dtype": "float32", "shape": [act_dim], "names": act_names}),
+    );
+    features.insert("next.reward".into(), scalar("float32"));
+    features.insert("next.done".into(), scalar("bool"));
+    features.insert("next.success".into(), scalar("bool"));
+
+    // Arrow columns.
+    let aerr = |source| DatasetError::Arrow {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let mut fields = Vec::new();
+    let mut cols: Vec<ArrayRef> = Vec::new();
+    let list_field = |name: &str, dim: usize| {
+        Field::new(
+            name,
+            DataType::FixedSizeList(
+                Arc::new(Field::new_list_field(DataType::Float32, false)),
+                dim as i32,
+            ),
+            false,
+        )
+    };
+    if obs_dim > 0 {
+        fields.push(list_field("observation.state", obs_dim));
+        cols.push(fixed_list(state.clone(), obs_dim).map_err(aerr)?);
+    }
+    fields.push(list_field("action", act_dim));
+    cols.push(fixed_list(action.clone(), act_dim).map_err(aerr)?);
+    fields.push(Field::new("next.reward", DataType::Float32, false));
+    cols.push(Arc::new(Float32Array::from(reward.clone())));
+    fields.push(Field::new("next.done", DataType::Boolean, false));
+    cols.push(Arc::new(BooleanArray::from(done.clone())));
+    fields.push(Field::new("next.success", DataType::Boolean, false));
+    cols.push(Arc::new(BooleanArray::from(success.clone())));
+    fields.push(Field::new("timestamp", DataType::Float32, false));
+    cols.push(Arc::new(Float32Array::from(timestamp.clone())));
+    for (name, v) in [
+        ("frame_index", &frame_index),
+        ("episode_index", &episode_index),
+        ("index", &index),
+        ("task_index", &task_index),
+    ] {
+        fields.push(Field::new(name, DataType::Int64, false));
+        cols.push(Arc::new(Int64Array::from(v.clone())));
+        features.insert(name.into(), scalar("int64"));
+    }
+    features.insert("timestamp".into(), scalar("float32"));
+    let data = RecordBatch::try_new(Arc::new(Schema::new(fields)), cols).map_err(aerr)?;
+
+    // Stats.
+    let widen = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
+    let bools = |v: &[bool]| v.iter().map(|&x| x as u8 as f64).collect::<Vec<_>>();
+    let ints = |v: &[i64]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
+    let mut stats = Map::new();
+    if obs_dim > 0 {
+        stats.insert(
+            "observation.state".into(),
+            vector_stats(&widen(&state), obs_dim),
+        );
+    }
+    stats.insert("action".into(), vector_stats(&widen(&action), act_dim));
+    stats.insert("next.reward".into(), vector_stats(&widen(&reward), 1));
+    stats.insert("next.done".into(), vector_stats(&bools(&done), 1));
+    stats.insert("next.success".into(), vector_stats(&bools(&success), 1));
+    stats.insert("timestamp".into(), vector_stats(&widen(&timestamp), 1));
+    for (name, v) in [
+        ("frame_index", &frame_index),
+        ("episode_index", &episode_index),
+        ("index", &index),
+        ("task_index", &task_index),
+    ] {
+        stats.insert(name.into(), vector_stats(&ints(v), 1));
+    }
+
+    // Write everything under a temporary directory.
+    // The temporary directory replaces an empty `dir` on commit (rename(2) does that).
+    let mut staged = super::Staged::default();
+    let tmp = staged.add(dir);
+    std::fs::create_dir_all(&tmp).map_err(DatasetError::io(dir))?;
+    write_parquet(
+        &tmp.join("data/chunk-000/file-000.parquet"),
+        &dir.join("data/chunk-000/file-000.parquet"),
+        &data,
+    )?;
+    let mut videos = Vec::new();
+    let mut ep_video_cols: Vec<(Field, ArrayRef)> = Vec::new();
+    for cam in &cams {
+        let key = format!("observation.images.{}", cam.name);
+        let rel = format!("videos/{key}/chunk-000/file-000.mp4");
+        let (w, h, st) = write_video(&tmp.join(&rel), &dir.join(&rel), cam, &episodes)?;
+        features.insert(
+            key.clone(),
+            json!({
+                "dtype": "video",
+                "shape": [h, w, 3],
+                "names": ["height", "width", "channels"],
+                "info": {
+                    "video.height": h, "video.width": w, "video.codec": "h264",
+                    "video.pix_fmt": "yuv420p", "video.is_depth_map": false,
+                    "video.fps": FPS, "video.channels": 3, "has_audio": false
+                }
+            }),
+        );
+        stats.insert(key.clone(), st.to_json());
+        videos.push((cam.name.clone(), rows));
+        let zeros: ArrayRef = Arc::new(Int64Array::from(vec![0i64; episodes.len()]));
+        ep_video_cols.push((
+            Field::new(format!("videos/{key}/chunk_index"), DataType::Int64, false),
+            zeros.clone(),
+        ));
+        ep_video_cols.push((
+            Field::new(format!("videos/{key}/file_index"), DataType::Int64, false),
+            zeros,
+        ));
+        let from: Vec<f64> = ep_rows
+            .iter()
+            .map(|(a, _)| *a as f64 / FPS as f64)
+            .collect();
+        let to: Vec<f64> = ep_rows
+            .iter()
+            .map(|(_, b)| *b as f64 / FPS as f64)
+            .collect();
+        ep_video_cols.push((
+            Field::new(
+                format!("videos/{key}/from_timestamp"),
+                DataType::Float64,
+                false,
+            ),
+            Arc::new(Float64Array::from(from)),
+        ));
+        ep_video_cols.push((
+            Field::new(
+                format!("videos/{key}/to_timestamp"),
+                DataType::Float64,
+                false,
+            ),
+            Arc::new(Float64Array::from(to)),
+        ));
+    }
+
+    // Episodes metadata.
+    let task = task_description(&m.env_id);
+    let n = episodes.len();
+    let mut tasks_col = ListBuilder::new(StringBuilder::new());
+    for _ in 0..n {
+        tasks_col.values().append_value(&task);
+        tasks_col.append(true);
+    }
+    let mut ep_fields = vec![
+        Field::new("episode_index", DataType::Int64, false),
+        Field::new(
+            "tasks",
+            DataType::List(Arc::new(Field::new_list_field(DataType::Utf8, true))),
+            true,
+        ),
+        Field::new("length", DataType::Int64, false),
+        Field::new("data/chunk_index", DataType::Int64, false),
+        Field::new("data/file_index", DataType::Int64, false),
+        Field::new("dataset_from_index", DataType::Int64, false),
+        Field::new("dataset_to_index", DataType::Int64, false),
+    ];
+    let zeros: ArrayRef = Arc::new(Int64Array::from(vec![0i64; n]));
+    let mut ep_cols: Vec<ArrayRef> = vec![
+        Arc::new(Int64Array::from((0..n as i64).collect::<Vec<_>>())),
+        Arc::new(tasks_col.finish()),
+        Arc::new(Int64Array::from(
+            ep_rows
+                .iter()
+                .map(|(a, b)| (b - a) as i64)
+                .collect::<Vec<_>>(),
+        )),
+        zeros.clone(),
+        zeros.clone(),
+        Arc::new(Int64Array::from(
+            ep_rows.iter().map(|(a, _)| *a as i64).collect::<Vec<_>>(),
+        )),
+        Arc::new(Int64Array::from(
+            ep_rows.iter().map(|(_, b)| *b as i64).collect::<Vec<_>>(),
+        )),
+    ];
+    for (f, c) in ep_video_cols {
+        ep_fields.push(f);
+        ep_cols.push(c);
+    }
+    ep_fields.push(Field::new(
+        "meta/episodes/chunk_index",
+        DataType::Int64,
+        false,
+    ));
+    ep_cols.push(zeros.clone());
+    ep_fields.push(Field::new(
+        "meta/episodes/file_index",
+        DataType::Int64,
+        false,
+    ));
+    ep_cols.push(zeros);
+    let ep_batch = RecordBatch::try_new(Arc::new(Schema::new(ep_fields)), ep_cols).map_err(aerr)?;
+    write_parquet(
+        &tmp.join("meta/episodes/chunk-000/file-000.parquet"),
+        &dir.join("meta/episodes/chunk-000/file-000.parquet"),
+        &ep_batch,
+    )?;
+
+    // Tasks: the task string is the pandas index (LeRobot reads it with pandas).
+    let pandas = json!({
+        "index_columns": ["task"],
+        "column_indexes": [],
+        "columns": [
+            {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64", "metadata": null},
+            {"name": "task", "field_name": "task", "pandas_type": "unicode", "numpy_type": "object", "metadata": null}
+        ],
+        "creator": {"library": "mjskill", "version": env!("CARGO_PKG_VERSION")},
+        "pandas_version": "2.2.0"
+    });
+    let tasks_schema = Schema::new(vec![
+        Field::new("task_index", DataType::Int64, false),
+        Field::new("task", DataType::Utf8, false),
+    ])
+    .with_metadata(std::collections::HashMap::from([(
+        "pandas".to_string(),
+        pandas.to_string(),
+    )]));
+    let tasks = RecordBatch::try_new(
+        Arc::new(tasks_schema),
+        vec![
+            Arc::new(Int64Array::from(vec![0i64])),
+            Arc::new(arrow_array::StringArray::from(vec![task.clone()])),
+        ],
+    )
+    .map_err(aerr)?;
+    write_parquet(
+        &tmp.join("meta/tasks.parquet"),
+        &dir.join("meta/tasks.parquet"),
+        &tasks,
+    )?;
+
+    let info = json!({
+        "codebase_version": CODEBASE_VERSION,
+        "robot_type": m.robot,
+        "total_episodes": n,
+        "total_frames": rows,
+        "total_tasks": 1,
+        "chunks_size": 1000,
+        "data_files_size_in_mb": 100,
+        "video_files_size_in_mb": 500,
+        "fps": FPS,
+        "splits": {"train": format!("0:{n}")},
+        "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
+        "video_path": if cams.is_empty() { Value::Null } else {
+            json!("videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4")
+        },
+        "features": features,
+        "mjskill": {"env_id": m.env_id, "control_mode": m.control_mode, "obs_mode": m.obs_mode,
+                    "reward_mode": m.reward_mode, "source": path.display().to_string()}
+    });
+    let write_json = |rel: &str, v: &Value| -> Result<(), DatasetError> {
+        let text = serde_json::to_string_pretty(v).expect("json serializes");
+        std::fs::write(tmp.join(rel), text).map_err(DatasetError::io(&dir.join(rel)))
+    };
+    write_json("meta/info.json", &info)?;
+    write_json("meta/stats.json", &Value::Object(stats))?;
+    staged.commit()?;
+    Ok(ExportSummary {
+        file: path.display().to_string(),
+        format: "lerobot",
+        outputs: vec![dir.display().to_string()],
+        episodes: n,
+        steps: rows,
+        videos,
+    })
+}
+
+/// The directory layout's relative paths written for a dataset with these cameras (for
+/// tests and documentation).
+pub fn layout(cameras: &[&str]) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = [
+        "meta/info.json",
+        "meta/stats.json",
+        "meta/tasks.parquet",
+        "meta/episodes/chunk-000/file-000.parquet",
+        "data/chunk-000/file-000.parquet",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .collect();
+    for c in cameras {
+        v.push(PathBuf::from(format!(
+            "videos/observation.images.{c}/chunk-000/file-000.mp4"
+        )));
+    }
+    v
+}

@@ -1,0 +1,869 @@
+//! Datasets: importing ManiSkill's sample demos (tests/data/maniskill_demos, copied from
+//! shared/reference/maniskill/demos), exporting to ManiSkill's trajectory format (round trip)
+//! and to LeRobotDataset v3 (read back with pyarrow and decoded with PyAV, independent of
+//! mjskill's writers), and bad input.
+//!
+//! The Python checks use the venv `.ci/setup` creates (`.ci/venv`); without it they print a
+//! note and pass, unless `MJSKILL_REQUIRE_PYTHON` is set (`.ci/run` sets it).
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use mjskill::datasets::export;
+use mjskill::datasets::import::{self, ImportArgs, ReplayBy};
+use mjskill::datasets::maniskill_h5;
+use mjskill::datasets::DatasetError;
+use mjskill::record::{self, Recorder};
+use mjskill::{make, EnvConfig, SimConfig};
+
+fn demos() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_demos")
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mjskill-datasets-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Names in `dir` (temporaries included: a failed command must leave none).
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn import(
+    h5: &Path,
+    json: Option<&Path>,
+    out: &Path,
+    by: ReplayBy,
+) -> Result<import::ImportReport, DatasetError> {
+    import::run(&ImportArgs {
+        h5: h5.to_path_buf(),
+        json: json.map(Path::to_path_buf),
+        out: out.to_path_buf(),
+        by,
+        sim: SimConfig::default(),
+    })
+}
+
+/// (file, [(ManiSkill success, by actions, by states, first divergence step)] per episode).
+type Expected = (&'static str, [(bool, bool, bool, Option<usize>); 3]);
+
+/// The figures the import reports for the sample demos (README "Datasets" table).
+const EXPECTED: [Expected; 4] = [
+    ("PickCube-v1/trajectory.h5", [(true, true, true, None); 3]),
+    (
+        "PickCube-v1/trajectory.none.pd_ee_delta_pose.physx_cpu.h5",
+        [(true, true, true, None); 3],
+    ),
+    (
+        "PlaceSphere-v1/trajectory.h5",
+        [
+            (false, true, false, None),
+            (true, true, true, None),
+            (false, false, false, None),
+        ],
+    ),
+    (
+        "PokeCube-v1/trajectory.h5",
+        [
+            (true, true, true, None),
+            (true, true, true, Some(113)),
+            (true, true, true, Some(118)),
+        ],
+    ),
+];
+
+#[test]
+fn sample_demos_import_with_the_reported_success() {
+    let dir = tmp_dir("import");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(demos().join("demos_summary.json")).unwrap())
+            .unwrap();
+    for (file, want) in EXPECTED {
+        let h5 = demos().join(file);
+        for by in [ReplayBy::Actions, ReplayBy::States] {
+            let out = dir.join(format!("{}-{}.mcap", file.replace('/', "_"), by.name()));
+            let r = import(&h5, None, &out, by).unwrap_or_else(|e| panic!("{file}: {e}"));
+            let got: Vec<_> = r
+                .episodes
+                .iter()
+                .map(|e| {
+                    (
+                        e.maniskill_success,
+                        e.by_actions_success,
+                        e.by_states_success,
+                        e.first_divergence_step,
+                    )
+                })
+                .collect();
+            eprintln!("{file} by {}: {got:?}", by.name());
+            assert_eq!(got, want, "{file}");
+            // By states, mjskill's success flag is ManiSkill's at every step.
+            assert!(
+                r.episodes
+                    .iter()
+                    .all(|e| e.by_states_success_mismatches == 0),
+                "{file}"
+            );
+            // ManiSkill's figures are those of the demos' own summary.
+            let env = file.split('/').next().unwrap();
+            if !file.contains("pd_ee") {
+                for (e, s) in r
+                    .episodes
+                    .iter()
+                    .zip(summary[env]["episodes"].as_array().unwrap())
+                {
+                    assert_eq!(e.maniskill_success, s["success"].as_bool().unwrap());
+                    assert_eq!(e.steps as u64, s["elapsed_steps"].as_u64().unwrap());
+                    assert_eq!(e.seed, s["seed"].as_u64());
+                }
+            }
+            // The recording holds every episode, step for step.
+            let rec = record::read(&out).unwrap();
+            assert!(rec.complete);
+            let eps: Vec<_> = rec.finished().collect();
+            assert_eq!(eps.len(), 3);
+            for (e, rep) in eps.iter().zip(&r.episodes) {
+                assert_eq!(e.steps.len(), rep.steps);
+                assert_eq!(e.seed, rep.seed);
+            }
+            assert_eq!(rec.meta.env_id, r.env_id);
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Largest |a - b| relative to max(1, |a|) over two trajectories' env_states.
+fn state_error(a: &maniskill_h5::EpisodeData, b: &maniskill_h5::EpisodeData) -> f64 {
+    assert_eq!(a.env_states.len(), b.env_states.len());
+    let mut worst = 0.0f64;
+    for (sa, sb) in a.env_states.iter().zip(&b.env_states) {
+        assert!(
+            sa.actors.keys().eq(sb.actors.keys()) || {
+                let mut x: Vec<_> = sa.actors.keys().collect();
+                let mut y: Vec<_> = sb.actors.keys().collect();
+                x.sort();
+                y.sort();
+                x == y
+            }
+        );
+        for (name, va) in &sa.actors {
+            for (x, y) in va.iter().zip(&sb.actors[name]) {
+                worst = worst.max((x - y).abs() / x.abs().max(1.0));
+            }
+        }
+        for (name, va) in &sa.articulations {
+            let vb = &sb.articulations[name];
+            assert_eq!(va.len(), vb.len());
+            for (x, y) in va.iter().zip(vb) {
+                worst = worst.max((x - y).abs() / x.abs().max(1.0));
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn imported_demos_round_trip_to_maniskill_format() {
+    let dir = tmp_dir("roundtrip");
+    for file in [
+        "PickCube-v1/trajectory.h5",
+        "PlaceSphere-v1/trajectory.h5",
+        "PokeCube-v1/trajectory.h5",
+        "PickCube-v1/trajectory.none.pd_ee_delta_pose.physx_cpu.h5",
+    ] {
+        let h5 = demos().join(file);
+        let mcap = dir.join("demo.mcap");
+        let rep = import(&h5, None, &mcap, ReplayBy::States).unwrap();
+        let out = dir.join("traj.h5");
+        let s = export::to_maniskill(&mcap, &out, None).unwrap();
+        assert_eq!(s.episodes, 3);
+        assert_eq!(listing(&dir), ["demo.mcap", "traj.h5", "traj.json"]);
+        let orig = maniskill_h5::read(&h5, None).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let back = maniskill_h5::read(&out, None).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(back.json.env_info.env_id, orig.json.env_info.env_id);
+        assert_eq!(back.episodes.len(), orig.episodes.len());
+        for (k, (a, b)) in orig.episodes.iter().zip(&back.episodes).enumerate() {
+            let (ia, ib) = (&orig.json.episodes[k], &back.json.episodes[k]);
+            assert_eq!(ia.seed(), ib.seed(), "{file} {k}");
+            assert_eq!(ia.control_mode, ib.control_mode);
+            assert_eq!(ia.elapsed_steps, ib.elapsed_steps);
+            assert_eq!(a.actions, b.actions, "{file} {k}: actions bitwise");
+            assert_eq!(a.action_dim, b.action_dim);
+            assert_eq!(a.truncated, b.truncated, "{file} {k}");
+            // env_states: ManiSkill's names, every value equal within float32.
+            let err = state_error(a, b);
+            assert!(
+                err <= 2.0 * f32::EPSILON as f64,
+                "{file} {k}: env_states differ by {err}"
+            );
+            // success and terminated are mjskill's, recomputed from ManiSkill's states: they
+            // differ from ManiSkill's flags exactly where the import reported.
+            let sa = a.success.as_ref().unwrap();
+            let sb = b.success.as_ref().unwrap();
+            let mismatches = sa.iter().zip(sb).filter(|(x, y)| x != y).count();
+            assert_eq!(
+                mismatches, rep.episodes[k].by_states_success_mismatches,
+                "{file} {k}"
+            );
+            assert_eq!(b.terminated, *sb);
+            // The actor datasets are listed in ManiSkill's scene order.
+            let names: Vec<_> = b.env_states[0].actors.keys().cloned().collect();
+            let env = make(&orig.json.env_info.env_id, EnvConfig::default()).unwrap();
+            let order: Vec<String> = env.actor_names().iter().map(|s| s.to_string()).collect();
+            assert_eq!(names, order);
+        }
+        // h5py (as ManiSkill reads it) sees the same layout: groups in ManiSkill's order,
+        // numpy bools, float32 actions.
+        if let Some(py) = python() {
+            let script = "import h5py, json, sys\n\
+                f = h5py.File(sys.argv[1], 'r')\n\
+                g = f['traj_0']\n\
+                print(json.dumps({'trajs': list(f), 'actors': list(g['env_states/actors']),\
+                'success': str(g['success'].dtype), 'actions': str(g['actions'].dtype),\
+                'shape': list(g['actions'].shape)}))";
+            let o = Command::new(py)
+                .args(["-c", script])
+                .arg(&out)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let env = make(&orig.json.env_info.env_id, EnvConfig::default()).unwrap();
+            assert_eq!(
+                v["trajs"],
+                serde_json::json!(["traj_0", "traj_1", "traj_2"])
+            );
+            assert_eq!(v["actors"], serde_json::json!(env.actor_names()));
+            assert_eq!(v["success"], "bool");
+            assert_eq!(v["actions"], "float32");
+            assert_eq!(
+                v["shape"],
+                serde_json::json!([orig.episodes[0].steps(), orig.episodes[0].action_dim])
+            );
+        }
+        std::fs::remove_file(&out).unwrap();
+        std::fs::remove_file(out.with_extension("json")).unwrap();
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Records `episodes` episodes of `steps` random-ish steps of PickCube (state obs), with the
+/// human camera's video when `video`.
+fn record_rollout(path: &Path, episodes: usize, steps: usize, video: bool) -> Vec<Vec<u8>> {
+    let mut env = make("PickCube-v1", EnvConfig::default()).unwrap();
+    let mut rec = Recorder::create(path, &env).unwrap();
+    if video {
+        rec.enable_video("render_camera").unwrap();
+    }
+    let (w, h) = env.render_size();
+    let dim = env.action_space().shape[0];
+    let mut frames = Vec::new();
+    for k in 0..episodes {
+        rec.reset(&mut env, Some(40 + k as u64)).unwrap();
+        if video {
+            let rgb = env.render().unwrap().to_vec();
+            rec.record_frame(&rgb, w, h).unwrap();
+            frames.push(rgb);
+        }
+        for t in 0..steps {
+            let a: Vec<f32> = (0..dim)
+                .map(|i| (((t * 7 + i * 3 + k) % 11) as f32 / 5.0 - 1.0) * 0.5)
+                .collect();
+            rec.step(&mut env, &a).unwrap();
+            if video {
+                let rgb = env.render().unwrap().to_vec();
+                rec.record_frame(&rgb, w, h).unwrap();
+                frames.push(rgb);
+            }
+        }
+        rec.end_episode(false).unwrap();
+    }
+    rec.finish().unwrap();
+    frames
+}
+
+#[test]
+fn exported_rollout_states_are_the_envs() {
+    let dir = tmp_dir("rollout");
+    let mcap = dir.join("run.mcap");
+    record_rollout(&mcap, 2, 6, false);
+    let out = dir.join("run.h5");
+    export::to_maniskill(&mcap, &out, None).unwrap();
+    let t = maniskill_h5::read(&out, None).unwrap();
+    let rec = record::read(&mcap).unwrap();
+    assert_eq!(t.json.env_info.env_id, "PickCube-v1");
+    assert_eq!(
+        t.json.env_info.env_kwargs["control_mode"],
+        "pd_joint_delta_pos"
+    );
+    let mut env = make("PickCube-v1", EnvConfig::default()).unwrap();
+    for (k, (ep, r)) in t.episodes.iter().zip(rec.finished()).enumerate() {
+        assert_eq!(t.json.episodes[k].seed(), Some(40 + k as u64));
+        assert_eq!(ep.steps(), 6);
+        env.reset(Some(40 + k as u64));
+        let f32s = |v: Vec<f64>| v.into_iter().map(|x| x as f32 as f64).collect::<Vec<_>>();
+        assert_eq!(
+            f32s(ep.env_states[0].flat()),
+            f32s(env.get_state_dict().flat())
+        );
+        for t in 0..6 {
+            env.step(ep.action(t)).unwrap();
+            assert_eq!(
+                f32s(ep.env_states[t + 1].flat()),
+                f32s(env.get_state_dict().flat()),
+                "episode {k} step {t}"
+            );
+        }
+        // obs: row 0 after the reset, then after every step, as recorded.
+        let (obs, d) = ep.obs.as_ref().unwrap();
+        assert_eq!(&obs[..*d], &r.initial_obs[..]);
+        assert_eq!(&obs[6 * d..], &r.steps[5].obs[..]);
+        assert_eq!(ep.rewards.as_ref().unwrap()[5], r.steps[5].reward);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn python() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
+    let ok = p.exists()
+        && Command::new(&p)
+            .args(["-c", "import pyarrow, pandas, av, h5py"])
+            .status()
+            .is_ok_and(|s| s.success());
+    if ok {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
+        "{} with pyarrow, pandas, av and h5py is missing: run `bash .ci/setup`",
+        p.display()
+    );
+    eprintln!(
+        "note: LeRobot read-back skipped: run `bash .ci/setup` to create {}",
+        p.display()
+    );
+    None
+}
+
+/// Reads a LeRobot v3 dataset with pyarrow / pandas and decodes its videos with PyAV (FFmpeg's
+/// decoder): prints one JSON line of what it found.
+const READER: &str = r#"
+import json, sys, pathlib
+import pyarrow.parquet as pq, pandas as pd, av
+root = pathlib.Path(sys.argv[1])
+info = json.loads((root / "meta/info.json").read_text())
+stats = json.loads((root / "meta/stats.json").read_text())
+data = pq.read_table(root / info["data_path"].format(chunk_index=0, file_index=0))
+eps = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+tasks = pd.read_parquet(root / "meta/tasks.parquet")
+out = {"info": info, "columns": data.column_names, "rows": data.num_rows,
+       "types": {f.name: str(f.type) for f in data.schema},
+       "episodes": eps, "tasks": list(tasks.index), "task_index": [int(x) for x in tasks["task_index"]],
+       "stats_keys": sorted(stats), "data": {c: data.column(c).to_pylist() for c in
+       ["timestamp", "frame_index", "episode_index", "index", "next.done", "action", "observation.state"]},
+       "videos": {}}
+for key, ft in info["features"].items():
+    if ft["dtype"] != "video":
+        continue
+    path = root / info["video_path"].format(video_key=key, chunk_index=0, file_index=0)
+    with av.open(str(path)) as c:
+        s = c.streams.video[0]
+        cc = s.codec_context
+        frames, pts, means = 0, [], []
+        for f in c.decode(s):
+            frames += 1
+            pts.append(float(f.pts * s.time_base))
+            a = f.to_ndarray(format="rgb24")
+            means.append(float(a.mean()))
+        out["videos"][key] = {"codec": cc.name, "profile": cc.profile, "has_b_frames": bool(cc.has_b_frames),
+                              "width": cc.width, "height": cc.height, "frames": frames, "pts": pts,
+                              "means": means, "pix_fmt": cc.pix_fmt}
+print(json.dumps(out))
+"#;
+
+#[test]
+fn lerobot_export_reads_back_with_pyarrow_and_pyav() {
+    let dir = tmp_dir("lerobot");
+    let mcap = dir.join("run.mcap");
+    let frames = record_rollout(&mcap, 2, 9, true);
+    let ds = dir.join("ds");
+    let s = mjskill::datasets::lerobot::write(&mcap, &ds, Some(true)).unwrap();
+    assert_eq!((s.episodes, s.steps), (2, 18));
+    assert_eq!(s.videos, [("render_camera".to_string(), 18)]);
+    for p in mjskill::datasets::lerobot::layout(&["render_camera"]) {
+        assert!(ds.join(&p).is_file(), "{}", p.display());
+    }
+    // Without --video, no videos directory; a non-empty output directory is refused.
+    let ds2 = dir.join("ds2");
+    mjskill::datasets::lerobot::write(&mcap, &ds2, Some(false)).unwrap();
+    assert!(!ds2.join("videos").exists());
+    let e = mjskill::datasets::lerobot::write(&mcap, &ds2, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not an empty directory"), "{e}");
+    // An existing empty directory is filled.
+    let ds3 = dir.join("ds3");
+    std::fs::create_dir(&ds3).unwrap();
+    mjskill::datasets::lerobot::write(&mcap, &ds3, Some(false)).unwrap();
+    assert!(ds3.join("meta/info.json").is_file());
+
+    let Some(py) = python() else { return };
+    let o = Command::new(py)
+        .arg("-c")
+        .arg(READER)
+        .arg(&ds)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let info = &v["info"];
+    assert_eq!(info["codebase_version"], "v3.0");
+    assert_eq!(info["fps"], 20);
+    assert_eq!(info["robot_type"], "panda");
+    assert_eq!(info["total_episodes"], 2);
+    assert_eq!(info["total_frames"], 18);
+    let f = &info["features"];
+    assert_eq!(f["action"]["shape"], serde_json::json!([8]));
+    assert_eq!(f["action"]["names"].as_array().unwrap().len(), 8);
+    assert_eq!(f["observation.state"]["dtype"], "float32");
+    assert_eq!(
+        f["observation.images.render_camera"]["shape"],
+        serde_json::json!([512, 512, 3])
+    );
+    for c in [
+        "observation.state",
+        "action",
+        "next.reward",
+        "next.done",
+        "next.success",
+        "timestamp",
+        "frame_index",
+        "episode_index",
+        "index",
+        "task_index",
+    ] {
+        assert!(
+            v["columns"].as_array().unwrap().iter().any(|x| x == c),
+            "column {c}"
+        );
+        assert!(
+            v["stats_keys"].as_array().unwrap().iter().any(|x| x == c),
+            "stats {c}"
+        );
+    }
+    let ty = v["types"]["action"].as_str().unwrap();
+    assert!(
+        ty.starts_with("fixed_size_list<") && ty.ends_with(": float not null>[8]"),
+        "{ty}"
+    );
+    assert_eq!(v["rows"], 18);
+    let d = &v["data"];
+    for i in 0..18usize {
+        let t = i % 9;
+        assert_eq!(d["index"][i], i);
+        assert_eq!(d["frame_index"][i], t);
+        assert_eq!(d["episode_index"][i], i / 9);
+        assert_eq!(
+            d["timestamp"][i].as_f64().unwrap(),
+            (t as f32 / 20.0) as f64,
+            "1/fps grid"
+        );
+        assert_eq!(d["next.done"][i], t == 8);
+    }
+    // Rows hold the recorded actions and the obs before them.
+    let rec = record::read(&mcap).unwrap();
+    let ep1 = rec.finished().nth(1).unwrap();
+    let a: Vec<f32> = serde_json::from_value(d["action"][9 + 4].clone()).unwrap();
+    assert_eq!(a, ep1.steps[4].action);
+    let o0: Vec<f32> = serde_json::from_value(d["observation.state"][9].clone()).unwrap();
+    assert_eq!(o0, ep1.initial_obs);
+    assert_eq!(
+        v["tasks"][0],
+        "Grasp the red cube and move it to the goal position."
+    );
+    let eps = v["episodes"].as_array().unwrap();
+    assert_eq!(eps.len(), 2);
+    assert_eq!(eps[1]["dataset_from_index"], 9);
+    assert_eq!(eps[1]["length"], 9);
+    assert_eq!(
+        eps[1]["videos/observation.images.render_camera/from_timestamp"],
+        0.45
+    );
+    // The video: H.264 without B-frames, one frame per row on the 1/fps grid, and the
+    // pictures are the rendered ones (mean brightness within 2 levels).
+    let vid = &v["videos"]["observation.images.render_camera"];
+    assert_eq!(vid["codec"], "h264");
+    assert_eq!(vid["has_b_frames"], false);
+    assert!(
+        vid["profile"].as_str().unwrap().contains("Baseline"),
+        "{}",
+        vid["profile"]
+    );
+    assert_eq!(
+        (vid["width"].as_u64(), vid["height"].as_u64()),
+        (Some(512), Some(512))
+    );
+    assert_eq!(vid["frames"], 18);
+    for i in 0..18usize {
+        assert!((vid["pts"][i].as_f64().unwrap() - i as f64 / 20.0).abs() < 1e-6);
+        // Row i's frame: episode i / 9, frame i % 9 of that episode (10 recorded per episode).
+        let src = &frames[(i / 9) * 10 + i % 9];
+        let mean = src.iter().map(|&x| x as f64).sum::<f64>() / src.len() as f64;
+        let got = vid["means"][i].as_f64().unwrap();
+        assert!(
+            (got - mean).abs() < 2.0,
+            "frame {i}: mean {got} vs rendered {mean}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_input_is_a_clear_error_and_leaves_nothing() {
+    let dir = tmp_dir("bad");
+    let src = demos().join("PickCube-v1");
+    // A truncated h5.
+    let bytes = std::fs::read(src.join("trajectory.h5")).unwrap();
+    std::fs::write(dir.join("cut.h5"), &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::copy(src.join("trajectory.json"), dir.join("cut.json")).unwrap();
+    let out = dir.join("out.mcap");
+    let e = import(&dir.join("cut.h5"), None, &out, ReplayBy::Actions)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cut.h5") && e.contains("HDF5"), "{e}");
+    assert_eq!(listing(&dir), ["cut.h5", "cut.json"]);
+    // A wrong env id in the json.
+    let json = std::fs::read_to_string(src.join("trajectory.json")).unwrap();
+    std::fs::write(
+        dir.join("wrong.json"),
+        json.replace("\"PickCube-v1\"", "\"PickCube-v9\""),
+    )
+    .unwrap();
+    let e = import(
+        &src.join("trajectory.h5"),
+        Some(&dir.join("wrong.json")),
+        &out,
+        ReplayBy::States,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("\"PickCube-v9\"") && e.contains("PlaceSphere-v1"),
+        "{e}"
+    );
+    // A json listing other episodes than the h5 holds.
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let mut two = v.clone();
+    two["episodes"].as_array_mut().unwrap().pop();
+    std::fs::write(dir.join("two.json"), two.to_string()).unwrap();
+    let e = import(
+        &src.join("trajectory.h5"),
+        Some(&dir.join("two.json")),
+        &out,
+        ReplayBy::Actions,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("3 traj_<k> groups") && e.contains("2 episodes"),
+        "{e}"
+    );
+    assert_eq!(
+        listing(&dir),
+        ["cut.h5", "cut.json", "two.json", "wrong.json"]
+    );
+    // A recording without frames exported with video requested.
+    let mcap = dir.join("run.mcap");
+    record_rollout(&mcap, 1, 3, false);
+    let e = mjskill::datasets::lerobot::write(&mcap, &dir.join("ds"), Some(true))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no camera frames") && e.contains("--video"),
+        "{e}"
+    );
+    assert_eq!(
+        listing(&dir),
+        ["cut.h5", "cut.json", "run.mcap", "two.json", "wrong.json"]
+    );
+    // The CLI says the same and exits non-zero.
+    let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args([
+            "export",
+            mcap.to_str().unwrap(),
+            "--format",
+            "lerobot",
+            "--video",
+            "yes",
+            "-o",
+        ])
+        .arg(dir.join("ds"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no camera frames"));
+    let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["export", mcap.to_str().unwrap(), "--format", "parquet"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("valid: maniskill, lerobot"));
+    assert_eq!(
+        listing(&dir),
+        ["cut.h5", "cut.json", "run.mcap", "two.json", "wrong.json"]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn cli_imports_and_exports() {
+    let dir = tmp_dir("cli");
+    let out = dir.join("demos.mcap");
+    let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .arg("import-maniskill")
+        .arg(demos().join("PokeCube-v1/trajectory.h5"))
+        .args(["--by", "states", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["env_id"], "PokeCube-v1");
+    assert_eq!(r["by"], "states");
+    for k in [
+        "maniskill_success",
+        "by_actions_success",
+        "by_states_success",
+        "first_divergence_step",
+    ] {
+        assert!(r["episodes"][0].get(k).is_some(), "{k}");
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .arg("export")
+        .arg(&out)
+        .args(["--format", "maniskill", "-o"])
+        .arg(dir.join("t.h5"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(dir.join("t.json").is_file());
+    let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(["import-maniskill", "x.h5", "--by", "frames", "--out"])
+        .arg(dir.join("x.mcap"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("\"frames\"") && err.contains("valid: actions, states"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn rollout_records_sensor_camera_video_that_exports_to_lerobot() {
+    let dir = tmp_dir("camera");
+    let out = dir.join("cam.mcap");
+    let mj = || Command::new(env!("CARGO_BIN_EXE_mjskill"));
+    // Without a colour obs mode the camera is refused before anything is written.
+    let o = mj()
+        .args([
+            "rollout",
+            "--episodes",
+            "1",
+            "--no-frame",
+            "--camera",
+            "base_camera",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--obs-mode rgb"), "{err}");
+    let o = mj()
+        .args([
+            "rollout",
+            "--episodes",
+            "1",
+            "--no-frame",
+            "--obs-mode",
+            "rgb",
+            "--camera",
+            "top",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("valid: base_camera"),
+        "{err}"
+    );
+    assert!(listing(&dir).is_empty());
+    let o = mj()
+        .args([
+            "rollout",
+            "--episodes",
+            "2",
+            "--no-frame",
+            "--obs-mode",
+            "rgb",
+            "--camera",
+            "base_camera",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let steps = s["steps"].as_u64().unwrap();
+    assert_eq!(s["video_frames"].as_u64().unwrap(), steps + 2);
+    let raw = record::read_raw(&out).unwrap();
+    let frames = raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == "/base_camera/video")
+        .count();
+    assert_eq!(frames as u64, steps + 2);
+    assert!(raw
+        .messages
+        .iter()
+        .filter(|m| m.topic == "/base_camera/video")
+        .all(|m| m.schema == "foxglove.CompressedVideo"));
+    let ds = dir.join("ds");
+    let sum = mjskill::datasets::lerobot::write(&out, &ds, None).unwrap();
+    assert_eq!(sum.videos, [("base_camera".to_string(), steps as usize)]);
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ds.join("meta/info.json")).unwrap()).unwrap();
+    assert_eq!(
+        info["features"]["observation.images.base_camera"]["shape"],
+        serde_json::json!([128, 128, 3])
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Rewrites a recording as mjskill wrote it before H.264 video: the camera's frames as PNG
+/// `foxglove.CompressedImage` messages on `/render_camera/image` (decoded from the H.264
+/// frames with OpenH264, re-encoded losslessly), every other record as it was.
+fn to_png_recording(src: &Path, dst: &Path) -> Vec<Vec<u8>> {
+    use base64::Engine;
+    use openh264::formats::YUVSource;
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let raw = record::read_raw(src).unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .profile(raw.profile.clone())
+        .library(raw.library.clone())
+        .create(std::io::BufWriter::new(std::fs::File::create(dst).unwrap()))
+        .unwrap();
+    w.write_metadata(&mcap::records::Metadata {
+        name: "mjskill".into(),
+        metadata: raw.metadata.clone(),
+    })
+    .unwrap();
+    let mut channels = std::collections::BTreeMap::new();
+    let mut dec = openh264::decoder::Decoder::new().unwrap();
+    let mut pngs = Vec::new();
+    let mut episode = 0;
+    for (seq, m) in raw.messages.iter().enumerate() {
+        let (topic, schema, data) = if m.schema == "foxglove.CompressedVideo" {
+            let mut v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+            let unit = b64.decode(v["data"].as_str().unwrap()).unwrap();
+            let pic = dec.decode(&unit).unwrap().expect("one picture per frame");
+            let (pw, ph) = pic.dimensions();
+            let mut rgb = vec![0; pw * ph * 3];
+            pic.write_rgb8(&mut rgb);
+            let mut png = Vec::new();
+            mjskill::record::image::encode_png(&rgb, pw, ph, &mut png).unwrap();
+            v["data"] = b64.encode(&png).into();
+            v["format"] = "png".into();
+            pngs.push(rgb);
+            (
+                record::TOPIC_RENDER_IMAGE.to_string(),
+                "foxglove.CompressedImage",
+                serde_json::to_vec(&v).unwrap(),
+            )
+        } else {
+            (m.topic.clone(), m.schema.as_str(), m.data.clone())
+        };
+        if m.topic == record::TOPIC_EPISODE {
+            w.write_metadata(&mcap::records::Metadata {
+                name: format!("episode-{episode}"),
+                metadata: raw.episode_metadata[episode].clone(),
+            })
+            .unwrap();
+            episode += 1;
+        }
+        let id = match channels.get(&topic) {
+            Some(&id) => id,
+            None => {
+                let sid = w.add_schema(schema, "jsonschema", b"{}").unwrap();
+                let id = w
+                    .add_channel(sid, &topic, "json", &std::collections::BTreeMap::new())
+                    .unwrap();
+                channels.insert(topic.clone(), id);
+                id
+            }
+        };
+        let header = mcap::records::MessageHeader {
+            channel_id: id,
+            sequence: seq as u32,
+            log_time: m.log_time,
+            publish_time: m.log_time,
+        };
+        w.write_to_known_channel(&header, &data).unwrap();
+    }
+    w.finish().unwrap();
+    pngs
+}
+
+#[test]
+fn recordings_with_png_frames_still_read_and_export_to_lerobot() {
+    let dir = tmp_dir("png");
+    let h264 = dir.join("h264.mcap");
+    record_rollout(&h264, 2, 4, true);
+    let old = dir.join("old.mcap");
+    let pngs = to_png_recording(&h264, &old);
+    assert_eq!(pngs.len(), 10);
+    // The old file reads as before.
+    let (a, b) = (record::read(&h264).unwrap(), record::read(&old).unwrap());
+    assert!(b.complete);
+    assert_eq!(a.episodes, b.episodes);
+    let raw = record::read_raw(&old).unwrap();
+    assert_eq!(
+        raw.messages
+            .iter()
+            .filter(|m| m.topic == record::TOPIC_RENDER_IMAGE)
+            .count(),
+        10
+    );
+    // Its PNG frames are encoded to H.264 by the LeRobot export: one per row.
+    let ds = dir.join("ds");
+    let s = mjskill::datasets::lerobot::write(&old, &ds, Some(true)).unwrap();
+    assert_eq!(s.videos, [("render_camera".to_string(), 8)]);
+    let mp4 = ds.join("videos/observation.images.render_camera/chunk-000/file-000.mp4");
+    assert!(std::fs::metadata(&mp4).unwrap().len() > 1000);
+    if let Some(py) = python() {
+        let script = "import av, sys\n\
+            c = av.open(sys.argv[1]); s = c.streams.video[0]\n\
+            print(sum(1 for _ in c.decode(s)), s.codec_context.name, s.codec_context.has_b_frames)";
+        let o = Command::new(py)
+            .args(["-c", script])
+            .arg(&mp4)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "8 h264 False");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
