@@ -33,6 +33,11 @@ def _register() -> None:
             entry_point="mjskill.envs:make_env",
             vector_entry_point="mjskill.envs:make_vector_env",
             max_episode_steps=max_steps,
+            # Seeded resets and steps are deterministic, but an unseeded reset draws the
+            # placement from the env's own "global torch generator", which a seeded reset
+            # does not reseed (as in ManiSkill), so reset(seed=s); reset() is not a function
+            # of s alone. gymnasium's flag for that is `nondeterministic`.
+            nondeterministic=True,
             kwargs={"env_id": env_id},
         )
 

@@ -213,7 +213,8 @@ class MjskillEnv(gym.Env):
         """Restores a state from ``get_state``; a bad state is a ``ValueError``."""
         if not isinstance(state, dict):
             raise TypeError(f"state must be a dict from get_state(), not {type(state).__name__}")
-        self._native.set_state(json.dumps(state))
+        _check_finite(state, "")
+        self._native.set_state(json.dumps(state, default=_jsonable))
 
     def get_state_dict(self) -> dict:
         """ManiSkill's ``get_state_dict()`` layout (``actors``, ``articulations``,
@@ -224,6 +225,7 @@ class MjskillEnv(gym.Env):
         """ManiSkill's ``set_state_dict()``; numpy arrays are accepted as values."""
         if not isinstance(state_dict, dict):
             raise TypeError(f"state_dict must be a dict, not {type(state_dict).__name__}")
+        _check_finite(state_dict, "")
         self._native.set_state_dict(json.dumps(state_dict, default=_jsonable))
 
     @property
@@ -233,6 +235,32 @@ class MjskillEnv(gym.Env):
     # -- pickling (AsyncVectorEnv, Ray) ----------------------------------------------------
     def __reduce__(self):
         return (_restore_env, (self._kwargs, self.render_mode, self._native.get_state()))
+
+
+def _check_finite(value: Any, path: str) -> None:
+    """JSON has no NaN or infinity: a non-finite number is named here (``physics[3] = inf
+    is not finite``) instead of reaching the parser."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        try:
+            arr = value if isinstance(value, np.ndarray) else np.asarray(value)
+        except ValueError:  # ragged nesting
+            arr = np.empty(len(value), dtype=object)
+            arr[:] = list(value)
+        if arr.dtype.kind == "f":
+            bad = np.flatnonzero(~np.isfinite(arr.ravel()))
+            if bad.size:
+                i = int(bad[0])
+                raise ValueError(
+                    f"cannot set state: {path}[{i}] = {arr.ravel()[i]} is not finite"
+                )
+        elif arr.dtype == object:
+            for i, v in enumerate(value):
+                _check_finite(v, f"{path}[{i}]")
+    elif isinstance(value, float) and not np.isfinite(value):
+        raise ValueError(f"cannot set state: {path} = {value} is not finite")
 
 
 def _jsonable(o: Any):
