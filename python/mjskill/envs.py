@@ -379,15 +379,6 @@ class MjskillVectorEnv(VectorEnv):
         """Envs that reset during the last step (their action was ignored)."""
         return self._native.autoreset()
 
-    def __reduce__(self):
-        kw = dict(self._kwargs, num_envs=self.num_envs, num_threads=self.num_threads)
-        return (_restore_vec, (kw,))
-
-
-def _restore_vec(kwargs: dict) -> MjskillVectorEnv:
-    return MjskillVectorEnv(**kwargs)
-
-
 def make_env(**kwargs) -> MjskillEnv:
     """``gym.make`` entry point: the env's own episode limit is lifted, because gymnasium's
     ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill."""

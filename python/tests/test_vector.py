@@ -126,3 +126,10 @@ def test_float64_and_list_actions_are_accepted():
     v.reset(seed=0)
     o2, *_ = v.step(a.tolist())
     np.testing.assert_array_equal(o1, o2)
+
+
+def test_vector_env_refuses_pickling_instead_of_losing_its_state():
+    import pickle
+
+    with pytest.raises(TypeError, match="pickle"):
+        pickle.dumps(make_vec(2))
