@@ -52,6 +52,10 @@ def test_sharded_rollout_equals_one_process(local_ray, tmp_path):
     assert info["successes"] == sharded["successes"]
     assert info["steps"] == sharded["steps"]
     assert np.isclose(info["mean_return"], sharded["mean_return"], rtol=1e-12)
+    shard = info["shards"][1]["file"]
+    replay = json.loads(subprocess.check_output([mjskill_bin(), "replay", shard]))
+    assert replay["ok"] is True, "the shard re-simulates exactly"
+    assert replay["episodes"] == info["shards"][1]["episodes"] == 7
     one = json.loads(subprocess.check_output([mjskill_bin(), "info", str(tmp_path / "one")]))
     assert one["episodes"] == 13 and np.isclose(one["mean_return"], info["mean_return"], rtol=1e-12)
 
