@@ -28,6 +28,7 @@ pub mod bench;
 pub mod datasets;
 pub mod eval;
 pub mod fidelity;
+pub mod info_dir;
 pub mod output;
 pub mod plot;
 pub mod render;
@@ -194,10 +195,11 @@ pub enum Command {
         #[arg(long)]
         no_frame: bool,
     },
-    /// Summarise a recording (JSON); says whether it was cut short. A damaged file (a CRC or
+    /// Summarise a recording or a directory of recordings (JSON); says whether it was cut short. A damaged file (a CRC or
     /// structure check fails) is an error naming the byte offset and chunk.
     Info {
-        /// The .mcap file.
+        /// The .mcap file, or a directory of .mcap shards summarised as one dataset (with
+        /// each shard's summary under "shards").
         file: PathBuf,
         /// Summarise what precedes damage instead of failing (the damage is reported).
         #[arg(long)]
@@ -398,6 +400,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 "{}",
                 serde_json::to_string(&summary).map_err(|e| e.to_string())?
             );
+            Ok(())
+        }
+        Command::Info { file, salvage } if file.is_dir() => {
+            let s = info_dir::info_dir(&file, salvage)?;
+            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
             Ok(())
         }
         Command::Info { file, salvage } => {

@@ -1,0 +1,391 @@
+"""Gymnasium classes over the native extension: :class:`MjskillEnv` (one env, a real
+``gymnasium.Env``) and :class:`MjskillVectorEnv` (the Rust ``VecEnv``, a gymnasium 1.x
+``VectorEnv`` with next-step autoreset)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from . import _native
+
+MAX_SEED = 2**32 - 1
+"""ManiSkill's seeds are 32-bit."""
+
+RENDER_MODES = ["rgb_array"]
+OBS_MODES = ["state", "state_dict", "none", "rgb", "depth", "rgbd"]
+_UNLIMITED = 2**32 - 1
+"""Rust-side episode length of envs made by ``gym.make``: its ``TimeLimit`` truncates."""
+
+
+def _check_seed(seed: Any) -> int | None:
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be an int or None, not {type(seed).__name__} ({seed!r})")
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}")
+    return seed
+
+
+def _check_render_mode(render_mode: Any) -> None:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(
+            f"unknown render_mode {render_mode!r}; valid render modes: "
+            f"{', '.join(RENDER_MODES)} (or None)"
+        )
+
+
+def _as_actions(action: Any, ndim: int) -> np.ndarray:
+    """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
+    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``."""
+    a = action if isinstance(action, np.ndarray) else np.asarray(action)
+    if a.dtype.kind not in "biuf":
+        raise TypeError(
+            f"actions must be numeric (float32 preferred), got dtype {a.dtype} from "
+            f"{type(action).__name__}"
+        )
+    if a.ndim != ndim:
+        want = "(action_dim,)" if ndim == 1 else "(num_envs, action_dim)"
+        raise ValueError(f"actions have shape {a.shape}, expected {want}")
+    if a.dtype != np.float32 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float32)
+    return a
+
+
+def _nest(flat: dict[str, Any]) -> dict[str, Any]:
+    """``{"agent/qpos": x}`` → ``{"agent": {"qpos": x}}``."""
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        node = out
+        parts = key.split("/")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = value
+    return out
+
+
+def _to_space(tree: Any) -> spaces.Space:
+    if isinstance(tree, dict):
+        return spaces.Dict({k: _to_space(v) for k, v in tree.items()})
+    return tree
+
+
+class _Layout:
+    """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
+
+    def __init__(self, spec: dict[str, Any]):
+        self.obs_mode = spec["obs_mode"]
+        self.parts = [(name, a, b) for name, a, b in spec["obs_layout"]]
+        self.cameras = spec["cameras"]
+        low, high = spec["obs_low"], spec["obs_high"]
+        self.dict_obs = self.obs_mode not in ("state", "none")
+        if not self.dict_obs:
+            self.space: spaces.Space = spaces.Box(low, high, shape=low.shape, dtype=np.float32)
+            return
+        flat = {
+            name: spaces.Box(low[a:b], high[a:b], shape=(b - a,), dtype=np.float32)
+            for name, a, b in self.parts
+        }
+        for cam, w, h, rgb, depth in self.cameras:
+            if rgb:
+                flat[f"sensor_data/{cam}/rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
+            if depth:
+                flat[f"sensor_data/{cam}/depth"] = spaces.Box(
+                    0.0, np.inf, (h, w, 1), np.float32
+                )
+        self.space = _to_space(_nest(flat))
+
+    def single(self, obs: np.ndarray, native: Any) -> Any:
+        if not self.dict_obs:
+            return obs
+        out = _nest({name: obs[a:b] for name, a, b in self.parts})
+        if self.cameras:
+            out["sensor_data"] = native.images()
+        return out
+
+    def batch(self, obs: np.ndarray, native: Any) -> Any:
+        if not self.dict_obs:
+            return obs
+        out = _nest({name: obs[:, a:b] for name, a, b in self.parts})
+        if self.cameras:
+            out["sensor_data"] = native.images()
+        return out
+
+
+class MjskillEnv(gym.Env):
+    """One mjskill env as a ``gymnasium.Env``, made with ManiSkill's keyword names.
+
+    ``gym.make("mjskill/PickCube-v1", robot_uids="panda", obs_mode="state",
+    control_mode="pd_ee_delta_pose", reward_mode="normalized_dense",
+    render_mode="rgb_array", max_episode_steps=50)`` builds one. ``reset(seed=s)`` gives
+    ManiSkill's exact initial state for seed ``s``. Made directly (not through ``gym.make``)
+    the env truncates at ``max_episode_steps`` (default 50) itself; through ``gym.make``,
+    gymnasium's ``TimeLimit`` wrapper truncates, as in ManiSkill.
+    """
+
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 20}
+
+    def __init__(
+        self,
+        env_id: str = "PickCube-v1",
+        robot_uids: str | None = None,
+        obs_mode: str = "state",
+        control_mode: str | None = None,
+        reward_mode: str = "normalized_dense",
+        render_mode: str | None = None,
+        max_episode_steps: int | None = None,
+        robot_init_qpos_noise: float = 0.02,
+        sim_freq: int = 100,
+    ):
+        _check_render_mode(render_mode)
+        self._kwargs = dict(
+            env_id=env_id,
+            robot_uids=robot_uids,
+            obs_mode=obs_mode,
+            control_mode=control_mode,
+            reward_mode=reward_mode,
+            max_episode_steps=max_episode_steps,
+            robot_init_qpos_noise=robot_init_qpos_noise,
+            sim_freq=sim_freq,
+        )
+        self._native = _native.Env(**self._kwargs)
+        self.render_mode = render_mode
+        spec = self._native.spec()
+        self.env_id = spec["env_id"]
+        self.robot_uids = spec["robot_uids"]
+        self.control_mode = spec["control_mode"]
+        self.obs_mode = spec["obs_mode"]
+        self.reward_mode = spec["reward_mode"]
+        self._layout = _Layout(spec)
+        self.observation_space = self._layout.space
+        lo, hi = spec["action_low"], spec["action_high"]
+        self.action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
+
+    # -- gymnasium API ---------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        seed = _check_seed(seed)
+        if options:
+            raise ValueError(
+                f"unsupported reset options {sorted(options)}; mjskill envs take no options"
+            )
+        super().reset(seed=None if seed is None else seed % (MAX_SEED + 1))
+        obs, info = self._native.reset(seed)
+        return self._layout.single(obs, self._native), info
+
+    def step(self, action):
+        a = _as_actions(action, 1)
+        obs, reward, terminated, truncated, info = self._native.step(a)
+        return self._layout.single(obs, self._native), reward, terminated, truncated, info
+
+    def render(self):
+        """The human camera's frame (H×W×3 uint8) with ``render_mode="rgb_array"``."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; make the env with "
+                'render_mode="rgb_array"'
+            )
+            return None
+        return self._native.render()
+
+    # -- ManiSkill-style state access ------------------------------------------------------
+    def get_obs(self):
+        """The observation of the current state (e.g. after ``set_state``)."""
+        return self._layout.single(self._native.obs(), self._native)
+
+    def get_info(self) -> dict:
+        """The info of the current state."""
+        return self._native.info()
+
+    def get_state(self) -> dict:
+        """Everything that determines the future (physics, controller targets, RNG
+        streams), as a JSON-compatible dict; ``set_state`` restores it bitwise."""
+        return json.loads(self._native.get_state())
+
+    def set_state(self, state: dict) -> None:
+        """Restores a state from ``get_state``; a bad state is a ``ValueError``."""
+        if not isinstance(state, dict):
+            raise TypeError(f"state must be a dict from get_state(), not {type(state).__name__}")
+        _check_finite(state, "")
+        self._native.set_state(json.dumps(state, default=_jsonable))
+
+    def get_state_dict(self) -> dict:
+        """ManiSkill's ``get_state_dict()`` layout (``actors``, ``articulations``,
+        ``controller``) as nested lists."""
+        return json.loads(self._native.get_state_dict())
+
+    def set_state_dict(self, state_dict: dict) -> None:
+        """ManiSkill's ``set_state_dict()``; numpy arrays are accepted as values."""
+        if not isinstance(state_dict, dict):
+            raise TypeError(f"state_dict must be a dict, not {type(state_dict).__name__}")
+        _check_finite(state_dict, "")
+        self._native.set_state_dict(json.dumps(state_dict, default=_jsonable))
+
+    @property
+    def elapsed_steps(self) -> int:
+        return self._native.elapsed_steps()
+
+    # -- pickling (AsyncVectorEnv, Ray) ----------------------------------------------------
+    def __reduce__(self):
+        return (_restore_env, (self._kwargs, self.render_mode, self._native.get_state()))
+
+
+def _check_finite(value: Any, path: str) -> None:
+    """JSON has no NaN or infinity: a non-finite number is named here (``physics[3] = inf
+    is not finite``) instead of reaching the parser."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        try:
+            arr = value if isinstance(value, np.ndarray) else np.asarray(value)
+        except ValueError:  # ragged nesting
+            arr = np.empty(len(value), dtype=object)
+            arr[:] = list(value)
+        if arr.dtype.kind == "f":
+            bad = np.flatnonzero(~np.isfinite(arr.ravel()))
+            if bad.size:
+                i = int(bad[0])
+                raise ValueError(
+                    f"cannot set state: {path}[{i}] = {arr.ravel()[i]} is not finite"
+                )
+        elif arr.dtype == object:
+            for i, v in enumerate(value):
+                _check_finite(v, f"{path}[{i}]")
+    elif isinstance(value, float) and not np.isfinite(value):
+        raise ValueError(f"cannot set state: {path} = {value} is not finite")
+
+
+def _jsonable(o: Any):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+
+def _restore_env(kwargs: dict, render_mode: str | None, state: str) -> MjskillEnv:
+    env = MjskillEnv(render_mode=render_mode, **kwargs)
+    env._native.set_state(state)
+    return env
+
+
+class MjskillVectorEnv(VectorEnv):
+    """N mjskill envs stepped on T threads in Rust, as a gymnasium 1.x ``VectorEnv``.
+
+    ``gym.make_vec("mjskill/PickCube-v1", num_envs=N, vectorization_mode="vector_entry_point",
+    num_threads=T)`` builds one. Autoreset is next-step (``metadata["autoreset_mode"]``): the
+    step on which env i ends returns that episode's final observation, reward and info with
+    ``terminated`` or ``truncated`` set; the next step ignores env i's action, resets it
+    (unseeded, its random streams continue) and returns the new episode's first observation
+    with reward 0. As in gymnasium's next-step mode there are no ``final_obs`` /
+    ``final_info`` entries: the final observation is the one returned with the flag.
+    ``reset(seed=s)`` seeds env i with ``s + i``, so results do not depend on T. The GIL is
+    released while the envs step.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        env_id: str = "PickCube-v1",
+        num_envs: int = 1,
+        num_threads: int = 1,
+        robot_uids: str | None = None,
+        obs_mode: str = "state",
+        control_mode: str | None = None,
+        reward_mode: str = "normalized_dense",
+        max_episode_steps: int | None = None,
+        robot_init_qpos_noise: float = 0.02,
+        sim_freq: int = 100,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode {render_mode!r} is not supported by the vector env (it renders "
+                "no human frames; its sensor images come with the rgb/depth/rgbd obs modes); "
+                "valid render modes: None"
+            )
+        for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
+            if v < 1:
+                raise ValueError(f"{name} {v} is out of range: use 1 or more")
+        self._kwargs = dict(
+            env_id=env_id,
+            robot_uids=robot_uids,
+            obs_mode=obs_mode,
+            control_mode=control_mode,
+            reward_mode=reward_mode,
+            max_episode_steps=max_episode_steps,
+            robot_init_qpos_noise=robot_init_qpos_noise,
+            sim_freq=sim_freq,
+        )
+        # The static description (layout, bounds, cameras) comes from one plain env.
+        spec = _native.Env(**self._kwargs).spec()
+        self._native = _native.VecEnv(
+            num_envs=int(num_envs), num_threads=int(num_threads), **self._kwargs
+        )
+        self.num_envs = int(num_envs)
+        self.num_threads = self._native.num_threads
+        self.render_mode = None
+        self.env_id = spec["env_id"]
+        self.robot_uids = spec["robot_uids"]
+        self.control_mode = spec["control_mode"]
+        self.obs_mode = spec["obs_mode"]
+        self.max_episode_steps = spec["max_episode_steps"]
+        self._layout = _Layout(spec)
+        lo, hi = spec["action_low"], spec["action_high"]
+        self.single_observation_space = self._layout.space
+        self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        if isinstance(seed, (list, tuple)):
+            seeds = [_check_seed(s) for s in seed]
+            if len(seeds) != self.num_envs or any(
+                s != seeds[0] + i for i, s in enumerate(seeds)
+            ):
+                raise ValueError(
+                    f"seed list {list(seed)} is not supported: env i is seeded with s + i, so "
+                    f"give one int s or the list [s, s+1, ..., s+{self.num_envs - 1}]"
+                )
+            seed = seeds[0]
+        seed = _check_seed(seed)
+        if options:
+            raise ValueError(
+                f"unsupported reset options {sorted(options)}; mjskill envs take no options"
+            )
+        if seed is not None:
+            self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
+        obs, info = self._native.reset(seed)
+        return self._layout.batch(obs, self._native), info
+
+    def step(self, actions):
+        a = _as_actions(actions, 2)
+        obs, rewards, terminated, truncated, info = self._native.step(a)
+        return self._layout.batch(obs, self._native), rewards, terminated, truncated, info
+
+    @property
+    def autoreset(self) -> np.ndarray:
+        """Envs that reset during the last step (their action was ignored)."""
+        return self._native.autoreset()
+
+def make_env(**kwargs) -> MjskillEnv:
+    """``gym.make`` entry point: the env's own episode limit is lifted, because gymnasium's
+    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill."""
+    kwargs.setdefault("max_episode_steps", _UNLIMITED)
+    return MjskillEnv(**kwargs)
+
+
+def make_vector_env(**kwargs) -> MjskillVectorEnv:
+    """``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point."""
+    return MjskillVectorEnv(**kwargs)

@@ -1,0 +1,706 @@
+//! `mjskill._native`: the PyO3 extension under the `mjskill` Python package.
+//!
+//! Two classes wrap the Rust API: [`PyEnv`] (one [`mjskill::Env`]) and [`PyVecEnv`] (a
+//! [`mjskill::env::VecEnv`]); [`record_episodes`] writes a recording (`.mcap`) of given seeds
+//! and actions. The gymnasium classes (`mjskill.MjskillEnv`, `mjskill.MjskillVectorEnv`) are
+//! plain Python on top, because a PyO3 class cannot subclass `gymnasium.Env`.
+//!
+//! Every Rust error becomes a Python `ValueError` carrying the Rust message (which names the
+//! bad value and the valid choices); a failed render is a `RuntimeError`. The GIL is released
+//! while an env steps, resets or renders. Each class holds its env behind a `Mutex`, so a
+//! Python object can be shared between threads safely.
+#![warn(missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+
+use mjskill::env::VecEnv;
+use mjskill::record::Recorder;
+use mjskill::{Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, SimConfig};
+use numpy::ndarray::ArrayView2;
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// A Rust env error as a Python `ValueError` with the same message.
+fn value_err(e: EnvError) -> PyErr {
+    match e {
+        EnvError::Render(m) => PyRuntimeError::new_err(m),
+        e => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// A poisoned lock (an earlier call panicked inside the env) as a Python `RuntimeError`.
+fn poisoned<T>(_: T) -> PyErr {
+    PyRuntimeError::new_err(
+        "this env is unusable: an earlier call panicked inside it (see the earlier error)",
+    )
+}
+
+/// Whether an info key holds a boolean (stored as 0/1 on the Rust side): ManiSkill's
+/// `success`, `fail` and `is_*` keys.
+fn is_flag(key: &str) -> bool {
+    key == "success" || key == "fail" || key.starts_with("is_")
+}
+
+/// The [`EnvConfig`] for ManiSkill's keyword arguments.
+fn config(
+    robot_uids: Option<String>,
+    obs_mode: &str,
+    control_mode: Option<String>,
+    reward_mode: &str,
+    max_episode_steps: Option<u32>,
+    robot_init_qpos_noise: f64,
+    sim_freq: u32,
+) -> PyResult<EnvConfig> {
+    if max_episode_steps == Some(0) {
+        return Err(PyValueError::new_err(
+            "max_episode_steps 0 is out of range: an episode needs at least one step (1 or more)",
+        ));
+    }
+    Ok(EnvConfig {
+        robot: robot_uids,
+        obs_mode: ObsMode::parse(obs_mode).map_err(value_err)?,
+        reward_mode: RewardMode::parse(reward_mode).map_err(value_err)?,
+        control_mode,
+        robot_init_qpos_noise,
+        max_episode_steps,
+        sim: SimConfig { sim_freq },
+    })
+}
+
+/// The single-env info dict: `elapsed_steps`, the task keys (flags as `bool`) and, on
+/// reset, `reconfigure`.
+fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("elapsed_steps", info.elapsed_steps)?;
+    for (k, v) in info.keys.iter().zip(&info.values) {
+        if is_flag(k) {
+            d.set_item(*k, *v != 0.0)?;
+        } else {
+            d.set_item(*k, *v)?;
+        }
+    }
+    if let Some(r) = info.reconfigure {
+        d.set_item("reconfigure", r)?;
+    }
+    Ok(d)
+}
+
+/// The static description of an env (what the Python layer builds its spaces from).
+fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let cfg = env.config();
+    d.set_item("env_id", env.id())?;
+    d.set_item("robot_uids", env.robot_spec().uid())?;
+    d.set_item("control_mode", env.control_mode())?;
+    d.set_item("obs_mode", cfg.obs_mode.name())?;
+    d.set_item("reward_mode", cfg.reward_mode.name())?;
+    d.set_item("max_episode_steps", env.max_episode_steps())?;
+    d.set_item("robot_init_qpos_noise", cfg.robot_init_qpos_noise)?;
+    d.set_item("sim_freq", cfg.sim.sim_freq)?;
+    let a = env.action_space();
+    d.set_item("action_low", PyArray1::from_slice(py, &a.low))?;
+    d.set_item("action_high", PyArray1::from_slice(py, &a.high))?;
+    let o = env.observation_space();
+    d.set_item("obs_low", PyArray1::from_slice(py, &o.low))?;
+    d.set_item("obs_high", PyArray1::from_slice(py, &o.high))?;
+    let layout = PyList::empty(py);
+    for (name, r) in env.obs_layout() {
+        layout.append((name.as_str(), r.start, r.end))?;
+    }
+    d.set_item("obs_layout", layout)?;
+    let cams = PyList::empty(py);
+    if cfg.obs_mode.is_visual() {
+        for name in env.sensor_names() {
+            if let Some(img) = env.image(name) {
+                cams.append((
+                    img.name,
+                    img.width,
+                    img.height,
+                    img.rgb.is_some(),
+                    img.depth.is_some(),
+                ))?;
+            }
+        }
+    }
+    d.set_item("cameras", cams)?;
+    let keys: Vec<(&str, bool)> = env.info().keys.iter().map(|k| (*k, is_flag(k))).collect();
+    d.set_item("info_keys", keys)?;
+    d.set_item("render_size", env.render_size())?;
+    Ok(d)
+}
+
+/// `{camera: {"rgb": H×W×3 uint8, "depth": H×W×1 float32}}` of a single env.
+fn images_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for name in env.sensor_names() {
+        let Some(img) = env.image(name) else { continue };
+        let cam = PyDict::new(py);
+        if let Some(rgb) = img.rgb {
+            let a = PyArray1::from_slice(py, rgb).reshape([img.height, img.width, 3])?;
+            cam.set_item("rgb", a)?;
+        }
+        if let Some(depth) = img.depth {
+            let a = PyArray1::from_slice(py, depth).reshape([img.height, img.width, 1])?;
+            cam.set_item("depth", a)?;
+        }
+        d.set_item(img.name, cam)?;
+    }
+    Ok(d)
+}
+
+/// One mjskill env (`mjskill._native.Env`); the gymnasium class `mjskill.MjskillEnv` wraps it.
+#[pyclass(module = "mjskill._native", name = "Env")]
+struct PyEnv {
+    env: Mutex<Env>,
+}
+
+impl PyEnv {
+    fn lock(&self) -> PyResult<MutexGuard<'_, Env>> {
+        self.env.lock().map_err(poisoned)
+    }
+}
+
+#[pymethods]
+impl PyEnv {
+    /// Builds `env_id` with ManiSkill's keyword arguments.
+    #[new]
+    #[pyo3(signature = (env_id, robot_uids=None, obs_mode="state", control_mode=None,
+        reward_mode="normalized_dense", max_episode_steps=None, robot_init_qpos_noise=0.02,
+        sim_freq=100))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        env_id: &str,
+        robot_uids: Option<String>,
+        obs_mode: &str,
+        control_mode: Option<String>,
+        reward_mode: &str,
+        max_episode_steps: Option<u32>,
+        robot_init_qpos_noise: f64,
+        sim_freq: u32,
+    ) -> PyResult<Self> {
+        let cfg = config(
+            robot_uids,
+            obs_mode,
+            control_mode,
+            reward_mode,
+            max_episode_steps,
+            robot_init_qpos_noise,
+            sim_freq,
+        )?;
+        let env = py
+            .detach(|| mjskill::make(env_id, cfg))
+            .map_err(value_err)?;
+        Ok(PyEnv {
+            env: Mutex::new(env),
+        })
+    }
+
+    /// The env's static description (ids, modes, space bounds, observation layout,
+    /// cameras, info keys).
+    fn spec<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        spec_dict(py, &*self.lock()?)
+    }
+
+    /// Resets (seeded: ManiSkill's exact initial state) and returns `(obs, info)`.
+    #[pyo3(signature = (seed=None))]
+    fn reset<'py>(
+        &self,
+        py: Python<'py>,
+        seed: Option<u64>,
+    ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyDict>)> {
+        let mut g = self.lock()?;
+        let env = &mut *g;
+        py.detach(|| env.try_reset(seed).map(|_| ()))
+            .map_err(value_err)?;
+        Ok((
+            PyArray1::from_slice(py, env.obs()),
+            info_dict(py, env.info())?,
+        ))
+    }
+
+    /// One step: `(obs, reward, terminated, truncated, info)`.
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        action: PyReadonlyArray1<'py, f32>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f32>>,
+        f32,
+        bool,
+        bool,
+        Bound<'py, PyDict>,
+    )> {
+        let mut g = self.lock()?;
+        let env = &mut *g;
+        let a = action.as_slice()?;
+        // Copied so that the numpy buffer is not touched without the GIL.
+        let mut buf = [0f32; 32];
+        let a: &[f32] = if a.len() <= buf.len() {
+            buf[..a.len()].copy_from_slice(a);
+            &buf[..a.len()]
+        } else {
+            return Err(value_err(EnvError::ActionLength {
+                got: a.len(),
+                expected: env.action_space().shape[0],
+                mode: env.control_mode().to_string(),
+            }));
+        };
+        let (reward, terminated, truncated) = py
+            .detach(|| env.step(a).map(|s| (s.reward, s.terminated, s.truncated)))
+            .map_err(value_err)?;
+        Ok((
+            PyArray1::from_slice(py, env.obs()),
+            reward,
+            terminated,
+            truncated,
+            info_dict(py, env.info())?,
+        ))
+    }
+
+    /// The current flat observation (empty for obs mode `none`).
+    fn obs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        Ok(PyArray1::from_slice(py, self.lock()?.obs()))
+    }
+
+    /// The current info dict.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        info_dict(py, self.lock()?.info())
+    }
+
+    /// The sensor images of the current state (visual obs modes; else empty).
+    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        images_dict(py, &*self.lock()?)
+    }
+
+    /// The human camera's RGB frame (H×W×3 uint8).
+    fn render<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let mut g = self.lock()?;
+        let env = &mut *g;
+        let (w, h) = env.render_size();
+        let frame = py
+            .detach(|| env.render().map(<[u8]>::to_vec))
+            .map_err(value_err)?;
+        Ok(PyArray1::from_vec(py, frame).reshape([h, w, 3])?.into_any())
+    }
+
+    /// [`Env::get_state`] as JSON (exact: floats round-trip).
+    fn get_state(&self) -> PyResult<String> {
+        serde_json::to_string(&self.lock()?.get_state())
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))
+    }
+
+    /// Restores a state from `get_state`; a bad state is a `ValueError` and changes nothing.
+    fn set_state(&self, state: &str) -> PyResult<()> {
+        let s: EnvState = serde_json::from_str(state)
+            .map_err(|e| PyValueError::new_err(format!("cannot set state: not a state: {e}")))?;
+        self.lock()?.set_state(&s).map_err(value_err)
+    }
+
+    /// ManiSkill's `get_state_dict()` as nested JSON.
+    fn get_state_dict(&self) -> PyResult<String> {
+        Ok(self.lock()?.get_state_dict().to_json().to_string())
+    }
+
+    /// ManiSkill's `set_state_dict()` from nested JSON.
+    fn set_state_dict(&self, state_dict: &str) -> PyResult<()> {
+        let v: serde_json::Value = serde_json::from_str(state_dict)
+            .map_err(|e| PyValueError::new_err(format!("cannot set state dict: not JSON: {e}")))?;
+        let sd = mjskill::StateDict::from_json(&v)
+            .map_err(|e| PyValueError::new_err(format!("cannot set state dict: {e}")))?;
+        self.lock()?.set_state_dict(&sd).map_err(value_err)
+    }
+
+    /// Steps since the last reset.
+    fn elapsed_steps(&self) -> PyResult<u32> {
+        Ok(self.lock()?.info().elapsed_steps)
+    }
+}
+
+/// The VecEnv and its action buffer, behind one lock.
+struct VecState {
+    vec: VecEnv,
+    actions: Vec<f32>,
+}
+
+/// N envs stepped on T threads (`mjskill._native.VecEnv`); `mjskill.MjskillVectorEnv`
+/// wraps it. Autoreset is gymnasium's next-step mode.
+#[pyclass(module = "mjskill._native", name = "VecEnv")]
+struct PyVecEnv {
+    inner: Mutex<VecState>,
+    /// Info keys with their flag-ness.
+    keys: Vec<(&'static str, bool)>,
+    /// Read-only all-true `[N]` masks for gymnasium's `"_<key>"` info entries, made once.
+    masks: Py<PyArray1<bool>>,
+    num_envs: usize,
+    obs_dim: usize,
+}
+
+impl PyVecEnv {
+    fn lock(&self) -> PyResult<MutexGuard<'_, VecState>> {
+        self.inner.lock().map_err(poisoned)
+    }
+
+    /// `{key: [N] array, "_key": mask}` of the last reset/step.
+    fn info<'py>(&self, py: Python<'py>, vec: &VecEnv) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let k = self.keys.len();
+        let values = vec.info();
+        let masks = self.masks.bind(py);
+        for (j, (key, flag)) in self.keys.iter().enumerate() {
+            let column = values.iter().skip(j).step_by(k.max(1));
+            if *flag {
+                let col: Vec<bool> = column.map(|v| *v != 0.0).collect();
+                d.set_item(*key, PyArray1::from_vec(py, col))?;
+            } else {
+                let col: Vec<f64> = column.copied().collect();
+                d.set_item(*key, PyArray1::from_vec(py, col))?;
+            }
+            d.set_item(format!("_{key}"), masks)?;
+        }
+        Ok(d)
+    }
+
+    fn obs<'py>(&self, py: Python<'py>, vec: &VecEnv) -> PyResult<Bound<'py, PyAny>> {
+        let v = ArrayView2::from_shape((self.num_envs, self.obs_dim), vec.obs())
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        Ok(v.to_pyarray(py).into_any())
+    }
+}
+
+#[pymethods]
+impl PyVecEnv {
+    /// Builds `num_envs` envs of `env_id` on `num_threads` threads.
+    #[new]
+    #[pyo3(signature = (env_id, num_envs, num_threads=1, robot_uids=None, obs_mode="state",
+        control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
+        robot_init_qpos_noise=0.02, sim_freq=100))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        env_id: &str,
+        num_envs: usize,
+        num_threads: usize,
+        robot_uids: Option<String>,
+        obs_mode: &str,
+        control_mode: Option<String>,
+        reward_mode: &str,
+        max_episode_steps: Option<u32>,
+        robot_init_qpos_noise: f64,
+        sim_freq: u32,
+    ) -> PyResult<Self> {
+        if num_threads == 0 {
+            return Err(PyValueError::new_err(
+                "num_threads 0 is out of range: use 1 or more threads (the caller's counts)",
+            ));
+        }
+        let cfg = config(
+            robot_uids,
+            obs_mode,
+            control_mode,
+            reward_mode,
+            max_episode_steps,
+            robot_init_qpos_noise,
+            sim_freq,
+        )?;
+        let vec = py
+            .detach(|| VecEnv::new(env_id, cfg, num_envs, num_threads))
+            .map_err(value_err)?;
+        let keys = vec.info_keys().iter().map(|k| (*k, is_flag(k))).collect();
+        let masks = PyArray1::from_vec(py, vec![true; num_envs]);
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("write", false)?;
+        masks.call_method("setflags", (), Some(&kwargs))?;
+        let obs_dim = vec.single_observation_space().shape.iter().product();
+        let actions = Vec::with_capacity(num_envs * vec.single_action_space().shape[0]);
+        Ok(PyVecEnv {
+            inner: Mutex::new(VecState { vec, actions }),
+            keys,
+            masks: masks.unbind(),
+            num_envs,
+            obs_dim,
+        })
+    }
+
+    /// Number of envs.
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.num_envs
+    }
+
+    /// Threads stepping the envs (the caller's included).
+    #[getter]
+    fn num_threads(&self) -> PyResult<usize> {
+        Ok(self.lock()?.vec.num_threads())
+    }
+
+    /// Resets every env (env i with `seed + i`, or unseeded): `(obs [N × D], info)`.
+    #[pyo3(signature = (seed=None))]
+    fn reset<'py>(
+        &self,
+        py: Python<'py>,
+        seed: Option<u64>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let mut g = self.lock()?;
+        let st = &mut *g;
+        py.detach(|| st.vec.try_reset(seed).map(|_| ()))
+            .map_err(value_err)?;
+        Ok((self.obs(py, &st.vec)?, self.info(py, &st.vec)?))
+    }
+
+    /// Steps every env with its row of `actions` (`[N × A]` float32):
+    /// `(obs, rewards, terminated, truncated, info)`.
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        actions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<(
+        Bound<'py, PyAny>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyDict>,
+    )> {
+        let mut g = self.lock()?;
+        let st = &mut *g;
+        let adim = st.vec.single_action_space().shape[0];
+        let (rows, cols) = actions.as_array().dim();
+        if (rows, cols) != (self.num_envs, adim) {
+            return Err(PyValueError::new_err(format!(
+                "actions have shape ({rows}, {cols}), expected (num_envs, action_dim) = ({}, {adim})",
+                self.num_envs
+            )));
+        }
+        // Copied into the env's own buffer: the numpy array is not read without the GIL.
+        st.actions.clear();
+        match actions.as_slice() {
+            Ok(s) => st.actions.extend_from_slice(s),
+            Err(_) => st.actions.extend(actions.as_array().iter().copied()),
+        }
+        let VecState { vec, actions } = st;
+        py.detach(|| vec.step(actions)).map_err(value_err)?;
+        Ok((
+            self.obs(py, vec)?,
+            PyArray1::from_slice(py, vec.rewards()),
+            PyArray1::from_slice(py, vec.terminated()),
+            PyArray1::from_slice(py, vec.truncated()),
+            self.info(py, vec)?,
+        ))
+    }
+
+    /// Envs that reset during the last step (their action was ignored).
+    fn autoreset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        Ok(PyArray1::from_slice(py, self.lock()?.vec.autoreset()))
+    }
+
+    /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32}}` of the last reset/step.
+    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let g = self.lock()?;
+        let vec = &g.vec;
+        let d = PyDict::new(py);
+        for name in vec.sensor_names() {
+            let Some(first) = vec.image(0, name) else {
+                continue;
+            };
+            let (w, h) = (first.width, first.height);
+            let cam = PyDict::new(py);
+            if first.rgb.is_some() {
+                let mut all = Vec::with_capacity(self.num_envs * h * w * 3);
+                for i in 0..self.num_envs {
+                    if let Some(rgb) = vec.image(i, name).and_then(|c| c.rgb) {
+                        all.extend_from_slice(rgb);
+                    }
+                }
+                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 3])?;
+                cam.set_item("rgb", a)?;
+            }
+            if first.depth.is_some() {
+                let mut all = Vec::with_capacity(self.num_envs * h * w);
+                for i in 0..self.num_envs {
+                    if let Some(depth) = vec.image(i, name).and_then(|c| c.depth) {
+                        all.extend_from_slice(depth);
+                    }
+                }
+                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 1])?;
+                cam.set_item("depth", a)?;
+            }
+            d.set_item(*name, cam)?;
+        }
+        Ok(d)
+    }
+}
+
+/// Writes a recording of the given episodes to `path`, re-simulating each from its seed and
+/// actions (`actions[k]` is episode k's `[steps × A]` array) in one env, the way `mjskill
+/// rollout` records. Returns each episode's `(return, success)`. The file is written under a
+/// temporary name and renamed into place only when complete, so a failure leaves nothing.
+#[pyfunction]
+#[pyo3(signature = (path, env_id, seeds, actions, robot_uids=None, obs_mode="state",
+    control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
+    robot_init_qpos_noise=0.02, sim_freq=100))]
+#[allow(clippy::too_many_arguments)]
+fn record_episodes(
+    py: Python<'_>,
+    path: PathBuf,
+    env_id: &str,
+    seeds: Vec<u64>,
+    actions: Vec<PyReadonlyArray2<'_, f32>>,
+    robot_uids: Option<String>,
+    obs_mode: &str,
+    control_mode: Option<String>,
+    reward_mode: &str,
+    max_episode_steps: Option<u32>,
+    robot_init_qpos_noise: f64,
+    sim_freq: u32,
+) -> PyResult<Vec<(f64, bool)>> {
+    if seeds.len() != actions.len() {
+        return Err(PyValueError::new_err(format!(
+            "{} seeds but {} action arrays: give one [steps × action_dim] array per seed",
+            seeds.len(),
+            actions.len()
+        )));
+    }
+    let cfg = config(
+        robot_uids,
+        obs_mode,
+        control_mode,
+        reward_mode,
+        max_episode_steps,
+        robot_init_qpos_noise,
+        sim_freq,
+    )?;
+    let episodes: Vec<Vec<f32>> = actions
+        .iter()
+        .map(|a| a.as_array().iter().copied().collect())
+        .collect();
+    let dims: Vec<usize> = actions.iter().map(|a| a.as_array().shape()[1]).collect();
+    py.detach(|| write_recording(&path, env_id, cfg, &seeds, &episodes, &dims))
+        .map_err(PyValueError::new_err)
+}
+
+/// [`record_episodes`] without the GIL: temp file, record, rename.
+fn write_recording(
+    path: &Path,
+    env_id: &str,
+    cfg: EnvConfig,
+    seeds: &[u64],
+    episodes: &[Vec<f32>],
+    dims: &[usize],
+) -> Result<Vec<(f64, bool)>, String> {
+    let mut env = mjskill::make(env_id, cfg).map_err(|e| e.to_string())?;
+    let adim = env.action_space().shape[0];
+    if let Some(d) = dims.iter().find(|d| **d != adim) {
+        return Err(format!(
+            "action arrays have {d} columns, but {} expects {adim}",
+            env.control_mode()
+        ));
+    }
+    let name = path
+        .file_name()
+        .ok_or_else(|| format!("{}: not a file name", path.display()))?;
+    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
+    let mut rec = Recorder::create(&tmp, &env).map_err(|e| e.to_string())?;
+    let result = (|| {
+        let mut out = Vec::with_capacity(seeds.len());
+        for (seed, acts) in seeds.iter().zip(episodes) {
+            env.try_reset(Some(*seed)).map_err(|e| e.to_string())?;
+            rec.begin_episode(&env, Some(*seed))
+                .map_err(|e| e.to_string())?;
+            let (mut ret, mut success) = (0.0f64, false);
+            for a in acts.chunks_exact(adim) {
+                let before = env.get_state();
+                let (r, term, trunc) = {
+                    let s = env.step(a).map_err(|e| e.to_string())?;
+                    (s.reward, s.terminated, s.truncated)
+                };
+                rec.record_step(&env, a, r, term, trunc, &before)
+                    .map_err(|e| e.to_string())?;
+                ret += r as f64;
+                success |= term;
+            }
+            rec.end_episode(success).map_err(|e| e.to_string())?;
+            out.push((ret, success));
+        }
+        Ok::<_, String>(out)
+    })();
+    match result {
+        Ok(out) => {
+            rec.finish().map_err(|e| e.to_string())?;
+            std::fs::rename(&tmp, path)
+                .map_err(|e| format!("cannot move {} to {}: {e}", tmp.display(), path.display()))?;
+            Ok(out)
+        }
+        Err(e) => {
+            let _ = rec.abandon();
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+/// Every registered env: `[(env_id, [robot, ...], max_episode_steps)]`, default robot first.
+#[pyfunction]
+fn registry() -> Vec<(&'static str, Vec<&'static str>, u32)> {
+    mjskill::registry()
+        .into_iter()
+        .map(|e| {
+            (
+                e.id,
+                e.robots.iter().map(|(r, _)| *r).collect(),
+                e.max_episode_steps,
+            )
+        })
+        .collect()
+}
+
+/// Control modes of a robot (default first).
+#[pyfunction]
+fn control_modes(env_id: &str, robot_uids: &str) -> PyResult<Vec<&'static str>> {
+    let info = mjskill::registry()
+        .into_iter()
+        .find(|e| e.id == env_id)
+        .ok_or_else(|| {
+            value_err(EnvError::UnknownEnv(
+                env_id.into(),
+                mjskill::registry()
+                    .iter()
+                    .map(|e| e.id)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            ))
+        })?;
+    let valid = info
+        .robots
+        .iter()
+        .map(|(r, _)| *r)
+        .collect::<Vec<_>>()
+        .join(", ");
+    info.robots
+        .into_iter()
+        .find(|(r, _)| *r == robot_uids)
+        .map(|(_, modes)| modes)
+        .ok_or_else(|| {
+            value_err(EnvError::UnsupportedRobot {
+                env: env_id.into(),
+                robot: robot_uids.into(),
+                valid,
+            })
+        })
+}
+
+/// The `mjskill._native` module.
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyEnv>()?;
+    m.add_class::<PyVecEnv>()?;
+    m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
+    m.add_function(wrap_pyfunction!(registry, m)?)?;
+    m.add_function(wrap_pyfunction!(control_modes, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
