@@ -12,6 +12,7 @@
 //! [−1, 1] and rescale in f32, deltas are added to the f32 measured position. Targets go to
 //! the robot's [`Drives`], which turn them into forces.
 pub mod drive;
+pub mod error;
 pub mod ik;
 pub mod joints;
 pub mod mode;
@@ -28,6 +29,7 @@ use crate::mjcf::Drive;
 use crate::mujoco::Data;
 use crate::obs::ObsWriter;
 pub use drive::Drives;
+pub use error::ControllerError;
 use ik::Chain;
 pub use joints::JointMap;
 pub use mode::ControlMode;
@@ -418,13 +420,13 @@ impl Controller {
         mode: ControlMode,
         parts: Vec<PartSpec>,
         desc: &RobotDesc,
-    ) -> Result<Controller, String> {
+    ) -> Result<Controller, ControllerError> {
         let active = desc.active_joints();
         let index = |name: &str| {
             active
                 .iter()
                 .position(|&j| desc.joints[j].name == name)
-                .ok_or_else(|| format!("no active joint {name:?}"))
+                .ok_or_else(|| ControllerError::NoActiveJoint(name.to_string()))
         };
         let limits = |i: usize| {
             let l = desc.joints[active[i]].limits;
@@ -441,16 +443,16 @@ impl Controller {
                 .collect::<Result<_, _>>()?;
             let mut followers = Vec::new();
             for (f, c, m, o) in &spec.followers {
-                let ci = spec.joints.iter().position(|j| j == c).ok_or_else(|| {
-                    format!("mimic control joint {c:?} is not in part {}", spec.name)
-                })?;
+                let ci = spec.joints.iter().position(|j| j == c).ok_or(
+                    ControllerError::MimicControl {
+                        joint: c,
+                        part: spec.name,
+                    },
+                )?;
                 followers.push((index(f)?, ci, *m, *o));
             }
             if !followers.is_empty() && !matches!(spec.kind, PartKind::JointPos(_)) {
-                return Err(format!(
-                    "part {} has mimic followers but is not a joint position part",
-                    spec.name
-                ));
+                return Err(ControllerError::MimicKind(spec.name));
             }
             let ctl = match spec.kind {
                 PartKind::JointPos(cfg) => {

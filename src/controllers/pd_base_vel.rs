@@ -1,6 +1,6 @@
 //! `PDBaseForwardVelController` (ManiSkill's `agents/controllers/pd_base_vel.py`, Fetch's
 //! base): [forward speed, yaw rate] → velocity targets of the virtual x, y, yaw joints.
-use super::{clip_scale, Drives, JointMap, PartController, PartCore};
+use super::{clip_scale, ControllerError, Drives, JointMap, PartController, PartCore};
 
 /// Configuration of a forward-velocity base part.
 #[derive(Debug, Clone, PartialEq)]
@@ -21,12 +21,12 @@ pub struct PdBaseForwardVel {
 impl PdBaseForwardVel {
     /// Builds the part on the three virtual joints `idx` = [x, y, yaw] (ManiSkill indices).
     /// Errors unless there are exactly three.
-    pub fn new(cfg: BaseForwardVelConfig, idx: Vec<usize>) -> Result<PdBaseForwardVel, String> {
+    pub fn new(
+        cfg: BaseForwardVelConfig,
+        idx: Vec<usize>,
+    ) -> Result<PdBaseForwardVel, ControllerError> {
         if idx.len() != 3 {
-            return Err(format!(
-                "a forward-velocity base needs the 3 joints x, y, yaw, got {}",
-                idx.len()
-            ));
+            return Err(ControllerError::BaseJoints(idx.len()));
         }
         Ok(PdBaseForwardVel {
             cfg,

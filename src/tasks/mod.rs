@@ -84,7 +84,7 @@ pub mod poke_cube;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model, ObjType};
+use crate::mujoco::{Data, MjError, Model, ObjType};
 pub use crate::obs::ObsWriter;
 use crate::rng::TorchGenerator;
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
@@ -178,7 +178,7 @@ pub trait Task: Send + std::fmt::Debug {
     /// Adds the task's props and cameras to the scene.
     fn build(&self, scene: &mut Scene);
     /// Resolves the task's names to ids in the compiled model.
-    fn resolve(&mut self, model: &Model) -> Result<(), String>;
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError>;
     /// Body whose contacts with the fingers decide `is_grasping`.
     fn grasp_object(&self) -> usize;
     /// Places the objects for a new episode, drawing from `torch` in upstream order.
@@ -213,17 +213,13 @@ pub fn body_pos(data: &Data, body: usize) -> Vector3<f64> {
 }
 
 /// Resolves a body id with an error naming it.
-pub fn body_id(model: &Model, name: &str) -> Result<usize, String> {
-    model
-        .require_id(ObjType::Body, name)
-        .map_err(|e| e.to_string())
+pub fn body_id(model: &Model, name: &str) -> Result<usize, MjError> {
+    model.require_id(ObjType::Body, name)
 }
 
 /// qpos address of a body's free joint.
-pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, String> {
-    let j = model
-        .require_id(ObjType::Joint, body)
-        .map_err(|e| e.to_string())?;
+pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, MjError> {
+    let j = model.require_id(ObjType::Joint, body)?;
     Ok(model.jnt_qposadr()[j] as usize)
 }
 

@@ -9,7 +9,7 @@ use super::{
     InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::{uniform_scaled, TorchGenerator};
 use crate::robots::RobotId;
 
@@ -171,7 +171,7 @@ impl Task for PickCube {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.cube = body_id(model, "cube")?;
         self.cube_qadr = free_joint_qpos(model, "cube")?;
         self.goal = body_id(model, "goal_site")?;

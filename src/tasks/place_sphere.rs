@@ -6,7 +6,7 @@ use super::{
     ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §3) ---------------------------------------------------------------
@@ -107,7 +107,7 @@ impl Task for PlaceSphere {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.sphere = body_id(model, "sphere")?;
         self.sphere_qadr = free_joint_qpos(model, "sphere")?;
         self.bin = body_id(model, "bin")?;

@@ -25,7 +25,7 @@ use super::{
 };
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §2) ---------------------------------------------------------------
@@ -168,7 +168,7 @@ impl Task for PokeCube {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.cube = body_id(model, "cube")?;
         self.cube_qadr = free_joint_qpos(model, "cube")?;
         self.peg = body_id(model, "peg")?;
