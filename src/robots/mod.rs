@@ -599,11 +599,13 @@ impl TableScene {
         let drive_list = controller.drives(&desc);
         let mut scene = crate::mjcf::Scene::new(name, timestep);
         scene.add_table_scene();
-        scene.add_robot(
-            &desc,
-            &spec.options(spec.table_base(), drive_list.clone()),
-            &|_| None,
-        )?;
+        scene
+            .add_robot(
+                &desc,
+                &spec.options(spec.table_base(), drive_list.clone()),
+                &|_| None,
+            )
+            .map_err(|e| e.to_string())?;
         extra(&mut scene);
         let mjcf = scene.finish();
         let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
