@@ -344,6 +344,12 @@ fn ik_chain_starts_at_the_torso_and_rejects_a_non_ancestor_root() {
         * fk[desc.link("gripper_link").unwrap()];
     assert!((rel.translation.vector - p0.translation.vector).norm() < 1e-12);
     let e = Chain::from_root(&desc, Some("head_pan_link"), "gripper_link", arm).unwrap_err();
+    assert!(
+        matches!(&e, mjskill::controllers::ControllerError::NotAncestor { root, ee }
+            if root == "head_pan_link" && ee == "gripper_link"),
+        "{e:?}"
+    );
+    let e = e.to_string();
     assert!(e.contains("head_pan_link") && e.contains("ancestor"), "{e}");
 }
 

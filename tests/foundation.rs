@@ -190,3 +190,39 @@ fn export_mjcf_is_accepted_by_debians_mujoco_compile() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("ur5") && err.contains("panda"), "{err}");
 }
+
+#[test]
+fn robot_options_naming_what_the_robot_lacks_are_typed_scene_errors() {
+    use mjskill::mjcf::{Drive, Scene, SceneError};
+    let spec = robots::spec("panda").unwrap();
+    let desc = spec.description().unwrap();
+    let add = |opts: &mjskill::mjcf::RobotOptions| {
+        let mut scene = Scene::new("t", 0.002);
+        scene.add_robot(&desc, opts, &|_| None).unwrap_err()
+    };
+    let mut opts = spec.options(spec.table_base(), vec![]);
+    opts.drives.push(Drive {
+        joint: "no_such_joint".into(),
+        kp: 1.0,
+        kd: 1.0,
+        force_limit: 1.0,
+    });
+    let e = add(&opts);
+    assert_eq!(
+        e,
+        SceneError::NoJoint {
+            robot: desc.name.clone(),
+            joint: "no_such_joint".into()
+        }
+    );
+    assert_eq!(
+        e.to_string(),
+        format!("robot {} has no joint \"no_such_joint\"", desc.name)
+    );
+    let mut opts = spec.options(spec.table_base(), vec![]);
+    opts.no_ground_contact.push("no_such_link".into());
+    assert_eq!(
+        add(&opts).to_string(),
+        format!("robot {} has no link \"no_such_link\"", desc.name)
+    );
+}

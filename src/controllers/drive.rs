@@ -120,15 +120,12 @@ impl Drives {
         drives: &[Drive],
         joints: &[String],
         gripper: &[&str],
-    ) -> Result<Drives, String> {
+    ) -> Result<Drives, super::ControllerError> {
         let mut dofs = Vec::with_capacity(drives.len());
         for d in drives {
-            let j = model
-                .require_id(ObjType::Joint, &d.joint)
-                .map_err(|e| e.to_string())?;
-            let actuator = model
-                .require_id(ObjType::Actuator, &crate::mjcf::actuator_name(&d.joint))
-                .map_err(|e| e.to_string())?;
+            let j = model.require_id(ObjType::Joint, &d.joint)?;
+            let actuator =
+                model.require_id(ObjType::Actuator, &crate::mjcf::actuator_name(&d.joint))?;
             dofs.push(DriveDof {
                 dof: model.jnt_dofadr()[j] as usize,
                 qpos: model.jnt_qposadr()[j] as usize,

@@ -10,6 +10,7 @@
 //! root frame. Fixed-size matrices: a solve allocates nothing.
 use nalgebra::{Isometry3, Matrix6, SMatrix, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 
+use super::ControllerError;
 use crate::mjcf::urdf::{JointKind, RobotDesc};
 
 /// Maximum number of joints in a chain.
@@ -48,7 +49,7 @@ type Jac = SMatrix<f64, 6, MAX_CHAIN>;
 impl Chain {
     /// The chain from the root link of `robot` to `ee_link`, where `arm` lists the joints the
     /// solver may move (ManiSkill indices are taken from `robot.active_joints()`).
-    pub fn new(robot: &RobotDesc, ee_link: &str, arm: &[&str]) -> Result<Chain, String> {
+    pub fn new(robot: &RobotDesc, ee_link: &str, arm: &[&str]) -> Result<Chain, ControllerError> {
         Chain::from_root(robot, None, ee_link, arm)
     }
 
@@ -60,24 +61,24 @@ impl Chain {
         root_link: Option<&str>,
         ee_link: &str,
         arm: &[&str],
-    ) -> Result<Chain, String> {
+    ) -> Result<Chain, ControllerError> {
         let mut link = robot
             .link(ee_link)
-            .ok_or_else(|| format!("robot has no link {ee_link:?}"))?;
+            .ok_or_else(|| ControllerError::NoLink(ee_link.to_string()))?;
         let root = match root_link {
             Some(r) => robot
                 .link(r)
-                .ok_or_else(|| format!("robot has no link {r:?} (IK root)"))?,
+                .ok_or_else(|| ControllerError::NoIkRoot(r.to_string()))?,
             None => robot.root,
         };
         let active_order = robot.active_joints();
         let mut rev = Vec::new();
         while link != root {
             let Some(j) = robot.parent_joint(link) else {
-                return Err(format!(
-                    "IK root link {:?} is not an ancestor of {ee_link:?}",
-                    robot.links[root].name
-                ));
+                return Err(ControllerError::NotAncestor {
+                    root: robot.links[root].name.clone(),
+                    ee: ee_link.to_string(),
+                });
             };
             let jd = &robot.joints[j];
             let q_index = active_order.iter().position(|&a| a == j);
@@ -95,13 +96,18 @@ impl Chain {
         rev.reverse();
         let movable = rev.iter().filter(|j| j.kind != JointKind::Fixed).count();
         if movable > MAX_CHAIN {
-            return Err(format!(
-                "chain to {ee_link} has {movable} joints; at most {MAX_CHAIN} supported"
-            ));
+            return Err(ControllerError::ChainTooLong {
+                ee: ee_link.to_string(),
+                movable,
+                max: MAX_CHAIN,
+            });
         }
         for a in arm {
             if !rev.iter().any(|j| j.name == *a) {
-                return Err(format!("arm joint {a:?} is not on the chain to {ee_link}"));
+                return Err(ControllerError::OffChain {
+                    joint: a.to_string(),
+                    ee: ee_link.to_string(),
+                });
             }
         }
         Ok(Chain {

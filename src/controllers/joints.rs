@@ -23,7 +23,7 @@ pub struct JointMap {
 
 impl JointMap {
     /// Resolves the active joints of `robot` in `model`. Errors name a missing joint.
-    pub fn resolve(model: &Model, robot: &RobotDesc) -> Result<JointMap, String> {
+    pub fn resolve(model: &Model, robot: &RobotDesc) -> Result<JointMap, super::ControllerError> {
         let mut m = JointMap {
             qpos_adr: Vec::new(),
             dof_adr: Vec::new(),
@@ -33,9 +33,7 @@ impl JointMap {
         };
         for j in robot.active_joints() {
             let jd = &robot.joints[j];
-            let id = model
-                .require_id(ObjType::Joint, &jd.name)
-                .map_err(|e| e.to_string())?;
+            let id = model.require_id(ObjType::Joint, &jd.name)?;
             m.qpos_adr.push(model.jnt_qposadr()[id] as usize);
             m.dof_adr.push(model.jnt_dofadr()[id] as usize);
             m.names.push(jd.name.clone());

@@ -140,7 +140,8 @@ impl Env {
             ..
         } = build_scene(spec, rs, &mode, config.sim, task.as_ref())?;
         let data = Data::new(model.clone()).map_err(|e| EnvError::Build(e.to_string()))?;
-        task.resolve(&model).map_err(EnvError::Build)?;
+        task.resolve(&model)
+            .map_err(|e| EnvError::Build(e.to_string()))?;
         let actors =
             state_dict::resolve_actors(&model, task.actor_names()).map_err(EnvError::Build)?;
         let n = robot.joints.len();

@@ -22,6 +22,51 @@ use crate::mujoco::{Model, Result as MjResult};
 use urdf::{JointKind, RobotDesc, ShapeGeom};
 use xml::{num, nums, Element};
 
+/// Why a robot could not be added to a scene: its options name something the robot lacks.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SceneError {
+    /// A drive or armature names a joint the robot does not have.
+    #[error("robot {robot} has no joint {joint:?}")]
+    NoJoint {
+        /// The robot.
+        robot: String,
+        /// The joint.
+        joint: String,
+    },
+    /// A site is attached to a link the robot does not have.
+    #[error("robot {robot} has no link {link:?} for a site")]
+    NoSiteLink {
+        /// The robot.
+        robot: String,
+        /// The link.
+        link: String,
+    },
+    /// A camera is attached to a link the robot does not have.
+    #[error("robot {robot} has no link {link:?} for camera {camera:?}")]
+    NoCameraLink {
+        /// The robot.
+        robot: String,
+        /// The link.
+        link: String,
+        /// The camera.
+        camera: String,
+    },
+    /// A collision exclusion names a link the robot does not have.
+    #[error("collision exclusion names unknown link {0:?} or {1:?}")]
+    UnknownExcludedLink(String, String),
+    /// A link without ground contact is not one of the robot's.
+    #[error("robot {robot} has no link {link:?}")]
+    NoLink {
+        /// The robot.
+        robot: String,
+        /// The link.
+        link: String,
+    },
+    /// A URDF mesh file could not be resolved.
+    #[error("mesh file {0:?} not found")]
+    MeshNotFound(String),
+}
+
 /// Default physics timestep in seconds, ManiSkill's (the env's `SimConfig` may choose
 /// another).
 pub const TIMESTEP: f64 = 0.01;
@@ -317,7 +362,7 @@ impl Scene {
         robot: &RobotDesc,
         opts: &RobotOptions,
         mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
-    ) -> std::result::Result<(), String> {
+    ) -> std::result::Result<(), SceneError> {
         for name in opts
             .drives
             .iter()
@@ -325,23 +370,27 @@ impl Scene {
             .chain(opts.armature.iter().map(|a| &a.0))
         {
             if robot.joint(name).is_none() {
-                return Err(format!("robot {} has no joint {name:?}", robot.name));
+                return Err(SceneError::NoJoint {
+                    robot: robot.name.clone(),
+                    joint: name.clone(),
+                });
             }
         }
         for (_, link, _) in &opts.sites {
             if robot.link(link).is_none() {
-                return Err(format!(
-                    "robot {} has no link {link:?} for a site",
-                    robot.name
-                ));
+                return Err(SceneError::NoSiteLink {
+                    robot: robot.name.clone(),
+                    link: link.to_string(),
+                });
             }
         }
         for c in &opts.cameras {
             if robot.link(&c.link).is_none() {
-                return Err(format!(
-                    "robot {} has no link {:?} for camera {:?}",
-                    robot.name, c.link, c.name
-                ));
+                return Err(SceneError::NoCameraLink {
+                    robot: robot.name.clone(),
+                    link: c.link.to_string(),
+                    camera: c.name.to_string(),
+                });
             }
         }
         let root_body = self.link_body(robot, robot.root, opts, mesh_bytes, &opts.base)?;
@@ -365,9 +414,7 @@ impl Scene {
         let mut seen = std::collections::HashSet::new();
         for (a, b) in pairs {
             let (Some(la), Some(lb)) = (robot.link(&a), robot.link(&b)) else {
-                return Err(format!(
-                    "collision exclusion names unknown link {a:?} or {b:?}"
-                ));
+                return Err(SceneError::UnknownExcludedLink(a, b));
             };
             let key = if a < b {
                 (a.clone(), b.clone())
@@ -423,7 +470,10 @@ impl Scene {
         }
         for link in &opts.no_ground_contact {
             if robot.link(link).is_none() {
-                return Err(format!("robot {} has no link {link:?}", robot.name));
+                return Err(SceneError::NoLink {
+                    robot: robot.name.clone(),
+                    link: link.to_string(),
+                });
             }
         }
         Ok(())
@@ -436,7 +486,7 @@ impl Scene {
         opts: &RobotOptions,
         mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
         pose: &Isometry3<f64>,
-    ) -> std::result::Result<Element, String> {
+    ) -> std::result::Result<Element, SceneError> {
         let l = &robot.links[link];
         let mut body = pose_attrs(Element::new("body").attr("name", &l.name), pose);
         match &l.inertial {
@@ -586,7 +636,7 @@ impl Scene {
         s: &urdf::Shape,
         mesh_name: &str,
         mesh_bytes: &dyn Fn(&str) -> Option<Vec<u8>>,
-    ) -> std::result::Result<Element, String> {
+    ) -> std::result::Result<Element, SceneError> {
         let g = pose_attrs(Element::new("geom"), &s.origin);
         Ok(match &s.geom {
             ShapeGeom::Box(h) => g.attr("type", "box").attr_nums("size", h),
@@ -595,7 +645,7 @@ impl Scene {
             ShapeGeom::Sphere(r) => g.attr("type", "sphere").attr_nums("size", &[*r]),
             ShapeGeom::Mesh(file, scale) => {
                 let bytes =
-                    mesh_bytes(file).ok_or_else(|| format!("mesh file {file:?} not found"))?;
+                    mesh_bytes(file).ok_or_else(|| SceneError::MeshNotFound(file.to_string()))?;
                 let ext = file
                     .rsplit('.')
                     .next()

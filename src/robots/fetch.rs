@@ -138,10 +138,7 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
         let kind = PartKind::joint_delta(3, JOINT_DELTA, false);
         PartSpec::new("body", &BODY, kind, BODY_GAINS)
     };
-    let base = PartKind::BaseForwardVel {
-        lin: (-1.0, 1.0),
-        ang: (-YAW_RATE_MAX, YAW_RATE_MAX),
-    };
+    let base = PartKind::base_forward_vel((-1.0, 1.0), (-YAW_RATE_MAX, YAW_RATE_MAX));
     Some(vec![
         PartSpec::new("arm", &ARM, kind, ARM_GAINS),
         gripper,

@@ -457,7 +457,7 @@ impl RobotIds {
     /// Resolves the ids of `robot` in `model`. Errors name what is missing.
     pub fn resolve(model: &Model, robot: &RobotDesc, spec: &RobotSpec) -> Result<RobotIds, String> {
         let mut r = RobotIds {
-            joints: JointMap::resolve(model, robot)?,
+            joints: JointMap::resolve(model, robot).map_err(|e| e.to_string())?,
             bodies: Vec::new(),
             root_body: 0,
             link_bodies: Vec::new(),
@@ -595,20 +595,23 @@ impl TableScene {
     ) -> Result<TableScene, String> {
         let desc = spec.description()?;
         let (mode, parts) = spec.control_mode(mode)?;
-        let controller = Controller::new(mode, parts, &desc)?;
+        let controller = Controller::new(mode, parts, &desc).map_err(|e| e.to_string())?;
         let drive_list = controller.drives(&desc);
         let mut scene = crate::mjcf::Scene::new(name, timestep);
         scene.add_table_scene();
-        scene.add_robot(
-            &desc,
-            &spec.options(spec.table_base(), drive_list.clone()),
-            &|_| None,
-        )?;
+        scene
+            .add_robot(
+                &desc,
+                &spec.options(spec.table_base(), drive_list.clone()),
+                &|_| None,
+            )
+            .map_err(|e| e.to_string())?;
         extra(&mut scene);
         let mjcf = scene.finish();
         let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
         let ids = RobotIds::resolve(&model, &desc, spec)?;
-        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)?;
+        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)
+            .map_err(|e| e.to_string())?;
         Ok(TableScene {
             model,
             desc,

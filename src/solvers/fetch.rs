@@ -32,12 +32,12 @@
 //! the base yaw are held.
 use nalgebra::Vector3;
 
+use super::body_id;
 use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, PITCH_NEAR,
 };
 use super::{body_xyz, tcp_xyz, Grasp, Phases, Policy, APPROACH_TOL, CLOSE_STEPS, FETCH_GRIPPER};
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// Gripper pitch for the farthest cubes (rad below the horizontal). With the other tasks'
 /// 5° the stretched arm's forearm rests on the table top and holds the gripper ≈ 1 cm above

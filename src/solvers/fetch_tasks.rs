@@ -28,6 +28,7 @@
 
 use nalgebra::Vector3;
 
+use super::body_id;
 use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, PITCH_FAR,
 };
@@ -35,7 +36,6 @@ use super::place_sphere::{PlaceSphereSolver, ALIGN_TOL, RELEASE_BELOW};
 use super::poke_cube::PokeCubeSolver;
 use super::{body_xyz, Policy, FETCH_GRIPPER};
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// Orientation tolerance before leaving the approach (rad).
 const ROT_TOL: f64 = 0.1;

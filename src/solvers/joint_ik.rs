@@ -18,10 +18,10 @@
 //! Positions are read from MuJoCo before the step; nothing is allocated per step.
 use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
 
+use super::body_id;
 use super::{body_xyz, Phases, Policy, APPROACH_TOL, DESCEND_TOL};
 use crate::controllers::ik::Chain;
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// Most arm joints an IK chain may have.
 const MAX_ARM: usize = 6;
@@ -128,7 +128,7 @@ impl JointIkPickCube {
             .iter()
             .map(|s| s.as_str())
             .collect();
-        let chain = Chain::new(&desc, robot.link, &arm)?;
+        let chain = Chain::new(&desc, robot.link, &arm).map_err(|e| e.to_string())?;
         let mut limits = [(0.0, 0.0); MAX_ARM];
         for (l, r) in limits
             .iter_mut()

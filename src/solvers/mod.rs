@@ -230,6 +230,11 @@ impl Phases {
     }
 }
 
+/// A task body's id in the env's model (the task layer's lookup, its error as text).
+fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, String> {
+    crate::tasks::body_id(model, name).map_err(|e| e.to_string())
+}
+
 /// A body's world position, read from MuJoCo.
 pub fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
     Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])

@@ -3,9 +3,9 @@
 //! Above the cube, down to it, close for [`CLOSE_STEPS`](super::CLOSE_STEPS) steps, carry to the goal. Positions
 //! are the robot's `tcp_pose` and the cube and goal centres, read before each step.
 //! Robot-generic: the gripper commands are a parameter.
+use super::body_id;
 use super::{body_xyz, ee_action, tcp_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// The PickCube policy.
 #[derive(Debug)]

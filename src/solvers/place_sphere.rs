@@ -16,9 +16,9 @@
 //! damping of free bodies is not emulated (README, Physics).
 use nalgebra::Vector3;
 
+use super::body_id;
 use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// Carrying height of the TCP (m) and its tolerance.
 const LIFT_Z: f64 = 0.08;

@@ -15,9 +15,9 @@
 //! and reached" stages before success (upstream's `reached` measures to the peg centre).
 use nalgebra::Vector3;
 
+use super::body_id;
 use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
-use crate::tasks::body_id;
 use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).

@@ -16,12 +16,12 @@
 //! 0.81 rad (closed) as targets.
 use nalgebra::{UnitQuaternion, Vector3};
 
+use super::body_id;
 use super::{
     body_quat, body_xyz, descended, tcp_xyz, write_pos, write_rot, Grasp, Phases, Policy,
     ACTION_SCALE, XARM6_ABS_GRIPPER,
 };
 use crate::env::Env;
-use crate::tasks::body_id;
 
 /// Steps the gripper closes before lifting (the absolute target closes it in ~3 steps; the
 /// delta gripper of `pd_ee_delta_pos` needs 8).

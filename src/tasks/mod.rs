@@ -2,22 +2,79 @@
 //! extras, `evaluate()`, dense reward — with every constant named once. This module holds
 //! what they share: the [`Task`] trait, the per-step [`TaskCtx`], the grasp check and pose
 //! helpers.
-/// Declares a task's `info` keys once: `pub const INFO_KEYS` (the names in upstream
-/// insertion order) and a `usize` index constant per key, from one list of
-/// `INDEX = "name"` pairs.
-macro_rules! info_keys {
-    ($($idx:ident = $name:literal),+ $(,)?) => {
-        /// `evaluate()` keys in upstream insertion order.
-        pub const INFO_KEYS: [&str; info_keys!(@count $($idx)+)] = [$($name),+];
-        info_keys!(@index 0usize; $($idx)+);
+/// Declares a task's typed `evaluate()` result once: a struct with one named field per
+/// `info` key (the field name is the key, in upstream insertion order; `bool` flags and `f64`
+/// values), with its key list and the conversion to and from the env's `info` slice
+/// (bools as 0/1).
+macro_rules! evaluation {
+    ($(#[$m:meta])* pub struct $name:ident {
+        $($(#[$fm:meta])* $field:ident: $ty:ty),+ $(,)?
+    }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct $name {
+            $($(#[$fm])* pub $field: $ty),+
+        }
+
+        impl $name {
+            /// The `info` keys (the field names), in upstream insertion order.
+            pub const KEYS: &'static [&'static str] = &[$(stringify!($field)),+];
+
+            /// Whether `key` is one of the boolean flags.
+            pub fn is_flag(key: &str) -> bool {
+                [$((stringify!($field), <$ty as $crate::tasks::InfoValue>::IS_FLAG)),+]
+                    .iter()
+                    .any(|&(k, flag)| flag && k == key)
+            }
+
+            /// Writes the result into `info` (aligned with [`Self::KEYS`]).
+            pub fn write(&self, info: &mut [f64]) {
+                let values = [$($crate::tasks::InfoValue::to_info(self.$field)),+];
+                info[..values.len()].copy_from_slice(&values);
+            }
+
+            /// Reads a result that [`Self::write`] wrote.
+            pub fn read(info: &[f64]) -> Self {
+                let mut k = 0usize;
+                $(
+                    let $field = $crate::tasks::InfoValue::from_info(info[k]);
+                    k += 1;
+                )+
+                let _ = k;
+                Self { $($field),+ }
+            }
+        }
     };
-    (@count) => { 0usize };
-    (@count $head:ident $($tail:ident)*) => { 1usize + info_keys!(@count $($tail)*) };
-    (@index $n:expr;) => {};
-    (@index $n:expr; $head:ident $($tail:ident)*) => {
-        const $head: usize = $n;
-        info_keys!(@index $n + 1usize; $($tail)*);
-    };
+}
+
+/// A value of an `evaluate()` result as stored in the env's `info` slice.
+pub trait InfoValue: Copy {
+    /// Whether the value is a boolean flag.
+    const IS_FLAG: bool;
+    /// The value in the `info` slice.
+    fn to_info(self) -> f64;
+    /// The value of an `info` entry.
+    fn from_info(x: f64) -> Self;
+}
+
+impl InfoValue for bool {
+    const IS_FLAG: bool = true;
+    fn to_info(self) -> f64 {
+        self as u8 as f64
+    }
+    fn from_info(x: f64) -> bool {
+        x > 0.0
+    }
+}
+
+impl InfoValue for f64 {
+    const IS_FLAG: bool = false;
+    fn to_info(self) -> f64 {
+        self
+    }
+    fn from_info(x: f64) -> f64 {
+        x
+    }
 }
 
 pub mod pick_cube;
@@ -27,7 +84,7 @@ pub mod poke_cube;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model, ObjType};
+use crate::mujoco::{Data, MjError, Model, ObjType};
 pub use crate::obs::ObsWriter;
 use crate::rng::TorchGenerator;
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
@@ -121,7 +178,7 @@ pub trait Task: Send + std::fmt::Debug {
     /// Adds the task's props and cameras to the scene.
     fn build(&self, scene: &mut Scene);
     /// Resolves the task's names to ids in the compiled model.
-    fn resolve(&mut self, model: &Model) -> Result<(), String>;
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError>;
     /// Body whose contacts with the fingers decide `is_grasping`.
     fn grasp_object(&self) -> usize;
     /// Places the objects for a new episode, drawing from `torch` in upstream order.
@@ -156,17 +213,13 @@ pub fn body_pos(data: &Data, body: usize) -> Vector3<f64> {
 }
 
 /// Resolves a body id with an error naming it.
-pub fn body_id(model: &Model, name: &str) -> Result<usize, String> {
-    model
-        .require_id(ObjType::Body, name)
-        .map_err(|e| e.to_string())
+pub fn body_id(model: &Model, name: &str) -> Result<usize, MjError> {
+    model.require_id(ObjType::Body, name)
 }
 
 /// qpos address of a body's free joint.
-pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, String> {
-    let j = model
-        .require_id(ObjType::Joint, body)
-        .map_err(|e| e.to_string())?;
+pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, MjError> {
+    let j = model.require_id(ObjType::Joint, body)?;
     Ok(model.jnt_qposadr()[j] as usize)
 }
 
@@ -277,5 +330,42 @@ pub fn add_cameras(scene: &mut Scene, cams: (CameraDef, CameraDef)) {
             look_at_mujoco(c.eye, c.target),
             c.fovy.to_degrees(),
         );
+    }
+}
+
+#[cfg(test)]
+mod evaluation_tests {
+    use super::pick_cube::PickCubeEval;
+    use super::poke_cube::PokeCubeEval;
+
+    #[test]
+    fn results_round_trip_through_the_info_slice() {
+        let e = PokeCubeEval {
+            success: false,
+            is_cube_placed: true,
+            is_peg_cube_fit: false,
+            is_peg_grasped: true,
+            angle_diff: 0.25,
+            head_to_cube_dist: 0.125,
+        };
+        let mut info = [f64::NAN; 6];
+        e.write(&mut info);
+        assert_eq!(info, [0.0, 1.0, 0.0, 1.0, 0.25, 0.125]);
+        assert_eq!(PokeCubeEval::read(&info), e);
+        assert_eq!(
+            PokeCubeEval::KEYS,
+            [
+                "success",
+                "is_cube_placed",
+                "is_peg_cube_fit",
+                "is_peg_grasped",
+                "angle_diff",
+                "head_to_cube_dist"
+            ]
+        );
+        assert!(PokeCubeEval::is_flag("is_peg_grasped"));
+        assert!(!PokeCubeEval::is_flag("angle_diff"));
+        assert!(!PokeCubeEval::is_flag("no_such_key"));
+        assert!(PickCubeEval::KEYS.iter().all(|k| PickCubeEval::is_flag(k)));
     }
 }

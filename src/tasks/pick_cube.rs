@@ -6,10 +6,10 @@ use nalgebra::Vector3;
 
 use super::{
     add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, yaw_quat_f32, CameraDef,
-    ObsWriter, Task, TaskCtx,
+    InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::{uniform_scaled, TorchGenerator};
 use crate::robots::RobotId;
 
@@ -93,11 +93,18 @@ pub fn config_for(robot: RobotId) -> PickCubeConfig {
     }
 }
 
-info_keys! {
-    SUCCESS = "success",
-    IS_OBJ_PLACED = "is_obj_placed",
-    IS_ROBOT_STATIC = "is_robot_static",
-    IS_GRASPED = "is_grasped",
+evaluation! {
+    /// PickCube's `evaluate()`.
+    pub struct PickCubeEval {
+        /// The cube is at the goal and the robot is static.
+        success: bool,
+        /// The cube is within `goal_thresh` of the goal.
+        is_obj_placed: bool,
+        /// The robot's joints are (nearly) at rest.
+        is_robot_static: bool,
+        /// The fingers grasp the cube.
+        is_grasped: bool,
+    }
 }
 
 /// PickCube-v1.
@@ -136,6 +143,19 @@ impl PickCube {
             RobotId::Fetch | RobotId::Xarm6Robotiq => 0,
         }
     }
+
+    /// `evaluate()`, typed.
+    pub fn eval(&self, ctx: &TaskCtx) -> PickCubeEval {
+        let d = (ctx.body_pos(self.goal) - ctx.body_pos(self.cube)).norm();
+        let placed = d <= self.cfg.goal_thresh as f64;
+        let stat = ctx.is_robot_static();
+        PickCubeEval {
+            success: placed && stat,
+            is_obj_placed: placed,
+            is_robot_static: stat,
+            is_grasped: ctx.is_grasping(),
+        }
+    }
 }
 
 impl Task for PickCube {
@@ -151,7 +171,7 @@ impl Task for PickCube {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.cube = body_id(model, "cube")?;
         self.cube_qadr = free_joint_qpos(model, "cube")?;
         self.goal = body_id(model, "goal_site")?;
@@ -196,24 +216,19 @@ impl Task for PickCube {
 
     // ---- evaluate ------------------------------------------------------------------------
     fn info_keys(&self) -> &'static [&'static str] {
-        &INFO_KEYS
+        PickCubeEval::KEYS
     }
 
     fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
-        let d = (ctx.body_pos(self.goal) - ctx.body_pos(self.cube)).norm();
-        let placed = d <= self.cfg.goal_thresh as f64;
-        let stat = ctx.is_robot_static();
-        info[SUCCESS] = (placed && stat) as u8 as f64;
-        info[IS_OBJ_PLACED] = placed as u8 as f64;
-        info[IS_ROBOT_STATIC] = stat as u8 as f64;
-        info[IS_GRASPED] = ctx.is_grasping() as u8 as f64;
+        self.eval(ctx).write(info);
     }
 
     // ---- observation extras ------------------------------------------------------------------
     fn observe_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut ObsWriter) {
         let tcp = Vector3::from(ctx.tcp_pos);
         let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
-        out.scalar("is_grasped", info[IS_GRASPED]);
+        let e = PickCubeEval::read(info);
+        out.scalar("is_grasped", e.is_grasped.to_info());
         out.pose("tcp_pose", tcp, ctx.tcp_quat);
         out.vec3("goal_pos", goal);
         if state {
@@ -225,18 +240,19 @@ impl Task for PickCube {
 
     // ---- dense reward (max 5) ----------------------------------------------------------------
     fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
-        if info[SUCCESS] > 0.0 {
+        let e = PickCubeEval::read(info);
+        if e.success {
             return MAX_REWARD;
         }
         let tcp = Vector3::from(ctx.tcp_pos);
         let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
-        let grasped = info[IS_GRASPED];
+        let grasped = e.is_grasped.to_info();
         let mut r = 1.0 - (5.0 * (cube - tcp).norm()).tanh();
         r += grasped;
         r += (1.0 - (5.0 * (goal - cube).norm()).tanh()) * grasped;
         let n = ctx.qvel.len() - self.static_drop();
         let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
-        r += (1.0 - (5.0 * qv).tanh()) * info[IS_OBJ_PLACED];
+        r += (1.0 - (5.0 * qv).tanh()) * e.is_obj_placed.to_info();
         r
     }
 

@@ -2,11 +2,11 @@
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, CameraDef, ObsWriter,
-    Task, TaskCtx,
+    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, CameraDef, InfoValue,
+    ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §3) ---------------------------------------------------------------
@@ -34,11 +34,18 @@ const STATIC_ANG: f64 = 0.5;
 /// The `ungrasp` term when the sphere is not grasped.
 const UNGRASP_FREE: f64 = 16.0;
 
-info_keys! {
-    IS_OBJ_GRASPED = "is_obj_grasped",
-    IS_OBJ_ON_BIN = "is_obj_on_bin",
-    IS_OBJ_STATIC = "is_obj_static",
-    SUCCESS = "success",
+evaluation! {
+    /// PlaceSphere's `evaluate()`.
+    pub struct PlaceSphereEval {
+        /// The fingers grasp the sphere.
+        is_obj_grasped: bool,
+        /// The sphere rests on the bin's floor, within the bin.
+        is_obj_on_bin: bool,
+        /// The sphere is (nearly) at rest.
+        is_obj_static: bool,
+        /// On the bin, static and released.
+        success: bool,
+    }
 }
 
 /// The five bin boxes (centre, half extents) in the bin frame: floor, walls −x, +x, −y, +y.
@@ -70,6 +77,22 @@ impl PlaceSphere {
     pub fn new() -> Self {
         Self::default()
     }
+
+    /// `evaluate()`, typed.
+    pub fn eval(&self, ctx: &TaskCtx) -> PlaceSphereEval {
+        let o = ctx.body_pos(self.sphere) - ctx.body_pos(self.bin);
+        let on_bin =
+            o.xy().norm() <= ON_BIN_XY && (o.z - RADIUS - SHORT_SIDE_HALF).abs() <= ON_BIN_Z;
+        let (lin, ang) = ctx.body_velocity(self.sphere);
+        let stat = lin.norm() <= STATIC_LIN && ang.norm() <= STATIC_ANG;
+        let grasped = ctx.is_grasping();
+        PlaceSphereEval {
+            is_obj_grasped: grasped,
+            is_obj_on_bin: on_bin,
+            is_obj_static: stat,
+            success: on_bin && stat && !grasped,
+        }
+    }
 }
 
 impl Task for PlaceSphere {
@@ -84,7 +107,7 @@ impl Task for PlaceSphere {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.sphere = body_id(model, "sphere")?;
         self.sphere_qadr = free_joint_qpos(model, "sphere")?;
         self.bin = body_id(model, "bin")?;
@@ -118,27 +141,19 @@ impl Task for PlaceSphere {
 
     // ---- evaluate ------------------------------------------------------------------------
     fn info_keys(&self) -> &'static [&'static str] {
-        &INFO_KEYS
+        PlaceSphereEval::KEYS
     }
 
     fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
-        let o = ctx.body_pos(self.sphere) - ctx.body_pos(self.bin);
-        let on_bin =
-            o.xy().norm() <= ON_BIN_XY && (o.z - RADIUS - SHORT_SIDE_HALF).abs() <= ON_BIN_Z;
-        let (lin, ang) = ctx.body_velocity(self.sphere);
-        let stat = lin.norm() <= STATIC_LIN && ang.norm() <= STATIC_ANG;
-        let grasped = ctx.is_grasping();
-        info[IS_OBJ_GRASPED] = grasped as u8 as f64;
-        info[IS_OBJ_ON_BIN] = on_bin as u8 as f64;
-        info[IS_OBJ_STATIC] = stat as u8 as f64;
-        info[SUCCESS] = (on_bin && stat && !grasped) as u8 as f64;
+        self.eval(ctx).write(info);
     }
 
     // ---- observation extras ------------------------------------------------------------------
     fn observe_extra(&self, ctx: &TaskCtx, info: &[f64], state: bool, out: &mut ObsWriter) {
         let tcp = ctx.tcp_link_pos();
         let sphere = ctx.body_pos(self.sphere);
-        out.scalar("is_grasped", info[IS_OBJ_GRASPED]);
+        let e = PlaceSphereEval::read(info);
+        out.scalar("is_grasped", e.is_obj_grasped.to_info());
         out.pose("tcp_pose", tcp, ctx.tcp_quat);
         out.vec3("bin_pos", ctx.body_pos(self.bin));
         if state {
@@ -151,7 +166,8 @@ impl Task for PlaceSphere {
     fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
         let tcp = ctx.tcp_link_pos();
         let (sphere, bin) = (ctx.body_pos(self.sphere), ctx.body_pos(self.bin));
-        let grasped = info[IS_OBJ_GRASPED] > 0.0;
+        let e = PlaceSphereEval::read(info);
+        let grasped = e.is_obj_grasped;
         let mut r = 2.0 * (1.0 - (5.0 * (tcp - sphere).norm()).tanh());
         let bin_top = bin + Vector3::new(0.0, 0.0, SHORT_SIDE_HALF + RADIUS);
         let place = 1.0 - (5.0 * (bin_top - sphere).norm()).tanh();
@@ -168,10 +184,10 @@ impl Task for PlaceSphere {
         let (lin, ang) = ctx.body_velocity(self.sphere);
         let stat = 1.0 - (10.0 * lin.norm() + ang.norm()).tanh();
         let robot_static = ctx.is_robot_static() as u8 as f64;
-        if info[IS_OBJ_ON_BIN] > 0.0 {
+        if e.is_obj_on_bin {
             r = 6.0 + (ungrasp + stat + robot_static) / 3.0;
         }
-        if info[SUCCESS] > 0.0 {
+        if e.success {
             r = MAX_REWARD;
         }
         r

@@ -25,7 +25,7 @@ use super::{
 };
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, Model};
+use crate::mujoco::{Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §2) ---------------------------------------------------------------
@@ -62,13 +62,22 @@ const REACHED_DIST: f64 = 0.01;
 /// Trailing qvel entries the static reward term ignores (both supported robots).
 const STATIC_DROP: usize = 2;
 
-info_keys! {
-    SUCCESS = "success",
-    IS_CUBE_PLACED = "is_cube_placed",
-    IS_PEG_CUBE_FIT = "is_peg_cube_fit",
-    IS_PEG_GRASPED = "is_peg_grasped",
-    ANGLE_DIFF = "angle_diff",
-    HEAD_TO_CUBE_DIST = "head_to_cube_dist",
+evaluation! {
+    /// PokeCube's `evaluate()`.
+    pub struct PokeCubeEval {
+        /// The cube is in the goal region and the robot is static.
+        success: bool,
+        /// The cube's centre is within the goal region (xy).
+        is_cube_placed: bool,
+        /// The peg head is aligned with and close to the cube.
+        is_peg_cube_fit: bool,
+        /// The fingers grasp the peg.
+        is_peg_grasped: bool,
+        /// |yaw(peg) − yaw(cube)| (rad).
+        angle_diff: f64,
+        /// Peg-head-to-cube distance in xy (m).
+        head_to_cube_dist: f64,
+    }
 }
 
 /// The target's rings `(radius, half thickness, colour)`, outermost first:
@@ -118,6 +127,29 @@ impl PokeCube {
             None => (Vector3::from(ctx.tcp_pos), ctx.tcp_quat),
         }
     }
+
+    /// `evaluate()`, typed.
+    pub fn eval(&self, ctx: &TaskCtx) -> PokeCubeEval {
+        let (cube, peg, goal) = (
+            ctx.body_pos(self.cube),
+            ctx.body_pos(self.peg),
+            ctx.body_pos(self.goal),
+        );
+        let placed = (cube.xy() - goal.xy()).norm() < GOAL_RADIUS;
+        // The head pose's rotation is the peg's.
+        let angle_diff =
+            (yaw_xyz(ctx.body_quat(self.peg)) - yaw_xyz(ctx.body_quat(self.cube))).abs();
+        let head_to_cube = (peg_head(peg).xy() - cube.xy()).norm();
+        let fit = angle_diff < FIT_ANGLE && head_to_cube <= FIT_DIST;
+        PokeCubeEval {
+            success: placed && ctx.is_robot_static(),
+            is_cube_placed: placed,
+            is_peg_cube_fit: fit,
+            is_peg_grasped: ctx.is_grasping(),
+            angle_diff,
+            head_to_cube_dist: head_to_cube,
+        }
+    }
 }
 
 impl Task for PokeCube {
@@ -136,7 +168,7 @@ impl Task for PokeCube {
         add_cameras(scene, self.cameras());
     }
 
-    fn resolve(&mut self, model: &Model) -> Result<(), String> {
+    fn resolve(&mut self, model: &Model) -> Result<(), MjError> {
         self.cube = body_id(model, "cube")?;
         self.cube_qadr = free_joint_qpos(model, "cube")?;
         self.peg = body_id(model, "peg")?;
@@ -184,27 +216,11 @@ impl Task for PokeCube {
 
     // ---- evaluate ------------------------------------------------------------------------
     fn info_keys(&self) -> &'static [&'static str] {
-        &INFO_KEYS
+        PokeCubeEval::KEYS
     }
 
     fn evaluate(&self, ctx: &TaskCtx, info: &mut [f64]) {
-        let (cube, peg, goal) = (
-            ctx.body_pos(self.cube),
-            ctx.body_pos(self.peg),
-            ctx.body_pos(self.goal),
-        );
-        let placed = (cube.xy() - goal.xy()).norm() < GOAL_RADIUS;
-        // The head pose's rotation is the peg's.
-        let angle_diff =
-            (yaw_xyz(ctx.body_quat(self.peg)) - yaw_xyz(ctx.body_quat(self.cube))).abs();
-        let head_to_cube = (peg_head(peg).xy() - cube.xy()).norm();
-        let fit = angle_diff < FIT_ANGLE && head_to_cube <= FIT_DIST;
-        info[SUCCESS] = (placed && ctx.is_robot_static()) as u8 as f64;
-        info[IS_CUBE_PLACED] = placed as u8 as f64;
-        info[IS_PEG_CUBE_FIT] = fit as u8 as f64;
-        info[IS_PEG_GRASPED] = ctx.is_grasping() as u8 as f64;
-        info[ANGLE_DIFF] = angle_diff;
-        info[HEAD_TO_CUBE_DIST] = head_to_cube;
+        self.eval(ctx).write(info);
     }
 
     // ---- observation extras ------------------------------------------------------------------
@@ -229,7 +245,8 @@ impl Task for PokeCube {
 
     // ---- dense reward (max 10) -----------------------------------------------------------------
     fn dense_reward(&self, ctx: &TaskCtx, info: &[f64]) -> f64 {
-        if info[SUCCESS] > 0.0 {
+        let e = PokeCubeEval::read(info);
+        if e.success {
             return MAX_REWARD;
         }
         let (tcp, _) = self.tcp(ctx);
@@ -242,18 +259,18 @@ impl Task for PokeCube {
         let d = (tcp - peg).norm();
         let mut r = 2.0 * (1.0 - (5.0 * d).tanh());
         // Grasped (and reached): head close to the cube and aligned with it.
-        let grasped_reached = info[IS_PEG_GRASPED] > 0.0 && d < REACHED_DIST;
+        let grasped_reached = e.is_peg_grasped && d < REACHED_DIST;
         if grasped_reached {
-            let close = 1.0 - (5.0 * info[HEAD_TO_CUBE_DIST]).tanh();
-            let align = 1.0 - (5.0 * info[ANGLE_DIFF]).tanh();
+            let close = 1.0 - (5.0 * e.head_to_cube_dist).tanh();
+            let align = 1.0 - (5.0 * e.angle_diff).tanh();
             r = 4.0 + close + align;
         }
         // Fitted: cube towards the goal (3-D distance).
-        if info[IS_PEG_CUBE_FIT] > 0.0 && grasped_reached {
+        if e.is_peg_cube_fit && grasped_reached {
             r = 7.0 + (1.0 - (5.0 * (goal - cube).norm()).tanh());
         }
         // Placed: robot at rest.
-        if info[IS_CUBE_PLACED] > 0.0 {
+        if e.is_cube_placed {
             let n = ctx.qvel.len().saturating_sub(STATIC_DROP);
             let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
             r += 1.0 - (5.0 * qv).tanh();
@@ -266,7 +283,7 @@ impl Task for PokeCube {
     }
 
     fn bool_info(&self, key: &str) -> bool {
-        self.info_keys().contains(&key) && !matches!(key, "angle_diff" | "head_to_cube_dist")
+        PokeCubeEval::is_flag(key)
     }
 
     fn actor_names(&self) -> &'static [&'static str] {

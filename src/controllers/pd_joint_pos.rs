@@ -1,0 +1,128 @@
+//! `PDJointPosController` and `PDJointPosMimicController` (ManiSkill's
+//! `agents/controllers/pd_joint_pos.py`): absolute or delta joint position targets — the
+//! `pd_joint_pos`, `pd_joint_delta_pos` and `pd_joint_target_delta_pos` arm modes and every
+//! gripper — with mimic followers that track `multiplier · control + offset`.
+use super::{clip_scale, Drives, JointMap, PartController, PartCore, Target};
+
+/// Configuration of a joint position part.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointPosConfig {
+    /// Delta from the measured position (or from the last target with `use_target`).
+    pub use_delta: bool,
+    /// Accumulate on the previous target (and expose it as `target_qpos`).
+    pub use_target: bool,
+    /// Clip to [−1, 1] and rescale to [low, high].
+    pub normalize: bool,
+    /// Lower bounds per action entry (None ⇒ the joint limits).
+    pub low: Option<Vec<f32>>,
+    /// Upper bounds per action entry (None ⇒ the joint limits).
+    pub high: Option<Vec<f32>>,
+}
+
+/// A joint position part with its mimic followers.
+#[derive(Debug, Clone)]
+pub struct PdJointPos {
+    cfg: JointPosConfig,
+    core: PartCore,
+    /// (follower index, position of its control joint in the part, multiplier, offset).
+    followers: Vec<(usize, usize, f32, f32)>,
+}
+
+impl PdJointPos {
+    /// Builds the part on the action joints `idx` (ManiSkill indices); `limits(i)` gives the
+    /// limits of joint i, the bounds of a part that is not normalised and has no explicit
+    /// bounds.
+    pub fn new(
+        cfg: JointPosConfig,
+        idx: Vec<usize>,
+        followers: Vec<(usize, usize, f32, f32)>,
+        limits: impl Fn(usize) -> (f32, f32),
+    ) -> PdJointPos {
+        let n = idx.len();
+        let (low, high) = if cfg.normalize {
+            (vec![-1.0; n], vec![1.0; n])
+        } else {
+            let l = cfg
+                .low
+                .clone()
+                .unwrap_or_else(|| idx.iter().map(|&i| limits(i).0).collect());
+            let h = cfg
+                .high
+                .clone()
+                .unwrap_or_else(|| idx.iter().map(|&i| limits(i).1).collect());
+            (l, h)
+        };
+        PdJointPos {
+            cfg,
+            core: PartCore::new(idx, low, high),
+            followers,
+        }
+    }
+
+    fn drive_followers(&self, drives: &mut Drives) {
+        for &(fi, ci, m, o) in &self.followers {
+            let t = m * self.core.target_q[ci] + o;
+            drives.set_joint_target(fi, t as f64, 0.0);
+        }
+    }
+}
+
+impl PartController for PdJointPos {
+    fn core(&self) -> &PartCore {
+        &self.core
+    }
+
+    fn core_mut(&mut self) -> &mut PartCore {
+        &mut self.core
+    }
+
+    fn drive_joints(&self, out: &mut Vec<usize>) {
+        out.extend_from_slice(&self.core.idx);
+        out.extend(self.followers.iter().map(|f| f.0));
+    }
+
+    fn set_action(&mut self, a: &[f32], joints: &JointMap, q: &[f64], drives: &mut Drives) {
+        let cfg = &self.cfg;
+        let core = &mut self.core;
+        for (k, &i) in core.idx.iter().enumerate() {
+            let x = if cfg.normalize {
+                let lo = cfg
+                    .low
+                    .as_ref()
+                    .map(|l| l[k])
+                    .unwrap_or(joints.limits[i].0 as f32);
+                let hi = cfg
+                    .high
+                    .as_ref()
+                    .map(|h| h[k])
+                    .unwrap_or(joints.limits[i].1 as f32);
+                clip_scale(a[k], lo, hi)
+            } else {
+                a[k]
+            };
+            core.target_q[k] = match (cfg.use_delta, cfg.use_target) {
+                (true, true) => core.target_q[k] + x,
+                (true, false) => q[i] as f32 + x,
+                (false, _) => x,
+            };
+            drives.set_joint_target(i, core.target_q[k] as f64, 0.0);
+        }
+        self.drive_followers(drives);
+    }
+
+    fn target(&self) -> Option<Target<'_>> {
+        self.cfg
+            .use_target
+            .then_some(Target::Qpos(&self.core.target_q))
+    }
+
+    fn restore_target(&mut self, v: &[f64], drives: &mut Drives) {
+        for (t, &x) in self.core.target_q.iter_mut().zip(v) {
+            *t = x as f32;
+        }
+        for (k, &i) in self.core.idx.iter().enumerate() {
+            drives.set_joint_target(i, self.core.target_q[k] as f64, 0.0);
+        }
+        self.drive_followers(drives);
+    }
+}
