@@ -10,34 +10,13 @@ use super::rollout::{info, InfoSummary};
 /// shards, plus each shard's own summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct DirSummary {
-    /// The directory.
-    pub file: String,
-    /// Env id (the same in every shard).
-    pub env: String,
-    /// Robot uid (the same in every shard).
-    pub robot: String,
-    /// Control mode (the same in every shard).
-    pub control_mode: String,
-    /// Observation mode (the same in every shard).
-    pub obs_mode: String,
-    /// Reward mode (the same in every shard).
-    pub reward_mode: String,
-    /// mjskill version that wrote the first shard.
-    pub version: String,
-    /// Finished episodes of all shards.
-    pub episodes: usize,
-    /// Successful finished episodes of all shards.
-    pub successes: usize,
-    /// Steps of the finished episodes of all shards.
-    pub steps: usize,
-    /// Mean return of all finished episodes.
-    pub mean_return: f64,
-    /// Whether every shard was closed properly.
-    pub complete: bool,
-    /// Steps of episodes that were cut short, summed over the shards (None if none was).
-    pub unfinished_steps: Option<usize>,
-    /// With `--salvage`: each damaged shard's damage.
-    pub damage: Option<String>,
+    /// The dataset as one recording: `file` is the directory; env, robot, modes are the
+    /// shards' (the same in every shard), `version` the first shard's; counts, steps and
+    /// unfinished steps are summed, the mean return is over all finished episodes,
+    /// `complete` holds if every shard was closed properly, and with `--salvage` `damage`
+    /// names each damaged shard's damage.
+    #[serde(flatten)]
+    pub total: InfoSummary,
     /// Each shard's summary, in file-name order.
     pub shards: Vec<InfoSummary>,
 }
@@ -88,7 +67,7 @@ pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, String> {
         .iter()
         .filter_map(|s| s.damage.as_ref().map(|d| format!("{}: {d}", s.file)))
         .collect();
-    Ok(DirSummary {
+    let total = InfoSummary {
         file: dir.display().to_string(),
         env: first.env.clone(),
         robot: first.robot.clone(),
@@ -107,6 +86,6 @@ pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, String> {
         complete: shards.iter().all(|s| s.complete),
         unfinished_steps: (!unfinished.is_empty()).then(|| unfinished.iter().sum()),
         damage: (!damage.is_empty()).then(|| damage.join("; ")),
-        shards,
-    })
+    };
+    Ok(DirSummary { total, shards })
 }
