@@ -22,16 +22,17 @@
 //! * **Coupling.** Within a micro-step the drives of one articulation are solved together
 //!   by projected Gauss–Seidel on `W` ([`SWEEPS`] sweeps; the first sweep is exactly
 //!   PhysX's per-dof formula), each force clamped to its limit.
-//! * **Constraints.** Equality constraints that move an undriven joint (the WidowX AI's
-//!   mimic carriage, the Robotiq linkage) are folded into `W` with MuJoCo's own compliance:
+//! * **Constraints.** Constraints that move an undriven joint (equalities on the WidowX AI's
+//!   mimic carriage or the Robotiq linkage) or that a gripper pushes against (the contacts
+//!   of a closing finger) are folded into `W` with MuJoCo's own compliance:
 //!   `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)`, so a drive sees the inertia it actually moves.
-//! * **Grippers.** A finger pressed against an object cannot move, but the drive equations
-//!   above only know the finger's free response, so an implicit drive would squeeze with a
-//!   fraction of its force. Gripper joints therefore get their damping `kd` as MuJoCo joint
-//!   damping — integrated implicitly by MuJoCo together with the contacts — and the spring
-//!   part `clamp(kp (q* − q) + kd q̇*, ±F)` as an explicit force. (Their damping is outside
-//!   the clamp, which caps a finger's speed at F / kd: 1 m/s for the Panda, far above what a
-//!   gripper reaches.)
+//!   PhysX solves contacts and drives in the same iterations; without the fold a finger
+//!   reaching a free cube would only know its own inertia and fling the cube at the other
+//!   finger, and a finger squeezing an object would get a fraction of its force.
+//! * **Grippers.** With their contacts folded in, gripper joints use the same implicit law
+//!   as the arm: a finger closing on a free cube pushes finger and cube together, one
+//!   pressed between object and opposite finger (`W ≈ 0`) squeezes with the full spring
+//!   force `clamp(kp (q* − q) + kd q̇*, ±F)`, as in PhysX.
 //! * **Position.** MuJoCo's semi-implicit Euler moves a joint by `h q̇'`; the micro-steps
 //!   know the path within the substep. The difference `c` is applied as a generalised force
 //!   `M c / h²` (so that what the arm holds moves with it through the contacts) and the
@@ -49,6 +50,9 @@ use crate::mujoco::{Data, Model, ObjType};
 pub const MICRO_STEPS: usize = 10;
 /// Gauss–Seidel sweeps over the coupled drive equations per micro-step.
 pub const SWEEPS: usize = 2;
+/// Most gripper contacts folded into a substep's drive response (more are left to MuJoCo's
+/// constraint solver alone; a two-finger grasp of a box makes at most 8).
+pub const MAX_GRIPPER_CONTACTS: usize = 16;
 
 /// One resolved drive.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,22 +96,28 @@ pub struct Drives {
     micro_force: Vec<f64>,
     force_sum: Vec<f64>,
     correction: Vec<f64>,
-    /// Per drive: the bodies its joint moves (gripper drives only; empty for arm drives),
-    /// and whether one of them touches something this substep.
+    /// Per drive: the bodies its joint moves (gripper drives only; empty for arm drives).
     gripper_bodies: Vec<Vec<usize>>,
-    blocked: Vec<bool>,
+    /// Per body: whether it belongs to the robot.
+    robot_body: Vec<bool>,
+    /// This substep's gripper contacts that their drive pushes into: (drive, other body).
+    pushes: Vec<(usize, usize)>,
+    /// Per drive: whether its gripper pinches an object against another part of the robot.
+    pinching: Vec<bool>,
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
     mc: Vec<f64>,
-    /// Equality rows that move an undriven dof: their Jacobian rows (ne × nv), their M⁻¹
-    /// images (ne × nv), indices into the model's equality rows, and the small dense
-    /// matrices A = J M⁻¹ Jᵀ + R (ne × ne) and Z = (M⁻¹ Jᵀ) at the drives (ne × n).
-    eq_j: Vec<f64>,
-    eq_y: Vec<f64>,
-    eq_rows: Vec<usize>,
-    eq_a: DMatrix<f64>,
-    eq_z: DMatrix<f64>,
-    eq_yd: DMatrix<f64>,
+    /// The constraint rows folded into `W` this substep (see [`Drives::fold_in_constraints`]):
+    /// their Jacobian rows (k × nv), M⁻¹ images (k × nv) and compliances `R` (k).
+    fold_j: Vec<f64>,
+    fold_y: Vec<f64>,
+    fold_r: Vec<f64>,
+    /// Per row count k (index k, up to [`Drives::max_fold_rows`]): the dense matrices
+    /// A = J M⁻¹ Jᵀ + R (k × k), Z = A⁻¹ (M⁻¹ Jᵀ at the drives) and M⁻¹ Jᵀ at the drives
+    /// (k × n each), sized once so that the varying contact count never allocates.
+    fold_a: Vec<DMatrix<f64>>,
+    fold_z: Vec<DMatrix<f64>>,
+    fold_yd: Vec<DMatrix<f64>>,
 }
 
 impl Drives {
@@ -158,6 +168,25 @@ impl Drives {
                     .collect()
             })
             .collect();
+        // The robot: the subtree of the first joint's top-level ancestor.
+        let robot_body = match dofs.first() {
+            Some(d) => {
+                let mut root = model.dof_bodyid()[d.dof] as usize;
+                while parent[root] != 0 {
+                    root = parent[root] as usize;
+                }
+                (0..model.nbody())
+                    .map(|b| {
+                        let mut x = b;
+                        while x != 0 && x != root {
+                            x = parent[x] as usize;
+                        }
+                        x == root
+                    })
+                    .collect()
+            }
+            None => vec![false; model.nbody()],
+        };
         let mut unit = vec![0.0; n * nv];
         for (k, d) in dofs.iter().enumerate() {
             unit[k * nv + d.dof] = 1.0;
@@ -166,8 +195,9 @@ impl Drives {
             .iter()
             .map(|j| drives.iter().position(|d| &d.joint == j))
             .collect();
-        // Upper bound of the equality rows (a connect has 3 rows, a weld 6, a joint 1).
-        let max_rows = 6 * model.neq();
+        // Upper bound of the folded rows: equality rows (a connect has 3, a weld 6, a joint
+        // 1) plus the gripper contacts'.
+        let max_rows = 6 * model.neq() + MAX_GRIPPER_CONTACTS;
         Ok(Drives {
             by_joint,
             target_q: vec![0.0; n],
@@ -183,15 +213,17 @@ impl Drives {
             force_sum: vec![0.0; n],
             correction: vec![0.0; n],
             gripper_bodies,
-            blocked: vec![false; n],
+            robot_body,
+            pushes: Vec::with_capacity(n * MAX_GRIPPER_CONTACTS),
+            pinching: vec![false; n],
             cvec: vec![0.0; nv],
             mc: vec![0.0; nv],
-            eq_j: Vec::with_capacity(max_rows * nv),
-            eq_y: Vec::with_capacity(max_rows * nv),
-            eq_rows: Vec::with_capacity(max_rows),
-            eq_a: DMatrix::zeros(0, 0),
-            eq_z: DMatrix::zeros(0, 0),
-            eq_yd: DMatrix::zeros(0, 0),
+            fold_j: Vec::with_capacity(max_rows * nv),
+            fold_y: vec![0.0; max_rows * nv],
+            fold_r: Vec::with_capacity(max_rows),
+            fold_a: (0..=max_rows).map(|k| DMatrix::zeros(k, k)).collect(),
+            fold_z: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
+            fold_yd: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
             dofs,
         })
     }
@@ -244,7 +276,7 @@ impl Drives {
                 self.w[i * n + j] = self.minv[j * nv + di.dof];
             }
         }
-        self.fold_in_equalities(data, nv);
+        self.fold_in_constraints(data, nv);
         // The arm's unconstrained acceleration (Coriolis, gravity compensation, passive
         // forces) with the drives switched off.
         {
@@ -263,24 +295,14 @@ impl Drives {
         }
         let dt = h / MICRO_STEPS as f64;
         self.force_sum.fill(0.0);
-        // A gripper joint whose links touch something is blocked: its drive acts with the full
-        // force a blocked joint gets from PhysX's implicit drive (zero response), explicitly.
-        self.blocked.fill(false);
-        let geom_body = data.model().geom_bodyid();
-        for c in 0..data.ncon() {
-            let (g1, g2) = data.contact_geoms(c);
-            let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
-            for (i, bodies) in self.gripper_bodies.iter().enumerate() {
-                if bodies.contains(&b1) || bodies.contains(&b2) {
-                    self.blocked[i] = true;
-                }
-            }
-        }
+        // A gripper pinching an object against the rest of the robot (the opposite finger or
+        // a fixed jaw) squeezes it: the object cannot give way, so the drive acts with the
+        // force PhysX's implicit drive has for a blocked joint (zero response), explicitly;
+        // the damping is capped so that it cannot reverse a still-moving finger within the
+        // substep (its free inertia is 1 / W_ii).
         for (i, d) in self.dofs.iter().enumerate() {
-            // Explicit damping, capped so that it cannot reverse a still-moving finger
-            // within the substep (the free inertia is 1 / W_ii).
-            let kd = d.kd.min(1.0 / (h * self.w[i * n + i]));
-            self.micro_force[i] = if self.blocked[i] {
+            let kd = d.kd.min(1.0 / (h * self.minv[i * nv + d.dof]));
+            self.micro_force[i] = if self.pinching[i] {
                 (d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i]
                     - kd * qvel[d.dof])
                     .clamp(-d.force_limit, d.force_limit)
@@ -291,7 +313,7 @@ impl Drives {
         for _ in 0..MICRO_STEPS {
             for _ in 0..SWEEPS {
                 for (i, d) in self.dofs.iter().enumerate() {
-                    if self.blocked[i] {
+                    if self.pinching[i] {
                         continue;
                     }
                     let g = dt * d.kp + d.kd;
@@ -346,72 +368,141 @@ impl Drives {
         let n = self.dofs.len();
         if n > 0 {
             data.solve_m(&mut self.minv, &self.unit, n);
-            self.fold_in_equalities(data, nv);
+            self.fold_in_constraints(data, nv);
         }
     }
 
-    /// Restricts `W` to the motions the equality constraints on undriven joints allow,
-    /// with MuJoCo's compliance `R` of those (soft) constraints. Equalities whose every
-    /// dof has a drive of its own (the Panda's finger mimic) are left to the drives.
-    fn fold_in_equalities(&mut self, data: &mut Data, nv: usize) {
+    /// Most rows [`Drives::fold_in_constraints`] folds in.
+    fn max_fold_rows(&self) -> usize {
+        self.fold_r.capacity()
+    }
+
+    /// Restricts `W` to the motions the constraints allow, with MuJoCo's compliance `R` of
+    /// those (soft) constraints: `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)` at the drives.
+    /// The rows are
+    /// * the equality rows that move an undriven dof (equalities whose every dof has a drive
+    ///   of its own, like the Panda's finger mimic, are left to the drives), and
+    /// * the contact normals of gripper links that their drive pushes into (the normal
+    ///   velocity would fall under the drive's force), taken as bilateral for the substep:
+    ///   a closing finger then feels what it pushes, a free cube or the opposite finger.
+    fn fold_in_constraints(&mut self, data: &mut Data, nv: usize) {
         let n = self.dofs.len();
+        let max_rows = self.max_fold_rows();
+        self.fold_j.clear();
+        self.fold_r.clear();
         let ne_all = data.ne();
-        let Some(jac) = data.equality_jacobian() else {
-            return;
-        };
-        self.eq_j.clear();
-        self.eq_rows.clear();
-        for r in 0..ne_all {
-            let row = &jac[r * nv..(r + 1) * nv];
-            let undriven = row
-                .iter()
-                .enumerate()
-                .any(|(k, &x)| x != 0.0 && !self.dofs.iter().any(|d| d.dof == k));
-            if undriven && self.eq_rows.len() < self.eq_rows.capacity() {
-                self.eq_j.extend_from_slice(row);
-                self.eq_rows.push(r);
+        if let Some(jac) = data.equality_jacobian() {
+            let compliance = data.efc_r(ne_all);
+            for r in 0..ne_all {
+                let row = &jac[r * nv..(r + 1) * nv];
+                let undriven = row
+                    .iter()
+                    .enumerate()
+                    .any(|(k, &x)| x != 0.0 && !self.dofs.iter().any(|d| d.dof == k));
+                if undriven && self.fold_r.len() < max_rows {
+                    self.fold_j.extend_from_slice(row);
+                    self.fold_r.push(compliance[r]);
+                }
             }
         }
-        let ne = self.eq_rows.len();
-        if ne == 0 {
+        let geom_body = data.model().geom_bodyid();
+        let qpos = data.qpos();
+        let compliance = data.efc_r(data.nefc());
+        self.pushes.clear();
+        for c in 0..data.ncon() {
+            if self.fold_r.len() == max_rows {
+                break;
+            }
+            let (g1, g2) = data.contact_geoms(c);
+            let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+            let Some((row0, rows)) = data.contact_rows(c) else {
+                continue;
+            };
+            let Some(jac) = data.constraint_rows(row0, rows) else {
+                continue;
+            };
+            // The normal row: the mean of the first pyramid edge pair, or the first row.
+            let normal = |k: usize| {
+                if rows > 1 {
+                    0.5 * (jac[k] + jac[nv + k])
+                } else {
+                    jac[k]
+                }
+            };
+            let mut pushed = false;
+            for (i, (d, bodies)) in self.dofs.iter().zip(&self.gripper_bodies).enumerate() {
+                let other = if bodies.contains(&b1) {
+                    b2
+                } else if bodies.contains(&b2) {
+                    b1
+                } else {
+                    continue;
+                };
+                // The drive's intent: its spring and target velocity, not its damping.
+                let push = d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i];
+                if normal(d.dof) * push < 0.0 {
+                    pushed = true;
+                    if !self.robot_body[other] && self.pushes.len() < self.pushes.capacity() {
+                        self.pushes.push((i, other));
+                    }
+                }
+            }
+            if pushed {
+                self.fold_j.extend((0..nv).map(normal));
+                self.fold_r.push(compliance[row0]);
+            }
+        }
+        // Pinching: an object a gripper pushes also touches the robot outside that gripper.
+        self.pinching.fill(false);
+        for c in 0..data.ncon() {
+            let (g1, g2) = data.contact_geoms(c);
+            let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+            let (robot, object) = match (self.robot_body[b1], self.robot_body[b2]) {
+                (true, false) => (b1, b2),
+                (false, true) => (b2, b1),
+                _ => continue,
+            };
+            for &(i, o) in &self.pushes {
+                if o == object && !self.gripper_bodies[i].contains(&robot) {
+                    self.pinching[i] = true;
+                }
+            }
+        }
+        let k = self.fold_r.len();
+        if k == 0 {
             return;
         }
-        if self.eq_a.nrows() != ne {
-            // Sized once: the equality rows of a model do not change between substeps.
-            self.eq_a = DMatrix::zeros(ne, ne);
-            self.eq_z = DMatrix::zeros(ne, n);
-            self.eq_yd = DMatrix::zeros(ne, n);
-        }
-        self.eq_y.resize(ne * nv, 0.0);
-        data.solve_m(&mut self.eq_y, &self.eq_j, ne);
-        let compliance = data.efc_r(ne_all);
-        for r in 0..ne {
-            for c in 0..ne {
-                self.eq_a[(r, c)] = (0..nv)
-                    .map(|k| self.eq_j[r * nv + k] * self.eq_y[c * nv + k])
+        data.solve_m(&mut self.fold_y, &self.fold_j, k);
+        let (a, z, yd) = (&mut self.fold_a[k], &mut self.fold_z[k], &mut self.fold_yd[k]);
+        for r in 0..k {
+            for c in 0..k {
+                a[(r, c)] = (0..nv)
+                    .map(|x| self.fold_j[r * nv + x] * self.fold_y[c * nv + x])
                     .sum::<f64>();
             }
-            self.eq_a[(r, r)] += compliance[self.eq_rows[r]];
+            a[(r, r)] += self.fold_r[r];
             for (c, d) in self.dofs.iter().enumerate() {
-                self.eq_yd[(r, c)] = self.eq_y[r * nv + d.dof];
+                yd[(r, c)] = self.fold_y[r * nv + d.dof];
             }
         }
-        self.eq_z.copy_from(&self.eq_yd);
+        z.copy_from(yd);
         // In place: `cholesky` takes the buffer and `unpack` gives it back.
-        let a = std::mem::replace(&mut self.eq_a, DMatrix::zeros(0, 0));
-        match a.cholesky() {
+        let owned = std::mem::replace(a, DMatrix::zeros(0, 0));
+        match owned.cholesky() {
             Some(chol) => {
-                chol.solve_mut(&mut self.eq_z);
-                self.eq_a = chol.unpack();
+                chol.solve_mut(z);
+                *a = chol.unpack();
             }
-            // Not positive definite (cannot happen with R > 0): keep the free response.
-            None => return,
+            // Not positive definite (R > 0 rules it out): keep the free response. The
+            // buffer is rebuilt at its size so that the next substep finds it again.
+            None => {
+                *a = DMatrix::zeros(k, k);
+                return;
+            }
         }
         for i in 0..n {
             for j in 0..n {
-                let fold: f64 = (0..ne)
-                    .map(|r| self.eq_yd[(r, i)] * self.eq_z[(r, j)])
-                    .sum();
+                let fold: f64 = (0..k).map(|r| yd[(r, i)] * z[(r, j)]).sum();
                 self.w[i * n + j] -= fold;
             }
         }

@@ -903,6 +903,41 @@ impl Data {
         view!(d.efc_R, n.min(d.nefc as usize))
     }
 
+    /// Number of constraint rows in the current constraint set (`mjData.nefc`).
+    pub fn nefc(&self) -> usize {
+        self.raw().nefc as usize
+    }
+
+    /// Constraint Jacobian rows `start..start + count` (row-major, `count` × nv), computed
+    /// by the last [`Data::step1`] / [`Data::forward`]; `None` for sparse Jacobians (see
+    /// [`Data::equality_jacobian`]) or rows out of range.
+    pub fn constraint_rows(&self, start: usize, count: usize) -> Option<&[f64]> {
+        // SAFETY: model pointer valid for the lifetime of self.
+        let sparse = unsafe { sys::mj_isSparse(self.model.ptr) } != 0;
+        let d = self.raw();
+        if sparse || start + count > d.nefc as usize {
+            return None;
+        }
+        let nv = self.model.nv();
+        Some(&view!(d.efc_J, d.nefc as usize * nv)[start * nv..(start + count) * nv])
+    }
+
+    /// The constraint rows of contact `i`: `(first efc row, number of rows)`, or `None` when
+    /// the contact has none (excluded, or beyond the constraint set). With pyramidal cones a
+    /// contact of dimension `dim > 1` has `2 (dim − 1)` rows, pyramid edges in pairs
+    /// `J_n ± μ_k J_tk`; otherwise `dim` rows, the normal first.
+    pub fn contact_rows(&self, i: usize) -> Option<(usize, usize)> {
+        let cs: &[sys::mjContact] = view!(self.raw().contact, self.raw().ncon);
+        let c = &cs[i];
+        if c.exclude != 0 || c.efc_address < 0 {
+            return None;
+        }
+        let dim = c.dim as usize;
+        let pyramidal = self.model.raw().opt.cone == sys::mjtCone__mjCONE_PYRAMIDAL as c_int;
+        let rows = if pyramidal && dim > 1 { 2 * (dim - 1) } else { dim };
+        Some((c.efc_address as usize, rows))
+    }
+
     /// Number of contacts in the current state.
     pub fn ncon(&self) -> usize {
         self.raw().ncon as usize
