@@ -65,16 +65,16 @@ const EXPECTED: [Expected; 4] = [
         "PlaceSphere-v1/trajectory.h5",
         [
             (false, true, false, None),
-            (true, true, true, None),
-            (false, false, false, None),
+            (true, false, true, None),
+            (false, true, false, None),
         ],
     ),
     (
         "PokeCube-v1/trajectory.h5",
         [
             (true, true, true, None),
-            (true, true, true, Some(113)),
-            (true, true, true, Some(118)),
+            (true, true, true, Some(110)),
+            (true, true, true, None),
         ],
     ),
 ];

@@ -165,3 +165,26 @@ fn a_closed_stdout_is_not_a_crash() {
     assert!(out.status.success(), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn bench_replays_the_envs_trajectory_bitwise_with_cloned_drives() {
+    // `bench` times raw physics on a clone of the env's `Data` and `Drives`; the clone must
+    // step exactly as the env did. 400 random steps make the Panda's fingers touch things
+    // (a clone that lost the drives' contact buffers diverged here).
+    for robot in ["panda", "fetch"] {
+        let o = mjskill()
+            .args([
+                "bench",
+                "--env",
+                "PickCube-v1",
+                "--robot",
+                robot,
+                "--steps",
+                "400",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(json(&o.stdout)["replay_identical"], true, "{robot}");
+    }
+}

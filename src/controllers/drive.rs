@@ -102,8 +102,12 @@ pub struct Drives {
     robot_body: Vec<bool>,
     /// This substep's gripper contacts that their drive pushes into: (drive, other body).
     pushes: Vec<(usize, usize)>,
-    /// Per drive: whether its gripper pinches an object against another part of the robot.
+    /// Per drive: whether its gripper pinches an object against another part of the robot,
+    /// and whether its gripper touches anything.
     pinching: Vec<bool>,
+    touching: Vec<bool>,
+    /// Per drive: whether an equality on an undriven dof (a linkage, a mimic) moves with it.
+    linked: Vec<bool>,
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
     mc: Vec<f64>,
@@ -112,7 +116,10 @@ pub struct Drives {
     fold_j: Vec<f64>,
     fold_y: Vec<f64>,
     fold_r: Vec<f64>,
-    /// Per row count k (index k, up to [`Drives::max_fold_rows`]): the dense matrices
+    /// Most rows folded in (the buffers are sized for it; `Vec::clone` keeps lengths, not
+    /// capacities, so the bound is stored).
+    max_fold_rows: usize,
+    /// Per row count k (index k, up to `max_fold_rows`): the dense matrices
     /// A = J M⁻¹ Jᵀ + R (k × k), Z = A⁻¹ (M⁻¹ Jᵀ at the drives) and M⁻¹ Jᵀ at the drives
     /// (k × n each), sized once so that the varying contact count never allocates.
     fold_a: Vec<DMatrix<f64>>,
@@ -214,13 +221,16 @@ impl Drives {
             correction: vec![0.0; n],
             gripper_bodies,
             robot_body,
-            pushes: Vec::with_capacity(n * MAX_GRIPPER_CONTACTS),
+            pushes: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
             pinching: vec![false; n],
+            touching: vec![false; n],
+            linked: vec![false; n],
             cvec: vec![0.0; nv],
             mc: vec![0.0; nv],
             fold_j: Vec::with_capacity(max_rows * nv),
             fold_y: vec![0.0; max_rows * nv],
             fold_r: Vec::with_capacity(max_rows),
+            max_fold_rows: max_rows,
             fold_a: (0..=max_rows).map(|k| DMatrix::zeros(k, k)).collect(),
             fold_z: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
             fold_yd: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
@@ -338,7 +348,7 @@ impl Drives {
         }
         for (i, d) in self.dofs.iter().enumerate() {
             self.force[i] = self.force_sum[i] / MICRO_STEPS as f64;
-            self.correction[i] = if d.arm {
+            self.correction[i] = if d.arm || !(self.touching[i] || self.linked[i]) {
                 self.mq[i] - (qpos[d.qpos] + h * self.mv[i])
             } else {
                 0.0
@@ -372,11 +382,6 @@ impl Drives {
         }
     }
 
-    /// Most rows [`Drives::fold_in_constraints`] folds in.
-    fn max_fold_rows(&self) -> usize {
-        self.fold_r.capacity()
-    }
-
     /// Restricts `W` to the motions the constraints allow, with MuJoCo's compliance `R` of
     /// those (soft) constraints: `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)` at the drives.
     /// The rows are
@@ -387,9 +392,10 @@ impl Drives {
     ///   a closing finger then feels what it pushes, a free cube or the opposite finger.
     fn fold_in_constraints(&mut self, data: &mut Data, nv: usize) {
         let n = self.dofs.len();
-        let max_rows = self.max_fold_rows();
+        let max_rows = self.max_fold_rows;
         self.fold_j.clear();
         self.fold_r.clear();
+        self.linked.fill(false);
         let ne_all = data.ne();
         if let Some(jac) = data.equality_jacobian() {
             let compliance = data.efc_r(ne_all);
@@ -402,6 +408,9 @@ impl Drives {
                 if undriven && self.fold_r.len() < max_rows {
                     self.fold_j.extend_from_slice(row);
                     self.fold_r.push(compliance[r]);
+                    for (d, linked) in self.dofs.iter().zip(&mut self.linked) {
+                        *linked |= row[d.dof] != 0.0;
+                    }
                 }
             }
         }
@@ -409,6 +418,7 @@ impl Drives {
         let qpos = data.qpos();
         let compliance = data.efc_r(data.nefc());
         self.pushes.clear();
+        self.touching.fill(false);
         for c in 0..data.ncon() {
             if self.fold_r.len() == max_rows {
                 break;
@@ -438,11 +448,12 @@ impl Drives {
                 } else {
                     continue;
                 };
+                self.touching[i] = true;
                 // The drive's intent: its spring and target velocity, not its damping.
                 let push = d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i];
                 if normal(d.dof) * push < 0.0 {
                     pushed = true;
-                    if !self.robot_body[other] && self.pushes.len() < self.pushes.capacity() {
+                    if !self.robot_body[other] && self.pushes.len() < MAX_GRIPPER_CONTACTS {
                         self.pushes.push((i, other));
                     }
                 }
@@ -473,7 +484,11 @@ impl Drives {
             return;
         }
         data.solve_m(&mut self.fold_y, &self.fold_j, k);
-        let (a, z, yd) = (&mut self.fold_a[k], &mut self.fold_z[k], &mut self.fold_yd[k]);
+        let (a, z, yd) = (
+            &mut self.fold_a[k],
+            &mut self.fold_z[k],
+            &mut self.fold_yd[k],
+        );
         for r in 0..k {
             for c in 0..k {
                 a[(r, c)] = (0..nv)

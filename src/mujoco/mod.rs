@@ -934,7 +934,11 @@ impl Data {
         }
         let dim = c.dim as usize;
         let pyramidal = self.model.raw().opt.cone == sys::mjtCone__mjCONE_PYRAMIDAL as c_int;
-        let rows = if pyramidal && dim > 1 { 2 * (dim - 1) } else { dim };
+        let rows = if pyramidal && dim > 1 {
+            2 * (dim - 1)
+        } else {
+            dim
+        };
         Some((c.efc_address as usize, rows))
     }
 

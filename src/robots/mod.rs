@@ -117,11 +117,11 @@ pub const JOINT_POS_MODES: [ControlMode; 3] = [
 /// one-step motion: WidowX AI wrist error 9.7e-4 → 4.5e-4 rad, Panda unchanged).
 pub const ARMATURE: f64 = 0.01;
 
-/// Armature of the gripper joints (unless the robot sets its own). At a 0.01 s step a 15 g
-/// finger pressed against an object by a stiff drive rattles and lets a lifted peg slip;
-/// 0.1 kg of added inertia keeps the grasp steady (PokeCube's motion-planning grasps match
-/// ManiSkill with it and fail without it).
-pub const GRIPPER_ARMATURE: f64 = 0.1;
+/// Armature of the gripper joints (unless the robot sets its own): as the arm's. (With the
+/// contacts a finger pushes into folded into its drive, `controllers::drive`, a light finger
+/// no longer needs added inertia to hold a grasp; with 0.1 kg the Panda's motion-planning
+/// grasps left the cube 0.35–0.40 mm from ManiSkill's at step 50, with 0.01 kg 0.16–0.31 mm.)
+pub const GRIPPER_ARMATURE: f64 = 0.01;
 
 /// How the tool-centre point is defined (docs/robots.md: "TCP").
 #[derive(Debug, Clone, PartialEq)]
