@@ -17,9 +17,9 @@ pub use config::{
     EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, CONSTRUCTION_SEED, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo, EnvSpec};
+pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::CameraImage;
-pub use state_dict::{ActionPart, StateDict};
+pub use state_dict::{ActionPart, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
 pub use vec::VecEnv;
 
@@ -139,11 +139,9 @@ impl Env {
             drives,
             ..
         } = build_scene(spec, rs, &mode, config.sim, task.as_ref())?;
-        let data = Data::new(model.clone()).map_err(|e| EnvError::Build(e.to_string()))?;
-        task.resolve(&model)
-            .map_err(|e| EnvError::Build(e.to_string()))?;
-        let actors =
-            state_dict::resolve_actors(&model, task.actor_names()).map_err(EnvError::Build)?;
+        let data = Data::new(model.clone())?;
+        task.resolve(&model)?;
+        let actors = state_dict::resolve_actors(&model, task.actor_names())?;
         let n = robot.joints.len();
         let keys = task.info_keys();
         let mut sim = Sim {
@@ -184,17 +182,14 @@ impl Env {
         let max_episode_steps = config.max_episode_steps.unwrap_or(spec.max_episode_steps);
         let render_options = crate::mujoco::render::RenderOptions::default();
         let vision = match config.obs_mode {
-            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(
-                render::Vision::new(
-                    model,
-                    task.cameras(),
-                    rs.cameras,
-                    config.obs_mode != ObsMode::Depth,
-                    config.obs_mode != ObsMode::Rgb,
-                    render_options,
-                )
-                .map_err(|e| EnvError::Render(e.to_string()))?,
-            ),
+            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(render::Vision::new(
+                model,
+                task.cameras(),
+                rs.cameras,
+                config.obs_mode != ObsMode::Depth,
+                config.obs_mode != ObsMode::Rgb,
+                render_options,
+            )?),
             _ => None,
         };
         let mut env = Env {
@@ -254,8 +249,12 @@ impl Env {
     pub fn config(&self) -> &EnvConfig {
         &self.config
     }
+    /// The robot.
+    pub fn robot_id(&self) -> crate::robots::RobotId {
+        self.sim.spec.id
+    }
     /// Robot spec.
-    pub fn robot_spec(&self) -> &'static RobotSpec {
+    pub(crate) fn robot_spec(&self) -> &'static RobotSpec {
         self.sim.spec
     }
     /// The control mode in use (the robot's default when the config names none).

@@ -7,20 +7,72 @@
 //! that phase, counting the step on which it was entered (the spec's [audited] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
-pub mod fetch;
-pub mod fetch_arm;
-pub mod fetch_tasks;
-pub mod joint_ik;
-pub mod pick_cube;
-pub mod place_sphere;
-pub mod poke_cube;
-pub mod xarm6;
+mod evaluate;
+pub(crate) mod fetch;
+pub(crate) mod fetch_arm;
+pub(crate) mod fetch_tasks;
+pub(crate) mod joint_ik;
+pub(crate) mod pick_cube;
+pub(crate) mod place_sphere;
+pub(crate) mod poke_cube;
+pub(crate) mod xarm6;
+
+pub use evaluate::{
+    check_seed_range, evaluate, make_env, run_episode, EpisodeResult, EvalError, EvalReport,
+};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
+use crate::controllers::ControllerError;
 use crate::env::Env;
-use crate::robots::RobotId;
+use crate::mujoco::MjError;
+use crate::robots::{RobotError, RobotId};
+
+/// Why a policy could not be built for an env.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolverError {
+    /// An unknown policy name.
+    #[error("unknown policy {name:?}; valid policies: {valid}")]
+    UnknownPolicy {
+        /// The requested name.
+        name: String,
+        /// The valid names.
+        valid: String,
+    },
+    /// The env's control mode is not the one the scripted solver drives.
+    #[error("the scripted solver for {robot} drives {required}, but the env uses {mode}")]
+    WrongControlMode {
+        /// The robot.
+        robot: &'static str,
+        /// The mode the solver drives.
+        required: String,
+        /// The env's mode.
+        mode: String,
+    },
+    /// No scripted solver for this (env, robot) pair.
+    #[error("no scripted solver for {env} with {robot}; available: {available}")]
+    NoSolver {
+        /// The env id.
+        env: &'static str,
+        /// The robot.
+        robot: &'static str,
+        /// The solved pairs.
+        available: String,
+    },
+    /// The Fetch solvers need the 15-dof Fetch.
+    #[error("the Fetch solvers need the 15-dof Fetch")]
+    FetchDof,
+    /// A robot link or description the solver needs is missing.
+    #[error(transparent)]
+    Robot(#[from] RobotError),
+    /// The solver's IK chain could not be built.
+    #[error(transparent)]
+    Controller(#[from] ControllerError),
+    /// A task body the solver needs is missing from the model.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+}
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -54,15 +106,15 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
 }
 
 /// Builds a policy by name for `env` (random: seeded with `seed`).
-pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, String> {
+pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, SolverError> {
     match name {
         "zero" => Ok(Box::new(Zero)),
         "random" => Ok(Box::new(Random(rand::rngs::StdRng::seed_from_u64(seed)))),
         "solver" => solver(env),
-        _ => Err(format!(
-            "unknown policy {name:?}; valid policies: {}",
-            POLICIES.join(", ")
-        )),
+        _ => Err(SolverError::UnknownPolicy {
+            name: name.to_string(),
+            valid: POLICIES.join(", "),
+        }),
     }
 }
 
@@ -112,19 +164,23 @@ pub const SOLVED: [(&str, &str); 11] = [
 ];
 
 /// Boxes a freshly built solver.
-fn boxed<P: Policy + 'static>(policy: Result<P, String>) -> Result<Box<dyn Policy>, String> {
+fn boxed<P: Policy + 'static>(
+    policy: Result<P, SolverError>,
+) -> Result<Box<dyn Policy>, SolverError> {
     Ok(Box::new(policy?))
 }
 
 /// Which scripted solver fits an (env, robot) pair.
-fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
+fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
     let required = required_control_mode("solver", robot).unwrap_or(mode);
     if mode != required {
-        return Err(format!(
-            "the scripted solver for {robot} drives {required}, but the env uses {mode}"
-        ));
+        return Err(SolverError::WrongControlMode {
+            robot,
+            required: required.to_string(),
+            mode: mode.to_string(),
+        });
     }
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(env, PANDA_GRIPPER)),
@@ -142,14 +198,15 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ("PlaceSphere-v1", "fetch") => boxed(fetch_tasks::FetchPlaceSphere::new(env)),
         ("PokeCube-v1", "panda") => boxed(poke_cube::PokeCubeSolver::new(env, PANDA_GRIPPER)),
         ("PokeCube-v1", "fetch") => boxed(fetch_tasks::FetchPokeCube::new(env)),
-        (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: {}",
-            SOLVED
+        (env, robot) => Err(SolverError::NoSolver {
+            env,
+            robot,
+            available: SOLVED
                 .iter()
                 .map(|(e, r)| format!("{e} with {r}"))
                 .collect::<Vec<_>>()
-                .join(", ")
-        )),
+                .join(", "),
+        }),
     }
 }
 
@@ -230,9 +287,9 @@ impl Phases {
     }
 }
 
-/// A task body's id in the env's model (the task layer's lookup, its error as text).
-fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, String> {
-    crate::tasks::body_id(model, name).map_err(|e| e.to_string())
+/// A task body's id in the env's model (the task layer's lookup).
+fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, SolverError> {
+    Ok(crate::tasks::body_id(model, name)?)
 }
 
 /// A body's world position, read from MuJoCo.

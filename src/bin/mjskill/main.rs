@@ -1,4 +1,6 @@
-//! The `mjskill` command line.
+//! The `mjskill` command line (`mjskill --help`), built on the library's public API. Its
+//! modules are the binary's own: argument parsing, output files, and the commands that are
+//! not library API (bench, plots, `fit-primitives`'s [`mesh_fit`]).
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -23,16 +25,16 @@ macro_rules! out {
     };
 }
 
-pub mod args;
-pub mod bench;
-pub mod datasets;
-pub mod eval;
-pub mod fidelity;
-pub mod info_dir;
-pub mod output;
-pub mod plot;
-pub mod render;
-pub mod rollout;
+mod args;
+mod bench;
+mod datasets;
+mod fidelity;
+mod info_dir;
+mod mesh_fit;
+mod output;
+mod plot;
+mod render;
+mod rollout;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
 #[derive(Debug, Parser)]
@@ -57,17 +59,17 @@ pub struct EnvArgs {
     pub control_mode: Option<String>,
     /// Physics steps per second (ManiSkill's sim_freq); a multiple of the 20 Hz control
     /// frequency. Higher is slower and closer to continuous-time dynamics.
-    #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+    #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
     pub sim_freq: u32,
 }
 
 impl EnvArgs {
     /// The env configuration (other fields at their defaults).
-    pub fn config(&self) -> crate::env::EnvConfig {
-        crate::env::EnvConfig {
+    pub fn config(&self) -> mjskill::EnvConfig {
+        mjskill::EnvConfig {
             robot: self.robot.clone(),
             control_mode: self.control_mode.clone(),
-            sim: crate::env::SimConfig {
+            sim: mjskill::SimConfig {
                 sim_freq: self.sim_freq,
             },
             ..Default::default()
@@ -228,7 +230,7 @@ pub enum Command {
         #[arg(long)]
         resync: Option<u32>,
         /// Physics steps per second of the replaying env.
-        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
         sim_freq: u32,
         /// Only the episodes of this control mode.
         #[arg(long)]
@@ -256,7 +258,7 @@ pub enum Command {
         #[arg(long, default_value = "actions")]
         by: String,
         /// Physics steps per second of the replaying env.
-        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
         sim_freq: u32,
     },
     /// Export a recording's finished episodes to ManiSkill's trajectory format (h5 + json)
@@ -300,8 +302,12 @@ pub enum Command {
     },
 }
 
+fn main() {
+    std::process::exit(run_cli());
+}
+
 /// Runs the command line; returns the process exit code.
-pub fn main() -> i32 {
+fn run_cli() -> i32 {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => 0,
@@ -332,8 +338,8 @@ fn run(cli: Cli) -> Result<(), String> {
                 (None, None) => None,
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
-            let config = crate::env::EnvConfig {
-                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+            let config = mjskill::EnvConfig {
+                obs_mode: mjskill::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
                 ..target.config()
             };
             let report = bench::run(&target.env, config, steps, vec, render)?;
@@ -357,7 +363,9 @@ fn run(cli: Cli) -> Result<(), String> {
             episodes,
             seed,
         } => {
-            let report = eval::run(&target.env, target.config(), &policy, episodes, seed)?;
+            let report =
+                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)
+                    .map_err(|e| e.to_string())?;
             out!(
                 "{}",
                 serde_json::to_string(&report).map_err(|e| e.to_string())?
@@ -377,10 +385,9 @@ fn run(cli: Cli) -> Result<(), String> {
             no_frame,
         } => {
             use std::io::IsTerminal;
-            let config = crate::env::EnvConfig {
-                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
-                reward_mode: crate::env::RewardMode::parse(&reward_mode)
-                    .map_err(|e| e.to_string())?,
+            let config = mjskill::EnvConfig {
+                obs_mode: mjskill::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+                reward_mode: mjskill::RewardMode::parse(&reward_mode).map_err(|e| e.to_string())?,
                 ..target.config()
             };
             let args = rollout::RolloutArgs {
@@ -417,7 +424,7 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = crate::record::replay::replay(&file, tolerance, salvage)?;
+            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
             out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())
@@ -472,7 +479,7 @@ fn run(cli: Cli) -> Result<(), String> {
         } => fidelity::run(&fidelity::FidelityArgs {
             file,
             resync,
-            sim: crate::env::SimConfig { sim_freq },
+            sim: mjskill::SimConfig { sim_freq },
             control_mode,
             summary,
             plot,
@@ -480,7 +487,7 @@ fn run(cli: Cli) -> Result<(), String> {
         Command::Envs => {
             out!(
                 "{}",
-                serde_json::to_string_pretty(&crate::env::registry()).map_err(|e| e.to_string())?
+                serde_json::to_string_pretty(&mjskill::registry()).map_err(|e| e.to_string())?
             );
             Ok(())
         }
@@ -504,17 +511,14 @@ fn export_mjcf(
     output: Option<PathBuf>,
 ) -> Result<(), String> {
     let mjcf = match env {
-        None => {
-            let spec = crate::robots::spec(robot.unwrap_or("panda"))?;
-            crate::robots::table_scene_with(spec, |_| {})?.mjcf
-        }
+        None => mjskill::robot_scene_mjcf(robot.unwrap_or("panda")).map_err(|e| e.to_string())?,
         Some(id) => {
             // As rollout does: without --robot, the env's own default robot.
             let robot = match robot {
                 Some(r) => r,
-                None => crate::env::default_robot(id).map_err(|e| e.to_string())?,
+                None => mjskill::default_robot(id).map_err(|e| e.to_string())?,
             };
-            crate::env::scene_mjcf(id, robot)?
+            mjskill::scene_mjcf(id, robot).map_err(|e| e.to_string())?
         }
     };
     if !mjcf.assets.is_empty() {
@@ -539,7 +543,7 @@ fn fit_primitives(
     crop: Option<&str>,
     scale: f64,
 ) -> Result<(), String> {
-    use crate::tools::mesh_fit;
+    use crate::mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())

@@ -5,12 +5,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::output::Output;
-use crate::env::checks::MAX_SEED;
-use crate::env::{Env, EnvConfig};
-use crate::record::image::write_png;
-use crate::record::RecordError;
-use crate::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
-use crate::solvers::{make_policy, Policy};
+use mjskill::record::image::write_png;
+use mjskill::record::RecordError;
+use mjskill::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
+use mjskill::solvers::{check_seed_range, make_env, make_policy, Policy};
+use mjskill::{Env, EnvConfig};
 
 /// The one-line JSON summary of a rollout.
 #[derive(Debug, Clone, Serialize)]
@@ -111,36 +110,15 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, Stri
     Ok(Some(png))
 }
 
-/// Checks that `episodes` episodes with seeds `seed, seed + 1, ...` stay within ManiSkill's
-/// 32-bit seeds; the errors name the flags.
-pub fn check_seed_range(seed: u64, episodes: u64) -> Result<(), String> {
-    if episodes == 0 {
-        return Err("--episodes must be at least 1".into());
-    }
-    if seed > MAX_SEED {
-        return Err(format!(
-            "--seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}"
-        ));
-    }
-    let last = seed as u128 + episodes as u128 - 1;
-    if last > MAX_SEED as u128 {
-        return Err(format!(
-            "--seed {seed} with --episodes {episodes} needs seeds up to {last}, beyond the \
-             32-bit seeds 0..={MAX_SEED}; lower --seed or --episodes"
-        ));
-    }
-    Ok(())
-}
-
 /// Records `episodes` seeded episodes; each finished episode is synced to disk before the next
 /// begins. Every argument is checked before any file is created; the recording is written
 /// under a temporary name next to `out` and takes its final name once its first episode is
 /// finished (see [`super::output`]), so a failed run never leaves an empty or partial file
 /// under `out`, and a run killed later keeps its finished episodes there.
 pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
-    check_seed_range(a.seed, a.episodes as u64)?;
-    let mut env = super::eval::make_env(&a.env, a.config.clone(), &a.policy)?;
-    let mut policy = make_policy(&a.policy, &env, a.seed)?;
+    check_seed_range(a.seed, a.episodes as u64).map_err(|e| e.to_string())?;
+    let mut env = make_env(&a.env, a.config.clone(), &a.policy).map_err(|e| e.to_string())?;
+    let mut policy = make_policy(&a.policy, &env, a.seed).map_err(|e| e.to_string())?;
     let frame_png = check_frame_path(&a.out, a.frame)?;
     let (render_w, render_h) = env.render_size();
     let camera = env.cameras().1.name;
@@ -190,7 +168,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
     Ok(RolloutSummary {
         out: a.out.display().to_string(),
         env: a.env.clone(),
-        robot: env.robot_spec().uid().to_string(),
+        robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         policy: a.policy.clone(),
         episodes: a.episodes,

@@ -4,8 +4,8 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use crate::env::{make, EnvConfig};
-use crate::mujoco::Data;
+use mjskill::mujoco::Data;
+use mjskill::{make, EnvConfig};
 
 /// One bench result (printed as a JSON line).
 #[derive(Debug, Clone, Serialize)]
@@ -94,7 +94,7 @@ pub fn run(
     let mut vec_env = match vec {
         None => None,
         Some((n, t)) => {
-            Some(crate::env::VecEnv::new(env_id, config.clone(), n, t).map_err(|e| e.to_string())?)
+            Some(mjskill::VecEnv::new(env_id, config.clone(), n, t).map_err(|e| e.to_string())?)
         }
     };
     if render_frames.is_some() {
@@ -205,7 +205,7 @@ pub fn run(
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
-        robot: env.robot_spec().uid().to_string(),
+        robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         obs_mode: env.config().obs_mode.name().to_string(),
         steps,
@@ -223,4 +223,26 @@ pub fn run(
         ratio,
         overhead_percent: (1.0 / ratio - 1.0) * 100.0,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn a_bad_vec_env_size_fails_before_any_timing() {
+        let t = Instant::now();
+        let e = super::run(
+            "PickCube-v1",
+            Default::default(),
+            100_000,
+            Some((0, 1)),
+            None,
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("--envs") && t.elapsed() < Duration::from_secs(5),
+            "{e}"
+        );
+    }
 }

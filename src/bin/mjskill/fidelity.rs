@@ -2,9 +2,9 @@
 //! or of a recording replayed with other physics settings.
 use std::path::PathBuf;
 
-use crate::env::SimConfig;
-use crate::maniskill::fidelity::{replay_file, replay_recording, FidelityOptions, FileFidelity};
-use crate::maniskill::reference::RefFile;
+use mjskill::maniskill::fidelity::{replay_file, replay_recording, FidelityOptions, FileFidelity};
+use mjskill::maniskill::reference::RefFile;
+use mjskill::SimConfig;
 
 /// Arguments of `mjskill fidelity`.
 #[derive(Debug, Clone)]
@@ -37,7 +37,7 @@ pub fn run(args: &FidelityArgs) -> Result<(), String> {
         if args.control_mode.is_some() {
             return Err("--control-mode selects episodes of a reference file; a recording has one control mode".into());
         }
-        let rec = crate::record::read(&args.file).map_err(|e| e.to_string())?;
+        let rec = mjskill::record::read(&args.file).map_err(|e| e.to_string())?;
         replay_recording(&rec, opts).map_err(|e| e.to_string())?
     } else {
         reference_report(args, opts)?
