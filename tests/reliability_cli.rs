@@ -390,7 +390,9 @@ fn replay_tolerance_is_a_finite_number_at_least_zero() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(json(&o)["tolerance"], 0.0);
     for bad in [f64::NAN, -1.0, f64::INFINITY] {
-        let e = mjskill::record::replay::replay(&f, bad, false).unwrap_err();
+        let e = mjskill::record::replay::replay(&f, bad, false)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("--tolerance"), "{e}");
     }
 }

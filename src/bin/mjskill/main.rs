@@ -424,7 +424,7 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
+            let r = mjskill::record::replay::replay(&file, tolerance, salvage).map_err(|e| e.to_string())?;
             out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
             if r.ok {
                 Ok(())

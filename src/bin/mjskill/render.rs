@@ -62,7 +62,7 @@ pub fn run(
             valid.join(", ")
         ));
     };
-    write_png(out, &rgb, w, h)?;
+    write_png(out, &rgb, w, h).map_err(|e| e.to_string())?;
     Ok(RenderSummary {
         out: out.display().to_string(),
         env: env_id.to_string(),

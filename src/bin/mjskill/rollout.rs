@@ -373,17 +373,17 @@ struct Count {
 }
 
 impl Visitor for Count {
-    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), String> {
+    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), mjskill::record::BoxError> {
         self.open = Some(0);
         Ok(())
     }
-    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), String> {
+    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), mjskill::record::BoxError> {
         if let Some(n) = self.open.as_mut() {
             *n += 1;
         }
         Ok(())
     }
-    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), String> {
+    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), mjskill::record::BoxError> {
         self.open = None;
         self.episodes += 1;
         self.successes += end.success as usize;
