@@ -160,12 +160,11 @@ fn init_egl() -> Result<EglDisplay, EglError> {
         )
     }
     .map_err(EglError::call("eglGetPlatformDisplay(surfaceless)"))?;
-    egl.initialize(display)
-        .map_err(|source| EglError::Call {
-            call: "eglInitialize",
-            source,
-            hint: " (no Mesa DRI driver?)",
-        })?;
+    egl.initialize(display).map_err(|source| EglError::Call {
+        call: "eglInitialize",
+        source,
+        hint: " (no Mesa DRI driver?)",
+    })?;
     let attrs = [
         egl::SURFACE_TYPE,
         egl::PBUFFER_BIT,

@@ -292,7 +292,8 @@ impl Decoder<'_> {
                         meta.env_id,
                         meta.robot,
                         meta.control_mode
-                    ).into()));
+                    )
+                    .into()));
                 }
                 self.last_episode = Some(e.episode);
                 self.open = Some((e.episode, 0));
@@ -317,7 +318,8 @@ impl Decoder<'_> {
                     return Err(bad(format!(
                         "step {} of episode {} follows {n} steps",
                         s.step, s.episode
-                    ).into()));
+                    )
+                    .into()));
                 }
                 self.open = Some((s.episode, n + 1));
                 Self::visit(
@@ -338,8 +340,7 @@ impl Decoder<'_> {
                 )
             }
             _ => {
-                let e: EpisodeEndMsg =
-                    serde_json::from_slice(data).map_err(|e| bad(e.into()))?;
+                let e: EpisodeEndMsg = serde_json::from_slice(data).map_err(|e| bad(e.into()))?;
                 match self.open {
                     Some((i, n)) if i == e.episode && n == e.steps => {}
                     _ => {
@@ -347,7 +348,8 @@ impl Decoder<'_> {
                             "end of episode {} after {} steps does not match the open episode \
                              {:?}",
                             e.episode, e.steps, self.open
-                        ).into()))
+                        )
+                        .into()))
                     }
                 }
                 self.open = None;

@@ -8,11 +8,11 @@ use clap::{Parser, Subcommand};
 
 /// Writes one line to standard output. A closed pipe (e.g. `mjskill envs | head`) is not an
 /// error: the reader has what it wanted.
-fn emit(line: std::fmt::Arguments) -> Result<(), String> {
+fn emit(line: std::fmt::Arguments) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{line}").and_then(|()| out.flush()) {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
-            Err(format!("cannot write to stdout: {e}"))
+            Err(format!("cannot write to stdout: {e}").into())
         }
         _ => Ok(()),
     }
@@ -24,6 +24,10 @@ macro_rules! out {
         emit(format_args!($($t)*))?
     };
 }
+
+/// The command line's errors: any error of the library (or a message), printed with its
+/// `Display` text.
+pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
 
 mod args;
 mod bench;
@@ -318,7 +322,7 @@ fn run_cli() -> i32 {
     }
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::ExportMjcf { robot, env, output } => {
             export_mjcf(robot.as_deref(), env.as_deref(), output)
@@ -339,14 +343,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
             let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
                 ..target.config()
             };
             let report = bench::run(&target.env, config, steps, vec, render)?;
-            out!(
-                "{}",
-                serde_json::to_string(&report).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
         Command::FitPrimitives {
@@ -364,12 +365,8 @@ fn run(cli: Cli) -> Result<(), String> {
             seed,
         } => {
             let report =
-                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)
-                    .map_err(|e| e.to_string())?;
-            out!(
-                "{}",
-                serde_json::to_string(&report).map_err(|e| e.to_string())?
-            );
+                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)?;
+            out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
         Command::Rollout {
@@ -386,8 +383,8 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             use std::io::IsTerminal;
             let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
-                reward_mode: mjskill::RewardMode::parse(&reward_mode).map_err(|e| e.to_string())?,
+                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+                reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
                 ..target.config()
             };
             let args = rollout::RolloutArgs {
@@ -403,20 +400,17 @@ fn run(cli: Cli) -> Result<(), String> {
                 frame: !no_frame,
             };
             let summary = rollout::rollout(&args)?;
-            out!(
-                "{}",
-                serde_json::to_string(&summary).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string(&summary)?);
             Ok(())
         }
         Command::Info { file, salvage } if file.is_dir() => {
             let s = info_dir::info_dir(&file, salvage)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Info { file, salvage } => {
             let s = rollout::info(&file, salvage)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Replay {
@@ -424,15 +418,16 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = mjskill::record::replay::replay(&file, tolerance, salvage).map_err(|e| e.to_string())?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
+            out!("{}", serde_json::to_string(&r)?);
             if r.ok {
                 Ok(())
             } else {
                 Err(format!(
                     "{}: replay deviates beyond the tolerance {tolerance}",
                     file.display()
-                ))
+                )
+                .into())
             }
         }
         Command::ImportManiskill {
@@ -442,9 +437,8 @@ fn run(cli: Cli) -> Result<(), String> {
             by,
             sim_freq,
         } => {
-            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)
-                .map_err(|e| e.to_string())?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Export {
@@ -454,9 +448,8 @@ fn run(cli: Cli) -> Result<(), String> {
             json,
             video,
         } => {
-            let r = datasets::export(&file, &format, output, json.as_deref(), video)
-                .map_err(|e| e.to_string())?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = datasets::export(&file, &format, output, json.as_deref(), video)?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Render {
@@ -466,7 +459,7 @@ fn run(cli: Cli) -> Result<(), String> {
             output,
         } => {
             let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Fidelity {
@@ -485,40 +478,37 @@ fn run(cli: Cli) -> Result<(), String> {
             plot,
         }),
         Command::Envs => {
-            out!(
-                "{}",
-                serde_json::to_string_pretty(&mjskill::registry()).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
         }
     }
 }
 
-fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), String> {
+fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), CliError> {
     match output {
-        Some(path) => {
-            std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
-        }
+        Some(path) => std::fs::write(&path, text)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?,
         None => std::io::stdout()
             .write_all(text.as_bytes())
-            .map_err(|e| format!("cannot write to stdout: {e}")),
+            .map_err(|e| format!("cannot write to stdout: {e}"))?,
     }
+    Ok(())
 }
 
 fn export_mjcf(
     robot: Option<&str>,
     env: Option<&str>,
     output: Option<PathBuf>,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let mjcf = match env {
-        None => mjskill::robot_scene_mjcf(robot.unwrap_or("panda")).map_err(|e| e.to_string())?,
+        None => mjskill::robot_scene_mjcf(robot.unwrap_or("panda"))?,
         Some(id) => {
             // As rollout does: without --robot, the env's own default robot.
             let robot = match robot {
                 Some(r) => r,
-                None => mjskill::default_robot(id).map_err(|e| e.to_string())?,
+                None => mjskill::default_robot(id)?,
             };
-            mjskill::scene_mjcf(id, robot).map_err(|e| e.to_string())?
+            mjskill::scene_mjcf(id, robot)?
         }
     };
     if !mjcf.assets.is_empty() {
@@ -542,7 +532,7 @@ fn fit_primitives(
     segments: usize,
     crop: Option<&str>,
     scale: f64,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     use crate::mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
@@ -565,12 +555,11 @@ fn fit_primitives(
                 return Err(format!(
                     "--crop needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}",
                     v.len()
-                ));
+                )
+                .into());
             }
             if (0..3).any(|k| v[k] > v[k + 3]) {
-                return Err(format!(
-                    "--crop {s}: each minimum must not exceed its maximum"
-                ));
+                return Err(format!("--crop {s}: each minimum must not exceed its maximum").into());
             }
             Some(mesh_fit::Crop {
                 min: [v[0], v[1], v[2]].into(),
@@ -579,10 +568,9 @@ fn fit_primitives(
         }
     };
     let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
-    let mut tris =
-        mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
-    mesh_fit::scale_triangles(&mut tris, scale).map_err(|e| e.to_string())?;
-    let pts = mesh_fit::surface_points(&tris, crop.as_ref()).map_err(|e| e.to_string())?;
+    let mut tris = mesh_fit::read_triangles(&bytes, &mesh.display().to_string())?;
+    mesh_fit::scale_triangles(&mut tris, scale)?;
+    let pts = mesh_fit::surface_points(&tris, crop.as_ref())?;
     let prims = match parts {
         Some(n) => mesh_fit::decompose(&pts, &kinds, n),
         None if segments > 1 && kinds.len() == 1 => {
@@ -590,10 +578,9 @@ fn fit_primitives(
         }
         None if segments > 1 => return Err("--segments needs a single --shape".into()),
         None => mesh_fit::fit_any(&pts, &kinds).map(|p| vec![p]),
-    }
-    .map_err(|e| e.to_string())?;
+    }?;
     for p in &prims {
-        mesh_fit::check_primitive(p, crop.is_some()).map_err(|e| e.to_string())?;
+        mesh_fit::check_primitive(p, crop.is_some())?;
     }
     let total: f64 = prims.iter().map(|p| p.volume()).sum();
     for p in &prims {

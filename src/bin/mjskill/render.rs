@@ -3,6 +3,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::CliError;
 use mjskill::record::image::write_png;
 use mjskill::{make, EnvConfig, ObsMode};
 
@@ -33,22 +34,22 @@ pub fn run(
     seed: u64,
     camera: &str,
     out: &Path,
-) -> Result<RenderSummary, String> {
-    let probe = make(env_id, config.clone()).map_err(|e| e.to_string())?;
+) -> Result<RenderSummary, CliError> {
+    let probe = make(env_id, config.clone())?;
     // The sensor camera, then the robot-mounted ones.
     let (human, sensors) = (probe.cameras().1, probe.sensor_names());
     drop(probe);
     let (rgb, (w, h), robot) = if camera == human.name {
-        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        let mut env = make(env_id, config)?;
         env.reset(Some(seed));
-        let frame = env.render().map_err(|e| e.to_string())?.to_vec();
+        let frame = env.render()?.to_vec();
         (frame, human.size, env.robot_id().uid())
     } else if sensors.contains(&camera) {
         let config = EnvConfig {
             obs_mode: ObsMode::Rgb,
             ..config
         };
-        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        let mut env = make(env_id, config)?;
         env.reset(Some(seed));
         let img = env
             .image(camera)
@@ -60,9 +61,10 @@ pub fn run(
         return Err(format!(
             "unknown camera {camera:?} for {env_id}; valid cameras: {}",
             valid.join(", ")
-        ));
+        )
+        .into());
     };
-    write_png(out, &rgb, w, h).map_err(|e| e.to_string())?;
+    write_png(out, &rgb, w, h)?;
     Ok(RenderSummary {
         out: out.display().to_string(),
         env: env_id.to_string(),
