@@ -65,7 +65,7 @@ pub enum EnvError {
     /// the field).
     #[error("cannot set state: {0}")]
     BadState(String),
-    /// A seed beyond ManiSkill's 32-bit seeds ([`checks::MAX_SEED`]).
+    /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
     #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
     BadSeed(u64),
     /// An unknown robot uid, or the robot's scene could not be built.
@@ -121,14 +121,14 @@ pub enum EnvError {
 pub enum ObsMode {
     /// One flat f32 vector.
     State,
-    /// The same values with named parts ([`Env::obs_layout`]).
+    /// The same values with named parts ([`Env::obs_layout`](super::Env::obs_layout)).
     StateDict,
     /// No observation.
     None,
     /// State-free vector (agent, controller, non-privileged extras) plus the sensor camera's
-    /// colour image ([`Env::sensor_rgb`]).
+    /// colour image ([`Env::sensor_rgb`](super::Env::sensor_rgb)).
     Rgb,
-    /// As `Rgb` with the depth image ([`Env::sensor_depth`]) instead of colour.
+    /// As `Rgb` with the depth image ([`Env::sensor_depth`](super::Env::sensor_depth)) instead of colour.
     Depth,
     /// As `Rgb` with both colour and depth.
     Rgbd,

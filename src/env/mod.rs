@@ -539,7 +539,7 @@ impl Env {
 
     /// Restores a state from [`Env::get_state`]; the following steps equal the original
     /// trajectory bitwise. A state of another env, robot or control mode, or with a
-    /// non-finite or out-of-range value ([`checks::check_state_values`]: the error names the
+    /// non-finite or out-of-range value (checked by `checks::check_state_values`: the error names the
     /// field), is an error and the env is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
         let mine = (self.id, self.sim.spec.uid(), self.sim.controller.mode());

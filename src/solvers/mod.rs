@@ -4,7 +4,7 @@
 //! The solvers are the EE-space scripted policies (control mode `pd_ee_delta_pos`): every step
 //! `action = [clip((target − tcp)/0.1, −L, L), gripper]`, with phases checked in order and
 //! falling through in the same step. "k steps" in a phase means exactly k actions issued in
-//! that phase, counting the step on which it was entered (the spec's [audited] reading).
+//! that phase, counting the step on which it was entered (the spec's \[audited\] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
 mod evaluate;
@@ -148,7 +148,7 @@ impl Policy for Random {
     }
 }
 
-/// The (env id, robot) pairs that have a scripted solver (the arms of [`solver`]'s match).
+/// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
 pub const SOLVED: [(&str, &str); 11] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
