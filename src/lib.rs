@@ -46,7 +46,7 @@ pub(crate) mod tasks;
 #[cfg(test)]
 mod tests;
 
-pub use controllers::ControlMode;
+pub use controllers::{ControlMode, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::{
     default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, Env, EnvConfig,

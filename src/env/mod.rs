@@ -77,7 +77,6 @@ impl Sim {
     fn ctx(&self) -> TaskCtx<'_> {
         let (tcp_pos, tcp_quat) = self.robot.tcp_pose(&self.data);
         TaskCtx {
-            model: &self.model,
             data: &self.data,
             robot: &self.robot,
             spec: self.spec,
@@ -237,7 +236,9 @@ impl Env {
     pub fn finger_forces(&self) -> &[[f64; 3]; 2] {
         &self.sim.finger_forces
     }
-    /// The robot's joint drives (targets and force law).
+    /// The robot's joint drives (PD targets and PhysX's force law). Read access for
+    /// inspecting the targets a control mode set; a clone stepped with a clone of
+    /// [`Env::data`] replays the raw physics without the env (what `mjskill bench` times).
     pub fn drives(&self) -> &Drives {
         &self.sim.drives
     }
@@ -269,12 +270,34 @@ impl Env {
     pub fn data(&self) -> &Data {
         &self.sim.data
     }
+    /// The `info` key of the task's grasp check (`is_grasped`, `is_peg_grasped`,
+    /// `is_obj_grasped`).
+    pub fn grasp_info_key(&self) -> &'static str {
+        self.sim.task.grasp_flag()
+    }
+    /// Whether `info` key `key` is a boolean flag (0 or 1) rather than a measurement
+    /// (PokeCube also reports two distances).
+    pub fn info_is_flag(&self, key: &str) -> bool {
+        self.sim.task.bool_info(key)
+    }
+    /// The TCP pose (ManiSkill's `agent.tcp_pose`) as position and raw quaternion (w, x, y, z),
+    /// in full precision.
+    pub fn tcp_pose(&self) -> ([f64; 3], [f64; 4]) {
+        self.sim.robot.tcp_pose(&self.sim.data)
+    }
+    /// The robot's joint positions in ManiSkill's qpos order, in full precision (ManiSkill's
+    /// `agent.robot.get_qpos()`; the observation holds them as `f32`).
+    pub fn robot_qpos(&self) -> Vec<f64> {
+        let mut q = vec![0.0; self.sim.robot.joints.len()];
+        self.sim.robot.joints.qpos(&self.sim.data, &mut q);
+        q
+    }
     /// Resolved robot ids.
-    pub fn robot(&self) -> &RobotIds {
+    pub(crate) fn robot(&self) -> &RobotIds {
         &self.sim.robot
     }
     /// The task.
-    pub fn task(&self) -> &dyn Task {
+    pub(crate) fn task(&self) -> &dyn Task {
         self.sim.task.as_ref()
     }
     /// Steps until truncation.

@@ -483,6 +483,7 @@ pub struct RobotIds {
     /// Body id per URDF link name lookup (name, id).
     pub link_bodies: Vec<(String, usize)>,
     /// The `tcp` site (at the TCP link's origin), when the robot has a TCP link.
+    #[cfg_attr(not(test), allow(dead_code))] // read by the tests
     pub tcp_site: Option<usize>,
     /// Body of the TCP link.
     pub tcp_body: Option<usize>,

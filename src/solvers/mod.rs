@@ -212,7 +212,7 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
 
 /// Gripper commands (open, close) of a robot's gripper action.
 #[derive(Debug, Clone, Copy)]
-pub struct Gripper {
+pub(crate) struct Gripper {
     /// Action value that opens.
     pub open: f32,
     /// Action value that closes.
@@ -220,32 +220,32 @@ pub struct Gripper {
 }
 
 /// Panda: +1 opens (0.04 m), −1 closes (−0.01 m target).
-pub const PANDA_GRIPPER: Gripper = Gripper {
+pub(crate) const PANDA_GRIPPER: Gripper = Gripper {
     open: 1.0,
     close: -1.0,
 };
 
 /// Fetch: +1 opens (0.05 m), −1 closes (−0.01 m target).
-pub const FETCH_GRIPPER: Gripper = Gripper {
+pub(crate) const FETCH_GRIPPER: Gripper = Gripper {
     open: 1.0,
     close: -1.0,
 };
 
 /// xArm6 + Robotiq in `pd_ee_delta_pose`: the absolute gripper (docs/robots.md §4) takes target
 /// 0 rad (open) and 0.81 rad (closed).
-pub const XARM6_ABS_GRIPPER: Gripper = Gripper {
+pub(crate) const XARM6_ABS_GRIPPER: Gripper = Gripper {
     open: 0.0,
     close: 0.81,
 };
 
 /// Height of the approach point above the grasp point (m; the grasp phases of docs/solvers.md §7).
-pub const APPROACH_HEIGHT: f64 = 0.05;
+pub(crate) const APPROACH_HEIGHT: f64 = 0.05;
 /// Approach tolerance (m).
-pub const APPROACH_TOL: f64 = 0.01;
+pub(crate) const APPROACH_TOL: f64 = 0.01;
 /// Descent tolerance (m).
-pub const DESCEND_TOL: f64 = 0.004;
+pub(crate) const DESCEND_TOL: f64 = 0.004;
 /// Steps the gripper closes before the object is moved (Panda, Fetch).
-pub const CLOSE_STEPS: usize = 3;
+pub(crate) const CLOSE_STEPS: usize = 3;
 
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
@@ -257,7 +257,7 @@ const ROT_SCALE: f64 = -0.1;
 /// within one step; "k steps in a phase" counts the actions issued in it, including the one
 /// of the step on which it was entered.
 #[derive(Debug, Default, Clone, Copy)]
-pub struct Phases {
+pub(crate) struct Phases {
     /// The current phase.
     pub phase: usize,
     /// Actions issued in the current phase.
@@ -293,12 +293,12 @@ fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, SolverErro
 }
 
 /// A body's world position, read from MuJoCo.
-pub fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
+pub(crate) fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
     Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
 }
 
 /// A body's world orientation, read from MuJoCo.
-pub fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
+pub(crate) fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
     let q = &env.data().xquat()[4 * body..4 * body + 4];
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
@@ -325,7 +325,7 @@ fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
 /// Phases 0–2 that every EE-space solver starts with (docs/solvers.md §7): above the grasp point
 /// (open), down to it (open), close for `hold` steps.
 #[derive(Debug, Clone, Copy)]
-pub struct Grasp {
+pub(crate) struct Grasp {
     /// The robot's gripper commands.
     pub gripper: Gripper,
     /// Whether the descent to the grasp point is done (target, tcp).

@@ -110,8 +110,6 @@ pub struct CameraDef {
 
 /// Everything a task reads in one evaluation, resolved and computed by the env.
 pub struct TaskCtx<'a> {
-    /// The model.
-    pub model: &'a Model,
     /// The simulation state (post-step).
     pub data: &'a Data,
     /// Robot ids.
