@@ -20,6 +20,13 @@
 //! [`solvers::evaluate`]) and [`mujoco`] (read access to the simulation behind
 //! [`Env::model`] and [`Env::data`] for custom sensing, and the render settings).
 //!
+//! Errors are typed per layer, each naming the bad value, with the lower layer's error as its
+//! `source`: [`EnvError`] (from [`RobotError`], itself from [`ControllerError`],
+//! [`SceneError`], [`UrdfError`], [`ModelFileError`] and [`mujoco::MjError`]; and
+//! [`RenderError`], [`StateDictError`]), [`RecordError`], [`solvers::SolverError`] and
+//! [`solvers::EvalError`], and the errors of [`record::replay`], [`record::image`] and
+//! [`datasets`].
+//!
 //! Inside, the modules follow the flow of data, and every module only uses modules before it
 //! (`tests/layering.rs` checks this): `mujoco-sys` (FFI) → `mujoco` (the safe layer) → `mjcf`
 //! (URDF → MJCF scene generation) → `controllers` → `robots` → `tasks` → `env` → `record` →
@@ -46,14 +53,16 @@ pub(crate) mod tasks;
 #[cfg(test)]
 mod tests;
 
-pub use controllers::{ControlMode, Drives};
+pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::{
     default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, Env, EnvConfig,
     EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, RewardMode, SimConfig, StateDict,
     StateDictError, Step, VecEnv, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use mjcf::Mjcf;
+pub use mjcf::urdf::RobotError as UrdfError;
+pub use mjcf::{Mjcf, SceneError};
+pub use models::ModelFileError;
 pub use mujoco::render::{RenderError, RenderOptions};
 pub use record::{RecordError, Recorder};
 pub use robots::{robot_scene_mjcf, RobotError, RobotId};
