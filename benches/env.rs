@@ -6,7 +6,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use mjskill::env::vec::VecEnv;
+use mjskill::VecEnv;
 use mjskill::{make, registry, Env, EnvConfig, ObsMode};
 use rand::{Rng, SeedableRng};
 

@@ -8,9 +8,27 @@ pub fn file(path: &str) -> Option<&'static [u8]> {
     FILES.iter().find(|(p, _)| *p == path).map(|(_, b)| *b)
 }
 
+/// Why a model file cannot be read: the error names the file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ModelFileError {
+    /// No such file in `models/`.
+    #[error("model file {0:?} is not shipped in models/")]
+    NotShipped(String),
+    /// The file is not UTF-8 text.
+    #[error("model file {path:?} is not UTF-8: {source}")]
+    NotUtf8 {
+        /// The file.
+        path: String,
+        /// The decoding error.
+        source: std::str::Utf8Error,
+    },
+}
+
 /// The model file at `path` as UTF-8 text, with an error naming the file.
-pub fn text(path: &str) -> Result<&'static str, String> {
-    let bytes =
-        file(path).ok_or_else(|| format!("model file {path:?} is not shipped in models/"))?;
-    std::str::from_utf8(bytes).map_err(|e| format!("model file {path:?} is not UTF-8: {e}"))
+pub fn text(path: &str) -> Result<&'static str, ModelFileError> {
+    let bytes = file(path).ok_or_else(|| ModelFileError::NotShipped(path.to_string()))?;
+    std::str::from_utf8(bytes).map_err(|source| ModelFileError::NotUtf8 {
+        path: path.to_string(),
+        source,
+    })
 }

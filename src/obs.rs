@@ -61,11 +61,6 @@ impl<'a> ObsWriter<'a> {
         self.pos
     }
 
-    /// Whether nothing was written yet.
-    pub fn is_empty(&self) -> bool {
-        self.pos == 0
-    }
-
     /// Writes a part whose key is the path `segments` joined by `/` after the prefix (e.g.
     /// `["arm", "target_qpos"]`), with the values as f32.
     pub fn put_path(&mut self, segments: &[&str], values: impl IntoIterator<Item = f64>) {

@@ -74,8 +74,7 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         }
     }
     // The VecEnv's steady-state step (workers included: the counter is process-wide).
-    let mut v =
-        mjskill::env::VecEnv::new("PickCube-v1", mjskill::EnvConfig::default(), 4, 2).unwrap();
+    let mut v = mjskill::VecEnv::new("PickCube-v1", mjskill::EnvConfig::default(), 4, 2).unwrap();
     let acts: Vec<f32> = (0..32).map(|i| (i as f32 * 0.3).sin()).collect();
     v.step(&acts).unwrap();
     ALLOCS.store(0, Ordering::SeqCst);
@@ -141,7 +140,7 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         obs_mode: mjskill::ObsMode::Rgbd,
         ..Default::default()
     };
-    let mut v = mjskill::env::VecEnv::new("PickCube-v1", config, 3, 2).unwrap();
+    let mut v = mjskill::VecEnv::new("PickCube-v1", config, 3, 2).unwrap();
     let acts: Vec<f32> = (0..3 * v.single_action_space().shape[0])
         .map(|i| (i as f32 * 0.3).sin())
         .collect();

@@ -3,8 +3,8 @@
 //! (fixed seed, bounded cases) of random bad actions, states and configs: every call is an
 //! `Err` or gives finite output, and the env stays usable.
 
-use mjskill::env::checks::MAX_SEED;
-use mjskill::env::VecEnv;
+use mjskill::VecEnv;
+use mjskill::MAX_SEED;
 use mjskill::{make, Env, EnvConfig, EnvError, EnvState, ObsMode, RewardMode};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};

@@ -1,7 +1,9 @@
 //! The module graph runs one way: FFI → `mujoco` → `mjcf` → `controllers` → `robots` →
-//! `tasks` → `env` → `record` → (`maniskill`, `solvers`, `tools`) → `cli`, with the leaves
+//! `tasks` → `env` → `record` → (`maniskill`, `solvers`) → `datasets`, with the leaves
 //! `rng` (ManiSkill's RNG emulation), `models` (the embedded robot files) and `obs` (the
-//! observation writer) below everything.
+//! observation writer) below everything, and the crate's internal cross-layer tests
+//! (`src/tests/`) above. The command line (`src/bin/mjskill/`) is a separate crate on the
+//! public API.
 //!
 //! This test reads every `src/**/*.rs`, collects the top-level module each `crate::` path
 //! names (in `use` lines, code and intra-doc links alike, `use crate::{a::X, b::Y}` groups
@@ -20,9 +22,9 @@ const LAYERS: &[&[&str]] = &[
     &["tasks"],
     &["env"],
     &["record"],
-    &["maniskill", "solvers", "tools"],
+    &["maniskill", "solvers"],
     &["datasets"],
-    &["cli"],
+    &["tests"],
 ];
 
 fn layer(module: &str) -> Option<usize> {

@@ -51,9 +51,7 @@ fn quat_angle(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn robot_qpos(env: &Env) -> Vec<f64> {
-    let mut q = vec![0.0; env.robot().joints.len()];
-    env.robot().joints.qpos(env.data(), &mut q);
-    q
+    env.robot_qpos()
 }
 
 /// Compares everything that is a function of the state: poses, TCP, obs (except the grasp
@@ -85,7 +83,7 @@ fn check_state_quantities(
             "{ctx}: {name} rotation"
         );
     }
-    let (p, q) = env.robot().tcp_pose(env.data());
+    let (p, q) = env.tcp_pose();
     assert!(max_abs(&p, &s.tcp_pose[..3]) < 2e-6, "{ctx}: tcp position");
     // Fetch's TCP quaternion is an unnormalised average in ManiSkill: compare as written.
     assert!(
@@ -106,7 +104,7 @@ fn check_state_quantities(
     let info = env.info();
     let grasp_agrees = info.flag(grasp_key) == s.flag(grasp_key);
     for k in info.keys {
-        if !env.task().bool_info(k) || (*k == grasp_key) || (*k == "success" && !grasp_agrees) {
+        if !env.info_is_flag(k) || (*k == grasp_key) || (*k == "success" && !grasp_agrees) {
             continue;
         }
         assert_eq!(info.flag(k), s.flag(k), "{ctx}: info {k}");
@@ -130,7 +128,7 @@ fn seeded_initial_states_equal_maniskills() {
                 env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
             env.reset(Some(ep.seed));
             let ctx = format!("{} {} seed {}", f.env_id, f.robot, ep.seed);
-            let key = env.task().grasp_flag();
+            let key = env.grasp_info_key();
             // A fresh env's first reset sees no previous contacts: the grasp flag is false
             // in both.
             check_state_quantities(&env, &ep.initial, key, None, &ctx);
@@ -156,7 +154,7 @@ fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
             let mut env =
                 env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
             env.reset(Some(ep.seed));
-            let key = env.task().grasp_flag();
+            let key = env.grasp_info_key();
             let gi = grasp_obs_index(&f, &ep.control_mode);
             for s in &ep.steps {
                 env.set_state_dict(&s.state_dict).unwrap();

@@ -192,7 +192,7 @@ fn spec_dense_reward(e: &mjskill::Env, sphere_body: usize) -> f64 {
 
 #[test]
 fn every_reward_stage_of_a_solved_episode_matches_the_spec_formula() {
-    use mjskill::cli::eval;
+    use mjskill::solvers as eval;
     let config = EnvConfig {
         reward_mode: mjskill::RewardMode::Dense,
         ..Default::default()

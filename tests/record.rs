@@ -90,7 +90,7 @@ fn round_trip_and_exact_replay() {
     assert!(r.complete);
     let m = &r.meta;
     assert_eq!(m.env_id, "PickCube-v1");
-    assert_eq!(m.robot, env.robot_spec().uid());
+    assert_eq!(m.robot, env.robot_id().uid());
     assert_eq!(m.obs_mode, env.config().obs_mode.name());
     assert_eq!(m.reward_mode, env.config().reward_mode.name());
     assert_eq!(m.control_mode, env.get_state().control_mode);

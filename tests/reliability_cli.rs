@@ -108,29 +108,6 @@ fn bad_arguments_never_touch_an_existing_recording() {
 }
 
 #[test]
-fn a_failed_run_before_its_first_episode_leaves_the_old_file() {
-    // What a rollout killed or failing in its first episode leaves: the old file as it was.
-    use mjskill::cli::output::Output;
-    let d = dir("unpublished");
-    let out = d.join("run.mcap");
-    std::fs::write(&out, b"old recording").unwrap();
-    let (o, mut f) = Output::start(&out).unwrap();
-    std::io::Write::write_all(&mut f, b"half an episode").unwrap();
-    assert!(o.current() != out && o.current().starts_with(&d));
-    o.discard();
-    assert_eq!(std::fs::read(&out).unwrap(), b"old recording");
-    assert!(leftovers(&d).is_empty());
-    // Publishing moves the new file into place; what is written after lands there too.
-    let (mut o, mut f) = Output::start(&out).unwrap();
-    std::io::Write::write_all(&mut f, b"episode 1").unwrap();
-    o.publish().unwrap();
-    std::io::Write::write_all(&mut f, b", episode 2").unwrap();
-    drop(f);
-    assert_eq!(std::fs::read(&out).unwrap(), b"episode 1, episode 2");
-    assert!(leftovers(&d).is_empty());
-}
-
-#[test]
 fn side_pngs_never_clobber_or_cut_the_recording() {
     let d = dir("sidepng");
     // --out x.png: the frame PNG would be the recording itself.
@@ -393,20 +370,6 @@ fn bench_reports_the_threads_it_used() {
         r["threads"], 2,
         "a VecEnv of 2 envs runs on at most 2 threads: {r}"
     );
-    // Library: a bad VecEnv size fails before any timing.
-    let t = Instant::now();
-    let e = mjskill::cli::bench::run(
-        "PickCube-v1",
-        Default::default(),
-        100_000,
-        Some((0, 1)),
-        None,
-    )
-    .unwrap_err();
-    assert!(
-        e.contains("--envs") && t.elapsed() < Duration::from_secs(5),
-        "{e}"
-    );
 }
 
 #[test]
@@ -427,7 +390,9 @@ fn replay_tolerance_is_a_finite_number_at_least_zero() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(json(&o)["tolerance"], 0.0);
     for bad in [f64::NAN, -1.0, f64::INFINITY] {
-        let e = mjskill::record::replay::replay(&f, bad, false).unwrap_err();
+        let e = mjskill::record::replay::replay(&f, bad, false)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("--tolerance"), "{e}");
     }
 }

@@ -477,7 +477,7 @@ fn visual_envs_render_on_vec_env_worker_threads() {
         obs_mode: ObsMode::Rgb,
         ..Default::default()
     };
-    let mut v = mjskill::env::VecEnv::new("PickCube-v1", config, 2, 2).unwrap();
+    let mut v = mjskill::VecEnv::new("PickCube-v1", config, 2, 2).unwrap();
     v.reset(Some(5));
     let dim = v.single_action_space().shape[0];
     let acts: Vec<f32> = (0..2 * dim).map(|i| (i as f32 * 0.4).sin()).collect();

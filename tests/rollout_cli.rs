@@ -51,7 +51,8 @@ fn rollout_info_and_replay_round_trip() {
 #[test]
 fn no_frame_skips_the_png_next_to_the_recording() {
     let out = tmp("noframe.mcap");
-    let png = mjskill::cli::rollout::frame_path(&out);
+    // The frame goes next to the recording: `noframe.mcap` → `noframe.png`.
+    let png = out.with_extension("png");
     let o = mjskill()
         .args(["rollout", "--episodes", "1", "--no-frame", "--out"])
         .arg(&out)

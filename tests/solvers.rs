@@ -1,11 +1,11 @@
 //! Scripted solvers and `eval`.
 
-use mjskill::cli::eval;
+use mjskill::solvers as eval;
 use mjskill::EnvConfig;
 
 #[test]
 fn pickcube_panda_solver_succeeds_on_seeds_0_to_19() {
-    let r = eval::run("PickCube-v1", EnvConfig::default(), "solver", 20, 0).unwrap();
+    let r = eval::evaluate("PickCube-v1", EnvConfig::default(), "solver", 20, 0).unwrap();
     assert_eq!(r.control_mode, "pd_ee_delta_pos");
     assert!(r.successes >= 19, "{r:?}");
     // The cube is held at the goal until the end, and the dense reward accumulates.
@@ -17,16 +17,18 @@ fn pickcube_panda_solver_succeeds_on_seeds_0_to_19() {
 
 #[test]
 fn zero_and_random_policies_do_not_solve_pickcube() {
-    let r = eval::run("PickCube-v1", EnvConfig::default(), "zero", 3, 0).unwrap();
+    let r = eval::evaluate("PickCube-v1", EnvConfig::default(), "zero", 3, 0).unwrap();
     assert_eq!(r.successes, 0);
-    let r = eval::run("PickCube-v1", EnvConfig::default(), "random", 3, 0).unwrap();
+    let r = eval::evaluate("PickCube-v1", EnvConfig::default(), "random", 3, 0).unwrap();
     assert_eq!(r.successes, 0);
     assert!(r.mean_return.is_finite());
 }
 
 #[test]
 fn policy_errors_name_the_problem() {
-    let e = eval::run("PickCube-v1", EnvConfig::default(), "telepathy", 1, 0).unwrap_err();
+    let e = eval::evaluate("PickCube-v1", EnvConfig::default(), "telepathy", 1, 0)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("telepathy") && e.contains("solver, random, zero"),
         "{e}"
@@ -35,7 +37,9 @@ fn policy_errors_name_the_problem() {
         control_mode: Some("pd_joint_pos".into()),
         ..Default::default()
     };
-    let e = eval::run("PickCube-v1", config, "solver", 1, 0).unwrap_err();
+    let e = eval::evaluate("PickCube-v1", config, "solver", 1, 0)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("pd_ee_delta_pos") && e.contains("pd_joint_pos"),
         "{e}"
@@ -45,7 +49,9 @@ fn policy_errors_name_the_problem() {
         control_mode: Some("pd_telekinesis".into()),
         ..Default::default()
     };
-    let e = eval::run("PickCube-v1", config, "solver", 1, 0).unwrap_err();
+    let e = eval::evaluate("PickCube-v1", config, "solver", 1, 0)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("unknown control mode \"pd_telekinesis\"") && e.contains("pd_ee_delta_pose"),
         "{e}"
@@ -84,7 +90,7 @@ fn sparse_reward_is_success_and_dense_reaches_its_maximum_stage() {
 #[test]
 fn placesphere_and_pokecube_panda_solvers_succeed_on_seeds_0_to_19() {
     for env in ["PlaceSphere-v1", "PokeCube-v1"] {
-        let r = eval::run(env, EnvConfig::default(), "solver", 20, 0).unwrap();
+        let r = eval::evaluate(env, EnvConfig::default(), "solver", 20, 0).unwrap();
         assert_eq!(r.control_mode, "pd_ee_delta_pos");
         assert!(r.successes >= 19, "{r:?}");
         // Success is kept to the last step (the sphere stays in the bin, the cube at the goal).

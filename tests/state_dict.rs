@@ -133,10 +133,12 @@ fn bad_state_dicts_are_errors_that_leave_the_env_unchanged() {
     assert!(
         StateDict::from_json(&serde_json::json!({"actors": {"cube": [1.0]}}))
             .unwrap_err()
+            .to_string()
             .contains("actors.cube has 1 values, expected 13")
     );
     assert!(StateDict::from_json(&serde_json::json!({"bodies": {}}))
         .unwrap_err()
+        .to_string()
         .contains("unknown state dict key \"bodies\""));
 }
 
@@ -200,7 +202,7 @@ fn sim_freq_sets_the_physics_step_and_bad_rates_are_errors() {
             sim: SimConfig { sim_freq },
             ..Default::default()
         };
-        let r = mjskill::cli::eval::run("PickCube-v1", config, "solver", 3, 0).unwrap();
+        let r = mjskill::solvers::evaluate("PickCube-v1", config, "solver", 3, 0).unwrap();
         assert_eq!(r.successes, 3, "sim_freq {sim_freq}");
     }
 }

@@ -1,6 +1,6 @@
 //! VecEnv: thread-count independence, autoreset semantics, errors.
 
-use mjskill::env::VecEnv;
+use mjskill::VecEnv;
 use mjskill::{make, Env, EnvConfig, ObsMode};
 
 fn actions(n: usize, dim: usize, k: usize) -> Vec<f32> {

@@ -1,7 +1,7 @@
 //! `mjskill._native`: the PyO3 extension under the `mjskill` Python package.
 //!
 //! Two classes wrap the Rust API: [`PyEnv`] (one [`mjskill::Env`]) and [`PyVecEnv`] (a
-//! [`mjskill::env::VecEnv`]); [`record_episodes`] writes a recording (`.mcap`) of given seeds
+//! [`mjskill::VecEnv`]); [`record_episodes`] writes a recording (`.mcap`) of given seeds
 //! and actions. The gymnasium classes (`mjskill.MjskillEnv`, `mjskill.MjskillVectorEnv`) are
 //! plain Python on top, because a PyO3 class cannot subclass `gymnasium.Env`.
 //!
@@ -14,8 +14,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
-use mjskill::env::VecEnv;
 use mjskill::record::Recorder;
+use mjskill::VecEnv;
 use mjskill::{Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, SimConfig};
 use numpy::ndarray::ArrayView2;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
@@ -26,7 +26,7 @@ use pyo3::types::{PyDict, PyList};
 /// A Rust env error as a Python `ValueError` with the same message.
 fn value_err(e: EnvError) -> PyErr {
     match e {
-        EnvError::Render(m) => PyRuntimeError::new_err(m),
+        EnvError::Render(m) => PyRuntimeError::new_err(m.to_string()),
         e => PyValueError::new_err(e.to_string()),
     }
 }
@@ -93,7 +93,7 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let cfg = env.config();
     d.set_item("env_id", env.id())?;
-    d.set_item("robot_uids", env.robot_spec().uid())?;
+    d.set_item("robot_uids", env.robot_id().uid())?;
     d.set_item("control_mode", env.control_mode())?;
     d.set_item("obs_mode", cfg.obs_mode.name())?;
     d.set_item("reward_mode", cfg.reward_mode.name())?;

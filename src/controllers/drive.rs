@@ -71,7 +71,7 @@ struct DriveDof {
 }
 
 /// The drives of one robot: targets plus the force law. All buffers are allocated in
-/// [`Drives::new`]; [`Drives::apply`] allocates nothing.
+/// `Drives::new`; [`Drives::apply`] allocates nothing.
 #[derive(Debug, Clone)]
 pub struct Drives {
     dofs: Vec<DriveDof>,
@@ -132,7 +132,7 @@ impl Drives {
     /// [`crate::mjcf::actuator_name`]) in `model`. `joints` are the robot's joints in
     /// ManiSkill order; `gripper` names the gripper joints. Errors name a missing joint or
     /// actuator.
-    pub fn new(
+    pub(crate) fn new(
         model: &Model,
         drives: &[Drive],
         joints: &[String],

@@ -32,6 +32,8 @@ struct ChainJoint {
     q_index: Option<usize>,
     /// Whether the IK may move it.
     active: bool,
+    /// Joint limits (read by the tests).
+    #[cfg_attr(not(test), allow(dead_code))]
     limits: (f64, f64),
 }
 
@@ -240,6 +242,7 @@ impl Chain {
     }
 
     /// Joint limits of the movable chain joints (for tests).
+    #[cfg(test)]
     pub fn limits(&self) -> Vec<(f64, f64)> {
         self.joints
             .iter()

@@ -49,11 +49,6 @@ impl JointMap {
         self.qpos_adr.len()
     }
 
-    /// Whether the robot has no active joint.
-    pub fn is_empty(&self) -> bool {
-        self.qpos_adr.is_empty()
-    }
-
     /// Reads the joint positions (ManiSkill order) into `out`.
     pub fn qpos(&self, data: &Data, out: &mut [f64]) {
         let q = data.qpos();

@@ -71,7 +71,7 @@ pub(crate) fn read_recording(
             .as_u64()
             .ok_or_else(|| bad("no episode".into()))? as usize;
         let step = v["step"].as_u64().ok_or_else(|| bad("no step".into()))? as usize;
-        let sd = StateDict::from_json(&v["state"]).map_err(bad)?;
+        let sd = StateDict::from_json(&v["state"]).map_err(|e| bad(e.to_string()))?;
         if states.len() <= ep {
             states.resize(ep + 1, Vec::new());
         }

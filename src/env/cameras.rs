@@ -78,12 +78,11 @@ impl Env {
                     false,
                     self.render_options,
                 )
-                .map_err(|e| EnvError::Render(e.to_string()))?,
+                .map_err(EnvError::from)?,
             );
         }
         let v = self.vision.as_mut().expect("created above");
-        v.render_human(&mut self.sim.data)
-            .map_err(|e| EnvError::Render(e.to_string()))
+        v.render_human(&mut self.sim.data).map_err(EnvError::from)
     }
 
     /// Size (width, height) of [`Env::render`]'s frames.
@@ -112,7 +111,7 @@ impl Env {
                 old.depth_on,
                 options,
             )
-            .map_err(|e| EnvError::Render(e.to_string()))?;
+            .map_err(EnvError::from)?;
             self.vision = Some(new);
         }
         self.render_options = options;

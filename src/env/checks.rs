@@ -35,9 +35,7 @@ pub fn check_seed(seed: u64) -> Result<(), EnvError> {
 /// Checks `robot_init_qpos_noise`: finite and in `0..=MAX_QPOS_NOISE`.
 pub fn check_qpos_noise(sigma: f64) -> Result<(), EnvError> {
     if !(sigma.is_finite() && (0.0..=MAX_QPOS_NOISE).contains(&sigma)) {
-        return Err(EnvError::Build(format!(
-            "robot_init_qpos_noise must be finite and in [0, {MAX_QPOS_NOISE}], got {sigma}"
-        )));
+        return Err(EnvError::BadQposNoise(sigma));
     }
     Ok(())
 }

@@ -3,6 +3,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::mjcf::CONTROL_DT;
+use crate::mujoco::render::RenderError;
+use crate::mujoco::MjError;
+use crate::robots::RobotError;
 
 /// Seed of the reset ManiSkill performs at the end of env construction.
 pub const CONSTRUCTION_SEED: u64 = 2022;
@@ -27,9 +30,19 @@ pub enum EnvError {
         /// Valid robots.
         valid: String,
     },
-    /// Unknown mode (obs, reward or control).
-    #[error("{0}")]
-    UnknownMode(String),
+    /// Unknown obs or reward mode.
+    #[error("unknown {what} {got:?}; valid {}s: {valid}", what.replace('_', " "))]
+    UnknownMode {
+        /// What was being parsed (`obs_mode`, `reward_mode`).
+        what: &'static str,
+        /// The requested mode.
+        got: String,
+        /// The valid modes.
+        valid: String,
+    },
+    /// A control mode the robot does not have (the message lists the robot's modes).
+    #[error(transparent)]
+    UnknownControlMode(RobotError),
     /// Action of the wrong length.
     #[error("action has {got} values, but {mode} expects {expected}")]
     ActionLength {
@@ -52,15 +65,55 @@ pub enum EnvError {
     /// the field).
     #[error("cannot set state: {0}")]
     BadState(String),
-    /// A seed beyond ManiSkill's 32-bit seeds ([`checks::MAX_SEED`]).
+    /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
     #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
     BadSeed(u64),
-    /// Building the scene or model failed.
-    #[error("{0}")]
-    Build(String),
+    /// An unknown robot uid, or the robot's scene could not be built.
+    #[error(transparent)]
+    Robot(#[from] RobotError),
+    /// MuJoCo could not create the simulation data or a task's body is missing.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+    /// The scene has no body for one of the task's actors.
+    #[error("the scene has no body for actor {0:?}")]
+    NoActorBody(&'static str),
+    /// A task actor's body has neither a free joint nor a mocap.
+    #[error("actor {0:?} is neither free nor mocap")]
+    ActorNotMovable(&'static str),
+    /// `robot_init_qpos_noise` out of range.
+    #[error(
+        "robot_init_qpos_noise must be finite and in [0, {max}], got {0}",
+        max = super::checks::MAX_QPOS_NOISE
+    )]
+    BadQposNoise(f64),
+    /// `sim_freq` is not a multiple of the control frequency in range.
+    #[error(
+        "sim_freq {0} is not a multiple of the control frequency {CONTROL_FREQ} Hz between \
+         {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)"
+    )]
+    BadSimFreq(u32),
+    /// A [`VecEnv`](super::VecEnv) of zero envs.
+    #[error("a VecEnv needs at least one env")]
+    NoEnvs,
+    /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
+    #[error("cannot start a VecEnv worker thread: {0}")]
+    WorkerThread(String),
+    /// [`VecEnv::step`](super::VecEnv::step) actions of the wrong length.
+    #[error(
+        "VecEnv actions have {got} values, expected {num_envs} envs × {act_dim} = {}",
+        num_envs * act_dim
+    )]
+    VecActionLength {
+        /// Given length.
+        got: usize,
+        /// Envs.
+        num_envs: usize,
+        /// Action dimension of each env.
+        act_dim: usize,
+    },
     /// Rendering is unavailable or failed (the message names what to install).
-    #[error("{0}")]
-    Render(String),
+    #[error(transparent)]
+    Render(#[from] RenderError),
 }
 
 /// Observation modes.
@@ -68,14 +121,14 @@ pub enum EnvError {
 pub enum ObsMode {
     /// One flat f32 vector.
     State,
-    /// The same values with named parts ([`Env::obs_layout`]).
+    /// The same values with named parts ([`Env::obs_layout`](super::Env::obs_layout)).
     StateDict,
     /// No observation.
     None,
     /// State-free vector (agent, controller, non-privileged extras) plus the sensor camera's
-    /// colour image ([`Env::sensor_rgb`]).
+    /// colour image ([`Env::sensor_rgb`](super::Env::sensor_rgb)).
     Rgb,
-    /// As `Rgb` with the depth image ([`Env::sensor_depth`]) instead of colour.
+    /// As `Rgb` with the depth image ([`Env::sensor_depth`](super::Env::sensor_depth)) instead of colour.
     Depth,
     /// As `Rgb` with both colour and depth.
     Rgbd,
@@ -142,16 +195,18 @@ impl RewardMode {
 }
 
 /// Looks `s` up in a (name, value) table; the error lists the valid names.
-fn parse_named<T: Copy>(all: &[(&'static str, T)], s: &str, what: &str) -> Result<T, EnvError> {
+fn parse_named<T: Copy>(
+    all: &[(&'static str, T)],
+    s: &str,
+    what: &'static str,
+) -> Result<T, EnvError> {
     all.iter()
         .find(|(n, _)| *n == s)
         .map(|(_, m)| *m)
-        .ok_or_else(|| {
-            EnvError::UnknownMode(format!(
-                "unknown {what} {s:?}; valid {}s: {}",
-                what.replace('_', " "),
-                names(all)
-            ))
+        .ok_or_else(|| EnvError::UnknownMode {
+            what,
+            got: s.to_string(),
+            valid: names(all),
         })
 }
 
@@ -192,11 +247,7 @@ impl SimConfig {
             || !self.sim_freq.is_multiple_of(CONTROL_FREQ)
             || self.sim_freq > 100_000
         {
-            return Err(EnvError::Build(format!(
-                "sim_freq {} is not a multiple of the control frequency {CONTROL_FREQ} Hz \
-                 between {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)",
-                self.sim_freq
-            )));
+            return Err(EnvError::BadSimFreq(self.sim_freq));
         }
         Ok(())
     }

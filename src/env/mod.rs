@@ -17,9 +17,9 @@ pub use config::{
     EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, CONSTRUCTION_SEED, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo, EnvSpec};
+pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::CameraImage;
-pub use state_dict::{ActionPart, StateDict};
+pub use state_dict::{ActionPart, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
 pub use vec::VecEnv;
 
@@ -77,7 +77,6 @@ impl Sim {
     fn ctx(&self) -> TaskCtx<'_> {
         let (tcp_pos, tcp_quat) = self.robot.tcp_pose(&self.data);
         TaskCtx {
-            model: &self.model,
             data: &self.data,
             robot: &self.robot,
             spec: self.spec,
@@ -139,11 +138,9 @@ impl Env {
             drives,
             ..
         } = build_scene(spec, rs, &mode, config.sim, task.as_ref())?;
-        let data = Data::new(model.clone()).map_err(|e| EnvError::Build(e.to_string()))?;
-        task.resolve(&model)
-            .map_err(|e| EnvError::Build(e.to_string()))?;
-        let actors =
-            state_dict::resolve_actors(&model, task.actor_names()).map_err(EnvError::Build)?;
+        let data = Data::new(model.clone())?;
+        task.resolve(&model)?;
+        let actors = state_dict::resolve_actors(&model, task.actor_names())?;
         let n = robot.joints.len();
         let keys = task.info_keys();
         let mut sim = Sim {
@@ -184,17 +181,14 @@ impl Env {
         let max_episode_steps = config.max_episode_steps.unwrap_or(spec.max_episode_steps);
         let render_options = crate::mujoco::render::RenderOptions::default();
         let vision = match config.obs_mode {
-            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(
-                render::Vision::new(
-                    model,
-                    task.cameras(),
-                    rs.cameras,
-                    config.obs_mode != ObsMode::Depth,
-                    config.obs_mode != ObsMode::Rgb,
-                    render_options,
-                )
-                .map_err(|e| EnvError::Render(e.to_string()))?,
-            ),
+            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(render::Vision::new(
+                model,
+                task.cameras(),
+                rs.cameras,
+                config.obs_mode != ObsMode::Depth,
+                config.obs_mode != ObsMode::Rgb,
+                render_options,
+            )?),
             _ => None,
         };
         let mut env = Env {
@@ -242,7 +236,9 @@ impl Env {
     pub fn finger_forces(&self) -> &[[f64; 3]; 2] {
         &self.sim.finger_forces
     }
-    /// The robot's joint drives (targets and force law).
+    /// The robot's joint drives (PD targets and PhysX's force law). Read access for
+    /// inspecting the targets a control mode set; a clone stepped with a clone of
+    /// [`Env::data`] replays the raw physics without the env (what `mjskill bench` times).
     pub fn drives(&self) -> &Drives {
         &self.sim.drives
     }
@@ -254,8 +250,12 @@ impl Env {
     pub fn config(&self) -> &EnvConfig {
         &self.config
     }
+    /// The robot.
+    pub fn robot_id(&self) -> crate::robots::RobotId {
+        self.sim.spec.id
+    }
     /// Robot spec.
-    pub fn robot_spec(&self) -> &'static RobotSpec {
+    pub(crate) fn robot_spec(&self) -> &'static RobotSpec {
         self.sim.spec
     }
     /// The control mode in use (the robot's default when the config names none).
@@ -270,12 +270,34 @@ impl Env {
     pub fn data(&self) -> &Data {
         &self.sim.data
     }
+    /// The `info` key of the task's grasp check (`is_grasped`, `is_peg_grasped`,
+    /// `is_obj_grasped`).
+    pub fn grasp_info_key(&self) -> &'static str {
+        self.sim.task.grasp_flag()
+    }
+    /// Whether `info` key `key` is a boolean flag (0 or 1) rather than a measurement
+    /// (PokeCube also reports two distances).
+    pub fn info_is_flag(&self, key: &str) -> bool {
+        self.sim.task.bool_info(key)
+    }
+    /// The TCP pose (ManiSkill's `agent.tcp_pose`) as position and raw quaternion (w, x, y, z),
+    /// in full precision.
+    pub fn tcp_pose(&self) -> ([f64; 3], [f64; 4]) {
+        self.sim.robot.tcp_pose(&self.sim.data)
+    }
+    /// The robot's joint positions in ManiSkill's qpos order, in full precision (ManiSkill's
+    /// `agent.robot.get_qpos()`; the observation holds them as `f32`).
+    pub fn robot_qpos(&self) -> Vec<f64> {
+        let mut q = vec![0.0; self.sim.robot.joints.len()];
+        self.sim.robot.joints.qpos(&self.sim.data, &mut q);
+        q
+    }
     /// Resolved robot ids.
-    pub fn robot(&self) -> &RobotIds {
+    pub(crate) fn robot(&self) -> &RobotIds {
         &self.sim.robot
     }
     /// The task.
-    pub fn task(&self) -> &dyn Task {
+    pub(crate) fn task(&self) -> &dyn Task {
         self.sim.task.as_ref()
     }
     /// Steps until truncation.
@@ -540,7 +562,7 @@ impl Env {
 
     /// Restores a state from [`Env::get_state`]; the following steps equal the original
     /// trajectory bitwise. A state of another env, robot or control mode, or with a
-    /// non-finite or out-of-range value ([`checks::check_state_values`]: the error names the
+    /// non-finite or out-of-range value (checked by `checks::check_state_values`: the error names the
     /// field), is an error and the env is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
         let mine = (self.id, self.sim.spec.uid(), self.sim.controller.mode());

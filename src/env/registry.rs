@@ -169,7 +169,7 @@ pub(super) fn resolve_robot(
     robot: Option<&str>,
 ) -> Result<&'static RobotSpec, EnvError> {
     let id = match robot {
-        Some(uid) => RobotId::parse(uid).map_err(EnvError::Build)?,
+        Some(uid) => RobotId::parse(uid)?,
         None => spec.robots[0],
     };
     if !spec.robots.contains(&id) {
@@ -188,9 +188,9 @@ pub(super) fn resolve_robot(
 }
 
 /// Builds the MJCF of an env's scene for `robot` with its default control mode.
-pub fn scene_mjcf(env_id: &str, robot: &str) -> Result<Mjcf, String> {
-    let spec = env_spec(env_id).map_err(|e| e.to_string())?;
-    let rs = resolve_robot(spec, Some(robot)).map_err(|e| e.to_string())?;
+pub fn scene_mjcf(env_id: &str, robot: &str) -> Result<Mjcf, EnvError> {
+    let spec = env_spec(env_id)?;
+    let rs = resolve_robot(spec, Some(robot))?;
     let task = (spec.make_task)(rs.id);
     let scene = build_scene(
         spec,
@@ -198,8 +198,7 @@ pub fn scene_mjcf(env_id: &str, robot: &str) -> Result<Mjcf, String> {
         rs.control_modes[0].name(),
         SimConfig::default(),
         task.as_ref(),
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     Ok(scene.mjcf)
 }
 
@@ -214,7 +213,7 @@ pub(super) fn build_scene(
     // An unknown mode is the user's error (it lists the valid modes); anything else is a build
     // failure.
     rs.control_mode(control_mode)
-        .map_err(EnvError::UnknownMode)?;
+        .map_err(EnvError::UnknownControlMode)?;
     TableScene::build(
         rs,
         &format!("{}-{}", spec.id.id(), rs.uid()),
@@ -222,7 +221,7 @@ pub(super) fn build_scene(
         sim.timestep(),
         |scene| task.build(scene),
     )
-    .map_err(EnvError::Build)
+    .map_err(EnvError::Robot)
 }
 
 #[cfg(test)]

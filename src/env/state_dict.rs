@@ -83,47 +83,51 @@ impl StateDict {
 
     /// Parses ManiSkill's nested JSON form (as [`StateDict::to_json`] writes it and as
     /// ManiSkill's `get_state_dict()` serialises). Errors name the offending key.
-    pub fn from_json(v: &Value) -> Result<StateDict, String> {
-        let obj = v.as_object().ok_or("a state dict must be a JSON object")?;
+    pub fn from_json(v: &Value) -> Result<StateDict, StateDictError> {
+        let obj = v.as_object().ok_or(StateDictError::NotJsonObject)?;
         for k in obj.keys() {
             if !matches!(k.as_str(), "actors" | "articulations" | "controller") {
-                return Err(format!(
-                    "unknown state dict key {k:?}; valid keys: actors, articulations, controller"
-                ));
+                return Err(StateDictError::UnknownKey(k.clone()));
             }
         }
-        let floats = |key: &str, v: &Value| -> Result<Vec<f64>, String> {
+        let floats = |key: &str, v: &Value| -> Result<Vec<f64>, StateDictError> {
             v.as_array()
-                .ok_or_else(|| format!("{key} must be an array of numbers"))?
+                .ok_or_else(|| StateDictError::NotNumbers(key.to_string()))?
                 .iter()
                 .map(|x| {
-                    x.as_f64()
-                        .ok_or_else(|| format!("{key} holds a non-number {x}"))
+                    x.as_f64().ok_or_else(|| StateDictError::NonNumber {
+                        key: key.to_string(),
+                        value: x.to_string(),
+                    })
                 })
                 .collect()
         };
         let mut sd = StateDict::default();
         if let Some(a) = obj.get("actors") {
-            let a = a.as_object().ok_or("actors must be an object")?;
+            let a = a.as_object().ok_or(StateDictError::NotObject("actors"))?;
             for (name, v) in a {
                 let key = format!("actors.{name}");
                 let f = floats(&key, v)?;
                 let arr: [f64; 13] = f
                     .as_slice()
                     .try_into()
-                    .map_err(|_| format!("{key} has {} values, expected 13", f.len()))?;
+                    .map_err(|_| StateDictError::ActorLength { key, got: f.len() })?;
                 sd.actors.insert(name.clone(), arr);
             }
         }
         if let Some(a) = obj.get("articulations") {
-            let a = a.as_object().ok_or("articulations must be an object")?;
+            let a = a
+                .as_object()
+                .ok_or(StateDictError::NotObject("articulations"))?;
             for (name, v) in a {
                 sd.articulations
                     .insert(name.clone(), floats(&format!("articulations.{name}"), v)?);
             }
         }
         if let Some(c) = obj.get("controller") {
-            let c = c.as_object().ok_or("controller must be an object")?;
+            let c = c
+                .as_object()
+                .ok_or(StateDictError::NotObject("controller"))?;
             for (k, v) in c {
                 match v {
                     Value::Object(inner) => {
@@ -142,6 +146,40 @@ impl StateDict {
         }
         Ok(sd)
     }
+}
+
+/// Why a JSON value is not a state dict ([`StateDict::from_json`]); the message names the
+/// offending key.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StateDictError {
+    /// The value is not a JSON object.
+    #[error("a state dict must be a JSON object")]
+    NotJsonObject,
+    /// One of the groups (`actors`, `articulations`, `controller`) is not a JSON object.
+    #[error("{0} must be an object")]
+    NotObject(&'static str),
+    /// A top-level key other than `actors`, `articulations` and `controller`.
+    #[error("unknown state dict key {0:?}; valid keys: actors, articulations, controller")]
+    UnknownKey(String),
+    /// An entry that is not an array.
+    #[error("{0} must be an array of numbers")]
+    NotNumbers(String),
+    /// An array entry that is not a number.
+    #[error("{key} holds a non-number {value}")]
+    NonNumber {
+        /// The entry's key.
+        key: String,
+        /// The offending JSON value.
+        value: String,
+    },
+    /// An actor state without 13 values.
+    #[error("{key} has {got} values, expected 13")]
+    ActorLength {
+        /// The actor's key.
+        key: String,
+        /// Values given.
+        got: usize,
+    },
 }
 
 /// How an actor of ManiSkill's scene is represented in the MuJoCo model.
@@ -189,7 +227,7 @@ fn table_pose() -> [f64; 7] {
 pub(crate) fn resolve_actors(
     model: &Model,
     task_actors: &[&'static str],
-) -> Result<Vec<Actor>, String> {
+) -> Result<Vec<Actor>, EnvError> {
     let mut out = vec![Actor {
         name: crate::mjcf::TABLE,
         body: ActorBody::Fixed(table_pose()),
@@ -197,7 +235,7 @@ pub(crate) fn resolve_actors(
     for &name in task_actors {
         let body = model
             .id(crate::mujoco::ObjType::Body, name)
-            .ok_or_else(|| format!("the scene has no body for actor {name:?}"))?;
+            .ok_or(EnvError::NoActorBody(name))?;
         let free = (0..model.njnt()).find(|&j| {
             model.jnt_bodyid()[j] as usize == body && model.joint_type(j) == JointType::Free
         });
@@ -212,7 +250,7 @@ pub(crate) fn resolve_actors(
                 body,
                 mocap: m as usize,
             },
-            _ => return Err(format!("actor {name:?} is neither free nor mocap")),
+            _ => return Err(EnvError::ActorNotMovable(name)),
         };
         out.push(Actor { name, body });
     }

@@ -50,7 +50,7 @@ impl Info {
     }
 }
 
-/// The result of [`Env::step`], borrowing the env's buffers.
+/// The result of [`Env::step`](super::Env::step), borrowing the env's buffers.
 #[derive(Debug)]
 pub struct Step<'a> {
     /// Observation (empty for obs mode `none`).
@@ -65,7 +65,7 @@ pub struct Step<'a> {
     pub info: &'a Info,
 }
 
-/// Everything that determines an env's future, for [`Env::get_state`] / [`Env::set_state`].
+/// Everything that determines an env's future, for [`Env::get_state`](super::Env::get_state) / [`Env::set_state`](super::Env::set_state).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EnvState {
     /// Env id.
@@ -74,7 +74,7 @@ pub struct EnvState {
     pub robot: String,
     /// Control mode.
     pub control_mode: String,
-    /// MuJoCo state ([`Data::get_state`]).
+    /// MuJoCo state ([`Data::get_state`](crate::mujoco::Data::get_state)).
     pub physics: Vec<f64>,
     /// Controller targets.
     pub controller: Vec<f64>,

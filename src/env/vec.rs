@@ -294,7 +294,7 @@ impl VecEnv {
         threads: usize,
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
-            return Err(EnvError::Build("a VecEnv needs at least one env".into()));
+            return Err(EnvError::NoEnvs);
         }
         let threads = threads.clamp(1, num_envs);
         let mut envs = Vec::with_capacity(num_envs);
@@ -396,9 +396,7 @@ impl VecEnv {
                         sh.done.fetch_add(1, Ordering::Release);
                     }
                 })
-                .map_err(|e| {
-                    EnvError::Build(format!("cannot start a VecEnv worker thread: {e}"))
-                })?;
+                .map_err(|e| EnvError::WorkerThread(e.to_string()))?;
             thread_handles.push(h.thread().clone());
             handles.push(h);
         }
@@ -507,13 +505,11 @@ impl VecEnv {
     /// episode ended on the previous step reset instead (see the module documentation).
     pub fn step(&mut self, actions: &[f32]) -> Result<(), EnvError> {
         if actions.len() != self.num_envs * self.act_dim {
-            return Err(EnvError::Build(format!(
-                "VecEnv actions have {} values, expected {} envs × {} = {}",
-                actions.len(),
-                self.num_envs,
-                self.act_dim,
-                self.num_envs * self.act_dim
-            )));
+            return Err(EnvError::VecActionLength {
+                got: actions.len(),
+                num_envs: self.num_envs,
+                act_dim: self.act_dim,
+            });
         }
         if let Some((index, &value)) = actions.iter().enumerate().find(|(_, a)| !a.is_finite()) {
             return Err(EnvError::ActionNotFinite { index, value });

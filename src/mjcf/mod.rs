@@ -16,7 +16,7 @@ pub mod props;
 pub mod urdf;
 pub mod xml;
 
-use nalgebra::{Isometry3, UnitQuaternion};
+use nalgebra::Isometry3;
 
 use crate::mujoco::{Model, Result as MjResult};
 use urdf::{JointKind, RobotDesc, ShapeGeom};
@@ -676,9 +676,4 @@ impl Scene {
 /// Name of the k-th collision geom of a link.
 pub fn collision_geom_name(link: &str, k: usize) -> String {
     format!("{link}_collision{k}")
-}
-
-/// A quaternion (w, x, y, z) for a rotation about z.
-pub fn rotz(theta: f64) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_euler_angles(0.0, 0.0, theta)
 }

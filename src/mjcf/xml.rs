@@ -53,11 +53,6 @@ impl Element {
         self.children.push(c);
         self
     }
-    /// Builder: sets the comment written before the element.
-    pub fn with_comment(mut self, c: &str) -> Self {
-        self.comment = Some(c.to_string());
-        self
-    }
     /// Sets (or replaces) an attribute.
     pub fn set(&mut self, k: &str, v: impl ToString) {
         let v = v.to_string();
@@ -66,13 +61,6 @@ impl Element {
         } else {
             self.attrs.push((k.to_string(), v));
         }
-    }
-    /// The value of attribute `k`, if set.
-    pub fn get(&self, k: &str) -> Option<&str> {
-        self.attrs
-            .iter()
-            .find(|(kk, _)| kk == k)
-            .map(|(_, v)| v.as_str())
     }
     /// Appends a child and returns a mutable reference to it.
     pub fn push(&mut self, c: Element) -> &mut Element {

@@ -93,25 +93,63 @@ unsafe impl Send for EglDisplay {}
 // SAFETY: see above; nothing in EglDisplay is mutated after initialisation.
 unsafe impl Sync for EglDisplay {}
 
-static EGL: OnceLock<Result<EglDisplay, String>> = OnceLock::new();
+/// Why EGL could not be set up or a context made current. Kept (and cloned into every
+/// [`RenderError`]) once per process, so the loader's error is held as its text.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum EglError {
+    /// libEGL.so.1 is missing or lacks EGL 1.5.
+    #[error("cannot load libEGL.so.1 with EGL 1.5 ({0})")]
+    Load(String),
+    /// No surfaceless platform.
+    #[error(
+        "EGL offers no surfaceless platform (EGL_MESA_platform_surfaceless missing; Mesa's \
+         EGL driver is not installed?); client extensions: {0:?}"
+    )]
+    NoSurfaceless(String),
+    /// An EGL call failed.
+    #[error("{call} failed: {source}{hint}")]
+    Call {
+        /// The call.
+        call: &'static str,
+        /// EGL's error.
+        source: egl::Error,
+        /// What is likely missing (may be empty).
+        hint: &'static str,
+    },
+    /// No framebuffer configuration fits.
+    #[error("no EGL config with desktop OpenGL, RGBA8, depth 24 and stencil 8")]
+    NoConfig,
+    /// The context is not current after making it so.
+    #[error("the GL context is not current after eglMakeCurrent")]
+    NotCurrent,
+}
+
+impl EglError {
+    fn call(call: &'static str) -> impl FnOnce(egl::Error) -> EglError {
+        move |source| EglError::Call {
+            call,
+            source,
+            hint: "",
+        }
+    }
+}
+
+static EGL: OnceLock<Result<EglDisplay, EglError>> = OnceLock::new();
 /// Serialises context creation: `mjr_makeContext` (re)loads MuJoCo's process-global GL
 /// function table.
 static CREATE: Mutex<()> = Mutex::new(());
 
-fn init_egl() -> Result<EglDisplay, String> {
+fn init_egl() -> Result<EglDisplay, EglError> {
     // SAFETY: loads the system libEGL; the symbols are the standard EGL 1.5 entry points,
     // whose signatures khronos-egl declares.
     let egl = unsafe { EglInstance::load_required_from_filename("libEGL.so.1") }
-        .map_err(|e| format!("cannot load libEGL.so.1 with EGL 1.5 ({e})"))?;
+        .map_err(|e| EglError::Load(e.to_string()))?;
     let ext = egl
         .query_string(None, egl::EXTENSIONS)
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     if !ext.contains("EGL_MESA_platform_surfaceless") {
-        return Err(format!(
-            "EGL offers no surfaceless platform (EGL_MESA_platform_surfaceless missing; Mesa's \
-             EGL driver is not installed?); client extensions: {ext:?}"
-        ));
+        return Err(EglError::NoSurfaceless(ext));
     }
     // SAFETY: the surfaceless platform takes no native display (EGL_DEFAULT_DISPLAY = null).
     let display = unsafe {
@@ -121,9 +159,12 @@ fn init_egl() -> Result<EglDisplay, String> {
             &[egl::ATTRIB_NONE],
         )
     }
-    .map_err(|e| format!("eglGetPlatformDisplay(surfaceless) failed: {e}"))?;
-    egl.initialize(display)
-        .map_err(|e| format!("eglInitialize failed: {e} (no Mesa DRI driver?)"))?;
+    .map_err(EglError::call("eglGetPlatformDisplay(surfaceless)"))?;
+    egl.initialize(display).map_err(|source| EglError::Call {
+        call: "eglInitialize",
+        source,
+        hint: " (no Mesa DRI driver?)",
+    })?;
     let attrs = [
         egl::SURFACE_TYPE,
         egl::PBUFFER_BIT,
@@ -145,8 +186,8 @@ fn init_egl() -> Result<EglDisplay, String> {
     ];
     let config = egl
         .choose_first_config(display, &attrs)
-        .map_err(|e| format!("eglChooseConfig failed: {e}"))?
-        .ok_or("no EGL config with desktop OpenGL, RGBA8, depth 24 and stencil 8")?;
+        .map_err(EglError::call("eglChooseConfig"))?
+        .ok_or(EglError::NoConfig)?;
     Ok(EglDisplay {
         egl,
         display,
@@ -157,7 +198,7 @@ fn init_egl() -> Result<EglDisplay, String> {
 fn egl_display() -> Result<&'static EglDisplay, RenderError> {
     EGL.get_or_init(init_egl)
         .as_ref()
-        .map_err(|e| RenderError::Unavailable(e.clone()))
+        .map_err(|e| RenderError::Unavailable(e.to_string()))
 }
 
 /// Checks that headless rendering can start here (loads EGL and opens the display, once per
@@ -201,17 +242,17 @@ impl std::fmt::Debug for Renderer {
 }
 
 /// Makes `ctx` current on this thread and checks that it is.
-fn make_current(e: &EglDisplay, ctx: egl::Context) -> Result<(), String> {
+fn make_current(e: &EglDisplay, ctx: egl::Context) -> Result<(), EglError> {
     // eglBindAPI is per thread; eglGetCurrentContext answers for the bound API.
     e.egl
         .bind_api(egl::OPENGL_API)
-        .map_err(|err| format!("eglBindAPI(EGL_OPENGL_API) failed: {err}"))?;
+        .map_err(EglError::call("eglBindAPI(EGL_OPENGL_API)"))?;
     e.egl
         .make_current(e.display, None, None, Some(ctx))
-        .map_err(|err| format!("eglMakeCurrent failed: {err}"))?;
+        .map_err(EglError::call("eglMakeCurrent"))?;
     match e.egl.get_current_context() {
         Some(c) if c.as_ptr() == ctx.as_ptr() => Ok(()),
-        _ => Err("the GL context is not current after eglMakeCurrent".into()),
+        _ => Err(EglError::NotCurrent),
     }
 }
 
@@ -267,7 +308,7 @@ impl Renderer {
             })?;
         if let Err(msg) = make_current(e, ctx) {
             let _ = e.egl.destroy_context(e.display, ctx);
-            return Err(RenderError::Unavailable(msg));
+            return Err(RenderError::Unavailable(msg.to_string()));
         }
 
         let mut vis = Box::new(*model.raw());
@@ -390,7 +431,7 @@ impl Renderer {
                 "image buffers must hold {w}x{h}x3 bytes (rgb) and {w}x{h} floats (depth)"
             )));
         }
-        make_current(self.egl, self.ctx).map_err(RenderError::Failed)?;
+        make_current(self.egl, self.ctx).map_err(|e| RenderError::Failed(e.to_string()))?;
         for (g, on) in self.opt.geomgroup.iter_mut().zip(geom_groups) {
             *g = on as u8;
         }

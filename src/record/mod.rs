@@ -94,6 +94,27 @@ pub fn camera_topic(camera: &str) -> String {
     format!("/{camera}/video")
 }
 
+/// An error of any type, as a [`Visitor`] returns it and as [`RecordError`] carries it.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Why the metadata record of a file does not parse ([`Meta::from_map`]).
+#[derive(Debug, thiserror::Error)]
+pub enum MetaError {
+    /// A value is not the JSON its key needs.
+    #[error("metadata {key:?} = {value:?}: {source}")]
+    Value {
+        /// The key.
+        key: String,
+        /// The stored text.
+        value: String,
+        /// The JSON error.
+        source: serde_json::Error,
+    },
+    /// The fields do not form mjskill's metadata (a missing or mistyped field).
+    #[error(transparent)]
+    Fields(#[from] serde_json::Error),
+}
+
 /// Errors of recording and reading; every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
@@ -122,14 +143,14 @@ pub enum RecordError {
         reason: String,
     },
     /// A record or message of the file does not decode.
-    #[error("{}: bad {what}: {reason}", .path.display())]
+    #[error("{}: bad {what}: {source}", .path.display())]
     Decode {
         /// The file.
         path: PathBuf,
         /// Which record or message.
         what: String,
-        /// The decoding error.
-        reason: String,
+        /// The decoding error (JSON, metadata, or an inconsistency it names).
+        source: BoxError,
     },
     /// The recorder was used out of order (e.g. a step without an episode).
     #[error("{}: {msg}", .path.display())]
@@ -161,12 +182,12 @@ pub enum RecordError {
         detail: String,
     },
     /// A [`Visitor`] of [`stream`] stopped the reading.
-    #[error("{}: {msg}", .path.display())]
+    #[error("{}: {source}", .path.display())]
     Visitor {
         /// The file.
         path: PathBuf,
-        /// The visitor's message.
-        msg: String,
+        /// The visitor's error.
+        source: BoxError,
     },
     /// A value to record is not finite (a state that could not be restored), or a message is
     /// larger than [`MAX_MESSAGE`]; nothing was written.
@@ -305,17 +326,21 @@ impl Meta {
     }
 
     /// Parses the string map of the MCAP `Metadata` record.
-    pub fn from_map(map: &BTreeMap<String, String>) -> Result<Meta, String> {
+    pub fn from_map(map: &BTreeMap<String, String>) -> Result<Meta, MetaError> {
         let mut obj = serde_json::Map::new();
         for (k, v) in map {
             let value = if STRING_KEYS.contains(&k.as_str()) {
                 serde_json::Value::String(v.clone())
             } else {
-                serde_json::from_str(v).map_err(|e| format!("metadata {k:?} = {v:?}: {e}"))?
+                serde_json::from_str(v).map_err(|source| MetaError::Value {
+                    key: k.clone(),
+                    value: v.clone(),
+                    source,
+                })?
             };
             obj.insert(k.clone(), value);
         }
-        serde_json::from_value(serde_json::Value::Object(obj)).map_err(|e| e.to_string())
+        Ok(serde_json::from_value(serde_json::Value::Object(obj))?)
     }
 
     /// The env configuration the file was recorded with.
@@ -754,7 +779,7 @@ impl Recorder {
         let data = serde_json::to_vec(msg).map_err(|e| RecordError::Decode {
             path: self.path.clone(),
             what: "message to write".into(),
-            reason: e.to_string(),
+            source: e.into(),
         })?;
         self.write(channel_id, ns, &data)
     }

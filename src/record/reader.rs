@@ -12,7 +12,7 @@ use std::path::Path;
 
 use super::scan::{scan, At, Item};
 use super::{
-    EpisodeEndMsg, EpisodeMsg, Meta, RecordError, StepMsgIn, EPISODE_METADATA_PREFIX,
+    BoxError, EpisodeEndMsg, EpisodeMsg, Meta, RecordError, StepMsgIn, EPISODE_METADATA_PREFIX,
     METADATA_NAME, PROFILE, TOPIC_EPISODE, TOPIC_EPISODE_END, TOPIC_STEP,
 };
 use crate::env::EnvState;
@@ -108,20 +108,20 @@ impl Recording {
 /// Receives a recording's contents from [`stream`], in file order: the metadata first, then
 /// for every episode its start, its steps and (if it was finished) its end. An episode that
 /// gets no [`Visitor::episode_end`] before the next [`Visitor::episode_start`] or the end of
-/// the file was cut short. An `Err` stops the reading and is returned as
-/// [`RecordError::Visitor`].
+/// the file was cut short. An `Err` (of any error type, boxed) stops the reading and is
+/// returned as [`RecordError::Visitor`], with the visitor's error as its source.
 pub trait Visitor {
     /// The file-level metadata, before any episode.
-    fn meta(&mut self, meta: &Meta) -> Result<(), String> {
+    fn meta(&mut self, meta: &Meta) -> Result<(), BoxError> {
         let _ = meta;
         Ok(())
     }
     /// An episode begins.
-    fn episode_start(&mut self, start: EpisodeStart) -> Result<(), String>;
+    fn episode_start(&mut self, start: EpisodeStart) -> Result<(), BoxError>;
     /// A step of the episode begun last; `index` counts from 0.
-    fn step(&mut self, episode: u64, index: u32, step: StepRec) -> Result<(), String>;
+    fn step(&mut self, episode: u64, index: u32, step: StepRec) -> Result<(), BoxError>;
     /// The episode begun last ends.
-    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), String>;
+    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), BoxError>;
 }
 
 /// How [`stream`] ended.
@@ -160,10 +160,10 @@ impl Decoder<'_> {
         }
     }
 
-    fn visit(path: &Path, r: Result<(), String>) -> Result<(), RecordError> {
-        r.map_err(|msg| RecordError::Visitor {
+    fn visit(path: &Path, r: Result<(), BoxError>) -> Result<(), RecordError> {
+        r.map_err(|source| RecordError::Visitor {
             path: path.to_path_buf(),
-            msg,
+            source,
         })
     }
 
@@ -194,10 +194,10 @@ impl Decoder<'_> {
             if self.meta.is_some() {
                 return Err(self.corrupt(at, format!("a second {METADATA_NAME:?} metadata record")));
             }
-            let meta = Meta::from_map(map).map_err(|reason| RecordError::Decode {
+            let meta = Meta::from_map(map).map_err(|e| RecordError::Decode {
                 path: self.path.to_path_buf(),
                 what: format!("metadata at {at}"),
-                reason,
+                source: e.into(),
             })?;
             Self::visit(self.path, self.v.meta(&meta))?;
             self.meta = Some((meta, map.clone()));
@@ -246,17 +246,17 @@ impl Decoder<'_> {
             return Ok(());
         }
         let path = self.path;
-        let bad = |reason: String| RecordError::Decode {
+        let bad = |source: BoxError| RecordError::Decode {
             path: path.to_path_buf(),
             what: format!("{topic} message in {at}"),
-            reason,
+            source,
         };
         let Some((meta, _)) = self.meta.as_ref() else {
             return Err(self.corrupt(at, format!("{topic} message before the metadata")));
         };
         match topic {
             TOPIC_EPISODE => {
-                let e: EpisodeMsg = serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
+                let e: EpisodeMsg = serde_json::from_slice(data).map_err(|e| bad(e.into()))?;
                 let seed_text = e.seed.map_or("null".to_string(), |s| s.to_string());
                 match &self.episode_meta {
                     Some((i, s)) if *i == e.episode && *s == seed_text => {}
@@ -292,7 +292,8 @@ impl Decoder<'_> {
                         meta.env_id,
                         meta.robot,
                         meta.control_mode
-                    )));
+                    )
+                    .into()));
                 }
                 self.last_episode = Some(e.episode);
                 self.open = Some((e.episode, 0));
@@ -308,16 +309,17 @@ impl Decoder<'_> {
                 )
             }
             TOPIC_STEP => {
-                let s: StepMsgIn = serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
+                let s: StepMsgIn = serde_json::from_slice(data).map_err(|e| bad(e.into()))?;
                 let n = match self.open {
                     Some((i, n)) if i == s.episode => n,
-                    _ => return Err(bad(format!("episode {} is not open", s.episode))),
+                    _ => return Err(bad(format!("episode {} is not open", s.episode).into())),
                 };
                 if s.step != n {
                     return Err(bad(format!(
                         "step {} of episode {} follows {n} steps",
                         s.step, s.episode
-                    )));
+                    )
+                    .into()));
                 }
                 self.open = Some((s.episode, n + 1));
                 Self::visit(
@@ -338,8 +340,7 @@ impl Decoder<'_> {
                 )
             }
             _ => {
-                let e: EpisodeEndMsg =
-                    serde_json::from_slice(data).map_err(|e| bad(e.to_string()))?;
+                let e: EpisodeEndMsg = serde_json::from_slice(data).map_err(|e| bad(e.into()))?;
                 match self.open {
                     Some((i, n)) if i == e.episode && n == e.steps => {}
                     _ => {
@@ -347,7 +348,8 @@ impl Decoder<'_> {
                             "end of episode {} after {} steps does not match the open episode \
                              {:?}",
                             e.episode, e.steps, self.open
-                        )))
+                        )
+                        .into()))
                     }
                 }
                 self.open = None;
@@ -434,7 +436,7 @@ struct Collect {
 }
 
 impl Visitor for Collect {
-    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), String> {
+    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), BoxError> {
         self.episodes.push(EpisodeRec {
             index: s.index,
             seed: s.seed,
@@ -448,7 +450,7 @@ impl Visitor for Collect {
         });
         Ok(())
     }
-    fn step(&mut self, _episode: u64, _index: u32, step: StepRec) -> Result<(), String> {
+    fn step(&mut self, _episode: u64, _index: u32, step: StepRec) -> Result<(), BoxError> {
         let ep = self
             .episodes
             .last_mut()
@@ -457,7 +459,7 @@ impl Visitor for Collect {
         ep.steps.push(step);
         Ok(())
     }
-    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), String> {
+    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), BoxError> {
         let ep = self
             .episodes
             .last_mut()

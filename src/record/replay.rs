@@ -5,8 +5,42 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::{stream, EpisodeEnd, EpisodeStart, Meta, Recording, StepRec, Visitor};
-use crate::env::Env;
+use super::{
+    stream, BoxError, EpisodeEnd, EpisodeStart, Meta, RecordError, Recording, StepRec, Visitor,
+};
+use crate::env::{Env, EnvError};
+
+/// Why a recording could not be replayed (deviations beyond the tolerance are not errors:
+/// they are reported in [`ReplayReport::ok`]).
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// A negative or non-finite tolerance.
+    #[error("--tolerance must be a finite number ≥ 0, got {0}")]
+    BadTolerance(f64),
+    /// The file could not be read (or the replay stopped while reading it: the source).
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// The env of the recording's metadata could not be built.
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    /// The recording's messages are out of order.
+    #[error("{0}")]
+    Order(&'static str),
+    /// An episode's initial state or one of its actions was rejected by the env.
+    #[error("episode {index}: {source}")]
+    Episode {
+        /// The episode.
+        index: u64,
+        /// The env's error.
+        source: EnvError,
+    },
+    /// The file holds no finished episode.
+    #[error("{}: no finished episode to replay", .0.display())]
+    NoEpisodes(std::path::PathBuf),
+    /// With salvage: the damage comes before the first finished episode.
+    #[error("no finished episode to replay before the damage: {0}")]
+    NoEpisodesBeforeDamage(#[source] RecordError),
+}
 
 /// Largest deviations found by `replay`.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -64,7 +98,7 @@ struct EpisodeDev {
     flags: usize,
     steps: usize,
     /// The first error (e.g. a rejected action); reported only if the episode was finished.
-    error: Option<String>,
+    error: Option<EnvError>,
 }
 
 /// Re-simulates episodes as they are read.
@@ -99,14 +133,32 @@ impl Replayer {
 }
 
 impl Visitor for Replayer {
-    fn meta(&mut self, m: &Meta) -> Result<(), String> {
-        let config = m.config().map_err(|e| e.to_string())?;
-        self.env = Some(crate::env::make(&m.env_id, config).map_err(|e| e.to_string())?);
+    fn meta(&mut self, m: &Meta) -> Result<(), BoxError> {
+        Ok(self.begin(m)?)
+    }
+    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), BoxError> {
+        Ok(self.episode_start(s)?)
+    }
+    fn step(&mut self, _: u64, _: u32, st: StepRec) -> Result<(), BoxError> {
+        Ok(self.step(st)?)
+    }
+    fn episode_end(&mut self, _: EpisodeEnd) -> Result<(), BoxError> {
+        Ok(self.episode_end()?)
+    }
+}
+
+impl Replayer {
+    fn begin(&mut self, m: &Meta) -> Result<(), ReplayError> {
+        let config = m.config()?;
+        self.env = Some(crate::env::make(&m.env_id, config)?);
         Ok(())
     }
 
-    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), String> {
-        let env = self.env.as_mut().ok_or("an episode before the metadata")?;
+    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), ReplayError> {
+        let env = self
+            .env
+            .as_mut()
+            .ok_or(ReplayError::Order("an episode before the metadata"))?;
         let mut dev = EpisodeDev {
             index: s.index,
             ..Default::default()
@@ -116,7 +168,7 @@ impl Visitor for Replayer {
                 env.reset(Some(seed));
                 Ok(())
             }
-            None => env.set_state(&s.state).map_err(|e| e.to_string()),
+            None => env.set_state(&s.state),
         };
         match r {
             Ok(()) => dev.obs = max_dev(env.obs(), &s.obs),
@@ -126,9 +178,9 @@ impl Visitor for Replayer {
         Ok(())
     }
 
-    fn step(&mut self, _: u64, _: u32, st: StepRec) -> Result<(), String> {
+    fn step(&mut self, st: StepRec) -> Result<(), ReplayError> {
         let (Some(env), Some(dev)) = (self.env.as_mut(), self.cur.as_mut()) else {
-            return Err("a step outside an episode".into());
+            return Err(ReplayError::Order("a step outside an episode"));
         };
         if dev.error.is_some() {
             return Ok(());
@@ -136,7 +188,7 @@ impl Visitor for Replayer {
         let s = match env.step(&st.action) {
             Ok(s) => s,
             Err(e) => {
-                dev.error = Some(e.to_string());
+                dev.error = Some(e);
                 return Ok(());
             }
         };
@@ -163,10 +215,16 @@ impl Visitor for Replayer {
         Ok(())
     }
 
-    fn episode_end(&mut self, _: EpisodeEnd) -> Result<(), String> {
-        let dev = self.cur.take().ok_or("an episode end outside an episode")?;
-        if let Some(e) = dev.error {
-            return Err(format!("episode {}: {e}", dev.index));
+    fn episode_end(&mut self) -> Result<(), ReplayError> {
+        let dev = self
+            .cur
+            .take()
+            .ok_or(ReplayError::Order("an episode end outside an episode"))?;
+        if let Some(source) = dev.error {
+            return Err(ReplayError::Episode {
+                index: dev.index,
+                source,
+            });
         }
         let r = &mut self.rep;
         r.max_obs_dev = r.max_obs_dev.max(dev.obs);
@@ -185,10 +243,10 @@ pub fn replay_recording(
     path: &Path,
     r: &Recording,
     tolerance: f64,
-) -> Result<ReplayReport, String> {
+) -> Result<ReplayReport, ReplayError> {
     check_tolerance(tolerance)?;
     let mut p = Replayer::new(path, tolerance);
-    p.meta(&r.meta)?;
+    p.begin(&r.meta)?;
     for ep in r.finished() {
         p.episode_start(EpisodeStart {
             index: ep.index,
@@ -197,25 +255,18 @@ pub fn replay_recording(
             obs: ep.initial_obs.clone(),
             info: ep.initial_info.clone(),
         })?;
-        for (t, st) in ep.steps.iter().enumerate() {
-            p.step(ep.index, t as u32, st.clone())?;
+        for st in &ep.steps {
+            p.step(st.clone())?;
         }
-        p.episode_end(EpisodeEnd {
-            index: ep.index,
-            steps: ep.steps.len() as u32,
-            ret: ep.ret,
-            success: ep.success,
-        })?;
+        p.episode_end()?;
     }
     Ok(p.finish())
 }
 
 /// Checks a replay tolerance: a finite number ≥ 0.
-pub fn check_tolerance(tolerance: f64) -> Result<(), String> {
+pub fn check_tolerance(tolerance: f64) -> Result<(), ReplayError> {
     if !(tolerance.is_finite() && tolerance >= 0.0) {
-        return Err(format!(
-            "--tolerance must be a finite number ≥ 0, got {tolerance}"
-        ));
+        return Err(ReplayError::BadTolerance(tolerance));
     }
     Ok(())
 }
@@ -224,16 +275,16 @@ pub fn check_tolerance(tolerance: f64) -> Result<(), String> {
 /// (memory bounded by one chunk and one env). A damaged file is an error naming the byte
 /// offset and chunk; with `salvage`, the episodes that precede the damage are replayed and the
 /// damage reported in [`ReplayReport::damage`].
-pub fn replay(path: &Path, tolerance: f64, salvage: bool) -> Result<ReplayReport, String> {
+pub fn replay(path: &Path, tolerance: f64, salvage: bool) -> Result<ReplayReport, ReplayError> {
     check_tolerance(tolerance)?;
     let mut p = Replayer::new(path, tolerance);
-    let end = stream(path, salvage, &mut p).map_err(|e| e.to_string())?;
+    let end = stream(path, salvage, &mut p)?;
     let mut rep = p.finish();
-    rep.damage = end.damage.map(|e| e.to_string());
+    rep.damage = end.damage.as_ref().map(|e| e.to_string());
     if rep.episodes == 0 {
-        return Err(match rep.damage {
-            Some(d) => format!("no finished episode to replay before the damage: {d}"),
-            None => format!("{}: no finished episode to replay", path.display()),
+        return Err(match end.damage {
+            Some(d) => ReplayError::NoEpisodesBeforeDamage(d),
+            None => ReplayError::NoEpisodes(path.to_path_buf()),
         });
     }
     Ok(rep)

@@ -35,6 +35,7 @@ pub const TABLE_QPOS: [f64; 15] = [
 ];
 
 /// Joint names in ManiSkill's qpos order (breadth-first; docs/robots.md §3 table).
+#[cfg(test)]
 pub const JOINT_ORDER: [&str; 15] = [
     "root_x_axis_joint",
     "root_y_axis_joint",

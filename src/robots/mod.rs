@@ -11,11 +11,55 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::controllers::{ControlMode, Controller, Drives, JointMap, PartSpec};
-use crate::mjcf::urdf::RobotDesc;
-use crate::mjcf::{Drive, LinkCamera, RobotOptions, GRAVITY};
-use crate::mujoco::{Data, Model, ObjType};
+use crate::controllers::{ControlMode, Controller, ControllerError, Drives, JointMap, PartSpec};
+use crate::mjcf::urdf::{RobotDesc, RobotError as UrdfError};
+use crate::mjcf::{Drive, LinkCamera, RobotOptions, SceneError, GRAVITY};
+use crate::models::ModelFileError;
+use crate::mujoco::{Data, MjError, Model, ObjType};
 use crate::rng::NumpyRandomState;
+
+/// Why a robot, its control mode or its table scene could not be resolved or built. Messages
+/// name the bad value and, for a bad uid or mode, list the valid choices; the failure of a
+/// lower layer is the error's source.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RobotError {
+    /// An unknown robot uid.
+    #[error("unknown robot {uid:?}; valid robots: {valid}")]
+    UnknownRobot {
+        /// The requested uid.
+        uid: String,
+        /// The valid uids.
+        valid: String,
+    },
+    /// A control mode this robot does not have (or no control mode at all).
+    #[error("unknown control mode {mode:?} for robot {robot}; valid modes: {valid}")]
+    UnknownControlMode {
+        /// The requested mode.
+        mode: String,
+        /// The robot's uid.
+        robot: &'static str,
+        /// The robot's control modes.
+        valid: String,
+    },
+    /// The robot has no link of this name.
+    #[error("robot has no link {0:?}")]
+    NoLink(String),
+    /// The robot's URDF or SRDF is not shipped or not text.
+    #[error(transparent)]
+    ModelFile(#[from] ModelFileError),
+    /// The robot's URDF could not be parsed.
+    #[error(transparent)]
+    Urdf(#[from] UrdfError),
+    /// The controller or its drives could not be built.
+    #[error(transparent)]
+    Controller(#[from] ControllerError),
+    /// The robot could not be added to the scene.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// MuJoCo rejected the scene, or a body is missing from the model.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+}
 
 /// The five robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
 /// depends on the robot matches on this exhaustively.
@@ -55,15 +99,13 @@ impl RobotId {
     }
 
     /// Parses a uid; the error lists the valid uids.
-    pub fn parse(uid: &str) -> Result<RobotId, String> {
+    pub fn parse(uid: &str) -> Result<RobotId, RobotError> {
         RobotId::ALL
             .into_iter()
             .find(|r| r.uid() == uid)
-            .ok_or_else(|| {
-                format!(
-                    "unknown robot {uid:?}; valid robots: {}",
-                    ROBOT_UIDS.join(", ")
-                )
+            .ok_or_else(|| RobotError::UnknownRobot {
+                uid: uid.to_string(),
+                valid: ROBOT_UIDS.join(", "),
             })
     }
 
@@ -331,10 +373,10 @@ impl RobotSpec {
     }
 
     /// Loads and parses this robot's URDF and SRDF from `models/`.
-    pub fn description(&self) -> Result<RobotDesc, String> {
+    pub fn description(&self) -> Result<RobotDesc, RobotError> {
         let urdf = crate::models::text(self.urdf)?;
         let srdf = crate::models::text(self.srdf).ok();
-        RobotDesc::parse(urdf, srdf, self.urdf).map_err(|e| e.to_string())
+        Ok(RobotDesc::parse(urdf, srdf, self.urdf)?)
     }
 
     /// Scene options for this robot placed at `base` with the given drives.
@@ -378,19 +420,18 @@ impl RobotSpec {
 
     /// The control mode named `mode` with its parts; the error (an unknown name or a mode
     /// this robot lacks) lists this robot's control modes.
-    pub fn control_mode(&self, mode: &str) -> Result<(ControlMode, Vec<PartSpec>), String> {
+    pub fn control_mode(&self, mode: &str) -> Result<(ControlMode, Vec<PartSpec>), RobotError> {
         ControlMode::from_name(mode)
             .and_then(|m| Some((m, (self.parts)(m)?)))
-            .ok_or_else(|| {
-                format!(
-                    "unknown control mode {mode:?} for robot {}; valid modes: {}",
-                    self.uid(),
-                    self.control_modes
-                        .iter()
-                        .map(|m| m.name())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
+            .ok_or_else(|| RobotError::UnknownControlMode {
+                mode: mode.to_string(),
+                robot: self.uid(),
+                valid: self
+                    .control_modes
+                    .iter()
+                    .map(|m| m.name())
+                    .collect::<Vec<_>>()
+                    .join(", "),
             })
     }
 
@@ -415,7 +456,7 @@ impl RobotSpec {
 }
 
 /// Looks up a robot spec by uid; the error lists the valid uids.
-pub fn spec(uid: &str) -> Result<&'static RobotSpec, String> {
+pub fn spec(uid: &str) -> Result<&'static RobotSpec, RobotError> {
     Ok(RobotId::parse(uid)?.spec())
 }
 
@@ -442,6 +483,7 @@ pub struct RobotIds {
     /// Body id per URDF link name lookup (name, id).
     pub link_bodies: Vec<(String, usize)>,
     /// The `tcp` site (at the TCP link's origin), when the robot has a TCP link.
+    #[cfg_attr(not(test), allow(dead_code))] // read by the tests
     pub tcp_site: Option<usize>,
     /// Body of the TCP link.
     pub tcp_body: Option<usize>,
@@ -455,9 +497,13 @@ pub struct RobotIds {
 
 impl RobotIds {
     /// Resolves the ids of `robot` in `model`. Errors name what is missing.
-    pub fn resolve(model: &Model, robot: &RobotDesc, spec: &RobotSpec) -> Result<RobotIds, String> {
+    pub fn resolve(
+        model: &Model,
+        robot: &RobotDesc,
+        spec: &RobotSpec,
+    ) -> Result<RobotIds, RobotError> {
         let mut r = RobotIds {
-            joints: JointMap::resolve(model, robot).map_err(|e| e.to_string())?,
+            joints: JointMap::resolve(model, robot)?,
             bodies: Vec::new(),
             root_body: 0,
             link_bodies: Vec::new(),
@@ -468,9 +514,7 @@ impl RobotIds {
             weight: Vec::new(),
         };
         for l in &robot.links {
-            let b = model
-                .require_id(ObjType::Body, &l.name)
-                .map_err(|e| e.to_string())?;
+            let b = model.require_id(ObjType::Body, &l.name)?;
             r.bodies.push(b);
             r.link_bodies.push((l.name.clone(), b));
             r.weight.push(model.body_mass()[b] * GRAVITY);
@@ -495,12 +539,12 @@ impl RobotIds {
     }
 
     /// Body id of a robot link.
-    pub fn body(&self, link: &str) -> Result<usize, String> {
+    pub fn body(&self, link: &str) -> Result<usize, RobotError> {
         self.link_bodies
             .iter()
             .find(|(n, _)| n == link)
             .map(|(_, b)| *b)
-            .ok_or_else(|| format!("robot has no link {link:?}"))
+            .ok_or_else(|| RobotError::NoLink(link.to_string()))
     }
 
     /// Cancels gravity on every robot body (ManiSkill disables gravity on robot links):
@@ -562,15 +606,13 @@ impl RobotIds {
 }
 
 /// A robot in the table scene (plus whatever a task or test adds): the compiled model, the
-/// robot's description and ids, the MJCF, and the controller of the chosen control mode with
+/// robot's ids, the MJCF, and the controller of the chosen control mode with
 /// its drives. Built by [`TableScene::build`], the one scene builder (envs, tests and
 /// `export-mjcf` all use it).
 #[derive(Debug)]
 pub struct TableScene {
     /// The compiled model.
     pub model: Arc<Model>,
-    /// The robot description (URDF + SRDF).
-    pub desc: RobotDesc,
     /// Resolved ids.
     pub ids: RobotIds,
     /// The generated MJCF.
@@ -592,29 +634,25 @@ impl TableScene {
         mode: &str,
         timestep: f64,
         extra: impl FnOnce(&mut crate::mjcf::Scene),
-    ) -> Result<TableScene, String> {
+    ) -> Result<TableScene, RobotError> {
         let desc = spec.description()?;
         let (mode, parts) = spec.control_mode(mode)?;
-        let controller = Controller::new(mode, parts, &desc).map_err(|e| e.to_string())?;
+        let controller = Controller::new(mode, parts, &desc)?;
         let drive_list = controller.drives(&desc);
         let mut scene = crate::mjcf::Scene::new(name, timestep);
         scene.add_table_scene();
-        scene
-            .add_robot(
-                &desc,
-                &spec.options(spec.table_base(), drive_list.clone()),
-                &|_| None,
-            )
-            .map_err(|e| e.to_string())?;
+        scene.add_robot(
+            &desc,
+            &spec.options(spec.table_base(), drive_list.clone()),
+            &|_| None,
+        )?;
         extra(&mut scene);
         let mjcf = scene.finish();
-        let model = Arc::new(mjcf.compile().map_err(|e| e.to_string())?);
+        let model = Arc::new(mjcf.compile()?);
         let ids = RobotIds::resolve(&model, &desc, spec)?;
-        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)
-            .map_err(|e| e.to_string())?;
+        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)?;
         Ok(TableScene {
             model,
-            desc,
             ids,
             mjcf,
             controller,
@@ -628,7 +666,7 @@ impl TableScene {
 pub fn table_scene_with(
     spec: &RobotSpec,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
-) -> Result<TableScene, String> {
+) -> Result<TableScene, RobotError> {
     table_scene_at(spec, crate::mjcf::TIMESTEP, extra)
 }
 
@@ -637,7 +675,7 @@ pub fn table_scene_at(
     spec: &RobotSpec,
     timestep: f64,
     extra: impl FnOnce(&mut crate::mjcf::Scene),
-) -> Result<TableScene, String> {
+) -> Result<TableScene, RobotError> {
     TableScene::build(
         spec,
         spec.uid(),
@@ -645,6 +683,12 @@ pub fn table_scene_at(
         timestep,
         extra,
     )
+}
+
+/// The MJCF of `robot`'s table scene alone, with the drives of its default control mode (what
+/// `mjskill export-mjcf --robot` writes). Errors: an unknown uid (listing the valid ones).
+pub fn robot_scene_mjcf(robot: &str) -> Result<crate::mjcf::Mjcf, RobotError> {
+    Ok(table_scene_with(spec(robot)?, |_| {})?.mjcf)
 }
 
 /// Unit vector helper: the local y axis of a body in world coordinates.

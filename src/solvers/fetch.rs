@@ -90,7 +90,7 @@ pub struct FetchPickCube {
 
 impl FetchPickCube {
     /// Resolves the bodies of a PickCube env with Fetch.
-    pub fn new(env: &Env) -> Result<Self, String> {
+    pub fn new(env: &Env) -> Result<Self, super::SolverError> {
         Ok(FetchPickCube {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,

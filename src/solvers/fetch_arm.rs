@@ -97,9 +97,9 @@ pub struct ArmCommand {
 
 impl FetchArm {
     /// Resolves the Fetch's bodies.
-    pub fn new(env: &Env) -> Result<Self, String> {
+    pub fn new(env: &Env) -> Result<Self, super::SolverError> {
         if env.robot().joints.len() != 15 {
-            return Err("the Fetch solvers need the 15-dof Fetch".into());
+            return Err(super::SolverError::FetchDof);
         }
         Ok(FetchArm {
             gripper_link: env.robot().body("gripper_link")?,

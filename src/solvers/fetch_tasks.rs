@@ -79,7 +79,7 @@ pub struct FetchPlaceSphere {
 
 impl FetchPlaceSphere {
     /// Resolves the bodies of a PlaceSphere env with Fetch.
-    pub fn new(env: &Env) -> Result<Self, String> {
+    pub fn new(env: &Env) -> Result<Self, super::SolverError> {
         let mut inner = PlaceSphereSolver::new(env, FETCH_GRIPPER)?.with_descent(descended_tilted);
         inner.release_align = RELEASE_ALIGN;
         inner.release_speed = RELEASE_SPEED;
@@ -201,7 +201,7 @@ pub struct FetchPokeCube {
 
 impl FetchPokeCube {
     /// Resolves the bodies of a PokeCube env with Fetch.
-    pub fn new(env: &Env) -> Result<Self, String> {
+    pub fn new(env: &Env) -> Result<Self, super::SolverError> {
         let mut inner = PokeCubeSolver::new(env, FETCH_GRIPPER)?.with_descent(descended_on_peg);
         inner.grasp_offset_x = POKE_GRASP_OFFSET_X;
         inner.push_short_of_goal = POKE_PUSH_SHORT;

@@ -121,14 +121,14 @@ pub struct JointIkPickCube {
 
 impl JointIkPickCube {
     /// Builds the solver for a PickCube env whose robot is described by `robot`.
-    pub fn new(env: &Env, robot: JointIkRobot) -> Result<Self, String> {
+    pub fn new(env: &Env, robot: JointIkRobot) -> Result<Self, super::SolverError> {
         let spec = env.robot_spec();
         let desc = spec.description()?;
         let arm: Vec<&str> = env.robot().joints.names[..robot.n_arm]
             .iter()
             .map(|s| s.as_str())
             .collect();
-        let chain = Chain::new(&desc, robot.link, &arm).map_err(|e| e.to_string())?;
+        let chain = Chain::new(&desc, robot.link, &arm)?;
         let mut limits = [(0.0, 0.0); MAX_ARM];
         for (l, r) in limits
             .iter_mut()

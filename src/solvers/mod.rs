@@ -4,23 +4,75 @@
 //! The solvers are the EE-space scripted policies (control mode `pd_ee_delta_pos`): every step
 //! `action = [clip((target − tcp)/0.1, −L, L), gripper]`, with phases checked in order and
 //! falling through in the same step. "k steps" in a phase means exactly k actions issued in
-//! that phase, counting the step on which it was entered (the spec's [audited] reading).
+//! that phase, counting the step on which it was entered (the spec's \[audited\] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
-pub mod fetch;
-pub mod fetch_arm;
-pub mod fetch_tasks;
-pub mod joint_ik;
-pub mod pick_cube;
-pub mod place_sphere;
-pub mod poke_cube;
-pub mod xarm6;
+mod evaluate;
+pub(crate) mod fetch;
+pub(crate) mod fetch_arm;
+pub(crate) mod fetch_tasks;
+pub(crate) mod joint_ik;
+pub(crate) mod pick_cube;
+pub(crate) mod place_sphere;
+pub(crate) mod poke_cube;
+pub(crate) mod xarm6;
+
+pub use evaluate::{
+    check_seed_range, evaluate, make_env, run_episode, EpisodeResult, EvalError, EvalReport,
+};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
+use crate::controllers::ControllerError;
 use crate::env::Env;
-use crate::robots::RobotId;
+use crate::mujoco::MjError;
+use crate::robots::{RobotError, RobotId};
+
+/// Why a policy could not be built for an env.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolverError {
+    /// An unknown policy name.
+    #[error("unknown policy {name:?}; valid policies: {valid}")]
+    UnknownPolicy {
+        /// The requested name.
+        name: String,
+        /// The valid names.
+        valid: String,
+    },
+    /// The env's control mode is not the one the scripted solver drives.
+    #[error("the scripted solver for {robot} drives {required}, but the env uses {mode}")]
+    WrongControlMode {
+        /// The robot.
+        robot: &'static str,
+        /// The mode the solver drives.
+        required: String,
+        /// The env's mode.
+        mode: String,
+    },
+    /// No scripted solver for this (env, robot) pair.
+    #[error("no scripted solver for {env} with {robot}; available: {available}")]
+    NoSolver {
+        /// The env id.
+        env: &'static str,
+        /// The robot.
+        robot: &'static str,
+        /// The solved pairs.
+        available: String,
+    },
+    /// The Fetch solvers need the 15-dof Fetch.
+    #[error("the Fetch solvers need the 15-dof Fetch")]
+    FetchDof,
+    /// A robot link or description the solver needs is missing.
+    #[error(transparent)]
+    Robot(#[from] RobotError),
+    /// The solver's IK chain could not be built.
+    #[error(transparent)]
+    Controller(#[from] ControllerError),
+    /// A task body the solver needs is missing from the model.
+    #[error(transparent)]
+    Mujoco(#[from] MjError),
+}
 
 /// The policy names `rollout` and `eval` accept.
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
@@ -54,15 +106,15 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
 }
 
 /// Builds a policy by name for `env` (random: seeded with `seed`).
-pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, String> {
+pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, SolverError> {
     match name {
         "zero" => Ok(Box::new(Zero)),
         "random" => Ok(Box::new(Random(rand::rngs::StdRng::seed_from_u64(seed)))),
         "solver" => solver(env),
-        _ => Err(format!(
-            "unknown policy {name:?}; valid policies: {}",
-            POLICIES.join(", ")
-        )),
+        _ => Err(SolverError::UnknownPolicy {
+            name: name.to_string(),
+            valid: POLICIES.join(", "),
+        }),
     }
 }
 
@@ -96,7 +148,7 @@ impl Policy for Random {
     }
 }
 
-/// The (env id, robot) pairs that have a scripted solver (the arms of [`solver`]'s match).
+/// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
 pub const SOLVED: [(&str, &str); 11] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
@@ -112,19 +164,23 @@ pub const SOLVED: [(&str, &str); 11] = [
 ];
 
 /// Boxes a freshly built solver.
-fn boxed<P: Policy + 'static>(policy: Result<P, String>) -> Result<Box<dyn Policy>, String> {
+fn boxed<P: Policy + 'static>(
+    policy: Result<P, SolverError>,
+) -> Result<Box<dyn Policy>, SolverError> {
     Ok(Box::new(policy?))
 }
 
 /// Which scripted solver fits an (env, robot) pair.
-fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
+fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
     let required = required_control_mode("solver", robot).unwrap_or(mode);
     if mode != required {
-        return Err(format!(
-            "the scripted solver for {robot} drives {required}, but the env uses {mode}"
-        ));
+        return Err(SolverError::WrongControlMode {
+            robot,
+            required: required.to_string(),
+            mode: mode.to_string(),
+        });
     }
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(env, PANDA_GRIPPER)),
@@ -142,20 +198,21 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, String> {
         ("PlaceSphere-v1", "fetch") => boxed(fetch_tasks::FetchPlaceSphere::new(env)),
         ("PokeCube-v1", "panda") => boxed(poke_cube::PokeCubeSolver::new(env, PANDA_GRIPPER)),
         ("PokeCube-v1", "fetch") => boxed(fetch_tasks::FetchPokeCube::new(env)),
-        (id, r) => Err(format!(
-            "no scripted solver for {id} with {r}; available: {}",
-            SOLVED
+        (env, robot) => Err(SolverError::NoSolver {
+            env,
+            robot,
+            available: SOLVED
                 .iter()
                 .map(|(e, r)| format!("{e} with {r}"))
                 .collect::<Vec<_>>()
-                .join(", ")
-        )),
+                .join(", "),
+        }),
     }
 }
 
 /// Gripper commands (open, close) of a robot's gripper action.
 #[derive(Debug, Clone, Copy)]
-pub struct Gripper {
+pub(crate) struct Gripper {
     /// Action value that opens.
     pub open: f32,
     /// Action value that closes.
@@ -163,32 +220,32 @@ pub struct Gripper {
 }
 
 /// Panda: +1 opens (0.04 m), −1 closes (−0.01 m target).
-pub const PANDA_GRIPPER: Gripper = Gripper {
+pub(crate) const PANDA_GRIPPER: Gripper = Gripper {
     open: 1.0,
     close: -1.0,
 };
 
 /// Fetch: +1 opens (0.05 m), −1 closes (−0.01 m target).
-pub const FETCH_GRIPPER: Gripper = Gripper {
+pub(crate) const FETCH_GRIPPER: Gripper = Gripper {
     open: 1.0,
     close: -1.0,
 };
 
 /// xArm6 + Robotiq in `pd_ee_delta_pose`: the absolute gripper (docs/robots.md §4) takes target
 /// 0 rad (open) and 0.81 rad (closed).
-pub const XARM6_ABS_GRIPPER: Gripper = Gripper {
+pub(crate) const XARM6_ABS_GRIPPER: Gripper = Gripper {
     open: 0.0,
     close: 0.81,
 };
 
 /// Height of the approach point above the grasp point (m; the grasp phases of docs/solvers.md §7).
-pub const APPROACH_HEIGHT: f64 = 0.05;
+pub(crate) const APPROACH_HEIGHT: f64 = 0.05;
 /// Approach tolerance (m).
-pub const APPROACH_TOL: f64 = 0.01;
+pub(crate) const APPROACH_TOL: f64 = 0.01;
 /// Descent tolerance (m).
-pub const DESCEND_TOL: f64 = 0.004;
+pub(crate) const DESCEND_TOL: f64 = 0.004;
 /// Steps the gripper closes before the object is moved (Panda, Fetch).
-pub const CLOSE_STEPS: usize = 3;
+pub(crate) const CLOSE_STEPS: usize = 3;
 
 /// Position error scale of the EE-space policies (m per unit action).
 const ACTION_SCALE: f64 = 0.1;
@@ -200,7 +257,7 @@ const ROT_SCALE: f64 = -0.1;
 /// within one step; "k steps in a phase" counts the actions issued in it, including the one
 /// of the step on which it was entered.
 #[derive(Debug, Default, Clone, Copy)]
-pub struct Phases {
+pub(crate) struct Phases {
     /// The current phase.
     pub phase: usize,
     /// Actions issued in the current phase.
@@ -230,18 +287,18 @@ impl Phases {
     }
 }
 
-/// A task body's id in the env's model (the task layer's lookup, its error as text).
-fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, String> {
-    crate::tasks::body_id(model, name).map_err(|e| e.to_string())
+/// A task body's id in the env's model (the task layer's lookup).
+fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, SolverError> {
+    Ok(crate::tasks::body_id(model, name)?)
 }
 
 /// A body's world position, read from MuJoCo.
-pub fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
+pub(crate) fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
     Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
 }
 
 /// A body's world orientation, read from MuJoCo.
-pub fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
+pub(crate) fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
     let q = &env.data().xquat()[4 * body..4 * body + 4];
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
@@ -268,7 +325,7 @@ fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
 /// Phases 0–2 that every EE-space solver starts with (docs/solvers.md §7): above the grasp point
 /// (open), down to it (open), close for `hold` steps.
 #[derive(Debug, Clone, Copy)]
-pub struct Grasp {
+pub(crate) struct Grasp {
     /// The robot's gripper commands.
     pub gripper: Gripper,
     /// Whether the descent to the grasp point is done (target, tcp).

@@ -18,7 +18,7 @@ pub struct PickCubeSolver {
 
 impl PickCubeSolver {
     /// Resolves the cube and goal bodies of a PickCube env.
-    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, super::SolverError> {
         Ok(PickCubeSolver {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,

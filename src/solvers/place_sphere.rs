@@ -63,7 +63,7 @@ pub struct PlaceSphereSolver {
 
 impl PlaceSphereSolver {
     /// Resolves the sphere and bin bodies of a PlaceSphere env.
-    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, super::SolverError> {
         Ok(PlaceSphereSolver {
             sphere: body_id(env.model(), "sphere")?,
             bin: body_id(env.model(), "bin")?,

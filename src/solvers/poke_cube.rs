@@ -58,7 +58,7 @@ pub struct PokeCubeSolver {
 
 impl PokeCubeSolver {
     /// Resolves the cube, peg and goal bodies of a PokeCube env.
-    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, String> {
+    pub fn new(env: &Env, gripper: Gripper) -> Result<Self, super::SolverError> {
         Ok(PokeCubeSolver {
             cube: body_id(env.model(), "cube")?,
             peg: body_id(env.model(), "peg")?,

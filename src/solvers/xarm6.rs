@@ -53,7 +53,7 @@ pub struct Xarm6PickCube {
 
 impl Xarm6PickCube {
     /// Resolves the bodies of a PickCube env with the xArm6.
-    pub fn new(env: &Env) -> Result<Self, String> {
+    pub fn new(env: &Env) -> Result<Self, super::SolverError> {
         Ok(Xarm6PickCube {
             cube: body_id(env.model(), "cube")?,
             goal: body_id(env.model(), "goal_site")?,

@@ -20,7 +20,8 @@ macro_rules! evaluation {
             /// The `info` keys (the field names), in upstream insertion order.
             pub const KEYS: &'static [&'static str] = &[$(stringify!($field)),+];
 
-            /// Whether `key` is one of the boolean flags.
+            /// Whether `key` is one of the boolean flags (not every task's `info` needs it).
+            #[allow(dead_code)]
             pub fn is_flag(key: &str) -> bool {
                 [$((stringify!($field), <$ty as $crate::tasks::InfoValue>::IS_FLAG)),+]
                     .iter()
@@ -81,7 +82,7 @@ pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;
 
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::mjcf::Scene;
 use crate::mujoco::{Data, MjError, Model, ObjType};
@@ -109,8 +110,6 @@ pub struct CameraDef {
 
 /// Everything a task reads in one evaluation, resolved and computed by the env.
 pub struct TaskCtx<'a> {
-    /// The model.
-    pub model: &'a Model,
     /// The simulation state (post-step).
     pub data: &'a Data,
     /// Robot ids.
@@ -299,14 +298,6 @@ pub fn finger_forces(
             }
         }
     }
-}
-
-/// A pose from position and quaternion arrays.
-pub fn pose(p: [f64; 3], q: [f64; 4]) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::new(p[0], p[1], p[2]),
-        UnitQuaternion::new_unchecked(Quaternion::new(q[0], q[1], q[2], q[3])),
-    )
 }
 
 /// `sapien_utils.look_at(eye, target, up=(0,0,1))` expressed as a MuJoCo camera frame

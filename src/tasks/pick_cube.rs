@@ -130,11 +130,6 @@ impl PickCube {
         }
     }
 
-    /// The configuration in use.
-    pub fn config(&self) -> &PickCubeConfig {
-        &self.cfg
-    }
-
     /// Number of trailing qvel entries the static bonus ignores (docs/tasks.md §1.7).
     fn static_drop(&self) -> usize {
         match self.robot {

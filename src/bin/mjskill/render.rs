@@ -3,8 +3,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::env::{make, EnvConfig, ObsMode};
-use crate::record::image::write_png;
+use crate::CliError;
+use mjskill::record::image::write_png;
+use mjskill::{make, EnvConfig, ObsMode};
 
 /// The JSON summary of `mjskill render`.
 #[derive(Debug, Clone, Serialize)]
@@ -33,37 +34,35 @@ pub fn run(
     seed: u64,
     camera: &str,
     out: &Path,
-) -> Result<RenderSummary, String> {
-    let probe = make(env_id, config.clone()).map_err(|e| e.to_string())?;
-    let (sensor, human) = probe.cameras();
-    let mounted = probe.robot_spec().cameras;
+) -> Result<RenderSummary, CliError> {
+    let probe = make(env_id, config.clone())?;
+    // The sensor camera, then the robot-mounted ones.
+    let (human, sensors) = (probe.cameras().1, probe.sensor_names());
     drop(probe);
     let (rgb, (w, h), robot) = if camera == human.name {
-        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        let mut env = make(env_id, config)?;
         env.reset(Some(seed));
-        let frame = env.render().map_err(|e| e.to_string())?.to_vec();
-        (frame, human.size, env.robot_spec().uid())
-    } else if camera == sensor.name || mounted.iter().any(|c| c.name == camera) {
+        let frame = env.render()?.to_vec();
+        (frame, human.size, env.robot_id().uid())
+    } else if sensors.contains(&camera) {
         let config = EnvConfig {
             obs_mode: ObsMode::Rgb,
             ..config
         };
-        let mut env = make(env_id, config).map_err(|e| e.to_string())?;
+        let mut env = make(env_id, config)?;
         env.reset(Some(seed));
         let img = env
             .image(camera)
             .expect("a sensor camera of the rgb obs mode");
         let frame = img.rgb.expect("rgb obs mode").to_vec();
-        (frame, (img.width, img.height), env.robot_spec().uid())
+        (frame, (img.width, img.height), env.robot_id().uid())
     } else {
-        let valid: Vec<&str> = [human.name, sensor.name]
-            .into_iter()
-            .chain(mounted.iter().map(|c| c.name))
-            .collect();
+        let valid: Vec<&str> = std::iter::once(human.name).chain(sensors).collect();
         return Err(format!(
             "unknown camera {camera:?} for {env_id}; valid cameras: {}",
             valid.join(", ")
-        ));
+        )
+        .into());
     };
     write_png(out, &rgb, w, h)?;
     Ok(RenderSummary {

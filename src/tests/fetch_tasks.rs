@@ -1,12 +1,12 @@
 //! PokeCube-v1 and PlaceSphere-v1 with Fetch (docs/tasks.md §2–§5): state dims, seeded objects
 //! independent of the robot, the Fetch's TCP link (`gripper_link`) in the PokeCube reward,
 //! the static term over `qvel[:-2]` and Fetch's signed static rule, and the scripted solvers.
-mod common;
+use super::common;
 
+use crate::env::{make, Env, EnvConfig, RewardMode};
+use crate::robots::fetch;
+use crate::solvers::make_policy;
 use common::{norm, part};
-use mjskill::robots::fetch;
-use mjskill::solvers::make_policy;
-use mjskill::{make, Env, EnvConfig, RewardMode};
 
 fn env(task: &str, robot: &str, mode: Option<&str>) -> Env {
     make(
@@ -136,7 +136,7 @@ fn pokecube_reward_uses_gripper_link_and_fetchs_static_rule() {
 
 /// Successes of the scripted solver over `seeds` within the 50-step episodes.
 fn solver_successes(task: &str, seeds: std::ops::Range<u64>) -> usize {
-    let mode = mjskill::solvers::required_control_mode("solver", "fetch");
+    let mode = crate::solvers::required_control_mode("solver", "fetch");
     let mut e = env(task, "fetch", mode);
     let mut policy = make_policy("solver", &e, 0).unwrap();
     let mut action = vec![0f32; e.action_space().shape[0]];

@@ -5,6 +5,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::rollout::{info, InfoSummary};
+use crate::CliError;
 
 /// The summary of a directory of `.mcap` shards: the fields of [`InfoSummary`] over all
 /// shards, plus each shard's own summary.
@@ -24,7 +25,7 @@ pub struct DirSummary {
 /// Summarises every `*.mcap` file directly inside `dir` (in file-name order) as one dataset.
 /// Errors: no shard, an unreadable shard (named), or shards of different envs, robots or
 /// modes (both files and values named).
-pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, String> {
+pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, CliError> {
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .map_err(|e| format!("cannot read the directory {}: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -35,7 +36,8 @@ pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, String> {
         return Err(format!(
             "{} holds no .mcap files; give a recording or a directory of .mcap shards",
             dir.display()
-        ));
+        )
+        .into());
     }
     let shards = files
         .iter()
@@ -54,7 +56,8 @@ pub fn info_dir(dir: &Path, salvage: bool) -> Result<DirSummary, String> {
             return Err(format!(
                 "{} and {} are not one dataset: {what} {a:?} vs {b:?}",
                 first.file, s.file
-            ));
+            )
+            .into());
         }
     }
     let episodes: usize = shards.iter().map(|s| s.episodes).sum();

@@ -1,10 +1,10 @@
 //! `mjskill import-maniskill` and `mjskill export`.
 use std::path::{Path, PathBuf};
 
-use crate::datasets::export::{self, Format};
-use crate::datasets::import::{self, ImportArgs, ImportReport, ReplayBy};
-use crate::datasets::DatasetError;
-use crate::env::SimConfig;
+use mjskill::datasets::export::{self, Format};
+use mjskill::datasets::import::{self, ImportArgs, ImportReport, ReplayBy};
+use mjskill::datasets::DatasetError;
+use mjskill::SimConfig;
 
 /// Runs `import-maniskill`.
 pub fn import_maniskill(
@@ -54,7 +54,7 @@ pub fn export(
                     msg: "--json applies to --format maniskill only".into(),
                 });
             }
-            crate::datasets::lerobot::write(file, &output, video)
+            mjskill::datasets::lerobot::write(file, &output, video)
         }
     }
 }

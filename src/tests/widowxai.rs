@@ -1,14 +1,14 @@
 //! WidowX AI (docs/robots.md §6) and PickCubeWidowXAI-v1: model kinematics against the URDF, the
 //! TCP link, the mimic-coupled carriages, the arm/gripper controllers that both drive the
 //! left carriage, the noise-free table scene, the scripted grasp and robot/env errors.
-mod common;
+use super::common;
 
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 
+use crate::env::{make, EnvConfig};
+use crate::mujoco::ObjType;
+use crate::robots::{self, widowxai};
 use common::env;
-use mjskill::mujoco::ObjType;
-use mjskill::robots::{self, widowxai};
-use mjskill::{make, EnvConfig};
 
 #[test]
 fn qpos_order_is_maniskills() {
@@ -205,16 +205,9 @@ fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
     assert_eq!(e.observation_space().shape, [40]);
     assert!((e.obs_part("extra/obj_pose").unwrap()[2] - 0.018).abs() < 1e-6);
     assert_eq!(
-        mjskill::env::default_robot("PickCubeWidowXAI-v1").unwrap(),
+        crate::env::default_robot("PickCubeWidowXAI-v1").unwrap(),
         "widowxai"
     );
-}
-
-#[test]
-fn export_mjcf_writes_a_scene_mujoco_compiles() {
-    let m = common::export_mjcf_model("widowxai", "PickCubeWidowXAI-v1");
-    assert!(m.id(ObjType::Joint, "left_carriage_joint").is_some());
-    assert!(m.id(ObjType::Body, "cube").is_some());
 }
 
 #[test]

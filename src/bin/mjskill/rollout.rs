@@ -5,12 +5,12 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::output::Output;
-use crate::env::checks::MAX_SEED;
-use crate::env::{Env, EnvConfig};
-use crate::record::image::write_png;
-use crate::record::RecordError;
-use crate::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
-use crate::solvers::{make_policy, Policy};
+use crate::CliError;
+use mjskill::record::image::write_png;
+use mjskill::record::RecordError;
+use mjskill::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
+use mjskill::solvers::{check_seed_range, make_env, make_policy, Policy};
+use mjskill::{Env, EnvConfig};
 
 /// The one-line JSON summary of a rollout.
 #[derive(Debug, Clone, Serialize)]
@@ -77,7 +77,7 @@ pub fn frame_path(out: &Path) -> std::path::PathBuf {
 /// Where the frame PNG of a rollout goes, checked before anything is written: `None` with
 /// `--no-frame`. Errors: the PNG would be the recording itself, or cannot be written (a
 /// directory, a read-only file).
-pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, String> {
+pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, CliError> {
     if !frame {
         return Ok(None);
     }
@@ -89,13 +89,15 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, Stri
              name the recording e.g. {} or pass --no-frame",
             out.display(),
             out.with_extension("mcap").display()
-        ));
+        )
+        .into());
     }
     if png.is_dir() {
         return Err(format!(
             "cannot write the frame PNG {}: it is a directory; pass --no-frame or another --out",
             png.display()
-        ));
+        )
+        .into());
     }
     if png.exists() {
         std::fs::OpenOptions::new()
@@ -111,42 +113,21 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, Stri
     Ok(Some(png))
 }
 
-/// Checks that `episodes` episodes with seeds `seed, seed + 1, ...` stay within ManiSkill's
-/// 32-bit seeds; the errors name the flags.
-pub fn check_seed_range(seed: u64, episodes: u64) -> Result<(), String> {
-    if episodes == 0 {
-        return Err("--episodes must be at least 1".into());
-    }
-    if seed > MAX_SEED {
-        return Err(format!(
-            "--seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}"
-        ));
-    }
-    let last = seed as u128 + episodes as u128 - 1;
-    if last > MAX_SEED as u128 {
-        return Err(format!(
-            "--seed {seed} with --episodes {episodes} needs seeds up to {last}, beyond the \
-             32-bit seeds 0..={MAX_SEED}; lower --seed or --episodes"
-        ));
-    }
-    Ok(())
-}
-
 /// Records `episodes` seeded episodes; each finished episode is synced to disk before the next
 /// begins. Every argument is checked before any file is created; the recording is written
 /// under a temporary name next to `out` and takes its final name once its first episode is
 /// finished (see [`super::output`]), so a failed run never leaves an empty or partial file
 /// under `out`, and a run killed later keeps its finished episodes there.
-pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
+pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     check_seed_range(a.seed, a.episodes as u64)?;
-    let mut env = super::eval::make_env(&a.env, a.config.clone(), &a.policy)?;
+    let mut env = make_env(&a.env, a.config.clone(), &a.policy)?;
     let mut policy = make_policy(&a.policy, &env, a.seed)?;
     let frame_png = check_frame_path(&a.out, a.frame)?;
     let (render_w, render_h) = env.render_size();
     let camera = env.cameras().1.name;
     if a.video {
         // Fail before creating anything when rendering is unavailable.
-        env.render().map_err(|e| e.to_string())?;
+        env.render()?;
     }
     check_cameras(&env, &a.cameras)?;
     let (mut output, file) = Output::start(&a.out)?;
@@ -154,7 +135,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         Ok(r) => r,
         Err(e) => {
             output.discard();
-            return Err(e.to_string());
+            return Err(e.into());
         }
     };
     let mut run = Run {
@@ -186,11 +167,11 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
         return Err(e);
     }
     let video_frames = rec.frames();
-    rec.finish().map_err(|e| e.to_string())?;
+    rec.finish()?;
     Ok(RolloutSummary {
         out: a.out.display().to_string(),
         env: a.env.clone(),
-        robot: env.robot_spec().uid().to_string(),
+        robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         policy: a.policy.clone(),
         episodes: a.episodes,
@@ -205,7 +186,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, String> {
 
 /// Checks that every `--camera` names a sensor camera with colour images in this env's obs
 /// mode.
-fn check_cameras(env: &Env, cameras: &[String]) -> Result<(), String> {
+fn check_cameras(env: &Env, cameras: &[String]) -> Result<(), CliError> {
     for c in cameras {
         match env.image(c) {
             Some(img) if img.rgb.is_some() => {}
@@ -213,20 +194,23 @@ fn check_cameras(env: &Env, cameras: &[String]) -> Result<(), String> {
                 return Err(format!(
                     "--camera {c}: obs mode {} renders no colour; use --obs-mode rgb or rgbd",
                     env.config().obs_mode.name()
-                ))
+                )
+                .into())
             }
             None if env.config().obs_mode.is_visual() => {
                 return Err(format!(
                     "--camera {c}: no such sensor camera; valid: {}",
                     env.sensor_names().join(", ")
-                ))
+                )
+                .into())
             }
             None => {
                 return Err(format!(
                     "--camera {c}: sensor cameras render only in a visual obs mode; use \
                      --obs-mode rgb or rgbd (cameras: {})",
                     env.sensor_names().join(", ")
-                ))
+                )
+                .into())
             }
         }
     }
@@ -239,7 +223,7 @@ fn record_sensors(
     rec: &mut Recorder,
     cameras: &[String],
     ids: &[usize],
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     for (c, &id) in cameras.iter().zip(ids) {
         let img = env
             .image(c)
@@ -247,8 +231,7 @@ fn record_sensors(
         let rgb = img
             .rgb
             .ok_or_else(|| format!("camera {c} has no colour image"))?;
-        rec.record_camera_frame(id, rgb, img.width, img.height)
-            .map_err(|e| e.to_string())?;
+        rec.record_camera_frame(id, rgb, img.width, img.height)?;
     }
     Ok(())
 }
@@ -272,37 +255,32 @@ fn record_all(
     camera: &str,
     (render_w, render_h): (usize, usize),
     frame_png: Option<&Path>,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     if a.video {
-        rec.enable_video(camera).map_err(|e| e.to_string())?;
+        rec.enable_video(camera)?;
     }
     let sensors: Vec<usize> = a
         .cameras
         .iter()
-        .map(|c| rec.enable_video(c).map_err(|e| e.to_string()))
+        .map(|c| rec.enable_video(c))
         .collect::<Result<_, _>>()?;
     let bar = if a.progress {
         indicatif::ProgressBar::new(a.episodes as u64)
     } else {
         indicatif::ProgressBar::hidden()
     };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} episodes {msg} [{elapsed} < {eta}]",
-        )
-        .map_err(|e| e.to_string())?,
-    );
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} episodes {msg} [{elapsed} < {eta}]",
+    )?);
     let mut action = vec![0.0f32; env.action_space().shape[0]];
     for k in 0..a.episodes as u64 {
         let seed = a.seed + k;
-        env.try_reset(Some(seed)).map_err(|e| e.to_string())?;
+        env.try_reset(Some(seed))?;
         policy.reset(env);
-        rec.begin_episode(env, Some(seed))
-            .map_err(|e| e.to_string())?;
+        rec.begin_episode(env, Some(seed))?;
         if a.video {
-            let rgb = env.render().map_err(|e| e.to_string())?;
-            rec.record_frame(rgb, render_w, render_h)
-                .map_err(|e| e.to_string())?;
+            let rgb = env.render()?;
+            rec.record_frame(rgb, render_w, render_h)?;
         }
         record_sensors(env, rec, &a.cameras, &sensors)?;
         let (mut ret, mut success) = (0.0f64, false);
@@ -314,9 +292,8 @@ fn record_all(
                 e => e.to_string(),
             })?;
             if a.video {
-                let rgb = env.render().map_err(|e| e.to_string())?;
-                rec.record_frame(rgb, render_w, render_h)
-                    .map_err(|e| e.to_string())?;
+                let rgb = env.render()?;
+                rec.record_frame(rgb, render_w, render_h)?;
             }
             record_sensors(env, rec, &a.cameras, &sensors)?;
             ret += reward as f64;
@@ -326,7 +303,7 @@ fn record_all(
                 break;
             }
         }
-        rec.end_episode(success).map_err(|e| e.to_string())?;
+        rec.end_episode(success)?;
         if k == 0 {
             output.publish()?;
             rec.renamed(output.current());
@@ -395,17 +372,17 @@ struct Count {
 }
 
 impl Visitor for Count {
-    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), String> {
+    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), mjskill::record::BoxError> {
         self.open = Some(0);
         Ok(())
     }
-    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), String> {
+    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), mjskill::record::BoxError> {
         if let Some(n) = self.open.as_mut() {
             *n += 1;
         }
         Ok(())
     }
-    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), String> {
+    fn episode_end(&mut self, end: EpisodeEnd) -> Result<(), mjskill::record::BoxError> {
         self.open = None;
         self.episodes += 1;
         self.successes += end.success as usize;
@@ -418,9 +395,9 @@ impl Visitor for Count {
 /// Reads and summarises a recording, streaming (memory bounded by one chunk). A damaged file
 /// is an error naming the byte offset and chunk; with `salvage`, what precedes the damage is
 /// summarised and the damage reported in [`InfoSummary::damage`].
-pub fn info(path: &Path, salvage: bool) -> Result<InfoSummary, String> {
+pub fn info(path: &Path, salvage: bool) -> Result<InfoSummary, CliError> {
     let mut c = Count::default();
-    let end = stream(path, salvage, &mut c).map_err(|e| e.to_string())?;
+    let end = stream(path, salvage, &mut c)?;
     let m = end.meta;
     Ok(InfoSummary {
         file: path.display().to_string(),

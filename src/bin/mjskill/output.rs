@@ -197,3 +197,42 @@ impl Output {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hidden files (temporaries) left in `d`.
+    fn leftovers(d: &Path) -> Vec<String> {
+        std::fs::read_dir(d)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().to_string())
+            .filter(|n| n.starts_with('.'))
+            .collect()
+    }
+
+    #[test]
+    fn a_failed_run_before_its_first_episode_leaves_the_old_file() {
+        // What a rollout killed or failing in its first episode leaves: the old file as it was.
+        let d =
+            std::env::temp_dir().join(format!("mjskill-output-{}-unpublished", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let out = d.join("run.mcap");
+        std::fs::write(&out, b"old recording").unwrap();
+        let (o, mut f) = Output::start(&out).unwrap();
+        std::io::Write::write_all(&mut f, b"half an episode").unwrap();
+        assert!(o.current() != out && o.current().starts_with(&d));
+        o.discard();
+        assert_eq!(std::fs::read(&out).unwrap(), b"old recording");
+        assert!(leftovers(&d).is_empty());
+        // Publishing moves the new file into place; what is written after lands there too.
+        let (mut o, mut f) = Output::start(&out).unwrap();
+        std::io::Write::write_all(&mut f, b"episode 1").unwrap();
+        o.publish().unwrap();
+        std::io::Write::write_all(&mut f, b", episode 2").unwrap();
+        drop(f);
+        assert_eq!(std::fs::read(&out).unwrap(), b"episode 1, episode 2");
+        assert!(leftovers(&d).is_empty());
+    }
+}

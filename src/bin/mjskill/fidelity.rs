@@ -2,9 +2,10 @@
 //! or of a recording replayed with other physics settings.
 use std::path::PathBuf;
 
-use crate::env::SimConfig;
-use crate::maniskill::fidelity::{replay_file, replay_recording, FidelityOptions, FileFidelity};
-use crate::maniskill::reference::RefFile;
+use crate::CliError;
+use mjskill::maniskill::fidelity::{replay_file, replay_recording, FidelityOptions, FileFidelity};
+use mjskill::maniskill::reference::RefFile;
+use mjskill::SimConfig;
 
 /// Arguments of `mjskill fidelity`.
 #[derive(Debug, Clone)]
@@ -24,11 +25,11 @@ pub struct FidelityArgs {
 }
 
 /// Runs the command: prints the report as one JSON line.
-pub fn run(args: &FidelityArgs) -> Result<(), String> {
+pub fn run(args: &FidelityArgs) -> Result<(), CliError> {
     if args.resync == Some(0) {
         return Err("--resync must be at least 1 (re-import every K ≥ 1 steps)".into());
     }
-    args.sim.validate().map_err(|e| e.to_string())?;
+    args.sim.validate()?;
     let opts = FidelityOptions {
         resync: args.resync,
         sim: args.sim,
@@ -37,8 +38,8 @@ pub fn run(args: &FidelityArgs) -> Result<(), String> {
         if args.control_mode.is_some() {
             return Err("--control-mode selects episodes of a reference file; a recording has one control mode".into());
         }
-        let rec = crate::record::read(&args.file).map_err(|e| e.to_string())?;
-        replay_recording(&rec, opts).map_err(|e| e.to_string())?
+        let rec = mjskill::record::read(&args.file)?;
+        replay_recording(&rec, opts)?
     } else {
         reference_report(args, opts)?
     };
@@ -50,14 +51,11 @@ pub fn run(args: &FidelityArgs) -> Result<(), String> {
             e.per_step.clear();
         }
     }
-    super::emit(format_args!(
-        "{}",
-        serde_json::to_string(&report).map_err(|e| e.to_string())?
-    ))
+    super::emit(format_args!("{}", serde_json::to_string(&report)?))
 }
 
 /// Whether `path` is an MCAP file (its magic), as opposed to a reference trajectory file.
-fn is_mcap(path: &std::path::Path) -> Result<bool, String> {
+fn is_mcap(path: &std::path::Path) -> Result<bool, CliError> {
     use std::io::Read;
     let mut magic = [0u8; 8];
     let mut f =
@@ -68,8 +66,8 @@ fn is_mcap(path: &std::path::Path) -> Result<bool, String> {
     Ok(n == 8 && magic == *mcap::MAGIC)
 }
 
-fn reference_report(args: &FidelityArgs, opts: FidelityOptions) -> Result<FileFidelity, String> {
-    let mut file = RefFile::open(&args.file).map_err(|e| e.to_string())?;
+fn reference_report(args: &FidelityArgs, opts: FidelityOptions) -> Result<FileFidelity, CliError> {
+    let mut file = RefFile::open(&args.file)?;
     if let Some(m) = &args.control_mode {
         if !file.control_modes.contains_key(m) {
             return Err(format!(
@@ -80,9 +78,10 @@ fn reference_report(args: &FidelityArgs, opts: FidelityOptions) -> Result<FileFi
                     .cloned()
                     .collect::<Vec<_>>()
                     .join(", ")
-            ));
+            )
+            .into());
         }
         file.episodes.retain(|e| &e.control_mode == m);
     }
-    replay_file(&file, opts).map_err(|e| e.to_string())
+    Ok(replay_file(&file, opts)?)
 }

@@ -5,11 +5,11 @@ use std::sync::Arc;
 
 use nalgebra::Vector3;
 
-use mjskill::controllers::Drives;
-use mjskill::mujoco::{Data, Model, ObjType};
-use mjskill::robots::{self, RobotIds};
+use crate::controllers::Drives;
+use crate::mujoco::{Data, Model, ObjType};
+use crate::robots::{self, RobotIds};
 
-mod common;
+use super::common;
 use common::run;
 
 #[test]
@@ -37,7 +37,7 @@ fn panda_forward_kinematics_matches_independent_urdf_fk() {
 }
 
 fn setup_panda(
-    extra: impl FnOnce(&mut mjskill::mjcf::Scene),
+    extra: impl FnOnce(&mut crate::mjcf::Scene),
 ) -> (Arc<Model>, RobotIds, Data, Drives) {
     common::table_scene_with(robots::spec("panda").unwrap(), extra)
 }
@@ -79,7 +79,7 @@ fn panda_fingers_close_on_a_4cm_box_and_hold_it_while_the_arm_moves() {
     // At the default 0.01 s step MuJoCo's soft contacts let a held box creep along the pads
     // while the arm accelerates (measured: 8 mm over this swing, 0.2 mm/s held still); at
     // 0.002 s it stays within a millimetre. The grasp must hold either way.
-    pick_box_and_swing(mjskill::mjcf::TIMESTEP, 0.015);
+    pick_box_and_swing(crate::mjcf::TIMESTEP, 0.015);
     pick_box_and_swing(0.002, 0.005);
 }
 
@@ -104,7 +104,7 @@ fn pick_box_and_swing(timestep: f64, slip: f64) {
     let tcp_site = ids.tcp_site.unwrap();
     let desc = spec.description().unwrap();
     let arm = &spec.arm_joints[..7];
-    let chain = mjskill::controllers::ik::Chain::new(&desc, "panda_hand_tcp", arm).unwrap();
+    let chain = crate::controllers::ik::Chain::new(&desc, "panda_hand_tcp", arm).unwrap();
     let mut q = vec![0.0; 9];
     ids.joints.qpos(&d, &mut q);
     let here = chain.fk(&q);
@@ -172,31 +172,11 @@ fn pick_box_and_swing(timestep: f64, slip: f64) {
 }
 
 #[test]
-fn export_mjcf_is_accepted_by_debians_mujoco_compile() {
-    let printed = common::export_and_mujoco_compile(
-        "pickcube_panda",
-        &["export-mjcf", "--robot", "panda", "--env", "PickCube-v1"],
-    );
-    assert!(
-        printed.contains("panda_joint7") && printed.contains("cube"),
-        "compiled model lists the robot and the cube"
-    );
-    // Unknown robot: a clear error listing the valid ones, non-zero exit.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args(["export-mjcf", "--robot", "ur5"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("ur5") && err.contains("panda"), "{err}");
-}
-
-#[test]
 fn robot_options_naming_what_the_robot_lacks_are_typed_scene_errors() {
-    use mjskill::mjcf::{Drive, Scene, SceneError};
+    use crate::mjcf::{Drive, Scene, SceneError};
     let spec = robots::spec("panda").unwrap();
     let desc = spec.description().unwrap();
-    let add = |opts: &mjskill::mjcf::RobotOptions| {
+    let add = |opts: &crate::mjcf::RobotOptions| {
         let mut scene = Scene::new("t", 0.002);
         scene.add_robot(&desc, opts, &|_| None).unwrap_err()
     };

@@ -370,6 +370,7 @@ impl Primitive {
     }
 
     /// Distance by which `p` lies outside the primitive (0 when inside).
+    #[cfg(test)]
     pub fn outside_distance(&self, p: &Point) -> f64 {
         match self {
             Primitive::Box { center, rot, half } => {
@@ -863,6 +864,7 @@ pub fn fit_segments(
 }
 
 /// Fits one primitive to the part of a mesh inside `crop` (or to the whole mesh).
+#[cfg(test)]
 pub fn fit_mesh(
     tris: &[Triangle],
     crop: Option<&Crop>,

@@ -3,7 +3,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::maniskill::fidelity::{FileFidelity, StepError};
+use mjskill::maniskill::fidelity::{FileFidelity, StepError};
 
 /// Font file the plots' text uses (Debian's `fonts-dejavu-core`, installed by `.ci/setup`).
 pub const FONT_FILE: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";

@@ -1,8 +1,75 @@
-//! `mjskill eval`: success rate and mean return of a policy over seeded episodes.
+//! Policy evaluation (`mjskill eval`): success rate and mean return of a policy over seeded
+//! episodes, and the episode loop `rollout` records from.
 use serde::Serialize;
 
-use crate::env::{make, Env, EnvConfig};
-use crate::solvers::{make_policy, required_control_mode, Policy};
+use crate::env::checks::MAX_SEED;
+use crate::env::{make, Env, EnvConfig, EnvError};
+use crate::robots::RobotError;
+use crate::solvers::{make_policy, required_control_mode, Policy, SolverError};
+
+/// Why an evaluation could not run. The seed-range messages name the `eval`/`rollout` flags
+/// the arguments come from.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EvalError {
+    /// Zero episodes.
+    #[error("--episodes must be at least 1")]
+    NoEpisodes,
+    /// A first seed beyond ManiSkill's 32-bit seeds.
+    #[error("--seed {0} is out of range: seeds are 32-bit, 0..={MAX_SEED}")]
+    SeedOutOfRange(u64),
+    /// Seeds `seed..seed + episodes` run beyond the 32-bit seeds.
+    #[error(
+        "--seed {seed} with --episodes {episodes} needs seeds up to {last}, beyond the \
+         32-bit seeds 0..={MAX_SEED}; lower --seed or --episodes"
+    )]
+    SeedRangeTooLong {
+        /// The first seed.
+        seed: u64,
+        /// Episodes.
+        episodes: u64,
+        /// The last seed the range needs.
+        last: u128,
+    },
+    /// The policy needs a control mode other than the one requested.
+    #[error("policy {policy:?} needs control mode {required}, not {mode}")]
+    ModeMismatch {
+        /// The policy.
+        policy: String,
+        /// The mode it needs.
+        required: &'static str,
+        /// The requested mode.
+        mode: String,
+    },
+    /// The requested control mode is unknown for the robot.
+    #[error(transparent)]
+    Robot(#[from] RobotError),
+    /// The env could not be built, reset or stepped.
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    /// The policy could not be built for the env.
+    #[error(transparent)]
+    Policy(#[from] SolverError),
+}
+
+/// Checks that `episodes` episodes with seeds `seed..seed + episodes` are at least one and
+/// all within ManiSkill's 32-bit seeds ([`MAX_SEED`]).
+pub fn check_seed_range(seed: u64, episodes: u64) -> Result<(), EvalError> {
+    if episodes == 0 {
+        return Err(EvalError::NoEpisodes);
+    }
+    if seed > MAX_SEED {
+        return Err(EvalError::SeedOutOfRange(seed));
+    }
+    let last = seed as u128 + episodes as u128 - 1;
+    if last > MAX_SEED as u128 {
+        return Err(EvalError::SeedRangeTooLong {
+            seed,
+            episodes,
+            last,
+        });
+    }
+    Ok(())
+}
 
 /// Result of one episode.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -47,12 +114,10 @@ pub struct EvalReport {
 }
 
 /// Builds the env for a policy: the solver dictates its control mode.
-pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env, String> {
+pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env, EvalError> {
     let robot = match &config.robot {
         Some(r) => r.clone(),
-        None => crate::env::default_robot(env_id)
-            .map_err(|e| e.to_string())?
-            .to_string(),
+        None => crate::env::default_robot(env_id)?.to_string(),
     };
     if let Some(required) = required_control_mode(policy, &robot) {
         match config.control_mode.as_deref() {
@@ -61,24 +126,27 @@ pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env
             Some(m) => {
                 // An unknown mode is reported as such, with the robot's valid modes.
                 crate::robots::spec(&robot)?.control_mode(m)?;
-                return Err(format!(
-                    "policy {policy:?} needs control mode {required}, not {m}"
-                ));
+                return Err(EvalError::ModeMismatch {
+                    policy: policy.to_string(),
+                    required,
+                    mode: m.to_string(),
+                });
             }
         }
     }
-    make(env_id, config).map_err(|e| e.to_string())
+    Ok(make(env_id, config)?)
 }
 
-/// Runs one seeded episode to truncation, calling `on_step` after every step.
+/// Runs one seeded episode to truncation, calling `on_step(env, action, reward, terminated,
+/// truncated)` after every step; its error (or the env's) ends the episode.
 pub fn run_episode(
     env: &mut Env,
     policy: &mut dyn Policy,
     seed: Option<u64>,
     action: &mut [f32],
-    mut on_step: impl FnMut(&Env, &[f32], f32, bool, bool) -> Result<(), String>,
-) -> Result<EpisodeResult, String> {
-    env.try_reset(seed).map_err(|e| e.to_string())?;
+    mut on_step: impl FnMut(&Env, &[f32], f32, bool, bool) -> Result<(), EvalError>,
+) -> Result<EpisodeResult, EvalError> {
+    env.try_reset(seed)?;
     policy.reset(env);
     let mut r = EpisodeResult {
         seed: seed.unwrap_or(0),
@@ -91,7 +159,7 @@ pub fn run_episode(
     loop {
         policy.act(env, action);
         let (reward, terminated, truncated) = {
-            let s = env.step(action).map_err(|e| e.to_string())?;
+            let s = env.step(action)?;
             (s.reward, s.terminated, s.truncated)
         };
         r.steps += 1;
@@ -108,17 +176,19 @@ pub fn run_episode(
     }
 }
 
-/// Runs `episodes` episodes with seeds `seed..seed + episodes` (32-bit seeds: the range must
-/// end at [`crate::env::checks::MAX_SEED`] or below). Results are accumulated as the episodes
-/// run, so memory does not grow with `episodes`.
-pub fn run(
+/// Evaluates policy `policy` ([`POLICIES`](super::POLICIES)) on `env_id`: runs `episodes`
+/// episodes with seeds `seed..seed + episodes` (32-bit seeds: the range must end at
+/// [`MAX_SEED`] or below), each to truncation. The solver's control mode is chosen for it
+/// ([`make_env`]). Results are accumulated as the episodes run, so memory does not grow with
+/// `episodes`.
+pub fn evaluate(
     env_id: &str,
     config: EnvConfig,
     policy: &str,
     episodes: usize,
     seed: u64,
-) -> Result<EvalReport, String> {
-    super::rollout::check_seed_range(seed, episodes as u64)?;
+) -> Result<EvalReport, EvalError> {
+    check_seed_range(seed, episodes as u64)?;
     let mut env = make_env(env_id, config, policy)?;
     let mut pol = make_policy(policy, &env, seed)?;
     let mut action = vec![0.0f32; env.action_space().shape[0]];
@@ -143,7 +213,7 @@ pub fn run(
     let n = episodes.max(1) as f64;
     Ok(EvalReport {
         env: env_id.to_string(),
-        robot: env.robot_spec().uid().to_string(),
+        robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         policy: policy.to_string(),
         episodes,

@@ -1,14 +1,14 @@
 //! PokeCube-v1 with the Panda: seeding, layout, the goal target, the upstream quirks of the
 //! observation and `evaluate()`, and every dense-reward stage on constructed states.
 
-mod common;
+use super::common;
 
 use std::f64::consts::FRAC_1_SQRT_2;
 
 use common::{close, norm, part, put_free_body as put, set_robot_qvel};
 
-use mjskill::mujoco::ObjType;
-use mjskill::{make, Env, EnvConfig, RewardMode};
+use crate::env::{make, Env, EnvConfig, RewardMode};
+use crate::mujoco::ObjType;
 
 fn env_with(control_mode: Option<&str>) -> Env {
     make(
@@ -126,7 +126,7 @@ fn state_layout_is_54_long_in_maniskills_order() {
             "head_to_cube_dist"
         ]
     );
-    let reg = mjskill::registry();
+    let reg = crate::env::registry();
     let r = reg.iter().find(|r| r.id == "PokeCube-v1").unwrap();
     assert_eq!(r.default_robot, "panda");
     assert_eq!(r.max_episode_steps, 50);
@@ -404,7 +404,7 @@ fn upstream_quirks_goal_pos_is_the_peg_head_is_unrotated_angle_is_unwrapped() {
 
 #[test]
 fn export_and_determinism() {
-    let mjcf = mjskill::env::scene_mjcf("PokeCube-v1", "panda").unwrap();
+    let mjcf = crate::env::scene_mjcf("PokeCube-v1", "panda").unwrap();
     for name in ["\"cube\"", "\"peg\"", "\"goal_region\"", "\"base_camera\""] {
         assert!(
             mjcf.xml.contains(name),
@@ -412,7 +412,9 @@ fn export_and_determinism() {
         );
     }
     // Bad robot: the error names it and the valid choices.
-    let err = mjskill::env::scene_mjcf("PokeCube-v1", "so100").unwrap_err();
+    let err = crate::env::scene_mjcf("PokeCube-v1", "so100")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("so100") && err.contains("panda"), "{err}");
     // Same seed and actions ⇒ bitwise identical observations.
     let run = || {

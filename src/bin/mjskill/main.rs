@@ -1,4 +1,6 @@
-//! The `mjskill` command line.
+//! The `mjskill` command line (`mjskill --help`), built on the library's public API. Its
+//! modules are the binary's own: argument parsing, output files, and the commands that are
+//! not library API (bench, plots, `fit-primitives`'s [`mesh_fit`]).
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -6,11 +8,11 @@ use clap::{Parser, Subcommand};
 
 /// Writes one line to standard output. A closed pipe (e.g. `mjskill envs | head`) is not an
 /// error: the reader has what it wanted.
-fn emit(line: std::fmt::Arguments) -> Result<(), String> {
+fn emit(line: std::fmt::Arguments) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{line}").and_then(|()| out.flush()) {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
-            Err(format!("cannot write to stdout: {e}"))
+            Err(format!("cannot write to stdout: {e}").into())
         }
         _ => Ok(()),
     }
@@ -23,16 +25,20 @@ macro_rules! out {
     };
 }
 
-pub mod args;
-pub mod bench;
-pub mod datasets;
-pub mod eval;
-pub mod fidelity;
-pub mod info_dir;
-pub mod output;
-pub mod plot;
-pub mod render;
-pub mod rollout;
+/// The command line's errors: any error of the library (or a message), printed with its
+/// `Display` text.
+pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
+
+mod args;
+mod bench;
+mod datasets;
+mod fidelity;
+mod info_dir;
+mod mesh_fit;
+mod output;
+mod plot;
+mod render;
+mod rollout;
 
 /// mjskill: ManiSkill3 tabletop tasks on MuJoCo 2.2.
 #[derive(Debug, Parser)]
@@ -57,17 +63,17 @@ pub struct EnvArgs {
     pub control_mode: Option<String>,
     /// Physics steps per second (ManiSkill's sim_freq); a multiple of the 20 Hz control
     /// frequency. Higher is slower and closer to continuous-time dynamics.
-    #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+    #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
     pub sim_freq: u32,
 }
 
 impl EnvArgs {
     /// The env configuration (other fields at their defaults).
-    pub fn config(&self) -> crate::env::EnvConfig {
-        crate::env::EnvConfig {
+    pub fn config(&self) -> mjskill::EnvConfig {
+        mjskill::EnvConfig {
             robot: self.robot.clone(),
             control_mode: self.control_mode.clone(),
-            sim: crate::env::SimConfig {
+            sim: mjskill::SimConfig {
                 sim_freq: self.sim_freq,
             },
             ..Default::default()
@@ -228,7 +234,7 @@ pub enum Command {
         #[arg(long)]
         resync: Option<u32>,
         /// Physics steps per second of the replaying env.
-        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
         sim_freq: u32,
         /// Only the episodes of this control mode.
         #[arg(long)]
@@ -256,7 +262,7 @@ pub enum Command {
         #[arg(long, default_value = "actions")]
         by: String,
         /// Physics steps per second of the replaying env.
-        #[arg(long, default_value_t = crate::env::SimConfig::DEFAULT_SIM_FREQ)]
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
         sim_freq: u32,
     },
     /// Export a recording's finished episodes to ManiSkill's trajectory format (h5 + json)
@@ -300,8 +306,12 @@ pub enum Command {
     },
 }
 
+fn main() {
+    std::process::exit(run_cli());
+}
+
 /// Runs the command line; returns the process exit code.
-pub fn main() -> i32 {
+fn run_cli() -> i32 {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => 0,
@@ -312,7 +322,7 @@ pub fn main() -> i32 {
     }
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::ExportMjcf { robot, env, output } => {
             export_mjcf(robot.as_deref(), env.as_deref(), output)
@@ -332,15 +342,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 (None, None) => None,
                 (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
             };
-            let config = crate::env::EnvConfig {
-                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
+            let config = mjskill::EnvConfig {
+                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
                 ..target.config()
             };
             let report = bench::run(&target.env, config, steps, vec, render)?;
-            out!(
-                "{}",
-                serde_json::to_string(&report).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
         Command::FitPrimitives {
@@ -357,11 +364,9 @@ fn run(cli: Cli) -> Result<(), String> {
             episodes,
             seed,
         } => {
-            let report = eval::run(&target.env, target.config(), &policy, episodes, seed)?;
-            out!(
-                "{}",
-                serde_json::to_string(&report).map_err(|e| e.to_string())?
-            );
+            let report =
+                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)?;
+            out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
         Command::Rollout {
@@ -377,10 +382,9 @@ fn run(cli: Cli) -> Result<(), String> {
             no_frame,
         } => {
             use std::io::IsTerminal;
-            let config = crate::env::EnvConfig {
-                obs_mode: crate::env::ObsMode::parse(&obs_mode).map_err(|e| e.to_string())?,
-                reward_mode: crate::env::RewardMode::parse(&reward_mode)
-                    .map_err(|e| e.to_string())?,
+            let config = mjskill::EnvConfig {
+                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+                reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
                 ..target.config()
             };
             let args = rollout::RolloutArgs {
@@ -396,20 +400,17 @@ fn run(cli: Cli) -> Result<(), String> {
                 frame: !no_frame,
             };
             let summary = rollout::rollout(&args)?;
-            out!(
-                "{}",
-                serde_json::to_string(&summary).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string(&summary)?);
             Ok(())
         }
         Command::Info { file, salvage } if file.is_dir() => {
             let s = info_dir::info_dir(&file, salvage)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Info { file, salvage } => {
             let s = rollout::info(&file, salvage)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Replay {
@@ -417,15 +418,16 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             salvage,
         } => {
-            let r = crate::record::replay::replay(&file, tolerance, salvage)?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
+            out!("{}", serde_json::to_string(&r)?);
             if r.ok {
                 Ok(())
             } else {
                 Err(format!(
                     "{}: replay deviates beyond the tolerance {tolerance}",
                     file.display()
-                ))
+                )
+                .into())
             }
         }
         Command::ImportManiskill {
@@ -435,9 +437,8 @@ fn run(cli: Cli) -> Result<(), String> {
             by,
             sim_freq,
         } => {
-            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)
-                .map_err(|e| e.to_string())?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Export {
@@ -447,9 +448,8 @@ fn run(cli: Cli) -> Result<(), String> {
             json,
             video,
         } => {
-            let r = datasets::export(&file, &format, output, json.as_deref(), video)
-                .map_err(|e| e.to_string())?;
-            out!("{}", serde_json::to_string(&r).map_err(|e| e.to_string())?);
+            let r = datasets::export(&file, &format, output, json.as_deref(), video)?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Render {
@@ -459,7 +459,7 @@ fn run(cli: Cli) -> Result<(), String> {
             output,
         } => {
             let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
-            out!("{}", serde_json::to_string(&s).map_err(|e| e.to_string())?);
+            out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
         Command::Fidelity {
@@ -472,49 +472,43 @@ fn run(cli: Cli) -> Result<(), String> {
         } => fidelity::run(&fidelity::FidelityArgs {
             file,
             resync,
-            sim: crate::env::SimConfig { sim_freq },
+            sim: mjskill::SimConfig { sim_freq },
             control_mode,
             summary,
             plot,
         }),
         Command::Envs => {
-            out!(
-                "{}",
-                serde_json::to_string_pretty(&crate::env::registry()).map_err(|e| e.to_string())?
-            );
+            out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
         }
     }
 }
 
-fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), String> {
+fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), CliError> {
     match output {
-        Some(path) => {
-            std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
-        }
+        Some(path) => std::fs::write(&path, text)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?,
         None => std::io::stdout()
             .write_all(text.as_bytes())
-            .map_err(|e| format!("cannot write to stdout: {e}")),
+            .map_err(|e| format!("cannot write to stdout: {e}"))?,
     }
+    Ok(())
 }
 
 fn export_mjcf(
     robot: Option<&str>,
     env: Option<&str>,
     output: Option<PathBuf>,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let mjcf = match env {
-        None => {
-            let spec = crate::robots::spec(robot.unwrap_or("panda"))?;
-            crate::robots::table_scene_with(spec, |_| {})?.mjcf
-        }
+        None => mjskill::robot_scene_mjcf(robot.unwrap_or("panda"))?,
         Some(id) => {
             // As rollout does: without --robot, the env's own default robot.
             let robot = match robot {
                 Some(r) => r,
-                None => crate::env::default_robot(id).map_err(|e| e.to_string())?,
+                None => mjskill::default_robot(id)?,
             };
-            crate::env::scene_mjcf(id, robot)?
+            mjskill::scene_mjcf(id, robot)?
         }
     };
     if !mjcf.assets.is_empty() {
@@ -538,8 +532,8 @@ fn fit_primitives(
     segments: usize,
     crop: Option<&str>,
     scale: f64,
-) -> Result<(), String> {
-    use crate::tools::mesh_fit;
+) -> Result<(), CliError> {
+    use crate::mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())
@@ -561,12 +555,11 @@ fn fit_primitives(
                 return Err(format!(
                     "--crop needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}",
                     v.len()
-                ));
+                )
+                .into());
             }
             if (0..3).any(|k| v[k] > v[k + 3]) {
-                return Err(format!(
-                    "--crop {s}: each minimum must not exceed its maximum"
-                ));
+                return Err(format!("--crop {s}: each minimum must not exceed its maximum").into());
             }
             Some(mesh_fit::Crop {
                 min: [v[0], v[1], v[2]].into(),
@@ -575,10 +568,9 @@ fn fit_primitives(
         }
     };
     let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
-    let mut tris =
-        mesh_fit::read_triangles(&bytes, &mesh.display().to_string()).map_err(|e| e.to_string())?;
-    mesh_fit::scale_triangles(&mut tris, scale).map_err(|e| e.to_string())?;
-    let pts = mesh_fit::surface_points(&tris, crop.as_ref()).map_err(|e| e.to_string())?;
+    let mut tris = mesh_fit::read_triangles(&bytes, &mesh.display().to_string())?;
+    mesh_fit::scale_triangles(&mut tris, scale)?;
+    let pts = mesh_fit::surface_points(&tris, crop.as_ref())?;
     let prims = match parts {
         Some(n) => mesh_fit::decompose(&pts, &kinds, n),
         None if segments > 1 && kinds.len() == 1 => {
@@ -586,10 +578,9 @@ fn fit_primitives(
         }
         None if segments > 1 => return Err("--segments needs a single --shape".into()),
         None => mesh_fit::fit_any(&pts, &kinds).map(|p| vec![p]),
-    }
-    .map_err(|e| e.to_string())?;
+    }?;
     for p in &prims {
-        mesh_fit::check_primitive(p, crop.is_some()).map_err(|e| e.to_string())?;
+        mesh_fit::check_primitive(p, crop.is_some())?;
     }
     let total: f64 = prims.iter().map(|p| p.volume()).sum();
     for p in &prims {

@@ -6,14 +6,14 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rand::Rng;
 
-mod common;
+use super::common;
 use common::run;
 
-use mjskill::controllers::Drives;
-use mjskill::mujoco::{Data, Model, ObjType};
-use mjskill::robots::xarm6_robotiq::{LOOP_CLOSURES, REST};
-use mjskill::robots::{self, RobotIds};
-use mjskill::EnvConfig;
+use crate::controllers::Drives;
+use crate::env::EnvConfig;
+use crate::mujoco::{Data, Model, ObjType};
+use crate::robots::xarm6_robotiq::{LOOP_CLOSURES, REST};
+use crate::robots::{self, RobotIds};
 
 fn spec() -> &'static robots::RobotSpec {
     robots::spec("xarm6_robotiq").unwrap()
@@ -21,7 +21,7 @@ fn spec() -> &'static robots::RobotSpec {
 
 /// Table scene at rest (`REST` is the table qpos) with drives on their rest targets and
 /// gravity compensation.
-fn setup(extra: impl FnOnce(&mut mjskill::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data, Drives) {
+fn setup(extra: impl FnOnce(&mut crate::mjcf::Scene)) -> (Arc<Model>, RobotIds, Data, Drives) {
     common::table_scene_with(spec(), extra)
 }
 
@@ -192,7 +192,7 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     // The rest TCP is 0.169 m up: IK on the URDF chain gives joint targets 0.1494 m lower,
     // which put the TCP at the cube centre.
     let desc = spec().description().unwrap();
-    let chain = mjskill::controllers::ik::Chain::new(
+    let chain = crate::controllers::ik::Chain::new(
         &desc,
         "eef",
         &["joint1", "joint2", "joint3", "joint4", "joint5", "joint6"],
@@ -245,8 +245,8 @@ fn closes_on_a_4cm_cube_and_lifts_it() {
     assert!(!d.warnings().diverged(), "{:?}", d.warnings());
 }
 
-fn pickcube(mode: &str) -> mjskill::Env {
-    mjskill::env::make(
+fn pickcube(mode: &str) -> crate::env::Env {
+    crate::env::make(
         "PickCube-v1",
         EnvConfig {
             robot: Some("xarm6_robotiq".into()),
@@ -298,7 +298,7 @@ fn control_modes_have_the_upstream_action_and_observation_shapes() {
         assert!(env.obs().iter().all(|x| x.is_finite()), "{mode}");
     }
     // The default mode is pd_joint_delta_pos.
-    let env = mjskill::env::make(
+    let env = crate::env::make(
         "PickCube-v1",
         EnvConfig {
             robot: Some("xarm6_robotiq".into()),
@@ -375,75 +375,10 @@ fn pickcube_solver_turns_the_gripper_to_the_cube_faces() {
         robot: Some("xarm6_robotiq".into()),
         ..Default::default()
     };
-    let r = mjskill::cli::eval::run("PickCube-v1", config, "solver", 20, 0).unwrap();
+    let r = crate::solvers::evaluate("PickCube-v1", config, "solver", 20, 0).unwrap();
     assert_eq!(r.control_mode, "pd_ee_delta_pose");
     // Measured 20/20 on seeds 0–19 (100/100 on seeds 0–99; README).
     assert!(r.successes >= 18, "{r:?}");
     let first = r.mean_first_success_step.unwrap();
     assert!((20.0..40.0).contains(&first), "{first}");
-}
-
-#[test]
-fn fit_primitives_scales_millimetre_meshes() {
-    // A 10 mm cube as an ASCII STL (12 triangles), as the Robotiq meshes are in millimetres.
-    let v = |i: usize| {
-        [
-            10.0 * (i & 1) as f64,
-            10.0 * ((i >> 1) & 1) as f64,
-            10.0 * ((i >> 2) & 1) as f64,
-        ]
-    };
-    let faces = [
-        [0, 1, 3],
-        [0, 3, 2],
-        [4, 6, 7],
-        [4, 7, 5],
-        [0, 4, 5],
-        [0, 5, 1],
-        [2, 3, 7],
-        [2, 7, 6],
-        [0, 2, 6],
-        [0, 6, 4],
-        [1, 5, 7],
-        [1, 7, 3],
-    ];
-    let mut stl = String::from("solid cube\n");
-    for f in faces {
-        stl += "facet normal 0 0 0\nouter loop\n";
-        for i in f {
-            let p = v(i);
-            stl += &format!("vertex {} {} {}\n", p[0], p[1], p[2]);
-        }
-        stl += "endloop\nendfacet\n";
-    }
-    stl += "endsolid cube\n";
-    let path = std::env::temp_dir().join(format!("mjskill-mm-cube-{}.stl", std::process::id()));
-    std::fs::write(&path, stl).unwrap();
-    let run = |scale: &str| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-            .args([
-                "fit-primitives",
-                "--shape",
-                "box",
-                "--scale",
-                scale,
-                "--mesh",
-            ])
-            .arg(&path)
-            .output()
-            .unwrap()
-    };
-    let out = run("0.001");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}");
-    assert!(text.contains(r#"<box size="0.01 0.01 0.01"/>"#), "{text}");
-    assert!(text.contains(r#"xyz="0.005 0.005 0.005""#), "{text}");
-    let out = run("0");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("--scale must be a positive number, got 0"),
-        "{err}"
-    );
-    std::fs::remove_file(&path).ok();
 }

@@ -2,7 +2,7 @@
 //! bad value (negative numbers included, which clap would otherwise take for flags) is an
 //! error naming the flag and the range, before anything runs.
 
-use crate::env::checks::MAX_SEED;
+use mjskill::MAX_SEED;
 
 /// Parses an integer in `lo..=hi`; any other input (negative, fractional, too large) is an
 /// error naming the range.
@@ -47,9 +47,9 @@ pub fn render_frames(s: &str) -> Result<usize, String> {
     ranged(s, 1, super::bench::MAX_RENDER as u64).map(|v| v as usize)
 }
 
-/// `fit-primitives --parts` and `--segments`: 1..=[`crate::tools::mesh_fit::MAX_PARTS`].
+/// `fit-primitives --parts` and `--segments`: 1..=[`crate::mesh_fit::MAX_PARTS`].
 pub fn parts(s: &str) -> Result<usize, String> {
-    ranged(s, 1, crate::tools::mesh_fit::MAX_PARTS as u64).map(|v| v as usize)
+    ranged(s, 1, crate::mesh_fit::MAX_PARTS as u64).map(|v| v as usize)
 }
 
 /// A finite float ≥ 0 (`replay --tolerance`).
@@ -64,9 +64,9 @@ pub fn tolerance(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-/// A mesh scale: finite, > 0 and at most [`crate::tools::mesh_fit::MAX_SCALE`].
+/// A mesh scale: finite, > 0 and at most [`crate::mesh_fit::MAX_SCALE`].
 pub fn scale(s: &str) -> Result<f64, String> {
-    let max = crate::tools::mesh_fit::MAX_SCALE;
+    let max = crate::mesh_fit::MAX_SCALE;
     let v: f64 = s
         .trim()
         .parse()

@@ -4,8 +4,9 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use crate::env::{make, EnvConfig};
-use crate::mujoco::Data;
+use crate::CliError;
+use mjskill::mujoco::Data;
+use mjskill::{make, EnvConfig};
 
 /// One bench result (printed as a JSON line).
 #[derive(Debug, Clone, Serialize)]
@@ -65,9 +66,9 @@ pub const MAX_THREADS: usize = 256;
 /// Largest `--render`.
 pub const MAX_RENDER: usize = 100_000;
 
-fn check_count(flag: &str, n: usize, max: usize) -> Result<(), String> {
+fn check_count(flag: &str, n: usize, max: usize) -> Result<(), CliError> {
     if !(1..=max).contains(&n) {
-        return Err(format!("{flag} must be in 1..={max}, got {n}"));
+        return Err(format!("{flag} must be in 1..={max}, got {n}").into());
     }
     Ok(())
 }
@@ -79,7 +80,7 @@ pub fn run(
     steps: usize,
     vec: Option<(usize, usize)>,
     render_frames: Option<usize>,
-) -> Result<BenchReport, String> {
+) -> Result<BenchReport, CliError> {
     check_count("--steps", steps, MAX_STEPS)?;
     if let Some((n, t)) = vec {
         check_count("--envs", n, MAX_ENVS)?;
@@ -88,17 +89,15 @@ pub fn run(
     if let Some(n) = render_frames {
         check_count("--render", n, MAX_RENDER)?;
     }
-    let mut env = make(env_id, config.clone()).map_err(|e| e.to_string())?;
+    let mut env = make(env_id, config.clone())?;
     // Built before timing, so that a bad VecEnv fails at once; the threads it uses (at most
     // one per env) are what the report shows.
     let mut vec_env = match vec {
         None => None,
-        Some((n, t)) => {
-            Some(crate::env::VecEnv::new(env_id, config.clone(), n, t).map_err(|e| e.to_string())?)
-        }
+        Some((n, t)) => Some(mjskill::VecEnv::new(env_id, config.clone(), n, t)?),
     };
     if render_frames.is_some() {
-        env.render().map_err(|e| e.to_string())?; // fail before timing without rendering
+        env.render()?; // fail before timing without rendering
     }
     let dim = env.action_space().shape[0];
     let mut rng = rand::rngs::StdRng::seed_from_u64(0);
@@ -114,23 +113,21 @@ pub fn run(
     let nd = env.drives().save_len();
     let mut targets = Vec::with_capacity(nd * steps);
     for i in 0..steps {
-        env.step(&actions[i * dim..(i + 1) * dim])
-            .map_err(|e| e.to_string())?;
+        env.step(&actions[i * dim..(i + 1) * dim])?;
         env.drives().save(&mut targets);
     }
     // Timed passes, alternating env and raw physics three times; the best of each counts.
     let (mut env_rate, mut mj_rate, mut replay_identical) = (0.0f64, 0.0f64, false);
     for _ in 0..3 {
-        env.set_state(&start).map_err(|e| e.to_string())?;
+        env.set_state(&start)?;
         let t = Instant::now();
         for i in 0..steps {
-            env.step(&actions[i * dim..(i + 1) * dim])
-                .map_err(|e| e.to_string())?;
+            env.step(&actions[i * dim..(i + 1) * dim])?;
         }
         env_rate = env_rate.max(steps as f64 / t.elapsed().as_secs_f64());
         let (env_qpos, env_qvel) = (env.data().qpos().to_vec(), env.data().qvel().to_vec());
 
-        env.set_state(&start).map_err(|e| e.to_string())?;
+        env.set_state(&start)?;
         let mut data: Data = env.data().clone();
         let mut drives = env.drives().clone();
         let t = Instant::now();
@@ -162,7 +159,7 @@ pub fn run(
             v.reset(Some(0));
             for t in 0..vsteps / 10 + 1 {
                 fill(t, &mut acts);
-                v.step(&acts).map_err(|e| e.to_string())?;
+                v.step(&acts)?;
             }
             let mut best = 0.0f64;
             for _ in 0..3 {
@@ -170,7 +167,7 @@ pub fn run(
                 let t0 = Instant::now();
                 for t in 0..vsteps {
                     fill(t, &mut acts);
-                    v.step(&acts).map_err(|e| e.to_string())?;
+                    v.step(&acts)?;
                 }
                 best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());
             }
@@ -180,21 +177,21 @@ pub fn run(
     let render_rate = match render_frames {
         None => None,
         Some(n) => {
-            env.set_state(&start).map_err(|e| e.to_string())?;
+            env.set_state(&start)?;
             let zero = vec![0.0f32; dim];
-            env.render().map_err(|e| e.to_string())?; // warm-up (context creation)
+            env.render()?; // warm-up (context creation)
             let mut best = 0.0f64;
             for _ in 0..3 {
                 let t = Instant::now();
                 for _ in 0..n {
                     // A step in between, so that every frame draws a new state.
-                    env.step(&zero).map_err(|e| e.to_string())?;
-                    env.render().map_err(|e| e.to_string())?;
+                    env.step(&zero)?;
+                    env.render()?;
                 }
                 let with_steps = t.elapsed().as_secs_f64();
                 let t = Instant::now();
                 for _ in 0..n {
-                    env.step(&zero).map_err(|e| e.to_string())?;
+                    env.step(&zero)?;
                 }
                 let steps_only = t.elapsed().as_secs_f64();
                 best = best.max(n as f64 / (with_steps - steps_only).max(1e-9));
@@ -205,7 +202,7 @@ pub fn run(
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
-        robot: env.robot_spec().uid().to_string(),
+        robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
         obs_mode: env.config().obs_mode.name().to_string(),
         steps,
@@ -223,4 +220,26 @@ pub fn run(
         ratio,
         overhead_percent: (1.0 / ratio - 1.0) * 100.0,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn a_bad_vec_env_size_fails_before_any_timing() {
+        let t = Instant::now();
+        let e = super::run(
+            "PickCube-v1",
+            Default::default(),
+            100_000,
+            Some((0, 1)),
+            None,
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("--envs") && t.elapsed() < Duration::from_secs(5),
+            "{e}"
+        );
+    }
 }

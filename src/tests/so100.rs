@@ -1,13 +1,13 @@
 //! SO100 (docs/robots.md §5) and PickCubeSO100-v1: model kinematics against the URDF, the
 //! jaw-tip TCP, drives, control modes, the table-scene noise rule, the scripted grasp and
 //! robot/env errors.
-mod common;
+use super::common;
 
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 
+use crate::env::{make, EnvConfig};
+use crate::robots::{self, so100};
 use common::env;
-use mjskill::robots::{self, so100};
-use mjskill::{make, EnvConfig};
 
 #[test]
 fn qpos_order_is_maniskills() {
@@ -223,18 +223,9 @@ fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
     assert_eq!(e.observation_space().shape, [36]);
     assert!((e.obs_part("extra/obj_pose").unwrap()[2] - 0.0125).abs() < 1e-6);
     assert_eq!(
-        mjskill::env::default_robot("PickCubeSO100-v1").unwrap(),
+        crate::env::default_robot("PickCubeSO100-v1").unwrap(),
         "so100"
     );
-}
-
-#[test]
-fn export_mjcf_writes_a_scene_mujoco_compiles() {
-    let m = common::export_mjcf_model("so100", "PickCubeSO100-v1");
-    assert!(m
-        .id(mjskill::mujoco::ObjType::Joint, "wrist_roll")
-        .is_some());
-    assert!(m.id(mjskill::mujoco::ObjType::Body, "cube").is_some());
 }
 
 #[test]

@@ -1,4 +1,0 @@
-//! The `mjskill` binary: see `mjskill --help`.
-fn main() {
-    std::process::exit(mjskill::cli::main());
-}
