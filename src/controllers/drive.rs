@@ -100,6 +100,8 @@ pub struct Drives {
     gripper_bodies: Vec<Vec<usize>>,
     /// Per body: whether it belongs to the robot.
     robot_body: Vec<bool>,
+    /// Per dof: whether a drive acts on it.
+    driven_dof: Vec<bool>,
     /// This substep's gripper contacts that their drive pushes into: (drive, other body).
     pushes: Vec<(usize, usize)>,
     /// Per drive: whether its gripper pinches an object against another part of the robot,
@@ -155,8 +157,16 @@ impl Drives {
         }
         let n = dofs.len();
         let nv = model.nv();
-        // The subtree of a gripper joint's body: the links it moves.
         let parent = model.body_parentid();
+        // Whether body `b` lies in the subtree of body `root`.
+        let in_subtree = |b: usize, root: usize| {
+            let mut x = b;
+            while x != 0 && x != root {
+                x = parent[x] as usize;
+            }
+            x == root
+        };
+        // The subtree of a gripper joint's body: the links it moves.
         let gripper_bodies = dofs
             .iter()
             .map(|d| {
@@ -165,13 +175,7 @@ impl Drives {
                 }
                 let root = model.dof_bodyid()[d.dof] as usize;
                 (0..model.nbody())
-                    .filter(|&b| {
-                        let mut x = b;
-                        while x != 0 && x != root {
-                            x = parent[x] as usize;
-                        }
-                        x == root
-                    })
+                    .filter(|&b| in_subtree(b, root))
                     .collect()
             })
             .collect();
@@ -182,18 +186,14 @@ impl Drives {
                 while parent[root] != 0 {
                     root = parent[root] as usize;
                 }
-                (0..model.nbody())
-                    .map(|b| {
-                        let mut x = b;
-                        while x != 0 && x != root {
-                            x = parent[x] as usize;
-                        }
-                        x == root
-                    })
-                    .collect()
+                (0..model.nbody()).map(|b| in_subtree(b, root)).collect()
             }
             None => vec![false; model.nbody()],
         };
+        let mut driven_dof = vec![false; nv];
+        for d in &dofs {
+            driven_dof[d.dof] = true;
+        }
         let mut unit = vec![0.0; n * nv];
         for (k, d) in dofs.iter().enumerate() {
             unit[k * nv + d.dof] = 1.0;
@@ -221,6 +221,7 @@ impl Drives {
             correction: vec![0.0; n],
             gripper_bodies,
             robot_body,
+            driven_dof,
             pushes: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
             pinching: vec![false; n],
             touching: vec![false; n],
@@ -286,7 +287,8 @@ impl Drives {
                 self.w[i * n + j] = self.minv[j * nv + di.dof];
             }
         }
-        self.fold_in_constraints(data, nv);
+        self.gather_constraint_rows(data, nv);
+        self.fold_in_constraint_rows(data, nv);
         // The arm's unconstrained acceleration (Coriolis, gravity compensation, passive
         // forces) with the drives switched off.
         {
@@ -311,8 +313,8 @@ impl Drives {
         // the damping is capped so that it cannot reverse a still-moving finger within the
         // substep (its free inertia is 1 / W_ii).
         for (i, d) in self.dofs.iter().enumerate() {
-            let kd = d.kd.min(1.0 / (h * self.minv[i * nv + d.dof]));
             self.micro_force[i] = if self.pinching[i] {
+                let kd = d.kd.min(1.0 / (h * self.minv[i * nv + d.dof]));
                 (d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i]
                     - kd * qvel[d.dof])
                     .clamp(-d.force_limit, d.force_limit)
@@ -371,27 +373,18 @@ impl Drives {
         }
     }
 
-    /// Sizes the buffers that depend on the model's constraint rows, so that
-    /// [`Drives::apply`] never allocates: call once after a [`Data::forward`] of the model.
-    pub fn prepare(&mut self, data: &mut Data) {
-        let nv = data.model().nv();
-        let n = self.dofs.len();
-        if n > 0 {
-            data.solve_m(&mut self.minv, &self.unit, n);
-            self.fold_in_constraints(data, nv);
-        }
-    }
-
-    /// Restricts `W` to the motions the constraints allow, with MuJoCo's compliance `R` of
-    /// those (soft) constraints: `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)` at the drives.
-    /// The rows are
+    /// Collects the constraint rows [`Drives::fold_in_constraint_rows`] folds into `W`,
+    /// with their compliance `R`:
     /// * the equality rows that move an undriven dof (equalities whose every dof has a drive
     ///   of its own, like the Panda's finger mimic, are left to the drives), and
     /// * the contact normals of gripper links that their drive pushes into (the normal
     ///   velocity would fall under the drive's force), taken as bilateral for the substep:
     ///   a closing finger then feels what it pushes, a free cube or the opposite finger.
-    fn fold_in_constraints(&mut self, data: &mut Data, nv: usize) {
-        let n = self.dofs.len();
+    ///
+    /// On the way it marks the drives that move a linkage (`linked`), whose gripper touches
+    /// anything (`touching`) and whose gripper pinches an object against the rest of the
+    /// robot (`pinching`).
+    fn gather_constraint_rows(&mut self, data: &Data, nv: usize) {
         let max_rows = self.max_fold_rows;
         self.fold_j.clear();
         self.fold_r.clear();
@@ -404,7 +397,7 @@ impl Drives {
                 let undriven = row
                     .iter()
                     .enumerate()
-                    .any(|(k, &x)| x != 0.0 && !self.dofs.iter().any(|d| d.dof == k));
+                    .any(|(k, &x)| x != 0.0 && !self.driven_dof[k]);
                 if undriven && self.fold_r.len() < max_rows {
                     self.fold_j.extend_from_slice(row);
                     self.fold_r.push(compliance[r]);
@@ -479,6 +472,12 @@ impl Drives {
                 }
             }
         }
+    }
+
+    /// Restricts `W` to the motions the gathered rows allow, with MuJoCo's compliance `R` of
+    /// those (soft) constraints: `W − (J M⁻¹)ᵀ (J M⁻¹ Jᵀ + R)⁻¹ (J M⁻¹)` at the drives.
+    fn fold_in_constraint_rows(&mut self, data: &mut Data, nv: usize) {
+        let n = self.dofs.len();
         let k = self.fold_r.len();
         if k == 0 {
             return;

@@ -223,7 +223,6 @@ impl Env {
             render_options,
         };
         env.reset(Some(CONSTRUCTION_SEED));
-        env.sim.drives.prepare(&mut env.sim.data);
         Ok(env)
     }
 
