@@ -83,6 +83,29 @@ fn a_reference_file_reports_per_step_and_per_bucket_deviations() {
         bucket_mean(&resync, 26, "joint"),
     );
     assert!(r < 0.5 * o, "one-step {r} vs open loop {o}");
+    // The held / free split covers every step; the motion-planning grasps are held, and
+    // their one-step object error (in-hand dynamics) exceeds that of free objects.
+    let split = &resync["grasp_split"];
+    let total: u64 = resync["episodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["steps"].as_u64().unwrap())
+        .sum();
+    let (held, free) = (
+        split["held_steps"].as_u64().unwrap(),
+        split["free_steps"].as_u64().unwrap(),
+    );
+    assert_eq!(held + free, total);
+    assert!(held > 0 && free > held, "held {held}, free {free}");
+    let (held_err, free_err) = (
+        split["held"]["obj_pos"].as_f64().unwrap(),
+        split["free"]["obj_pos"].as_f64().unwrap(),
+    );
+    assert!(
+        held_err > 10.0 * free_err,
+        "held {held_err} vs free {free_err}"
+    );
     // Only one control mode's episodes.
     let one = json(&mjskill(&[
         "fidelity",
@@ -202,4 +225,30 @@ fn bad_input_is_an_error_naming_it() {
         &["fidelity", &f, "--control-mode", "pd_ee_pose"],
         "recorded modes: pd_joint_delta_pos",
     );
+}
+
+#[test]
+fn the_grasp_split_counts_the_release_step_as_held() {
+    use mjskill::maniskill::fidelity::{GraspSplit, StepError};
+    let step = |grasped: bool, obj_pos: f64| StepError {
+        obj_pos,
+        reference_grasped: grasped,
+        ..StepError::default()
+    };
+    // Episode 1: free, grasped, grasped, released (held: it starts grasped), free.
+    let a = [
+        step(false, 1.0),
+        step(true, 2.0),
+        step(true, 2.0),
+        step(false, 2.0),
+        step(false, 1.0),
+    ];
+    // Episode 2 starts grasped: its first step is held.
+    let b = [step(false, 4.0)];
+    let s = GraspSplit::of(&[&a, &b], &[false, true]);
+    assert_eq!((s.held_steps, s.free_steps), (4, 2));
+    assert_eq!(s.held.unwrap().obj_pos, 2.5);
+    assert_eq!(s.free.unwrap().obj_pos, 1.0);
+    let none = GraspSplit::of(&[&a[..1]], &[false]);
+    assert_eq!((none.held_steps, none.held), (0, None));
 }

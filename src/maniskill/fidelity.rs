@@ -99,6 +99,8 @@ pub struct StepError {
     pub flag_mismatches: u32,
     /// Whether `is_grasped` (or the task's grasp flag) agrees.
     pub grasp_agrees: bool,
+    /// The reference's grasp flag after this step.
+    pub reference_grasped: bool,
 }
 
 /// Summary over the steps of one bucket.
@@ -133,6 +135,57 @@ pub struct StepMeans {
     pub obj_rot: f64,
     /// Reward difference.
     pub reward: f64,
+}
+
+/// Step errors split by whether the reference holds an object: a step is *held* when the
+/// reference's grasp flag is set before or after it. With `--resync 1` this separates the
+/// one-step error of in-hand dynamics from that of free objects and the arm.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GraspSplit {
+    /// Number of held steps.
+    pub held_steps: usize,
+    /// Means over the held steps (None without any).
+    pub held: Option<StepMeans>,
+    /// Number of the other steps.
+    pub free_steps: usize,
+    /// Means over the other steps (None without any).
+    pub free: Option<StepMeans>,
+}
+
+impl GraspSplit {
+    /// The split of episodes' per-step errors (`errors[e][i]` belongs to step i + 1 of
+    /// episode e; `initially_grasped[e]` is the reference's grasp flag before step 1).
+    pub fn of(errors: &[&[StepError]], initially_grasped: &[bool]) -> GraspSplit {
+        let (mut held, mut free) = (Vec::new(), Vec::new());
+        for (steps, &start) in errors.iter().zip(initially_grasped) {
+            let mut before = start;
+            for s in steps.iter() {
+                if before || s.reference_grasped {
+                    held.push(s);
+                } else {
+                    free.push(s);
+                }
+                before = s.reference_grasped;
+            }
+        }
+        fn means(sel: &[&StepError]) -> Option<StepMeans> {
+            let n = sel.len() as f64;
+            (!sel.is_empty()).then(|| StepMeans {
+                joint: sel.iter().map(|s| s.joint).sum::<f64>() / n,
+                tcp_pos: sel.iter().map(|s| s.tcp_pos).sum::<f64>() / n,
+                tcp_rot: sel.iter().map(|s| s.tcp_rot).sum::<f64>() / n,
+                obj_pos: sel.iter().map(|s| s.obj_pos).sum::<f64>() / n,
+                obj_rot: sel.iter().map(|s| s.obj_rot).sum::<f64>() / n,
+                reward: sel.iter().map(|s| s.reward).sum::<f64>() / n,
+            })
+        }
+        GraspSplit {
+            held_steps: held.len(),
+            held: means(&held),
+            free_steps: free.len(),
+            free: means(&free),
+        }
+    }
 }
 
 /// The report of one episode.
@@ -179,6 +232,8 @@ pub struct FileFidelity {
     pub episodes: Vec<EpisodeFidelity>,
     /// Per-bucket summary over every episode.
     pub buckets: Vec<BucketStats>,
+    /// Every episode's steps split by whether the reference holds an object.
+    pub grasp_split: GraspSplit,
 }
 
 /// How to replay.
@@ -216,6 +271,7 @@ pub fn compare(want: &Frame, got: &Frame, objects: &[String], grasp_key: &str) -
     }
     let mut flag_mismatches = 0;
     let mut grasp_agrees = true;
+    let reference_grasped = want.flags.iter().any(|(k, v)| k == grasp_key && *v);
     for (k, v) in &want.flags {
         if let Some((_, g)) = got.flags.iter().find(|(gk, _)| gk == k) {
             if g != v {
@@ -235,6 +291,7 @@ pub fn compare(want: &Frame, got: &Frame, objects: &[String], grasp_key: &str) -
         reward: (want.reward_dense - got.reward_dense).abs(),
         flag_mismatches,
         grasp_agrees,
+        reference_grasped,
     }
 }
 
@@ -443,6 +500,13 @@ pub fn replay_recording(
         sim: opts.sim,
         resync: opts.resync,
         buckets: buckets(&all),
+        grasp_split: GraspSplit::of(
+            &all,
+            &episodes
+                .iter()
+                .map(|e| e.initial.reference_grasped)
+                .collect::<Vec<_>>(),
+        ),
         episodes,
     })
 }
@@ -461,6 +525,13 @@ pub fn replay_file(file: &RefFile, opts: FidelityOptions) -> Result<FileFidelity
         sim: opts.sim,
         resync: opts.resync,
         buckets: buckets(&all),
+        grasp_split: GraspSplit::of(
+            &all,
+            &episodes
+                .iter()
+                .map(|e| e.initial.reference_grasped)
+                .collect::<Vec<_>>(),
+        ),
         episodes,
     })
 }
