@@ -245,10 +245,10 @@ fn the_grasp_split_counts_the_release_step_as_held() {
     ];
     // Episode 2 starts grasped: its first step is held.
     let b = [step(false, 4.0)];
-    let s = GraspSplit::of(&[&a, &b], &[false, true]);
+    let s = GraspSplit::of(&[(false, &a[..]), (true, &b[..])]);
     assert_eq!((s.held_steps, s.free_steps), (4, 2));
     assert_eq!(s.held.unwrap().obj_pos, 2.5);
     assert_eq!(s.free.unwrap().obj_pos, 1.0);
-    let none = GraspSplit::of(&[&a[..1]], &[false]);
+    let none = GraspSplit::of(&[(false, &a[..1])]);
     assert_eq!((none.held_steps, none.held), (0, None));
 }

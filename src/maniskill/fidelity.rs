@@ -153,13 +153,13 @@ pub struct GraspSplit {
 }
 
 impl GraspSplit {
-    /// The split of episodes' per-step errors (`errors[e][i]` belongs to step i + 1 of
-    /// episode e; `initially_grasped[e]` is the reference's grasp flag before step 1).
-    pub fn of(errors: &[&[StepError]], initially_grasped: &[bool]) -> GraspSplit {
+    /// The split of episodes given as (the reference's grasp flag before step 1, per-step
+    /// errors with `errors[i]` belonging to step i + 1).
+    pub fn of(episodes: &[(bool, &[StepError])]) -> GraspSplit {
         let (mut held, mut free) = (Vec::new(), Vec::new());
-        for (steps, &start) in errors.iter().zip(initially_grasped) {
+        for &(start, steps) in episodes {
             let mut before = start;
-            for s in steps.iter() {
+            for s in steps {
                 if before || s.reference_grasped {
                     held.push(s);
                 } else {
@@ -168,24 +168,33 @@ impl GraspSplit {
                 before = s.reference_grasped;
             }
         }
-        fn means(sel: &[&StepError]) -> Option<StepMeans> {
-            let n = sel.len() as f64;
-            (!sel.is_empty()).then(|| StepMeans {
-                joint: sel.iter().map(|s| s.joint).sum::<f64>() / n,
-                tcp_pos: sel.iter().map(|s| s.tcp_pos).sum::<f64>() / n,
-                tcp_rot: sel.iter().map(|s| s.tcp_rot).sum::<f64>() / n,
-                obj_pos: sel.iter().map(|s| s.obj_pos).sum::<f64>() / n,
-                obj_rot: sel.iter().map(|s| s.obj_rot).sum::<f64>() / n,
-                reward: sel.iter().map(|s| s.reward).sum::<f64>() / n,
-            })
-        }
         GraspSplit {
             held_steps: held.len(),
-            held: means(&held),
+            held: (!held.is_empty()).then(|| mean_and_max(&held).0),
             free_steps: free.len(),
-            free: means(&free),
+            free: (!free.is_empty()).then(|| mean_and_max(&free).0),
         }
     }
+}
+
+/// Per-metric means and maxima over `sel` (not empty).
+fn mean_and_max(sel: &[&StepError]) -> (StepMeans, StepMeans) {
+    let n = sel.len() as f64;
+    let (mut mean, mut max) = (StepMeans::default(), StepMeans::default());
+    for s in sel {
+        for (m, x, v) in [
+            (&mut mean.joint, &mut max.joint, s.joint),
+            (&mut mean.tcp_pos, &mut max.tcp_pos, s.tcp_pos),
+            (&mut mean.tcp_rot, &mut max.tcp_rot, s.tcp_rot),
+            (&mut mean.obj_pos, &mut max.obj_pos, s.obj_pos),
+            (&mut mean.obj_rot, &mut max.obj_rot, s.obj_rot),
+            (&mut mean.reward, &mut max.reward, s.reward),
+        ] {
+            *m += v / n;
+            *x = x.max(v);
+        }
+    }
+    (mean, max)
 }
 
 /// The report of one episode.
@@ -313,20 +322,7 @@ pub fn buckets(errors: &[&[StepError]]) -> Vec<BucketStats> {
                 return None;
             }
             let n = sel.len() as f64;
-            let (mut mean, mut max) = (StepMeans::default(), StepMeans::default());
-            for s in &sel {
-                for (m, x, v) in [
-                    (&mut mean.joint, &mut max.joint, s.joint),
-                    (&mut mean.tcp_pos, &mut max.tcp_pos, s.tcp_pos),
-                    (&mut mean.tcp_rot, &mut max.tcp_rot, s.tcp_rot),
-                    (&mut mean.obj_pos, &mut max.obj_pos, s.obj_pos),
-                    (&mut mean.obj_rot, &mut max.obj_rot, s.obj_rot),
-                    (&mut mean.reward, &mut max.reward, s.reward),
-                ] {
-                    *m += v / n;
-                    *x = x.max(v);
-                }
-            }
+            let (mean, max) = mean_and_max(&sel);
             Some(BucketStats {
                 from,
                 to: (to != u32::MAX).then_some(to),
@@ -501,10 +497,9 @@ pub fn replay_recording(
         resync: opts.resync,
         buckets: buckets(&all),
         grasp_split: GraspSplit::of(
-            &all,
             &episodes
                 .iter()
-                .map(|e| e.initial.reference_grasped)
+                .map(|e| (e.initial.reference_grasped, e.per_step.as_slice()))
                 .collect::<Vec<_>>(),
         ),
         episodes,
@@ -526,10 +521,9 @@ pub fn replay_file(file: &RefFile, opts: FidelityOptions) -> Result<FileFidelity
         resync: opts.resync,
         buckets: buckets(&all),
         grasp_split: GraspSplit::of(
-            &all,
             &episodes
                 .iter()
-                .map(|e| e.initial.reference_grasped)
+                .map(|e| (e.initial.reference_grasped, e.per_step.as_slice()))
                 .collect::<Vec<_>>(),
         ),
         episodes,
