@@ -245,6 +245,31 @@ pub struct FileFidelity {
     pub grasp_split: GraspSplit,
 }
 
+impl FileFidelity {
+    /// The report of `episodes` replayed with `opts`, with the summaries over all of them.
+    fn summarise(
+        env_id: String,
+        robot: String,
+        opts: FidelityOptions,
+        episodes: Vec<EpisodeFidelity>,
+    ) -> FileFidelity {
+        let all: Vec<&[StepError]> = episodes.iter().map(|e| e.per_step.as_slice()).collect();
+        let starts: Vec<(bool, &[StepError])> = episodes
+            .iter()
+            .map(|e| (e.initial.reference_grasped, e.per_step.as_slice()))
+            .collect();
+        FileFidelity {
+            buckets: buckets(&all),
+            grasp_split: GraspSplit::of(&starts),
+            env_id,
+            robot,
+            sim: opts.sim,
+            resync: opts.resync,
+            episodes,
+        }
+    }
+}
+
 /// How to replay.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FidelityOptions {
@@ -489,21 +514,12 @@ pub fn replay_recording(
             per_step,
         });
     }
-    let all: Vec<&[StepError]> = episodes.iter().map(|e| e.per_step.as_slice()).collect();
-    Ok(FileFidelity {
-        env_id: m.env_id.clone(),
-        robot: m.robot.clone(),
-        sim: opts.sim,
-        resync: opts.resync,
-        buckets: buckets(&all),
-        grasp_split: GraspSplit::of(
-            &episodes
-                .iter()
-                .map(|e| (e.initial.reference_grasped, e.per_step.as_slice()))
-                .collect::<Vec<_>>(),
-        ),
+    Ok(FileFidelity::summarise(
+        m.env_id.clone(),
+        m.robot.clone(),
+        opts,
         episodes,
-    })
+    ))
 }
 
 /// Replays every episode of a ManiSkill reference file.
@@ -513,19 +529,10 @@ pub fn replay_file(file: &RefFile, opts: FidelityOptions) -> Result<FileFidelity
         .iter()
         .map(|ep| replay_episode(file, ep, opts))
         .collect::<Result<Vec<_>, _>>()?;
-    let all: Vec<&[StepError]> = episodes.iter().map(|e| e.per_step.as_slice()).collect();
-    Ok(FileFidelity {
-        env_id: file.env_id.clone(),
-        robot: file.robot.clone(),
-        sim: opts.sim,
-        resync: opts.resync,
-        buckets: buckets(&all),
-        grasp_split: GraspSplit::of(
-            &episodes
-                .iter()
-                .map(|e| (e.initial.reference_grasped, e.per_step.as_slice()))
-                .collect::<Vec<_>>(),
-        ),
+    Ok(FileFidelity::summarise(
+        file.env_id.clone(),
+        file.robot.clone(),
+        opts,
         episodes,
-    })
+    ))
 }
