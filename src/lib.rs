@@ -55,6 +55,7 @@ mod tests;
 
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
+pub use env::vec::MAX_NUM_ENVS;
 pub use env::{
     default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, Env, EnvConfig,
     EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, RewardMode, SimConfig, StateDict,

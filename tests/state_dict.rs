@@ -95,6 +95,43 @@ fn the_controller_target_of_a_state_dict_drives_the_next_step() {
 }
 
 #[test]
+fn state_dict_values_have_the_bounds_of_set_state() {
+    let mut e = env("PickCube-v1", "panda", "pd_joint_target_delta_pos");
+    e.reset(Some(0));
+    let good = e.get_state_dict();
+    let before = e.get_state();
+    // A target beyond f32 would be observed as inf and could not be saved by get_state.
+    let mut sd = good.clone();
+    sd.controller.insert("arm.target_qpos".into(), vec![1e39; 7]);
+    let err = e.set_state_dict(&sd).unwrap_err().to_string();
+    assert!(
+        err.contains("controller.arm.target_qpos[0] = 1000000000000000000000000000000000000000 is out of range (|value| ≤ 3.4028234663852886e38)"),
+        "{err}"
+    );
+    // set_state rejects the same value.
+    let mut s = before.clone();
+    s.controller[0] = 1e39;
+    assert!(e.set_state(&s).is_err());
+    let mut sd = good.clone();
+    sd.articulations.get_mut("panda").unwrap()[13] = 1e11;
+    let err = e.set_state_dict(&sd).unwrap_err().to_string();
+    assert!(err.contains("articulations.panda[13] = 100000000000 is out of range (|value| ≤ 1e10)"), "{err}");
+    let mut sd = good.clone();
+    sd.actors.get_mut("cube").unwrap()[8] = -1e11;
+    let err = e.set_state_dict(&sd).unwrap_err().to_string();
+    assert!(err.contains("actors.cube[8] = -100000000000 is out of range"), "{err}");
+    assert_eq!(e.get_state(), before, "a rejected state dict changes nothing");
+    // The largest f32 target is accepted and round-trips through get_state/set_state.
+    let mut sd = good;
+    sd.controller.insert("arm.target_qpos".into(), vec![f32::MAX as f64; 7]);
+    e.set_state_dict(&sd).unwrap();
+    assert!(e.obs().iter().all(|v| v.is_finite()));
+    let s = e.get_state();
+    let json = serde_json::to_string(&s).unwrap();
+    e.set_state(&serde_json::from_str(&json).unwrap()).unwrap();
+}
+
+#[test]
 fn bad_state_dicts_are_errors_that_leave_the_env_unchanged() {
     let mut e = env("PickCube-v1", "panda", "pd_joint_delta_pos");
     e.reset(Some(0));

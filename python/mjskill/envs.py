@@ -30,7 +30,7 @@ def _check_seed(seed: Any) -> int | None:
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an int or None, not {type(seed).__name__} ({seed!r})")
     seed = int(seed)
-    if seed < 0:
+    if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}")
     return seed
 
@@ -43,9 +43,14 @@ def _check_render_mode(render_mode: Any) -> None:
         )
 
 
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
 def _as_actions(action: Any, ndim: int) -> np.ndarray:
     """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
-    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``."""
+    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``,
+    and a finite value beyond float32's range (which the cast would turn into infinity) a
+    ``ValueError`` naming the value given."""
     a = action if isinstance(action, np.ndarray) else np.asarray(action)
     if a.dtype.kind not in "biuf":
         raise TypeError(
@@ -55,6 +60,16 @@ def _as_actions(action: Any, ndim: int) -> np.ndarray:
     if a.ndim != ndim:
         want = "(action_dim,)" if ndim == 1 else "(num_envs, action_dim)"
         raise ValueError(f"actions have shape {a.shape}, expected {want}")
+    if a.dtype.kind == "f" and a.dtype.itemsize > 4:
+        with np.errstate(invalid="ignore"):
+            big = np.isfinite(a) & (np.abs(a) > _F32_MAX)
+        if big.any():
+            at = tuple(int(i) for i in np.argwhere(big)[0])
+            name = f"action[{at[0]}]" if ndim == 1 else f"actions[{at[0]}, {at[1]}]"
+            raise ValueError(
+                f"{name} = {float(a[at])!r} is outside the float32 range (|value| <= {_F32_MAX:.9g}); "
+                "actions are float32"
+            )
     if a.dtype != np.float32 or not a.flags.c_contiguous:
         a = np.ascontiguousarray(a, dtype=np.float32)
     return a
@@ -129,6 +144,11 @@ class MjskillEnv(gym.Env):
     ManiSkill's exact initial state for seed ``s``. Made directly (not through ``gym.make``)
     the env truncates at ``max_episode_steps`` (default 50) itself; through ``gym.make``,
     gymnasium's ``TimeLimit`` wrapper truncates, as in ManiSkill.
+
+    When MuJoCo raised instability warnings during a step (e.g. ``BadQacc``: the simulation
+    diverged and MuJoCo reset it), ``info["warnings"]`` holds ``{kind: count}``, the Rust
+    ``info.warnings``; the key is absent otherwise. One env may be used from several threads:
+    the calls run one at a time (the GIL is released while a call waits for another).
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 20}
@@ -288,7 +308,10 @@ class MjskillVectorEnv(VectorEnv):
     with reward 0. As in gymnasium's next-step mode there are no ``final_obs`` /
     ``final_info`` entries: the final observation is the one returned with the flag.
     ``reset(seed=s)`` seeds env i with ``s + i``, so results do not depend on T. The GIL is
-    released while the envs step.
+    released while the envs step. ``num_envs`` and ``num_threads`` are in
+    ``1..=mjskill._native.MAX_NUM_ENVS`` (16384). When some env raised MuJoCo warnings
+    during a step, ``info["warnings"]`` is an object array of env i's ``{kind: count}`` dict
+    (None for the others) with the mask ``info["_warnings"]``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -316,8 +339,11 @@ class MjskillVectorEnv(VectorEnv):
         for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
-            if v < 1:
-                raise ValueError(f"{name} {v} is out of range: use 1 or more")
+            if not 1 <= v <= _native.MAX_NUM_ENVS:
+                raise ValueError(
+                    f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS} (each env owns "
+                    "its MuJoCo model and data; more threads than envs are clamped)"
+                )
         self._kwargs = dict(
             env_id=env_id,
             robot_uids=robot_uids,

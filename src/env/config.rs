@@ -95,6 +95,13 @@ pub enum EnvError {
     /// A [`VecEnv`](super::VecEnv) of zero envs.
     #[error("a VecEnv needs at least one env")]
     NoEnvs,
+    /// A [`VecEnv`](super::VecEnv) of more than
+    /// [`MAX_NUM_ENVS`](super::vec::MAX_NUM_ENVS) envs.
+    #[error(
+        "num_envs {0} is out of range: 1..={max} (each env owns its MuJoCo model and data)",
+        max = super::vec::MAX_NUM_ENVS
+    )]
+    TooManyEnvs(usize),
     /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
     #[error("cannot start a VecEnv worker thread: {0}")]
     WorkerThread(String),

@@ -417,6 +417,8 @@ impl Env {
             .controller
             .reset(&self.sim.robot.joints, &self.sim.data, &mut self.sim.drives);
         self.sim.data.clear_warnings();
+        // `info.warnings` belongs to the step that raised them, not to the new episode.
+        self.info.warnings = Warnings::default();
         // Contacts are not refreshed by a reset (docs/env.md §3 step 8): the grasp check sees the
         // previous episode's last finger forces at the new poses.
         self.info.reconfigure = Some(false);

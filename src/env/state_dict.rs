@@ -16,6 +16,7 @@ use indexmap::IndexMap;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::{json, Map, Value};
 
+use super::checks::{MAX_STATE_VALUE, MAX_TARGET_VALUE};
 use super::{Env, EnvError};
 use crate::mujoco::{JointType, Model};
 
@@ -266,14 +267,21 @@ fn rotation_distance(a: &[f64], b: &[f64]) -> f64 {
     quat_of(a).angle_to(&quat_of(b))
 }
 
-fn check_finite(key: &str, v: &[f64]) -> Result<(), EnvError> {
-    match v.iter().position(|x| !x.is_finite()) {
-        Some(i) => Err(EnvError::BadState(format!(
-            "{key}[{i}] = {} is not finite",
-            v[i]
-        ))),
-        None => Ok(()),
+/// Checks that every value of `v` is finite and within ±`max` (the bounds of
+/// [`Env::set_state`]: [`MAX_STATE_VALUE`] for poses and velocities, [`MAX_TARGET_VALUE`] for
+/// controller targets), naming the first bad entry.
+fn check_values(key: &str, v: &[f64], max: f64) -> Result<(), EnvError> {
+    for (i, &x) in v.iter().enumerate() {
+        if !x.is_finite() {
+            return Err(EnvError::BadState(format!("{key}[{i}] = {x} is not finite")));
+        }
+        if x.abs() > max {
+            return Err(EnvError::BadState(format!(
+                "{key}[{i}] = {x} is out of range (|value| ≤ {max:e})"
+            )));
+        }
     }
+    Ok(())
 }
 
 /// A named slice of the action vector (ManiSkill's `action_space` dict entry of one
@@ -379,9 +387,12 @@ impl Env {
     /// controller entries of `*_target_*` modes are optional (missing ones keep their
     /// values). Afterwards the drive targets hold the new positions (or the restored
     /// controller targets), contacts are recomputed, and `obs`, `info` and every reward mode
-    /// describe the new state; `elapsed_steps` and the RNG streams are unchanged. Errors
-    /// (missing or unknown names, wrong lengths, non-finite values, a root pose other than
-    /// the robot's fixed table pose) leave the env unchanged.
+    /// describe the new state; `elapsed_steps` and the RNG streams are unchanged. Values
+    /// have the bounds of [`Env::set_state`]: poses and velocities within
+    /// ±[`MAX_STATE_VALUE`], controller targets within ±[`MAX_TARGET_VALUE`] (the largest
+    /// f32, as targets are observed as f32). Errors (missing or unknown names, wrong lengths,
+    /// non-finite or out-of-range values, a root pose other than the robot's fixed table
+    /// pose) leave the env unchanged.
     pub fn set_state_dict(&mut self, sd: &StateDict) -> Result<(), EnvError> {
         // Validate everything before touching the simulation.
         for name in sd.actors.keys() {
@@ -396,7 +407,7 @@ impl Env {
             let s = sd.actors.get(a.name).ok_or_else(|| {
                 EnvError::BadState(format!("state dict lacks actor {:?}", a.name))
             })?;
-            check_finite(&format!("actors.{}", a.name), s)?;
+            check_values(&format!("actors.{}", a.name), s, MAX_STATE_VALUE)?;
             if let ActorBody::Fixed(p) = a.body {
                 let dp = Vector3::from_column_slice(&s[..3]) - Vector3::from_column_slice(&p[..3]);
                 if dp.norm() > ROOT_POSE_TOLERANCE
@@ -429,7 +440,7 @@ impl Env {
                 13 + 2 * n
             )));
         }
-        check_finite(&format!("articulations.{uid}"), art)?;
+        check_values(&format!("articulations.{uid}"), art, MAX_STATE_VALUE)?;
         let root = self.sim.robot.root_body;
         let rp = &self.sim.data.xpos()[3 * root..3 * root + 3];
         let rq = &self.sim.data.xquat()[4 * root..4 * root + 4];
@@ -476,7 +487,7 @@ impl Env {
                         v.len()
                     )))
                 }
-                _ => check_finite(&format!("controller.{k}"), v)?,
+                _ => check_values(&format!("controller.{k}"), v, MAX_TARGET_VALUE)?,
             }
         }
 

@@ -41,6 +41,17 @@ use std::sync::{Arc, Mutex};
 use std::thread::{JoinHandle, Thread};
 
 use super::{make, BoxSpace, CameraImage, Env, EnvConfig, EnvError};
+use crate::mujoco::Warnings;
+
+/// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
+///
+/// Every env owns its MuJoCo model and data, about MEM_PER_ENV MB each, and takes about
+/// MAKE_MS ms to build, so 16384 envs already need about TOTAL_GB GB and several minutes to
+/// construct; that is 4× the largest batch ManiSkill's GPU simulation is usually run with
+/// (4096). A larger request is far more likely a mistake (e.g. `2**62`) than a workload, and
+/// is refused up front with [`EnvError::TooManyEnvs`] instead of attempting a multi-terabyte
+/// allocation.
+pub const MAX_NUM_ENVS: usize = 16_384;
 
 const CMD_STEP: u64 = 0;
 const CMD_RESET: u64 = 1;
@@ -149,6 +160,8 @@ struct Shared {
     truncated: Vec<AtomicBool>,
     autoreset: Vec<AtomicBool>,
     info: Vec<AtomicU64>,
+    /// `[N × 8]` MuJoCo warning counts ([`Warnings::counts`]) of each env's last reset/step.
+    warnings: Vec<AtomicU32>,
     images: ImageLayout,
     /// `[N × images.rgb_cells]` packed colour bytes (empty unless the mode renders rgb).
     rgb: Vec<AtomicU32>,
@@ -190,6 +203,13 @@ impl Worker {
             .zip(&env.info().values)
         {
             cell.store(v.to_bits(), Ordering::Relaxed);
+        }
+        let nw = Warnings::default().counts.len();
+        for (cell, c) in sh.warnings[g * nw..(g + 1) * nw]
+            .iter()
+            .zip(env.info().warnings.counts)
+        {
+            cell.store(c as u32, Ordering::Relaxed);
         }
         let l = &sh.images;
         if let Some(v) = env.vision.as_ref().filter(|_| !l.cams.is_empty()) {
@@ -275,6 +295,7 @@ pub struct VecEnv {
     truncated: Vec<bool>,
     autoreset: Vec<bool>,
     info: Vec<f64>,
+    warnings: Vec<Warnings>,
     sensor_names: Vec<&'static str>,
     /// Unpacked colour bytes, `[N × 4·rgb_cells]` (camera k of env i at
     /// `4·(i·rgb_cells + rgb_cell)`).
@@ -285,8 +306,9 @@ pub struct VecEnv {
 
 impl VecEnv {
     /// Builds `num_envs` envs of `env_id` with `config`, spread over `threads` threads (the
-    /// calling thread counts as one). Like [`make`], every env starts reset (env i with seed
-    /// 2022 + i).
+    /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
+    /// [`make`], every env starts reset (env i with seed 2022 + i). `num_envs` must be in
+    /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]).
     pub fn new(
         env_id: &str,
         config: EnvConfig,
@@ -295,6 +317,9 @@ impl VecEnv {
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
             return Err(EnvError::NoEnvs);
+        }
+        if num_envs > MAX_NUM_ENVS {
+            return Err(EnvError::TooManyEnvs(num_envs));
         }
         let threads = threads.clamp(1, num_envs);
         let mut envs = Vec::with_capacity(num_envs);
@@ -326,6 +351,7 @@ impl VecEnv {
             truncated: flags(num_envs),
             autoreset: flags(num_envs),
             info: (0..num_envs * nkeys).map(|_| AtomicU64::new(0)).collect(),
+            warnings: cells32(num_envs * Warnings::default().counts.len()),
             images,
             rgb: cells32(num_envs * rgb_cells),
             depth: cells32(num_envs * depth_len),
@@ -418,6 +444,7 @@ impl VecEnv {
             truncated: vec![false; num_envs],
             autoreset: vec![false; num_envs],
             info: vec![0.0; num_envs * nkeys],
+            warnings: vec![Warnings::default(); num_envs],
             sensor_names,
             rgb: vec![0; num_envs * rgb_cells * 4],
             depth: vec![0.0; num_envs * depth_len],
@@ -470,6 +497,12 @@ impl VecEnv {
         }
         for (dst, cell) in self.info.iter_mut().zip(&sh.info) {
             *dst = f64::from_bits(cell.load(Ordering::Relaxed));
+        }
+        let nw = Warnings::default().counts.len();
+        for (dst, cells) in self.warnings.iter_mut().zip(sh.warnings.chunks_exact(nw)) {
+            for (d, cell) in dst.counts.iter_mut().zip(cells) {
+                *d = cell.load(Ordering::Relaxed) as i32;
+            }
         }
         unpack_bytes(&mut self.rgb, &sh.rgb);
         for (dst, cell) in self.depth.iter_mut().zip(&sh.depth) {
@@ -575,6 +608,12 @@ impl VecEnv {
     /// Task info values, `[N × keys]` row-major (booleans as 0/1).
     pub fn info(&self) -> &[f64] {
         &self.info
+    }
+    /// MuJoCo instability warnings of each env's last reset/step (`[N]`, as
+    /// [`Env::info`]'s `warnings`: e.g. BADQACC when env i's simulation diverged and MuJoCo
+    /// reset it; all zero after a reset or an autoreset).
+    pub fn warnings(&self) -> &[Warnings] {
+        &self.warnings
     }
     /// Names of the sensor cameras [`VecEnv::image`] serves, as [`Env::sensor_names`] lists
     /// them (the task's sensor camera, then the robot's mounted cameras); empty unless the obs
