@@ -202,3 +202,27 @@ def test_mujoco_warnings_reach_python_info():
     assert w and set(w) <= {"BadQpos", "BadQvel", "BadQacc", "BadCtrl"}, w
     assert all(isinstance(c, int) and c > 0 for c in w.values()), w
     assert "warnings" not in env.reset(seed=0)[1], "a reset clears the warnings"
+
+
+def test_mujoco_warnings_reach_python_vector_info():
+    # Absolute joint targets 100× beyond the action space at one 0.05 s substep diverge.
+    v = mjskill.MjskillVectorEnv(
+        "PickCube-v1", num_envs=2, control_mode="pd_joint_pos", sim_freq=20, max_episode_steps=1000
+    )
+    v.reset(seed=0)
+    rng = np.random.default_rng(0)
+    lo, hi = v.single_action_space.low * 100, v.single_action_space.high * 100
+    for _ in range(100):
+        _, _, _, _, info = v.step(rng.uniform(lo, hi, size=(2, 8)).astype(np.float32))
+        if "warnings" in info:
+            break
+    else:
+        pytest.fail("no MuJoCo warning in 100 diverging steps")
+    w, mask = info["warnings"], info["_warnings"]
+    assert w.shape == (2,) and w.dtype == object and mask.dtype == bool and mask.any()
+    for entry, has in zip(w, mask):
+        assert (entry is not None) == has
+        if has:
+            assert entry and all(isinstance(c, int) and c > 0 for c in entry.values()), entry
+    _, info = v.reset(seed=0)
+    assert "warnings" not in info, "a reset clears the warnings"
