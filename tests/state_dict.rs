@@ -102,7 +102,8 @@ fn state_dict_values_have_the_bounds_of_set_state() {
     let before = e.get_state();
     // A target beyond f32 would be observed as inf and could not be saved by get_state.
     let mut sd = good.clone();
-    sd.controller.insert("arm.target_qpos".into(), vec![1e39; 7]);
+    sd.controller
+        .insert("arm.target_qpos".into(), vec![1e39; 7]);
     let err = e.set_state_dict(&sd).unwrap_err().to_string();
     assert!(
         err.contains("controller.arm.target_qpos[0] = 1000000000000000000000000000000000000000 is out of range (|value| ≤ 3.4028234663852886e38)"),
@@ -115,15 +116,26 @@ fn state_dict_values_have_the_bounds_of_set_state() {
     let mut sd = good.clone();
     sd.articulations.get_mut("panda").unwrap()[13] = 1e11;
     let err = e.set_state_dict(&sd).unwrap_err().to_string();
-    assert!(err.contains("articulations.panda[13] = 100000000000 is out of range (|value| ≤ 1e10)"), "{err}");
+    assert!(
+        err.contains("articulations.panda[13] = 100000000000 is out of range (|value| ≤ 1e10)"),
+        "{err}"
+    );
     let mut sd = good.clone();
     sd.actors.get_mut("cube").unwrap()[8] = -1e11;
     let err = e.set_state_dict(&sd).unwrap_err().to_string();
-    assert!(err.contains("actors.cube[8] = -100000000000 is out of range"), "{err}");
-    assert_eq!(e.get_state(), before, "a rejected state dict changes nothing");
+    assert!(
+        err.contains("actors.cube[8] = -100000000000 is out of range"),
+        "{err}"
+    );
+    assert_eq!(
+        e.get_state(),
+        before,
+        "a rejected state dict changes nothing"
+    );
     // The largest f32 target is accepted and round-trips through get_state/set_state.
     let mut sd = good;
-    sd.controller.insert("arm.target_qpos".into(), vec![f32::MAX as f64; 7]);
+    sd.controller
+        .insert("arm.target_qpos".into(), vec![f32::MAX as f64; 7]);
     e.set_state_dict(&sd).unwrap();
     assert!(e.obs().iter().all(|v| v.is_finite()));
     let s = e.get_state();

@@ -72,7 +72,13 @@ fn lock_without_gil<'a, T: Send>(py: Python<'_>, m: &'a Mutex<T>) -> PyResult<Mu
 /// An integer argument as a Python int, range-checked: a value outside `lo..=hi` (also one
 /// beyond any fixed-width integer) is a `ValueError` `"{name} {value} is out of range:
 /// {valid}"`; a non-integer stays a `TypeError`.
-fn int_arg(value: &Bound<'_, PyAny>, name: &str, lo: i128, hi: i128, valid: &str) -> PyResult<i128> {
+fn int_arg(
+    value: &Bound<'_, PyAny>,
+    name: &str,
+    lo: i128,
+    hi: i128,
+    valid: &str,
+) -> PyResult<i128> {
     let out_of_range = || {
         let shown = value
             .str()
@@ -693,8 +699,14 @@ fn record_episodes(
         .enumerate()
         .map(|(k, s)| {
             let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
-            int_arg(s, &format!("seeds[{k}]"), 0, mjskill::MAX_SEED as i128, &valid)
-                .map(|v| v as u64)
+            int_arg(
+                s,
+                &format!("seeds[{k}]"),
+                0,
+                mjskill::MAX_SEED as i128,
+                &valid,
+            )
+            .map(|v| v as u64)
         })
         .collect::<PyResult<Vec<u64>>>()?;
     if seeds.len() != actions.len() {

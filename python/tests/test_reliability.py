@@ -76,7 +76,7 @@ def test_one_env_shared_by_threads_never_hangs():
             [sys.executable, "-c", THREADS_SCRIPT],
             capture_output=True,
             text=True,
-            timeout=240,
+            timeout=120,
         )
     except subprocess.TimeoutExpired as t:
         pytest.fail(f"threads sharing one env hung; output so far:\n{t.stdout}")

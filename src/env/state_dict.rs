@@ -273,7 +273,9 @@ fn rotation_distance(a: &[f64], b: &[f64]) -> f64 {
 fn check_values(key: &str, v: &[f64], max: f64) -> Result<(), EnvError> {
     for (i, &x) in v.iter().enumerate() {
         if !x.is_finite() {
-            return Err(EnvError::BadState(format!("{key}[{i}] = {x} is not finite")));
+            return Err(EnvError::BadState(format!(
+                "{key}[{i}] = {x} is not finite"
+            )));
         }
         if x.abs() > max {
             return Err(EnvError::BadState(format!(
