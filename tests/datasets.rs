@@ -867,3 +867,335 @@ fn recordings_with_png_frames_still_read_and_export_to_lerobot() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn mjskill() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mjskill"))
+}
+
+/// Runs `cmd`, expects a clean failure (an exit code, no signal) and returns its stderr.
+fn fails(cmd: &mut Command) -> String {
+    let o = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        o.status.code().is_some_and(|c| c != 0),
+        "{cmd:?} should fail with an exit code: {:?} {err}",
+        o.status
+    );
+    err
+}
+
+/// The file type of `p` (not following a symbolic link).
+fn file_type(p: &Path) -> std::fs::FileType {
+    std::fs::symlink_metadata(p).unwrap().file_type()
+}
+
+#[test]
+fn export_never_writes_over_its_input_or_one_output_over_another() {
+    let dir = tmp_dir("export-clobber");
+    let src = dir.join("src.mcap");
+    record_rollout(&src, 1, 3, false);
+    let original = std::fs::read(&src).unwrap();
+    std::fs::hard_link(&src, dir.join("hard.h5")).unwrap();
+    std::os::unix::fs::symlink(&src, dir.join("soft.h5")).unwrap();
+    std::fs::create_dir(dir.join("sub")).unwrap();
+    std::fs::write(dir.join("t3b.h5"), b"old t3b").unwrap();
+    std::fs::write(dir.join("same.json"), b"old same").unwrap();
+    let before = listing(&dir);
+    let export = |args: &[&str]| {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["export", "src.mcap", "--format", "maniskill"])
+            .args(args);
+        c
+    };
+    // The output is the recording: by its name, through `..`, a hard link, a symbolic link.
+    for o in ["src.mcap", "sub/../src.mcap", "hard.h5", "soft.h5"] {
+        let err = fails(&mut export(&["-o", o]));
+        assert!(
+            err.contains(&format!("-o {o} is the recording src.mcap"))
+                && err.contains("nothing was written"),
+            "{err}"
+        );
+    }
+    let err = fails(&mut export(&["-o", "t2.h5", "--json", "src.mcap"]));
+    assert!(
+        err.contains("--json src.mcap is the recording src.mcap"),
+        "{err}"
+    );
+    // The h5 and the json at one path, named or by the default json name.
+    let err = fails(&mut export(&["-o", "t3b.h5", "--json", "t3b.h5"]));
+    assert!(
+        err.contains("-o t3b.h5 and --json t3b.h5 are the same file"),
+        "{err}"
+    );
+    let err = fails(&mut export(&["-o", "same.json"]));
+    assert!(
+        err.contains("-o same.json and the json (default: -o with extension .json) same.json"),
+        "{err}"
+    );
+    let err = fails(&mut export(&["-o", "new.json"]));
+    assert!(err.contains("are the same file"), "{err}");
+    assert_eq!(std::fs::read(&src).unwrap(), original);
+    assert_eq!(std::fs::read(dir.join("t3b.h5")).unwrap(), b"old t3b");
+    assert_eq!(std::fs::read(dir.join("same.json")).unwrap(), b"old same");
+    assert_eq!(listing(&dir), before);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn export_refuses_non_regular_outputs_and_a_failed_export_leaves_nothing() {
+    let dir = tmp_dir("export-special");
+    let src = dir.join("src.mcap");
+    record_rollout(&src, 1, 3, false);
+    let fifo = dir.join("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    std::fs::create_dir(dir.join("d")).unwrap();
+    // A link to /dev/full rather than /dev/full itself: an export that renamed over it
+    // replaces the link, never the device (the test may run as root).
+    let full = dir.join("full");
+    std::os::unix::fs::symlink("/dev/full", &full).unwrap();
+    let before = listing(&dir);
+    let export = |args: &[&str]| {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["export", "src.mcap", "--format", "maniskill"])
+            .args(args);
+        c
+    };
+    // A device or a FIFO is neither replaced by a rename nor reported as written.
+    let err = fails(&mut export(&["-o", "full", "--json", "x.json"]));
+    assert!(
+        err.contains("-o full is a character device, not a regular file"),
+        "{err}"
+    );
+    assert!(file_type(&full).is_symlink());
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let err = fails(&mut export(&["-o", "t.h5", "--json", "fifo"]));
+        assert!(err.contains("--json fifo is a FIFO"), "{err}");
+        assert!(file_type(&fifo).is_fifo());
+    }
+    // --json naming a directory: refused before the h5 is written.
+    let err = fails(&mut export(&["-o", "t.h5", "--json", "d"]));
+    assert!(err.contains("--json d is a directory"), "{err}");
+    let err = fails(&mut export(&["-o", "nodir/t.h5"]));
+    assert!(err.contains("the directory nodir does not exist"), "{err}");
+    assert_eq!(listing(&dir), before);
+    // The same through the library: nothing is left behind either.
+    let e = export::to_maniskill(&src, &dir.join("t.h5"), Some(&dir.join("d")))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("is a directory"), "{e}");
+    assert_eq!(listing(&dir), before);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A copy of the PickCube demos (`v.h5`, `v.json`) in `dir`.
+fn demo_copy(dir: &Path) -> (PathBuf, PathBuf) {
+    let src = demos().join("PickCube-v1");
+    let (h5, json) = (dir.join("v.h5"), dir.join("v.json"));
+    std::fs::copy(src.join("trajectory.h5"), &h5).unwrap();
+    std::fs::copy(src.join("trajectory.json"), &json).unwrap();
+    (h5, json)
+}
+
+#[test]
+fn import_never_writes_over_its_input() {
+    let dir = tmp_dir("import-clobber");
+    let (h5, json) = demo_copy(&dir);
+    let (h5_bytes, json_bytes) = (std::fs::read(&h5).unwrap(), std::fs::read(&json).unwrap());
+    for (out, named) in [
+        ("v.h5", "the h5 v.h5"),
+        (
+            "v.json",
+            "the json (default: the h5 with extension .json) v.json",
+        ),
+    ] {
+        let err =
+            fails(
+                mjskill()
+                    .current_dir(&dir)
+                    .args(["import-maniskill", "v.h5", "--out", out]),
+            );
+        assert!(err.contains(&format!("--out {out} is {named}")), "{err}");
+    }
+    let err = fails(mjskill().current_dir(&dir).args([
+        "import-maniskill",
+        "v.h5",
+        "--json",
+        "v.json",
+        "--out",
+        "./v.json",
+    ]));
+    assert!(err.contains("--out ./v.json is --json v.json"), "{err}");
+    // A link to /dev/full (never the device itself: see the export test).
+    std::os::unix::fs::symlink("/dev/full", dir.join("full")).unwrap();
+    let err =
+        fails(
+            mjskill()
+                .current_dir(&dir)
+                .args(["import-maniskill", "v.h5", "--out", "full"]),
+        );
+    assert!(err.contains("--out full is a character device"), "{err}");
+    assert!(file_type(&dir.join("full")).is_symlink());
+    assert_eq!(std::fs::read(&h5).unwrap(), h5_bytes);
+    assert_eq!(std::fs::read(&json).unwrap(), json_bytes);
+    assert_eq!(listing(&dir), ["full", "v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Replaces `traj_0/actions` of `h5` by a chunked dataset of `shape` that holds no data (it
+/// reads as zeros): a few KB on disk, `shape` in memory.
+fn declare_actions(h5: &Path, shape: (usize, usize)) {
+    let f = hdf5_metno::File::open_rw(h5).unwrap();
+    let g = f.group("traj_0").unwrap();
+    g.unlink("actions").unwrap();
+    g.new_dataset::<f32>()
+        .chunk((shape.0.min(1 << 16), shape.1.min(8)))
+        .shape(shape)
+        .create("actions")
+        .unwrap();
+    f.close().unwrap();
+}
+
+#[test]
+fn import_checks_declared_shapes_before_reading() {
+    let dir = tmp_dir("import-shapes");
+    let (h5, json) = demo_copy(&dir);
+    declare_actions(&h5, (2_000_000_000, 8));
+    assert!(std::fs::metadata(&h5).unwrap().len() < 1 << 20);
+    let import = || {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["import-maniskill", "v.h5", "--out", "o.mcap"]);
+        c
+    };
+    let err = fails(&mut import());
+    assert!(
+        err.contains("traj_0/actions declares 2000000000 rows, expected 82")
+            && err.contains("elapsed_steps"),
+        "{err}"
+    );
+    // A json that agrees with the declared shape is refused by the step limit.
+    let text = std::fs::read_to_string(&json).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["episodes"][0]["elapsed_steps"] = 2_000_000_000u32.into();
+    std::fs::write(&json, v.to_string()).unwrap();
+    let err = fails(&mut import());
+    assert!(
+        err.contains("episode 0: elapsed_steps 2000000000 exceeds the limit of 100000"),
+        "{err}"
+    );
+    // Too many columns.
+    std::fs::write(&json, &text).unwrap();
+    declare_actions(&h5, (82, 1 << 20));
+    let err = fails(&mut import());
+    assert!(
+        err.contains("traj_0/actions declares 1048576 columns, beyond the limit of 4096"),
+        "{err}"
+    );
+    assert_eq!(listing(&dir), ["v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn import_rejects_a_json_that_disagrees_with_itself_or_the_h5() {
+    let dir = tmp_dir("import-json");
+    let (_, json) = demo_copy(&dir);
+    let text = std::fs::read_to_string(&json).unwrap();
+    let base: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>, &str)> = vec![
+        (
+            "repeated episode id",
+            Box::new(|v| v["episodes"][1]["episode_id"] = 0.into()),
+            "episodes[0] and episodes[1] both have episode_id 0",
+        ),
+        (
+            "seed 2^32",
+            Box::new(|v| {
+                v["episodes"][0]["episode_seed"] = (1u64 << 32).into();
+                v["episodes"][0]["reset_kwargs"]["seed"] = (1u64 << 32).into();
+            }),
+            "episode 0: reset_kwargs.seed 4294967296 is not an integer in 0..=4294967295",
+        ),
+        (
+            "null seeds",
+            Box::new(|v| {
+                v["episodes"][1]["episode_seed"] = serde_json::Value::Null;
+                v["episodes"][1]["reset_kwargs"]["seed"] = serde_json::Value::Null;
+            }),
+            "episode 1: no seed",
+        ),
+        (
+            "seeds that disagree",
+            Box::new(|v| v["episodes"][2]["episode_seed"] = 7.into()),
+            "episode 2: reset_kwargs.seed 1302 and episode_seed 7 differ",
+        ),
+        (
+            "elapsed_steps",
+            Box::new(|v| v["episodes"][1]["elapsed_steps"] = 91.into()),
+            "traj_1/actions declares 92 rows, expected 91 (episode 1's elapsed_steps",
+        ),
+        (
+            "unknown robot",
+            Box::new(|v| v["env_info"]["env_kwargs"]["robot_uids"] = "ur5".into()),
+            "env_info.env_kwargs.robot_uids \"ur5\" is not a robot of PickCube-v1; valid: panda",
+        ),
+        (
+            "another robot",
+            Box::new(|v| v["env_info"]["env_kwargs"]["robot_uids"] = "fetch".into()),
+            "robot_uids is \"fetch\" but the h5's episodes hold the robot \"panda\"",
+        ),
+    ];
+    for (what, edit, expected) in cases {
+        let mut v = base.clone();
+        edit(&mut v);
+        std::fs::write(&json, v.to_string()).unwrap();
+        let err = fails(mjskill().current_dir(&dir).args([
+            "import-maniskill",
+            "v.h5",
+            "--out",
+            "o.mcap",
+        ]));
+        assert!(err.contains(expected), "{what}: {err}");
+        assert_eq!(listing(&dir), ["v.h5", "v.json"], "{what}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn import_by_states_names_a_row_with_a_zero_quaternion() {
+    let dir = tmp_dir("import-quat");
+    let (h5, _) = demo_copy(&dir);
+    {
+        let f = hdf5_metno::File::open_rw(&h5).unwrap();
+        let ds = f.dataset("traj_0/env_states/actors/cube").unwrap();
+        let mut v = ds.read_raw::<f32>().unwrap();
+        v[5 * 13 + 3..5 * 13 + 7].fill(0.0);
+        ds.write_raw(&v).unwrap();
+        f.close().unwrap();
+    }
+    for by in ["states", "actions"] {
+        let err = fails(mjskill().current_dir(&dir).args([
+            "import-maniskill",
+            "v.h5",
+            "--by",
+            by,
+            "--out",
+            "o.mcap",
+        ]));
+        assert!(
+            err.contains(
+                "traj_0/env_states/actors/cube row 5: the pose quaternion (w, x, y, z) \
+                 [0.0, 0.0, 0.0, 0.0] has norm 0"
+            ),
+            "{err}"
+        );
+    }
+    assert_eq!(listing(&dir), ["v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
