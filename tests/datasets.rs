@@ -1102,13 +1102,16 @@ fn import_checks_declared_shapes_before_reading() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// An edit of a trajectory json.
+type JsonEdit = Box<dyn Fn(&mut serde_json::Value)>;
+
 #[test]
 fn import_rejects_a_json_that_disagrees_with_itself_or_the_h5() {
     let dir = tmp_dir("import-json");
     let (_, json) = demo_copy(&dir);
     let text = std::fs::read_to_string(&json).unwrap();
     let base: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let cases: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>, &str)> = vec![
+    let cases: Vec<(&str, JsonEdit, &str)> = vec![
         (
             "repeated episode id",
             Box::new(|v| v["episodes"][1]["episode_id"] = 0.into()),
