@@ -1202,3 +1202,125 @@ fn import_by_states_names_a_row_with_a_zero_quaternion() {
     assert_eq!(listing(&dir), ["v.h5", "v.json"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Recomputes a LeRobot v3 dataset's statistics with numpy from its parquet rows and its
+/// decoded videos (PyAV), independently of mjskill: prints the largest deviations of
+/// `meta/stats.json` and of the per-episode `stats/<feature>/<stat>` columns, and of the
+/// per-episode stats aggregated as LeRobot's `aggregate_stats` does.
+const STATS_CHECK: &str = r#"
+import json, sys, pathlib
+import numpy as np, pyarrow.parquet as pq, av
+root = pathlib.Path(sys.argv[1])
+info = json.loads((root / "meta/info.json").read_text())
+stats = json.loads((root / "meta/stats.json").read_text())
+data = pq.read_table(root / "data/chunk-000/file-000.parquet").to_pydict()
+eps = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+Q = {"q01": 0.01, "q10": 0.10, "q50": 0.50, "q90": 0.90, "q99": 0.99}
+NAMES = ["min", "max", "mean", "std", "count"] + list(Q)
+def numpy_stats(a, axes):
+    s = {"min": a.min(axis=axes), "max": a.max(axis=axes), "mean": a.mean(axis=axes),
+         "std": a.std(axis=axes), "count": np.array([a.shape[0]])}
+    for k, q in Q.items():
+        s[k] = np.quantile(a, q, axis=axes)
+    return s
+out = {"missing": [], "dev_total": 0.0, "dev_episode": 0.0, "dev_aggregate": 0.0,
+       "dev_video": 0.0, "shapes": {}, "counts": {}}
+def dev(key, a, b):
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size != b.size:
+        out["missing"].append(f"{key}: size {a.size} vs {b.size}")
+        return 0.0
+    return float(np.abs(a.ravel() - b.ravel()).max())
+frames = {}
+for key, ft in info["features"].items():
+    if ft["dtype"] == "video":
+        path = root / info["video_path"].format(video_key=key, chunk_index=0, file_index=0)
+        with av.open(str(path)) as c:
+            imgs = [f.to_ndarray(format="rgb24") for f in c.decode(c.streams.video[0])]
+        frames[key] = np.stack(imgs).astype(np.float64) / 255.0
+for key, ft in info["features"].items():
+    video = ft["dtype"] == "video"
+    if video:
+        allrows, axes = frames[key], (0, 1, 2)
+    else:
+        allrows = np.array(data[key], dtype=np.float64)
+        allrows, axes = allrows.reshape(len(allrows), -1), 0
+    want = numpy_stats(allrows, axes)
+    for n in NAMES:
+        if n not in stats.get(key, {}):
+            out["missing"].append(f"stats.json {key}/{n}")
+            continue
+        got = np.asarray(stats[key][n], dtype=float)
+        if video and n != "count":
+            out["shapes"][key] = list(got.shape)
+        d = dev(f"{key}/{n}", got, want[n])
+        if n == "count":
+            out["counts"][key] = int(got[0])
+        elif video:
+            out["dev_video"] = max(out["dev_video"], d)
+        else:
+            out["dev_total"] = max(out["dev_total"], d)
+    per = []
+    for e in eps:
+        a, b = e["dataset_from_index"], e["dataset_to_index"]
+        w = numpy_stats(allrows[a:b], axes)
+        s = {}
+        for n in NAMES:
+            col = f"stats/{key}/{n}"
+            if col not in e:
+                out["missing"].append(col)
+                continue
+            s[n] = np.asarray(e[col], dtype=float)
+            if video and n != "count":
+                out["shapes"]["episode " + key] = list(s[n].shape)
+            d = dev(col, s[n], w[n])
+            out["dev_video" if video and n != "count" else "dev_episode"] = max(
+                out["dev_video" if video and n != "count" else "dev_episode"], d)
+        per.append(s)
+    if per and all(len(s) == len(NAMES) for s in per):
+        # LeRobot's aggregate_stats: weighted means, pooled variances, min of mins, max of maxes.
+        counts = np.array([s["count"][0] for s in per], dtype=float)
+        means = np.stack([s["mean"] for s in per])
+        c = counts.reshape((-1,) + (1,) * (means.ndim - 1))
+        mean = (means * c).sum(0) / counts.sum()
+        var = ((np.stack([s["std"] for s in per]) ** 2 + (means - mean) ** 2) * c).sum(0) / counts.sum()
+        agg = {"min": np.stack([s["min"] for s in per]).min(0), "max": np.stack([s["max"] for s in per]).max(0),
+               "mean": mean, "std": np.sqrt(var)}
+        for n, v in agg.items():
+            out["dev_aggregate"] = max(out["dev_aggregate"], dev(f"aggregate {key}/{n}", v, stats[key][n]))
+print(json.dumps(out))
+"#;
+
+#[test]
+fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
+    let dir = tmp_dir("lerobot-stats");
+    let mcap = dir.join("run.mcap");
+    record_rollout(&mcap, 2, 4, true);
+    let ds = dir.join("ds");
+    mjskill::datasets::lerobot::write(&mcap, &ds, Some(true)).unwrap();
+    let Some(py) = python() else { return };
+    let o = Command::new(py)
+        .arg("-c")
+        .arg(STATS_CHECK)
+        .arg(&ds)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["missing"], serde_json::json!([]), "{v}");
+    // Float32 data: the quantiles and moments agree with numpy's to rounding.
+    for k in ["dev_total", "dev_episode", "dev_aggregate"] {
+        assert!(v[k].as_f64().unwrap() < 1e-6, "{k}: {v}");
+    }
+    // Video statistics from mjskill's decoder against FFmpeg's (colour conversion rounding).
+    assert!(v["dev_video"].as_f64().unwrap() < 0.02, "{v}");
+    let cam = "observation.images.render_camera";
+    assert_eq!(v["shapes"][cam], serde_json::json!([3, 1, 1]));
+    assert_eq!(
+        v["shapes"][format!("episode {cam}")],
+        serde_json::json!([3, 1, 1])
+    );
+    assert_eq!(v["counts"]["action"], 8);
+    assert_eq!(v["counts"][cam], 8);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
