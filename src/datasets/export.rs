@@ -7,7 +7,7 @@ use serde_json::{json, Map, Value};
 
 use super::import::TOPIC_MANISKILL_STATE;
 use super::maniskill_h5::{self, EnvInfo, EpisodeData, EpisodeInfo, Trajectory, TrajectoryJson};
-use super::DatasetError;
+use super::{DatasetError, Named};
 use crate::env::{make, Env, StateDict};
 use crate::record::{EpisodeRec, Recording};
 
@@ -134,13 +134,30 @@ fn info_flag(info: &[(String, f64)], key: &str) -> Option<bool> {
 }
 
 /// Exports the finished episodes of the recording `path` to ManiSkill's format: `h5` and
-/// `json` (default: `h5` with extension `.json`).
+/// `json` (default: `h5` with extension `.json`). Refused before anything is read or written
+/// when an output is the recording, when the two outputs are one file, or when an output
+/// exists and is not a regular file (see [`crate::datasets`]).
 pub fn to_maniskill(
     path: &Path,
     h5: &Path,
     json_path: Option<&Path>,
 ) -> Result<ExportSummary, DatasetError> {
+    let json_given = json_path.is_some();
     let json_path = json_path.map_or_else(|| maniskill_h5::json_path_for(h5), Path::to_path_buf);
+    super::check_outputs(
+        &[Named::new("the recording", path)],
+        &[
+            Named::new("-o", h5),
+            Named::new(
+                if json_given {
+                    "--json"
+                } else {
+                    "the json (default: -o with extension .json)"
+                },
+                &json_path,
+            ),
+        ],
+    )?;
     let (rec, imported) = read_recording(path)?;
     let mut env = env_of(path, &rec)?;
     let m = &rec.meta;
