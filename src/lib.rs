@@ -73,3 +73,9 @@ pub use tasks::CameraDef;
 #[doc = include_str!("../README.md")]
 #[cfg(doctest)]
 pub struct ReadmeDoctests;
+
+/// The examples of `docs/rust-api.md`, compiled and run as doc tests (`tests/docs_links.rs`
+/// checks that every page with Rust code is included here).
+#[doc = include_str!("../docs/rust-api.md")]
+#[cfg(doctest)]
+pub struct DocsRustApiDoctests;

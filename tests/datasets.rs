@@ -54,7 +54,7 @@ fn import(
 /// (file, [(ManiSkill success, by actions, by states, first divergence step)] per episode).
 type Expected = (&'static str, [(bool, bool, bool, Option<usize>); 3]);
 
-/// The figures the import reports for the sample demos (README "Datasets" table).
+/// The figures the import reports for the sample demos (docs/datasets.md, "Import ManiSkill demos").
 const EXPECTED: [Expected; 4] = [
     ("PickCube-v1/trajectory.h5", [(true, true, true, None); 3]),
     (

@@ -194,7 +194,7 @@ fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
 /// mean joint (rad or m), TCP and object position (m) errors in the step buckets 1, 6–10 and
 /// 26–50, then the one-step (re-synchronised every step) joint, TCP and object errors. A
 /// pair passes when every figure is within 30 % of what was measured — tight enough that a
-/// wrong drive gain, limit, armature or law shows (README: "Physics", agreement table).
+/// wrong drive gain, limit, armature or law shows (docs/physics.md; docs/agreement.md).
 const MEASURED: [(&str, [f64; 12]); 11] = [
     (
         "PickCube-v1__fetch",
@@ -371,7 +371,7 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
             if f.env_id == "PlaceSphere-v1" {
                 // PlaceSphere's `success` also needs the released sphere to be still. In
                 // ManiSkill it stops within a step of landing between the bin's wall edges;
-                // in MuJoCo it can keep rocking there for a while (README: "Physics"), so for
+                // in MuJoCo it can keep rocking there for a while (docs/physics.md), so for
                 // this task the placement itself is compared: the sphere never strays 1 cm
                 // from ManiSkill's.
                 assert_eq!(e.first_object_divergence, None, "{ctx}: sphere placement");

@@ -1,7 +1,7 @@
 //! `mjskill._native`: the PyO3 extension under the `mjskill` Python package.
 //!
-//! Two classes wrap the Rust API: [`PyEnv`] (one [`mjskill::Env`]) and [`PyVecEnv`] (a
-//! [`mjskill::VecEnv`]); [`record_episodes`] writes a recording (`.mcap`) of given seeds
+//! Two classes wrap the Rust API: `PyEnv` (one [`mjskill::Env`]) and `PyVecEnv` (a
+//! [`mjskill::VecEnv`]); `record_episodes` writes a recording (`.mcap`) of given seeds
 //! and actions. The gymnasium classes (`mjskill.MjskillEnv`, `mjskill.MjskillVectorEnv`) are
 //! plain Python on top, because a PyO3 class cannot subclass `gymnasium.Env`.
 //!

@@ -1,7 +1,7 @@
 //! MJCF generation: robot URDFs (read by [`urdf`]) and task props ([`props`]) become one
 //! MuJoCo scene ([`Scene`] → [`Mjcf`]), compiled by the safe layer.
 //!
-//! Physics scheme (see the README's "Physics" section for the reasoning and measurements):
+//! Physics scheme (see docs/physics.md for the reasoning, docs/agreement.md for the measurements):
 //! * `timestep` chosen by the env (default [`TIMESTEP`], ManiSkill's 0.01 s) with MuJoCo's
 //!   explicit Euler integrator; one 20 Hz control step is [`CONTROL_DT`] / timestep physics
 //!   steps.

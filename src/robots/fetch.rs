@@ -3,7 +3,7 @@
 //!
 //! Control modes have four parts in upstream order: arm, gripper, body (head pan, head tilt,
 //! torso lift) and base ([forward speed, yaw rate] → velocity drives of the virtual joints).
-//! Two modes differ from upstream on purpose (see the README):
+//! Two modes differ from upstream on purpose (see docs/physics.md, "Per robot"):
 //! * `pd_joint_pos_vel`: upstream normalises the absolute arm positions to the joint limits,
 //!   which are ±inf for the continuous joints and yields NaN targets; mjskill normalises the
 //!   limited joints and takes the continuous joints' positions as is (not clipped).

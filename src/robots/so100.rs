@@ -51,7 +51,7 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
 /// Armature (kg·m²) of the jaw. With the default gripper armature the 20 g jaw, pinching the
 /// cube against the fixed jaw with its stiff drive, rattles the grasp loose at the 0.01 s
 /// step (scripted-solver success 13 %); 0.1 holds it (100 %), and the jaw still follows
-/// ManiSkill's to 3.3e-4 rad at step 1 (README: "Agreement with ManiSkill").
+/// ManiSkill's to 3.3e-4 rad at step 1 (docs/agreement.md).
 const JAW_ARMATURE: f64 = 0.1;
 
 /// The SO100 as ManiSkill configures it.

@@ -27,7 +27,7 @@ pub const MANISKILL_GRIPPER_GAINS: (f64, f64, f64) = (1e5, 2000.0, 0.1);
 /// and damping. It was needed under MuJoCo's implicit integrator (which linearised D = 2000
 /// without the force clamp); with PhysX's drive law (`controllers::drive`) the upstream gains
 /// work too, and this one still tracks ManiSkill's linkage closer (one-step knuckle error
-/// 0.7–1.1e-2 rad against 1.0–1.5e-2; README "Physics"). Both drives push with the full
+/// 0.7–1.1e-2 rad against 1.0–1.5e-2; docs/physics.md). Both drives push with the full
 /// 0.1 N·m except within F/kp of the target (1e-6 rad upstream, 0.02 rad here), so the squeeze
 /// of a ±0.15 rad delta command is the same.
 const GRIPPER_GAINS: (f64, f64, f64) = (GRIPPER_KP, GRIPPER_KD, MANISKILL_GRIPPER_GAINS.2);
@@ -85,7 +85,7 @@ pub const LOOP_CLOSURES: [(&str, [f64; 3], &str, [f64; 3]); 2] = [
 
 /// Armature (kg·m²) of the six linkage joints. The linkage links weigh 5–27 g (rotational
 /// inertia ~1e-5 kg·m²); the robot-wide 0.1 would make the 0.1 N·m knuckle drive close the
-/// gripper in ~1.3 s instead of a few control steps. See the README's "Physics".
+/// gripper in ~1.3 s instead of a few control steps. See docs/physics.md.
 pub const GRIPPER_ARMATURE: f64 = 3e-5;
 /// Passive damping (N·m·s/rad) on the undriven linkage joints, which keeps the closed chain
 /// from ringing under the stiff connect constraints.

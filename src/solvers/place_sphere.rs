@@ -13,7 +13,7 @@
 //! Measured (0.01 s step): 100/100 on seeds 0–99 (first success at step 34.2 on average) and
 //! on 100–199 (34.7). A released sphere that is still moving keeps rolling to and fro between
 //! the wall edges: MuJoCo's condim-3 contacts have no rolling resistance and PhysX's angular
-//! damping of free bodies is not emulated (README, Physics).
+//! damping of free bodies is not emulated (docs/physics.md, "Not emulated").
 use nalgebra::Vector3;
 
 use super::body_id;

@@ -156,7 +156,7 @@ fn solver_successes(task: &str, seeds: std::ops::Range<u64>) -> usize {
 }
 
 // The Fetch solvers succeed on 99/100 (PlaceSphere) and 100/100 (PokeCube) of seeds 0–99
-// at the 0.01 s step, 10 of seeds 0–9 each (README).
+// at the 0.01 s step, 10 of seeds 0–9 each (docs/solvers.md §9).
 #[test]
 fn placesphere_solver_places_the_sphere() {
     let wins = solver_successes("PlaceSphere-v1", 0..10);

@@ -377,7 +377,7 @@ fn pickcube_solver_turns_the_gripper_to_the_cube_faces() {
     };
     let r = crate::solvers::evaluate("PickCube-v1", config, "solver", 20, 0).unwrap();
     assert_eq!(r.control_mode, "pd_ee_delta_pose");
-    // Measured 20/20 on seeds 0–19 (100/100 on seeds 0–99; README).
+    // Measured 20/20 on seeds 0–19 (100/100 on seeds 0–99; docs/solvers.md §9).
     assert!(r.successes >= 18, "{r:?}");
     let first = r.mean_first_success_step.unwrap();
     assert!((20.0..40.0).contains(&first), "{first}");
