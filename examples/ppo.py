@@ -25,8 +25,9 @@ at every episode end. Differences, all for the native env or the ONNX file:
 
 Logs ``log.csv`` in the run directory every iteration: iteration, env_steps, wall_time,
 sim_time (seconds in env.reset/step), learner_time (policy inference during rollouts, GAE and
-the update), train_success and train_return (episodes that ended during the iteration),
-eval_success and eval_return (on evaluation iterations, else empty).
+the update; wall time also counts evaluations), train_success and train_return (episodes that
+ended during the iteration); evaluations are rows of their own (train columns empty) with
+eval_success and eval_return of the policy after env_steps steps.
 """
 
 from __future__ import annotations
@@ -267,9 +268,13 @@ def main(argv=None):
     ep_ret = np.zeros(N)
     best = None
     for it in range(1, iterations + 1):
-        eval_s = eval_r = None
         if it % args.eval_freq == 1 or args.eval_freq == 1:
             eval_s, eval_r = evaluate()
+            # An evaluation row: the policy after `global_step` env steps.
+            writer.writerow([it - 1, global_step, f"{time.perf_counter() - t_start:.3f}",
+                             f"{sim_time:.3f}", f"{learner_time:.3f}", "", "", eval_s, eval_r])
+            print(f"eval after {global_step} steps: success {eval_s:.3f} return {eval_r:.2f}",
+                  flush=True)
             save("policy", eval_s)
             if best is None or eval_s >= best:
                 best = eval_s
@@ -371,14 +376,12 @@ def main(argv=None):
         ts = float(np.mean(ended_success)) if ended_success else ""
         tr = float(np.mean(ended_return)) if ended_return else ""
         writer.writerow([it, global_step, f"{wall:.3f}", f"{sim_time:.3f}", f"{learner_time:.3f}",
-                         ts, tr, "" if eval_s is None else eval_s, "" if eval_r is None else eval_r])
+                         ts, tr, "", ""])
         log.flush()
         print(f"it {it}/{iterations} steps {global_step} wall {wall:.0f}s "
               f"(sim {sim_time:.0f}s, learner {learner_time:.0f}s) "
               f"{global_step / wall:.0f} steps/s train success "
-              f"{ts if ts == '' else round(ts, 3)}"
-              + ("" if eval_s is None else f" eval success {eval_s:.3f} return {eval_r:.2f}"),
-              flush=True)
+              f"{ts if ts == '' else round(ts, 3)}", flush=True)
         if args.max_minutes is not None and wall > 60 * args.max_minutes:
             break
     eval_s, eval_r = evaluate()

@@ -406,7 +406,7 @@ impl PolicyFile {
             });
         }
         let plan = typed.into_runnable().map_err(runtime)?;
-        let state = plan.spawn().map_err(runtime)?;
+        let state = TypedSimpleState::new(&plan).map_err(runtime)?;
         let input = Arc::new(Tensor::zero::<f32>(&shape).map_err(runtime)?);
         let mut policy = OnnxPolicy {
             path: self.path.clone(),
