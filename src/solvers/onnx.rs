@@ -14,6 +14,7 @@ use std::sync::Arc;
 use tract_onnx::pb::ModelProto;
 use tract_onnx::prelude::*;
 use tract_onnx::tract_hir::infer::Factoid;
+use tract_onnx::tract_hir::internal::DimLike;
 
 use crate::env::{Env, EnvConfig, ObsMode};
 use crate::solvers::{Policy, SolverError};
