@@ -92,7 +92,11 @@ fn json(out: &[u8]) -> serde_json::Value {
 /// Runs mjskill expecting failure; returns stderr, checked to be an error line, not a panic.
 fn fails(o: Output) -> String {
     let err = String::from_utf8_lossy(&o.stderr).to_string();
-    assert_eq!(o.status.code(), Some(2), "expected the error exit code: {err}");
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "expected the error exit code: {err}"
+    );
     assert!(err.starts_with("error: "), "{err}");
     assert!(!err.contains("panicked"), "{err}");
     err
@@ -197,9 +201,15 @@ fn policy_actions_are_the_networks_clipped_to_the_action_space() {
             }
         }
     }
-    assert!(max_err < 1e-4, "ONNX actions differ from the reference by {max_err}");
+    assert!(
+        max_err < 1e-4,
+        "ONNX actions differ from the reference by {max_err}"
+    );
     // The weights are scaled so both cases occur: the clipping is exercised.
-    assert!(clipped > 0 && inside > 0, "clipped {clipped}, inside {inside}");
+    assert!(
+        clipped > 0 && inside > 0,
+        "clipped {clipped}, inside {inside}"
+    );
 }
 
 #[test]
@@ -260,7 +270,11 @@ fn eval_and_rollout_take_a_policy_file() {
         .arg(&out)
         .output()
         .unwrap();
-    assert!(rp.status.success(), "{}", String::from_utf8_lossy(&rp.stderr));
+    assert!(
+        rp.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rp.stderr)
+    );
 }
 
 #[test]
@@ -268,7 +282,13 @@ fn wrong_sizes_are_refused_naming_both() {
     let Some(py) = python() else { return };
     let (obs_dim, act_dim) = dims();
     let wide = make_policy(&py, "wide_obs.onnx", obs_dim + 3, act_dim, &[]);
-    let err = fails(mjskill().args(["eval", "--policy"]).arg(&wide).output().unwrap());
+    let err = fails(
+        mjskill()
+            .args(["eval", "--policy"])
+            .arg(&wide)
+            .output()
+            .unwrap(),
+    );
     assert!(err.contains(&wide.display().to_string()), "{err}");
     assert!(
         err.contains(&format!("observations of {} values", obs_dim + 3))
@@ -276,7 +296,13 @@ fn wrong_sizes_are_refused_naming_both() {
         "{err}"
     );
     let act = make_policy(&py, "wide_act.onnx", obs_dim, act_dim + 2, &[]);
-    let err = fails(mjskill().args(["eval", "--policy"]).arg(&act).output().unwrap());
+    let err = fails(
+        mjskill()
+            .args(["eval", "--policy"])
+            .arg(&act)
+            .output()
+            .unwrap(),
+    );
     assert!(
         err.contains(&format!("actions of {} values", act_dim + 2))
             && err.contains(&format!("takes {act_dim}")),
@@ -355,15 +381,32 @@ fn metadata_mismatches_are_refused_naming_both() {
         "bare.onnx",
         obs_dim,
         act_dim,
-        &["--drop-meta", "robot_uids", "--drop-meta", "training_command"],
+        &[
+            "--drop-meta",
+            "robot_uids",
+            "--drop-meta",
+            "training_command",
+        ],
     );
-    let err = fails(mjskill().args(["eval", "--policy"]).arg(&bare).output().unwrap());
+    let err = fails(
+        mjskill()
+            .args(["eval", "--policy"])
+            .arg(&bare)
+            .output()
+            .unwrap(),
+    );
     assert!(
         err.contains("lacks the metadata_props robot_uids, training_command"),
         "{err}"
     );
     let vis = make_policy(&py, "vis.onnx", obs_dim, act_dim, &["--obs-mode", "rgbd"]);
-    let err = fails(mjskill().args(["eval", "--policy"]).arg(&vis).output().unwrap());
+    let err = fails(
+        mjskill()
+            .args(["eval", "--policy"])
+            .arg(&vis)
+            .output()
+            .unwrap(),
+    );
     assert!(err.contains("obs_mode \"rgbd\""), "{err}");
 }
 
@@ -378,7 +421,13 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
     // A protobuf field header promising more bytes than there are.
     std::fs::write(&truncated, [0x3a, 0xff, 0x01, 0x0a]).unwrap();
     for f in [&garbage, &empty, &truncated] {
-        let err = fails(mjskill().args(["eval", "--policy"]).arg(f).output().unwrap());
+        let err = fails(
+            mjskill()
+                .args(["eval", "--policy"])
+                .arg(f)
+                .output()
+                .unwrap(),
+        );
         assert!(err.contains(&f.display().to_string()), "{err}");
         assert!(
             err.contains("is not a valid ONNX model") || err.contains("lacks the metadata_props"),

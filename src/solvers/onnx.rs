@@ -202,7 +202,12 @@ impl PolicyFile {
             .iter()
             .map(|p| (p.key.clone(), p.value.clone()))
             .collect();
-        let get = |k: &str| props.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone());
+        let get = |k: &str| {
+            props
+                .iter()
+                .find(|(key, _)| key == k)
+                .map(|(_, v)| v.clone())
+        };
         let missing: Vec<&str> = METADATA_KEYS
             .iter()
             .copied()
@@ -291,7 +296,11 @@ impl PolicyFile {
         };
         check("env_id", &m.env_id, env)?;
         check("robot_uids", &m.robot_uids, config.robot.as_deref())?;
-        check("control_mode", &m.control_mode, config.control_mode.as_deref())?;
+        check(
+            "control_mode",
+            &m.control_mode,
+            config.control_mode.as_deref(),
+        )?;
         if obs_mode_given {
             if !matches!(config.obs_mode, ObsMode::State | ObsMode::StateDict) {
                 check("obs_mode", &m.obs_mode, Some(config.obs_mode.name()))?;
