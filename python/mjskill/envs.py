@@ -405,9 +405,26 @@ class MjskillVectorEnv(VectorEnv):
         """Envs that reset during the last step (their action was ignored)."""
         return self._native.autoreset()
 
-def make_env(**kwargs) -> MjskillEnv:
+def make_env(num_envs: int = 1, **kwargs) -> MjskillEnv:
     """``gym.make`` entry point: the env's own episode limit is lifted, because gymnasium's
-    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill."""
+    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill.
+
+    ``num_envs`` (ManiSkill's ``gym.make(..., num_envs=N)``): 1 is one env; more is an error
+    naming ``gym.make_vec``, because gymnasium 1.x's ``make`` only returns a
+    ``gymnasium.Env`` (it checks the type, then wraps it in ``TimeLimit``, whose scalar
+    truncation would end every env at once), so the native vector env cannot come from it.
+    """
+    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+        raise TypeError(f"num_envs must be an int, not {type(num_envs).__name__} ({num_envs!r})")
+    if num_envs != 1:
+        env_id = kwargs.get("env_id", "PickCube-v1")
+        raise ValueError(
+            f"gym.make('mjskill/{env_id}', num_envs={num_envs}): gymnasium's make returns one "
+            "gymnasium.Env (it checks the type and wraps it in TimeLimit), so it cannot return "
+            f"a vector env; use gym.make_vec('mjskill/{env_id}', num_envs={num_envs}, ...) with "
+            "the same keywords: it returns the native MjskillVectorEnv (the ids' vector entry "
+            "point), as ManiSkillVectorEnv wraps ManiSkill's batched env"
+        )
     kwargs.setdefault("max_episode_steps", _UNLIMITED)
     return MjskillEnv(**kwargs)
 

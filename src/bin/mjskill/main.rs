@@ -52,10 +52,10 @@ pub struct Cli {
 /// Which env, robot and control mode a command runs.
 #[derive(Debug, Clone, clap::Args)]
 pub struct EnvArgs {
-    /// Env id.
-    #[arg(long, default_value = "PickCube-v1")]
-    pub env: String,
-    /// Robot uid (default: the env's default robot).
+    /// Env id (default: a policy file's, else PickCube-v1).
+    #[arg(long)]
+    pub env: Option<String>,
+    /// Robot uid (default: a policy file's, else the env's default robot).
     #[arg(long)]
     pub robot: Option<String>,
     /// Control mode (default: the policy's if it needs one, else the robot's default).
@@ -68,6 +68,11 @@ pub struct EnvArgs {
 }
 
 impl EnvArgs {
+    /// The env id: `--env` or [`mjskill::solvers::DEFAULT_ENV`].
+    pub fn env_id(&self) -> &str {
+        self.env.as_deref().unwrap_or(mjskill::solvers::DEFAULT_ENV)
+    }
+
     /// The env configuration (other fields at their defaults).
     pub fn config(&self) -> mjskill::EnvConfig {
         mjskill::EnvConfig {
@@ -151,7 +156,8 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Policy: solver, random or zero.
+        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
+        /// env, robot and modes are the defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (seeds seed, seed+1, ...; the last must be a 32-bit seed).
@@ -167,13 +173,15 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd.
-        #[arg(long, default_value = "state")]
-        obs_mode: String,
+        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (default: a policy
+        /// file's, else state).
+        #[arg(long)]
+        obs_mode: Option<String>,
         /// Reward mode: normalized_dense, dense, sparse or none.
         #[arg(long, default_value = "normalized_dense")]
         reward_mode: String,
-        /// Policy: solver, random or zero.
+        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
+        /// env, robot and modes are the defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (1 or more; the last seed must be a 32-bit seed).
@@ -346,7 +354,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
                 ..target.config()
             };
-            let report = bench::run(&target.env, config, steps, vec, render)?;
+            let report = bench::run(target.env_id(), config, steps, vec, render)?;
             out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
@@ -364,8 +372,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             episodes,
             seed,
         } => {
-            let report =
-                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)?;
+            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
+            let (env, config) = policy.target(target.env.as_deref(), target.config(), false)?;
+            let report = mjskill::solvers::evaluate_spec(&env, config, &policy, episodes, seed)?;
             out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
@@ -383,12 +392,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             use std::io::IsTerminal;
             let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+                obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
                 reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
                 ..target.config()
             };
+            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
+            let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
             let args = rollout::RolloutArgs {
-                env: target.env,
+                env,
                 config,
                 policy,
                 episodes,
@@ -458,7 +469,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             camera,
             output,
         } => {
-            let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
+            let s = render::run(target.env_id(), target.config(), seed, &camera, &output)?;
             out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
