@@ -109,9 +109,15 @@ def read_h5(h5_path):
     return meta, out
 
 
-def replay(env_id, robot, mode, seed, actions):
-    """Replays `actions` open loop in a fresh ManiSkill env: per-step boolean info flags,
-    final success and the final positions of the dynamic actors."""
+_ENVS = {}
+
+
+def replay(env_id, robot, mode, seed, actions, reuse=False):
+    """Replays `actions` open loop in a ManiSkill env: per-step boolean info flags, final
+    success and the final positions of the dynamic actors. The env is made fresh for the
+    episode, or with `reuse` made once per (env, robot, mode) and reset for every episode,
+    as ManiSkill's replay_trajectory tool does (PhysX CPU keeps contact caches across
+    resets, so the two can differ slightly)."""
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401 (registers the envs)
     import torch
@@ -126,7 +132,13 @@ def replay(env_id, robot, mode, seed, actions):
     )
     if env_id not in FIXED_ROBOT:
         kw["robot_uids"] = robot
-    env = gym.make(env_id, **kw)
+    key = (env_id, robot, mode)
+    if reuse and key in _ENVS:
+        env = _ENVS[key]
+    else:
+        env = gym.make(env_id, **kw)
+        if reuse:
+            _ENVS[key] = env
     try:
         env.reset(seed=seed)
         flags = {}
@@ -144,7 +156,8 @@ def replay(env_id, robot, mode, seed, actions):
                 objects[name] = [float(f32_text(v)) for v in actor.pose.p.reshape(-1)[:3].tolist()]
         return {k: "".join(v) for k, v in flags.items()}, final, objects
     finally:
-        env.close()
+        if not reuse:
+            env.close()
 
 
 def versions():
@@ -159,7 +172,7 @@ def versions():
     return out
 
 
-def write(out_dir, source, env_id, robot, mode, episodes, extra):
+def write(out_dir, source, env_id, robot, mode, episodes, extra, reuse=False):
     os.makedirs(out_dir, exist_ok=True)
     name = f"{source}__{env_id}__{robot}.json.gz"
     keys = list(episodes[0]["flags"].keys()) if episodes else []
@@ -170,7 +183,9 @@ def write(out_dir, source, env_id, robot, mode, episodes, extra):
         "robot": robot,
         "control_mode": mode,
         "sim_backend": "physx_cpu",
-        "replay": "one freshly made env per episode: gym.make, reset(seed=seed), the actions",
+        "replay": ("one env for all episodes (as replay_trajectory): reset(seed=seed), the actions"
+                   if reuse else
+                   "one freshly made env per episode: gym.make, reset(seed=seed), the actions"),
         "versions": versions(),
         "command": " ".join(["python"] + sys.argv),
         "flag_keys": keys,
@@ -214,7 +229,7 @@ def record_solvers(a, pairs):
         episodes = []
         t0 = time.time()
         for seed, actions, mj_success in eps:
-            flags, final, objects = replay(env_id, robot, mode, seed, actions)
+            flags, final, objects = replay(env_id, robot, mode, seed, actions, a.reuse_env)
             episodes.append({"seed": seed, "steps": int(actions.shape[0]),
                              "mjskill_success_when_recorded": bool(mj_success),
                              "final_success": final, "flags": flags,
@@ -228,7 +243,7 @@ def record_solvers(a, pairs):
                 "mjskill export run.mcap --format maniskill -o run.h5"
                 + (f" --control-mode {convert}" if convert else ""),
             ],
-        })
+        }, a.reuse_env)
 
 
 def record_demos(a, pairs):
@@ -248,7 +263,7 @@ def record_demos(a, pairs):
         t0 = time.time()
         for seed, actions, demo_success in eps:
             assert seed < HELD_OUT_SEED, seed
-            flags, final, objects = replay(env_id, robot, mode, seed, actions)
+            flags, final, objects = replay(env_id, robot, mode, seed, actions, a.reuse_env)
             episodes.append({"seed": seed, "steps": int(actions.shape[0]),
                              "demo_success": bool(demo_success), "final_success": final,
                              "flags": flags, "final_objects": objects, "actions": actions})
@@ -256,8 +271,8 @@ def record_demos(a, pairs):
         write(a.out, "motionplanning", env_id, robot, mode, episodes, {
             "demo_command": "python " + " ".join(cmd[1:]),
             "demo_note": "demo_success is run.py's recorded success (one env reused for all "
-                         "seeds); final_success and flags are the fresh-env replay",
-        })
+                         "seeds); final_success and flags are the replay described by `replay`",
+        }, a.reuse_env)
 
 
 def main():
@@ -270,6 +285,8 @@ def main():
     p.add_argument("--only", choices=["solver", "motionplanning"])
     p.add_argument("--pairs", help="ENV:ROBOT[,ENV:ROBOT...] (default: all)")
     p.add_argument("--reuse", action="store_true", help="reuse demo h5 files already in --work")
+    p.add_argument("--reuse-env", action="store_true",
+                   help="one ManiSkill env per pair, reset per episode (faster; as replay_trajectory)")
     a = p.parse_args()
     last = max(a.solver_seed + a.episodes, a.episodes) - 1
     if last >= HELD_OUT_SEED:
