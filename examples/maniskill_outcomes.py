@@ -27,8 +27,13 @@ overlay venv of docs/outcome-agreement.md):
         --mjskill target/release/mjskill --work /tmp/outcomes_work --out tests/data/outcomes
 
 Options: --episodes N (per pair, default 50), --solver-seed S (first solver seed, default 0;
-demos always use seeds 0..N-1, as run.py does), --only solver|motionplanning,
---pairs ENV:ROBOT[,...]. Seeds 5000 and above are held out: do not record them.
+demos use run.py's seeds, 0..N-1 where its planner succeeds), --only solver|motionplanning,
+--pairs ENV:ROBOT[,...], --reuse-env (one ManiSkill env per pair, reset per episode, as
+replay_trajectory does; much faster), --reuse (keep demo h5 files already in --work).
+Seeds 5000 and above are held out: do not record them.
+
+`--trim FULL_DIR --keep N --out DIR` copies the first N episodes of every file (no ManiSkill
+needed); the repository's tests/data/outcomes holds such copies of a 50-episode recording.
 """
 
 import argparse
@@ -275,6 +280,28 @@ def record_demos(a, pairs):
         }, a.reuse_env)
 
 
+def trim(a):
+    """Copies the first --keep episodes of every outcome file in --trim to --out (no
+    ManiSkill needed): the small files the repository's tests replay."""
+    for name in sorted(os.listdir(a.trim)):
+        if not name.endswith(".json.gz"):
+            continue
+        with gzip.open(os.path.join(a.trim, name)) as f:
+            d = json.load(f)
+        assert d["format"] == FORMAT, name
+        episodes = d.pop("episodes")[: a.keep]
+        for e in episodes:
+            e["actions"] = np.asarray(e["actions"], dtype=np.float32)
+        extra = {k: v for k, v in d.items() if k not in (
+            "format", "source", "env_id", "robot", "control_mode", "sim_backend", "replay",
+            "flag_keys", "n_episodes", "maniskill_successes")}
+        extra["trimmed_from"] = {"episodes": d["n_episodes"],
+                                 "maniskill_successes": d["maniskill_successes"]}
+        reuse = d["replay"].startswith("one env for all")
+        write(a.out, d["source"], d["env_id"], d["robot"], d["control_mode"], episodes, extra,
+              reuse)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--mjskill", default="target/release/mjskill")
@@ -287,7 +314,13 @@ def main():
     p.add_argument("--reuse", action="store_true", help="reuse demo h5 files already in --work")
     p.add_argument("--reuse-env", action="store_true",
                    help="one ManiSkill env per pair, reset per episode (faster; as replay_trajectory)")
+    p.add_argument("--trim", metavar="DIR",
+                   help="copy the first --keep episodes of the outcome files in DIR to --out")
+    p.add_argument("--keep", type=int, default=10)
     a = p.parse_args()
+    if a.trim:
+        trim(a)
+        return
     last = max(a.solver_seed + a.episodes, a.episodes) - 1
     if last >= HELD_OUT_SEED:
         p.error(f"seeds up to {last}: seeds {HELD_OUT_SEED} and above are held out")
