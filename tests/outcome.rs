@@ -457,3 +457,37 @@ fn bad_outcome_files_are_errors_naming_the_problem() {
     assert!(err.contains("dim.json") && err.contains('2'), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_outcomes_command_prints_the_agreement() {
+    let file = data_dir().join("solver__PlaceSphere-v1__panda.json.gz");
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+            .arg("outcomes")
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = run(&[file.to_str().unwrap(), "--episodes", "2", "--per-episode"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["env_id"], "PlaceSphere-v1");
+    assert_eq!(r["episodes"], 2);
+    assert_eq!(r["per_episode"].as_array().unwrap().len(), 2);
+    assert_eq!(r["steps"], 100);
+    let o = run(&[file.to_str().unwrap(), "--episodes", "1", "--table"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.starts_with("| source |") && text.contains("| solver | PlaceSphere-v1 | panda |"),
+        "{text}"
+    );
+    let empty = std::env::temp_dir().join(format!("mjskill-outcomes-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).unwrap();
+    let o = run(&[empty.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("holds no outcome files"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&empty).unwrap();
+}
