@@ -13,7 +13,8 @@ freshly made env per episode, `reset(seed=seed)` then the actions):
   `--control-mode pd_joint_pos`: ManiSkill cannot build Fetch's EE modes, so the exported
   actions are the joint targets mjskill's controller set).
 * motionplanning: ManiSkill's own motion-planning demos, made with
-  `python -m mani_skill.examples.motionplanning.<panda|xarm6|so100>.run` (seeds 0..N-1).
+  `python -m mani_skill.examples.motionplanning.<panda|xarm6|so100>.run` (seeds 0..N-1,
+  the SO100's from 9).
 
 For every episode the file keeps the actions (float32, shortest round-trip decimals), every
 boolean that the task's `evaluate()` returns after each step (as a string of 0/1, one
@@ -27,7 +28,7 @@ overlay venv of docs/outcome-agreement.md):
         --mjskill target/release/mjskill --work /tmp/outcomes_work --out tests/data/outcomes
 
 Options: --episodes N (per pair, default 50), --solver-seed S (first solver seed, default 0;
-demos use run.py's seeds, 0..N-1 where its planner succeeds), --only solver|motionplanning,
+demos use run.py's seeds, 0..N-1; the SO100's run.py starts at 9), --only solver|motionplanning,
 --pairs ENV:ROBOT[,...], --reuse-env (one ManiSkill env per pair, reset per episode, as
 replay_trajectory does; much faster), --reuse (keep demo h5 files already in --work).
 Seeds 5000 and above are held out: do not record them.
