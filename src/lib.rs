@@ -57,9 +57,9 @@ pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::vec::MAX_NUM_ENVS;
 pub use env::{
-    default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, Env, EnvConfig,
-    EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, RewardMode, SimConfig, StateDict,
-    StateDictError, Step, VecEnv, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
+    default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, DriveTargets,
+    Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, RewardMode, SimConfig,
+    StateDict, StateDictError, Step, VecEnv, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use mjcf::urdf::RobotError as UrdfError;
 pub use mjcf::{Mjcf, SceneError};

@@ -1322,5 +1322,165 @@ fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
     );
     assert_eq!(v["counts"]["action"], 8);
     assert_eq!(v["counts"][cam], 8);
+
+fn mjskill_cli(args: &[&str], paths: &[&Path]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(args)
+        .args(paths)
+        .output()
+        .unwrap()
+}
+
+/// `export --control-mode pd_joint_pos` writes the joint targets mjskill's controller set
+/// (Fetch's EE solver: the IK solution), so the episode replays in `pd_joint_pos` (which
+/// ManiSkill can build for Fetch) with the same outcome and objects.
+#[test]
+fn export_converts_fetch_ee_actions_to_joint_targets_that_replay_the_episode() {
+    let dir = tmp_dir("convert");
+    let mcap = dir.join("fetch.mcap");
+    let o = mjskill_cli(
+        &[
+            "rollout",
+            "--env",
+            "PickCube-v1",
+            "--robot",
+            "fetch",
+            "--episodes",
+            "2",
+            "--seed",
+            "3",
+            "--no-frame",
+            "--out",
+        ],
+        &[&mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = record::read(&mcap).unwrap();
+    assert_eq!(rec.meta.control_mode, "pd_ee_delta_pose");
+    let h5 = dir.join("fetch.h5");
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&h5, &mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = maniskill_h5::read(&h5, None).unwrap();
+    assert_eq!(t.json.env_info.env_kwargs["control_mode"], "pd_joint_pos");
+    for (info, (ep, rec_ep)) in t
+        .json
+        .episodes
+        .iter()
+        .zip(t.episodes.iter().zip(rec.finished()))
+    {
+        assert_eq!(info.control_mode, "pd_joint_pos");
+        // arm 7 joint targets, gripper, body 3, base 2.
+        assert_eq!(ep.action_dim, 13);
+        assert_eq!(ep.steps(), rec_ep.steps.len());
+        for (t, s) in rec_ep.steps.iter().enumerate() {
+            // The gripper, body and base parts are the recorded ones.
+            assert_eq!(ep.action(t)[7..], s.action[6..], "step {t}");
+        }
+    }
+    // Replayed in mjskill by actions: the recorded outcome, objects within 0.1 mm.
+    let r = import(&h5, None, &dir.join("back.mcap"), ReplayBy::Actions).unwrap();
+    assert_eq!(r.control_mode, "pd_joint_pos");
+    for (e, rec_ep) in r.episodes.iter().zip(rec.finished()) {
+        assert_eq!(e.by_actions_success, rec_ep.success, "seed {:?}", e.seed);
+        assert_eq!(e.maniskill_success, rec_ep.success);
+        assert!(e.max_object_error_m < 1e-4, "{e:?}");
+    }
+    // The recording's own mode exports as recorded; other modes are errors naming the valid
+    // ones; LeRobot takes no control mode.
+    let same = dir.join("same.h5");
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_ee_delta_pose",
+            "-o",
+        ],
+        &[&same, &mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        maniskill_h5::read(&same, None).unwrap().episodes[0].action_dim,
+        12
+    );
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_vel",
+            "-o",
+        ],
+        &[&dir.join("bad.h5"), &mcap],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("\"pd_joint_vel\"")
+            && err.contains("valid: pd_joint_pos, pd_ee_delta_pose"),
+        "{err}"
+    );
+    assert!(!dir.join("bad.h5").exists());
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "lerobot",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&dir.join("lr"), &mcap],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--format maniskill only"),
+        "{err}"
+    );
+    // A mode that accumulates targets cannot be converted.
+    let tgt = dir.join("target.mcap");
+    let o = mjskill_cli(
+        &[
+            "rollout",
+            "--policy",
+            "zero",
+            "--episodes",
+            "1",
+            "--no-frame",
+            "--control-mode",
+            "pd_joint_target_delta_pos",
+            "--out",
+        ],
+        &[&tgt],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&dir.join("t.h5"), &tgt],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("accumulates targets"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -238,7 +238,8 @@ class MjskillEnv(gym.Env):
 
     def get_state_dict(self) -> dict:
         """ManiSkill's ``get_state_dict()`` layout (``actors``, ``articulations``,
-        ``controller``) as nested lists."""
+        ``controller``) as nested lists, plus ``drive`` (the joints' drive targets, which
+        ``set_state_dict`` restores; ManiSkill's own dicts lack it)."""
         return json.loads(self._native.get_state_dict())
 
     def set_state_dict(self, state_dict: dict) -> None:

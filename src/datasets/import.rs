@@ -6,7 +6,9 @@
 //! * By actions: the env is reset with the episode's seed and the actions are applied open
 //!   loop.
 //! * By states: every `env_states` row is imported with [`Env::set_state_dict`] (and
-//!   `elapsed_steps` set to its index); obs, reward and info are recomputed from it. Step t of
+//!   `elapsed_steps` set to its index), rows after the first with the drive targets of the
+//!   action that led to them ([`Env::set_state_dict_after_action`]: held objects stay
+//!   squeezed, as in ManiSkill); obs, reward and info are recomputed from it. Step t of
 //!   the recording then carries the state of row t as the state before it and the obs, reward
 //!   and flags of row t+1, so `mjskill replay` of such a file reports the physics difference
 //!   between ManiSkill and mjskill rather than zero.
@@ -44,7 +46,7 @@ pub fn maniskill_state_schema() -> serde_json::Value {
             "step": {"type": "integer", "minimum": 0},
             "state": {
                 "type": "object",
-                "properties": {"actors": map, "articulations": map, "controller": {"type": "object"}},
+                "properties": {"actors": map, "articulations": map, "controller": {"type": "object"}, "drive": {"type": "object"}},
                 "required": ["actors", "articulations"]
             }
         },
@@ -388,8 +390,14 @@ fn replay_states(
     path: &Path,
     mut sink: Option<Sink<'_>>,
 ) -> Result<Vec<bool>, DatasetError> {
+    // Row t > 0 is imported with the drive targets of action t − 1, applied to row t − 1
+    // (ManiSkill's rows lack them; PhysX keeps them across steps).
     let import = |env: &mut Env, t: usize| -> Result<(), DatasetError> {
-        env.set_state_dict(&ep.env_states[t]).map_err(|e| {
+        let r = match t {
+            0 => env.set_state_dict(&ep.env_states[0]),
+            _ => env.set_state_dict_after_action(ep.action(t - 1), &ep.env_states[t]),
+        };
+        r.map_err(|e| {
             DatasetError::format(path, format!("env_states row {t} cannot be imported: {e}"))
         })?;
         env.set_elapsed_steps(t as u32);

@@ -19,7 +19,7 @@ pub use config::{
 };
 pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::CameraImage;
-pub use state_dict::{ActionPart, StateDict, StateDictError};
+pub use state_dict::{ActionPart, DriveTargets, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
 pub use vec::VecEnv;
 
@@ -428,6 +428,18 @@ impl Env {
 
     /// One control step (docs/env.md §4). Errors (wrong length, NaN/inf) leave the env unchanged.
     pub fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
+        self.check_action(action)?;
+        self.sim.controller.set_action(
+            action,
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
+        );
+        Ok(self.advance())
+    }
+
+    /// An action's length and finiteness ([`Env::step`]'s errors).
+    fn check_action(&self, action: &[f32]) -> Result<(), EnvError> {
         let expected = self.sim.controller.action_dim();
         if action.len() != expected {
             return Err(EnvError::ActionLength {
@@ -439,13 +451,7 @@ impl Env {
         if let Some((index, &value)) = action.iter().enumerate().find(|(_, a)| !a.is_finite()) {
             return Err(EnvError::ActionNotFinite { index, value });
         }
-        self.sim.controller.set_action(
-            action,
-            &self.sim.robot.joints,
-            &self.sim.data,
-            &mut self.sim.drives,
-        );
-        Ok(self.advance())
+        Ok(())
     }
 
     /// A control step without a new action (`action=None` upstream): the drives keep their

@@ -254,6 +254,26 @@ pub enum Command {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
+    /// Replay the fixed action sequences of outcome files (tests/data/outcomes, written by
+    /// examples/maniskill_outcomes.py with ManiSkill) in mjskill and count how often the
+    /// outcome and the per-step flags agree with ManiSkill's: one JSON line per file, or a
+    /// Markdown table (docs/outcome-agreement.md).
+    Outcomes {
+        /// An outcome file (.json.gz) or a directory of them.
+        path: PathBuf,
+        /// Replay only the first N episodes of every file (1..=4294967296).
+        #[arg(long, value_parser = args::episodes, allow_hyphen_values = true)]
+        episodes: Option<usize>,
+        /// Physics steps per second of the replaying env.
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
+        sim_freq: u32,
+        /// Include every episode's result.
+        #[arg(long)]
+        per_episode: bool,
+        /// Print a Markdown table instead of JSON.
+        #[arg(long)]
+        table: bool,
+    },
     /// Replay ManiSkill demos (trajectory.h5 + .json) in mjskill, by actions (open loop from
     /// each episode's seed) or by states (importing every env_states row), record them to
     /// MCAP and print per-episode success and divergence (JSON).
@@ -292,6 +312,12 @@ pub enum Command {
         /// default whatever frames the recording has.
         #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
         video: Option<bool>,
+        /// --format maniskill: write the actions in this control mode. pd_joint_pos writes
+        /// every step's joint targets as mjskill's controller set them (e.g. the IK solution
+        /// of an EE mode), so that ManiSkill replays them even where it cannot build the
+        /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
+        #[arg(long)]
+        control_mode: Option<String>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -458,8 +484,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
             output,
             json,
             video,
+            control_mode,
         } => {
-            let r = datasets::export(&file, &format, output, json.as_deref(), video)?;
+            let r = datasets::export(
+                &file,
+                &format,
+                output,
+                json.as_deref(),
+                video,
+                control_mode.as_deref(),
+            )?;
             out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
@@ -488,6 +522,13 @@ fn run(cli: Cli) -> Result<(), CliError> {
             summary,
             plot,
         }),
+        Command::Outcomes {
+            path,
+            episodes,
+            sim_freq,
+            per_episode,
+            table,
+        } => outcomes(&path, episodes, sim_freq, per_episode, table),
         Command::Envs => {
             out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
@@ -601,5 +642,57 @@ fn fit_primitives(
         "<!-- primitives volume {total:.3e} m^3, mesh volume {:.3e} m^3 -->",
         mesh_fit::mesh_volume(&tris)
     );
+    Ok(())
+}
+
+/// `mjskill outcomes`: replays every outcome file under `path` and prints the agreement.
+fn outcomes(
+    path: &std::path::Path,
+    episodes: Option<usize>,
+    sim_freq: u32,
+    per_episode: bool,
+    table: bool,
+) -> Result<(), CliError> {
+    use mjskill::maniskill::outcome::{files, measure, OutcomeFile};
+    let sim = mjskill::SimConfig { sim_freq };
+    sim.validate()?;
+    let paths = files(path)?;
+    if paths.is_empty() {
+        return Err(format!("{} holds no outcome files (*.json.gz)", path.display()).into());
+    }
+    if table {
+        out!("| source | env | robot | control mode | episodes | ManiSkill successes | mjskill successes | same outcome | steps with all flags equal | per flag: steps equal |");
+        out!("|---|---|---|---|---|---|---|---|---|---|");
+    }
+    for p in paths {
+        let f = OutcomeFile::open(&p)?;
+        let mut r = measure(&f, &p, episodes, sim)?;
+        if table {
+            let flags: Vec<String> = r
+                .flags
+                .iter()
+                .map(|(k, a)| format!("{k} {}/{}", a.agree, a.steps))
+                .collect();
+            out!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {}/{} | {} |",
+                r.source,
+                r.env_id,
+                r.robot,
+                r.control_mode,
+                r.episodes,
+                r.maniskill_successes,
+                r.mjskill_successes,
+                r.same_outcome,
+                r.steps_all_flags_agree,
+                r.steps,
+                flags.join(", ")
+            );
+        } else {
+            if !per_episode {
+                r.per_episode.clear();
+            }
+            out!("{}", serde_json::to_string(&r)?);
+        }
+    }
     Ok(())
 }
