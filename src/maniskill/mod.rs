@@ -1,5 +1,8 @@
 //! Interoperation with ManiSkill 3's own data: reference trajectories recorded from
 //! ManiSkill ([`reference`](mod@reference)) and the step-by-step comparison of mjskill against them
-//! ([`fidelity`]).
+//! ([`fidelity`]), and mjskill's camera images against ManiSkill's ([`images`], reading
+//! numpy archives with [`npz`]).
 pub mod fidelity;
+pub mod images;
+pub mod npz;
 pub mod reference;

@@ -31,6 +31,7 @@ pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
 
 mod args;
 mod bench;
+mod compare_images;
 mod datasets;
 mod fidelity;
 mod info_dir;
@@ -287,6 +288,29 @@ pub enum Command {
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Compare mjskill's sensor camera images with ManiSkill's for the same states: loads
+    /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
+    /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
+    /// (mm), mean absolute colour difference. See docs/observations.md.
+    CompareImages {
+        /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
+        /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
+        /// `state_json`, `control_mode`).
+        reference: PathBuf,
+        /// Only this `<env>__<robot>` directory (repeatable).
+        #[arg(long = "pair")]
+        pairs: Vec<String>,
+        /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
+        /// above, segmentation below).
+        #[arg(long)]
+        panels: Option<PathBuf>,
+        /// At most this many states per pair (1..=1000000).
+        #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
+        limit: Option<usize>,
+        /// Include every state's per-camera scores (and per-id IoU).
+        #[arg(long)]
+        per_state: bool,
+    },
     /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
     /// prints a JSON summary.
     Render {
@@ -460,6 +484,23 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
             out!("{}", serde_json::to_string(&s)?);
+            Ok(())
+        }
+        Command::CompareImages {
+            reference,
+            pairs,
+            panels,
+            limit,
+            per_state,
+        } => {
+            let r = compare_images::run(&compare_images::CompareArgs {
+                reference,
+                pairs,
+                panels,
+                limit,
+                per_state,
+            })?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Fidelity {
