@@ -131,7 +131,7 @@ mod tests {
         // Robot bodies given out of order: ids follow the body order.
         let links = [
             ("link1".to_string(), b("link1")),
-            ("link0".into(), b("link0")),
+            ("r_world".into(), b("link0")),
         ];
         let ids = SegmentationIds::new(&m, &links, &["cube", "goal_site"]);
         assert_eq!(

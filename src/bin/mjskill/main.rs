@@ -114,8 +114,9 @@ pub enum Command {
         /// available cores). The report gives the number used.
         #[arg(long, value_parser = args::threads, allow_hyphen_values = true)]
         threads: Option<usize>,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
-        /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud (the visual modes render
+        /// the 128x128 sensor camera, and Fetch its two robot cameras, every step).
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Also time this many human-camera frames (1..=100000; Env::render, 512x512):
@@ -168,7 +169,8 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd.
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud.
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Reward mode: normalized_dense, dense, sparse or none.
@@ -194,7 +196,8 @@ pub enum Command {
         #[arg(long)]
         video: bool,
         /// Also record a sensor camera's colour frames (H.264) on /<camera>/video
-        /// (foxglove.CompressedVideo); repeatable. Needs --obs-mode rgb or rgbd (cameras:
+        /// (foxglove.CompressedVideo); repeatable. Needs an obs mode with colour (rgb, rgbd,
+        /// rgb+..., pointcloud; cameras:
         /// base_camera; Fetch also fetch_head, fetch_hand).
         #[arg(long = "camera")]
         cameras: Vec<String>,
