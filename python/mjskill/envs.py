@@ -19,7 +19,22 @@ MAX_SEED = 2**32 - 1
 """ManiSkill's seeds are 32-bit."""
 
 RENDER_MODES = ["rgb_array"]
-OBS_MODES = ["state", "state_dict", "none", "rgb", "depth", "rgbd"]
+OBS_MODES = [
+    "state",
+    "state_dict",
+    "none",
+    "rgb",
+    "depth",
+    "rgbd",
+    "segmentation",
+    "rgb+segmentation",
+    "depth+segmentation",
+    "rgb+depth+segmentation",
+    "pointcloud",
+]
+"""ManiSkill's obs modes; any ``+`` combination of rgb, depth and segmentation is accepted."""
+DEPTH_DTYPES = ["float32", "int16"]
+"""Depth images: float32 metres, or ManiSkill's int16 millimetres."""
 _UNLIMITED = 2**32 - 1
 """Rust-side episode length of envs made by ``gym.make``: its ``TimeLimit`` truncates."""
 
@@ -93,13 +108,25 @@ def _to_space(tree: Any) -> spaces.Space:
     return tree
 
 
+def _check_depth_dtype(depth_dtype: Any) -> None:
+    if depth_dtype not in DEPTH_DTYPES:
+        raise ValueError(
+            f"unknown depth_dtype {depth_dtype!r}; valid: {', '.join(DEPTH_DTYPES)} (float32: "
+            "metres; int16: ManiSkill's millimetres, 0 where nothing was seen)"
+        )
+
+
 class _Layout:
     """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
 
-    def __init__(self, spec: dict[str, Any]):
+    def __init__(self, spec: dict[str, Any], depth_dtype: str = "float32"):
         self.obs_mode = spec["obs_mode"]
         self.parts = [(name, a, b) for name, a, b in spec["obs_layout"]]
         self.cameras = spec["cameras"]
+        self.points = spec["point_count"]
+        self.depth_mm = depth_dtype == "int16"
+        ids = [i for i, _ in spec["segmentation_id_map"]]
+        max_id = max(ids, default=0)
         low, high = spec["obs_low"], spec["obs_high"]
         self.dict_obs = self.obs_mode not in ("state", "none")
         if not self.dict_obs:
@@ -109,30 +136,42 @@ class _Layout:
             name: spaces.Box(low[a:b], high[a:b], shape=(b - a,), dtype=np.float32)
             for name, a, b in self.parts
         }
-        for cam, w, h, rgb, depth in self.cameras:
+        for cam, w, h, rgb, depth, seg in self.cameras:
             if rgb:
                 flat[f"sensor_data/{cam}/rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
-            if depth:
+            if depth and self.depth_mm:
+                flat[f"sensor_data/{cam}/depth"] = spaces.Box(0, 32767, (h, w, 1), np.int16)
+            elif depth:
                 flat[f"sensor_data/{cam}/depth"] = spaces.Box(
                     0.0, np.inf, (h, w, 1), np.float32
                 )
+            if seg:
+                flat[f"sensor_data/{cam}/segmentation"] = spaces.Box(
+                    0, max_id, (h, w, 1), np.int16
+                )
+        if self.points is not None:
+            n = self.points
+            flat["pointcloud/xyzw"] = spaces.Box(-np.inf, np.inf, (n, 4), np.float32)
+            flat["pointcloud/rgb"] = spaces.Box(0, 255, (n, 3), np.uint8)
+            flat["pointcloud/segmentation"] = spaces.Box(0, max_id, (n, 1), np.int16)
         self.space = _to_space(_nest(flat))
+
+    def _visual(self, out: dict[str, Any], native: Any) -> dict[str, Any]:
+        if self.cameras:
+            out["sensor_data"] = native.images(self.depth_mm)
+        if self.points is not None:
+            out["pointcloud"] = native.point_cloud()
+        return out
 
     def single(self, obs: np.ndarray, native: Any) -> Any:
         if not self.dict_obs:
             return obs
-        out = _nest({name: obs[a:b] for name, a, b in self.parts})
-        if self.cameras:
-            out["sensor_data"] = native.images()
-        return out
+        return self._visual(_nest({name: obs[a:b] for name, a, b in self.parts}), native)
 
     def batch(self, obs: np.ndarray, native: Any) -> Any:
         if not self.dict_obs:
             return obs
-        out = _nest({name: obs[:, a:b] for name, a, b in self.parts})
-        if self.cameras:
-            out["sensor_data"] = native.images()
-        return out
+        return self._visual(_nest({name: obs[:, a:b] for name, a, b in self.parts}), native)
 
 
 class MjskillEnv(gym.Env):
@@ -164,8 +203,10 @@ class MjskillEnv(gym.Env):
         max_episode_steps: int | None = None,
         robot_init_qpos_noise: float = 0.02,
         sim_freq: int = 100,
+        depth_dtype: str = "float32",
     ):
         _check_render_mode(render_mode)
+        _check_depth_dtype(depth_dtype)
         self._kwargs = dict(
             env_id=env_id,
             robot_uids=robot_uids,
@@ -184,7 +225,9 @@ class MjskillEnv(gym.Env):
         self.control_mode = spec["control_mode"]
         self.obs_mode = spec["obs_mode"]
         self.reward_mode = spec["reward_mode"]
-        self._layout = _Layout(spec)
+        self.depth_dtype = depth_dtype
+        self.segmentation_id_map = dict(spec["segmentation_id_map"])
+        self._layout = _Layout(spec, depth_dtype)
         self.observation_space = self._layout.space
         lo, hi = spec["action_low"], spec["action_high"]
         self.action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
@@ -255,7 +298,8 @@ class MjskillEnv(gym.Env):
 
     # -- pickling (AsyncVectorEnv, Ray) ----------------------------------------------------
     def __reduce__(self):
-        return (_restore_env, (self._kwargs, self.render_mode, self._native.get_state()))
+        kwargs = dict(self._kwargs, depth_dtype=self.depth_dtype)
+        return (_restore_env, (kwargs, self.render_mode, self._native.get_state()))
 
 
 def _check_finite(value: Any, path: str) -> None:
@@ -330,11 +374,13 @@ class MjskillVectorEnv(VectorEnv):
         robot_init_qpos_noise: float = 0.02,
         sim_freq: int = 100,
         render_mode: str | None = None,
+        depth_dtype: str = "float32",
     ):
+        _check_depth_dtype(depth_dtype)
         if render_mode is not None:
             raise ValueError(
                 f"render_mode {render_mode!r} is not supported by the vector env (it renders "
-                "no human frames; its sensor images come with the rgb/depth/rgbd obs modes); "
+                "no human frames; its sensor images come with the visual obs modes); "
                 "valid render modes: None"
             )
         for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
@@ -368,7 +414,9 @@ class MjskillVectorEnv(VectorEnv):
         self.control_mode = spec["control_mode"]
         self.obs_mode = spec["obs_mode"]
         self.max_episode_steps = spec["max_episode_steps"]
-        self._layout = _Layout(spec)
+        self.depth_dtype = depth_dtype
+        self.segmentation_id_map = dict(spec["segmentation_id_map"])
+        self._layout = _Layout(spec, depth_dtype)
         lo, hi = spec["action_low"], spec["action_high"]
         self.single_observation_space = self._layout.space
         self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)

@@ -215,7 +215,7 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     }
     d.set_item("obs_layout", layout)?;
     let cams = PyList::empty(py);
-    if cfg.obs_mode.is_visual() {
+    if cfg.obs_mode.is_visual() && !cfg.obs_mode.is_point_cloud() {
         for name in env.sensor_names() {
             if let Some(img) = env.image(name) {
                 cams.append((
@@ -224,33 +224,82 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
                     img.height,
                     img.rgb.is_some(),
                     img.depth.is_some(),
+                    img.segmentation.is_some(),
                 ))?;
             }
         }
     }
     d.set_item("cameras", cams)?;
+    d.set_item("point_count", env.point_cloud().map(|p| p.len))?;
+    d.set_item("segmentation_id_map", env.segmentation_id_map())?;
     let keys: Vec<(&str, bool)> = env.info().keys.iter().map(|k| (*k, is_flag(k))).collect();
     d.set_item("info_keys", keys)?;
     d.set_item("render_size", env.render_size())?;
     Ok(d)
 }
 
-/// `{camera: {"rgb": H×W×3 uint8, "depth": H×W×1 float32}}` of a single env.
-fn images_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+/// `{camera: {"rgb": H×W×3 uint8, "depth": H×W×1 float32 metres (int16 millimetres with
+/// `depth_mm`), "segmentation": H×W×1 int16}}` of a single env (the textures its obs mode
+/// renders).
+fn images_dict<'py>(py: Python<'py>, env: &Env, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for name in env.sensor_names() {
         let Some(img) = env.image(name) else { continue };
         let cam = PyDict::new(py);
+        let (h, w) = (img.height, img.width);
         if let Some(rgb) = img.rgb {
-            let a = PyArray1::from_slice(py, rgb).reshape([img.height, img.width, 3])?;
-            cam.set_item("rgb", a)?;
+            cam.set_item("rgb", PyArray1::from_slice(py, rgb).reshape([h, w, 3])?)?;
         }
-        if let Some(depth) = img.depth {
-            let a = PyArray1::from_slice(py, depth).reshape([img.height, img.width, 1])?;
-            cam.set_item("depth", a)?;
+        match (img.depth, img.depth_mm) {
+            (Some(_), Some(mm)) if depth_mm => {
+                cam.set_item("depth", PyArray1::from_slice(py, mm).reshape([h, w, 1])?)?
+            }
+            (Some(m), _) => {
+                cam.set_item("depth", PyArray1::from_slice(py, m).reshape([h, w, 1])?)?
+            }
+            _ => {}
+        }
+        if let Some(seg) = img.segmentation {
+            cam.set_item(
+                "segmentation",
+                PyArray1::from_slice(py, seg).reshape([h, w, 1])?,
+            )?;
         }
         d.set_item(img.name, cam)?;
     }
+    Ok(d)
+}
+
+/// ManiSkill's `pointcloud` dict of `n` stacked clouds: `xyzw` n×N×4 float32, `rgb` n×N×3
+/// uint8, `segmentation` n×N×1 int16 (`single`: without the leading n).
+fn point_cloud_dict<'py, 'a>(
+    py: Python<'py>,
+    clouds: impl Iterator<Item = mjskill::PointCloud<'a>>,
+    single: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (mut xyzw, mut rgb, mut seg) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut n, mut len) = (0usize, 0usize);
+    for c in clouds {
+        xyzw.extend_from_slice(c.xyzw);
+        rgb.extend_from_slice(c.rgb);
+        seg.extend_from_slice(c.segmentation);
+        n += 1;
+        len = c.len;
+    }
+    let d = PyDict::new(py);
+    let shape = |k: usize| {
+        if single {
+            vec![len, k]
+        } else {
+            vec![n, len, k]
+        }
+    };
+    d.set_item("xyzw", PyArray1::from_vec(py, xyzw).reshape(shape(4))?)?;
+    d.set_item("rgb", PyArray1::from_vec(py, rgb).reshape(shape(3))?)?;
+    d.set_item(
+        "segmentation",
+        PyArray1::from_vec(py, seg).reshape(shape(1))?,
+    )?;
     Ok(d)
 }
 
@@ -376,9 +425,20 @@ impl PyEnv {
         info_dict(py, self.lock(py)?.info())
     }
 
-    /// The sensor images of the current state (visual obs modes; else empty).
-    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        images_dict(py, &*self.lock(py)?)
+    /// The sensor images of the current state (visual obs modes; else empty); depth in
+    /// ManiSkill's int16 millimetres with `depth_mm=True`, else float32 metres.
+    #[pyo3(signature = (depth_mm=false))]
+    fn images<'py>(&self, py: Python<'py>, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
+        images_dict(py, &*self.lock(py)?, depth_mm)
+    }
+
+    /// ManiSkill's fused point cloud of the current state (obs mode `pointcloud`; else
+    /// `None`): `{"xyzw": N×4 float32, "rgb": N×3 uint8, "segmentation": N×1 int16}`.
+    fn point_cloud<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let env = self.lock(py)?;
+        env.point_cloud()
+            .map(|c| point_cloud_dict(py, std::iter::once(c), true))
+            .transpose()
     }
 
     /// The human camera's RGB frame (H×W×3 uint8).
@@ -634,40 +694,64 @@ impl PyVecEnv {
         Ok(PyArray1::from_slice(py, self.lock(py)?.vec.autoreset()))
     }
 
-    /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32}}` of the last reset/step.
-    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32 (int16 millimetres with
+    /// `depth_mm`), "segmentation": N×H×W×1 int16}}` of the last reset/step.
+    #[pyo3(signature = (depth_mm=false))]
+    fn images<'py>(&self, py: Python<'py>, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
         let g = self.lock(py)?;
         let vec = &g.vec;
+        let n = self.num_envs;
         let d = PyDict::new(py);
         for name in vec.sensor_names() {
             let Some(first) = vec.image(0, name) else {
                 continue;
             };
             let (w, h) = (first.width, first.height);
+            let imgs = || (0..n).filter_map(|i| vec.image(i, name));
             let cam = PyDict::new(py);
             if first.rgb.is_some() {
-                let mut all = Vec::with_capacity(self.num_envs * h * w * 3);
-                for i in 0..self.num_envs {
-                    if let Some(rgb) = vec.image(i, name).and_then(|c| c.rgb) {
-                        all.extend_from_slice(rgb);
-                    }
-                }
-                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 3])?;
-                cam.set_item("rgb", a)?;
+                let all: Vec<u8> = imgs()
+                    .flat_map(|c| c.rgb.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("rgb", PyArray1::from_vec(py, all).reshape([n, h, w, 3])?)?;
             }
-            if first.depth.is_some() {
-                let mut all = Vec::with_capacity(self.num_envs * h * w);
-                for i in 0..self.num_envs {
-                    if let Some(depth) = vec.image(i, name).and_then(|c| c.depth) {
-                        all.extend_from_slice(depth);
-                    }
-                }
-                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 1])?;
-                cam.set_item("depth", a)?;
+            if first.depth.is_some() && depth_mm {
+                let all: Vec<i16> = imgs()
+                    .flat_map(|c| c.depth_mm.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("depth", PyArray1::from_vec(py, all).reshape([n, h, w, 1])?)?;
+            } else if first.depth.is_some() {
+                let all: Vec<f32> = imgs()
+                    .flat_map(|c| c.depth.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("depth", PyArray1::from_vec(py, all).reshape([n, h, w, 1])?)?;
+            }
+            if first.segmentation.is_some() {
+                let all: Vec<i16> = imgs()
+                    .flat_map(|c| c.segmentation.unwrap_or_default())
+                    .copied()
+                    .collect();
+                let a = PyArray1::from_vec(py, all).reshape([n, h, w, 1])?;
+                cam.set_item("segmentation", a)?;
             }
             d.set_item(*name, cam)?;
         }
         Ok(d)
+    }
+
+    /// ManiSkill's fused point clouds of the last reset/step (obs mode `pointcloud`; else
+    /// `None`): `{"xyzw": N×P×4 float32, "rgb": N×P×3 uint8, "segmentation": N×P×1 int16}`.
+    fn point_cloud<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let g = self.lock(py)?;
+        let vec = &g.vec;
+        if vec.point_cloud(0).is_none() {
+            return Ok(None);
+        }
+        let clouds = (0..self.num_envs).filter_map(|i| vec.point_cloud(i));
+        point_cloud_dict(py, clouds, false).map(Some)
     }
 }
 

@@ -10,15 +10,16 @@ pub mod checks;
 mod config;
 mod registry;
 pub mod render;
+mod segmentation;
 pub mod state_dict;
 mod types;
 pub mod vec;
 pub use config::{
-    EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, CONSTRUCTION_SEED, CONTROL_FREQ,
+    EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, Textures, CONSTRUCTION_SEED, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
-pub use render::CameraImage;
+pub use render::{depth_to_mm, CameraImage, PointCloud};
 pub use state_dict::{ActionPart, DriveTargets, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
 pub use vec::VecEnv;
@@ -112,6 +113,8 @@ pub struct Env {
     scratch_state: Vec<f64>,
     vision: Option<render::Vision>,
     render_options: crate::mujoco::render::RenderOptions,
+    /// ManiSkill's segmentation ids of the scene and of every geom.
+    seg_ids: segmentation::SegmentationIds,
 }
 
 /// Creates an env (gymnasium's `make`). Like ManiSkill, the new env has already been reset
@@ -180,16 +183,20 @@ impl Env {
         };
         let max_episode_steps = config.max_episode_steps.unwrap_or(spec.max_episode_steps);
         let render_options = crate::mujoco::render::RenderOptions::default();
-        let vision = match config.obs_mode {
-            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(render::Vision::new(
+        let seg_ids =
+            segmentation::SegmentationIds::new(model, &sim.robot.link_bodies, task.actor_names());
+        let vision = if config.obs_mode.is_visual() {
+            Some(render::Vision::new(
                 model,
                 task.cameras(),
                 rs.cameras,
-                config.obs_mode != ObsMode::Depth,
-                config.obs_mode != ObsMode::Rgb,
+                config.obs_mode.textures(),
+                config.obs_mode.is_point_cloud(),
+                seg_ids.geom_labels.clone(),
                 render_options,
-            )?),
-            _ => None,
+            )?)
+        } else {
+            None
         };
         let mut env = Env {
             id: spec.id.id(),
@@ -221,6 +228,7 @@ impl Env {
             scratch_state: Vec::new(),
             vision,
             render_options,
+            seg_ids,
         };
         env.reset(Some(CONSTRUCTION_SEED));
         Ok(env)

@@ -31,6 +31,7 @@ pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
 
 mod args;
 mod bench;
+mod compare_images;
 mod datasets;
 mod fidelity;
 mod info_dir;
@@ -118,8 +119,9 @@ pub enum Command {
         /// available cores). The report gives the number used.
         #[arg(long, value_parser = args::threads, allow_hyphen_values = true)]
         threads: Option<usize>,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
-        /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud (the visual modes render
+        /// the 128x128 sensor camera, and Fetch its two robot cameras, every step).
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Also time this many human-camera frames (1..=100000; Env::render, 512x512):
@@ -173,7 +175,8 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (default: a policy
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud (default: a policy
         /// file's, else state).
         #[arg(long)]
         obs_mode: Option<String>,
@@ -201,7 +204,8 @@ pub enum Command {
         #[arg(long)]
         video: bool,
         /// Also record a sensor camera's colour frames (H.264) on /<camera>/video
-        /// (foxglove.CompressedVideo); repeatable. Needs --obs-mode rgb or rgbd (cameras:
+        /// (foxglove.CompressedVideo); repeatable. Needs an obs mode with colour (rgb, rgbd,
+        /// rgb+..., pointcloud; cameras:
         /// base_camera; Fetch also fetch_head, fetch_hand).
         #[arg(long = "camera")]
         cameras: Vec<String>,
@@ -321,6 +325,29 @@ pub enum Command {
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Compare mjskill's sensor camera images with ManiSkill's for the same states: loads
+    /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
+    /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
+    /// (mm), mean absolute colour difference. See docs/observations.md.
+    CompareImages {
+        /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
+        /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
+        /// `state_json`, `control_mode`).
+        reference: PathBuf,
+        /// Only this `<env>__<robot>` directory (repeatable).
+        #[arg(long = "pair")]
+        pairs: Vec<String>,
+        /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
+        /// above, segmentation below).
+        #[arg(long)]
+        panels: Option<PathBuf>,
+        /// At most this many states per pair (1..=1000000).
+        #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
+        limit: Option<usize>,
+        /// Include every state's per-camera scores (and per-id IoU).
+        #[arg(long)]
+        per_state: bool,
+    },
     /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
     /// prints a JSON summary.
     Render {
@@ -505,6 +532,23 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             let s = render::run(target.env_id(), target.config(), seed, &camera, &output)?;
             out!("{}", serde_json::to_string(&s)?);
+            Ok(())
+        }
+        Command::CompareImages {
+            reference,
+            pairs,
+            panels,
+            limit,
+            per_state,
+        } => {
+            let r = compare_images::run(&compare_images::CompareArgs {
+                reference,
+                pairs,
+                panels,
+                limit,
+                per_state,
+            })?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Fidelity {
