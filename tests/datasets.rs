@@ -1322,6 +1322,8 @@ fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
     );
     assert_eq!(v["counts"]["action"], 8);
     assert_eq!(v["counts"][cam], 8);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
 
 fn mjskill_cli(args: &[&str], paths: &[&Path]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
@@ -1483,4 +1485,226 @@ fn export_converts_fetch_ee_actions_to_joint_targets_that_replay_the_episode() {
         "{err}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Compares a split LeRobot export (argv[2]) with the single-file export of the same
+/// recording (argv[1]): every episode's indices point at the files holding its rows and
+/// frames, every row is present exactly once, the video timestamps match the frames, and the
+/// files' contents concatenated equal the single files'. Prints JSON: problems and counts.
+const SPLIT_CHECK: &str = r#"
+import json, sys, pathlib
+import pyarrow as pa, pyarrow.parquet as pq, av
+one, split = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+info = json.loads((split / "meta/info.json").read_text())
+bad = []
+def files(root, pattern):
+    return sorted(root.glob(pattern))
+def chunk_file(p):
+    return int(p.parent.name.split("-")[1]), int(p.stem.split("-")[1])
+cs = info["chunks_size"]
+out = {"info": {k: info[k] for k in ["chunks_size", "data_files_size_in_mb", "video_files_size_in_mb"]}}
+# Files are numbered densely: chunk c holds files 0..cs-1 before chunk c+1 starts.
+def dense(paths, what):
+    got = [chunk_file(p) for p in paths]
+    want = [(i // cs, i % cs) for i in range(len(paths))]
+    if got != want:
+        bad.append(f"{what} files {got} are not numbered {want}")
+# meta/episodes: each row in the file it names.
+eps = []
+meta_files = files(split, "meta/episodes/chunk-*/file-*.parquet")
+dense(meta_files, "meta/episodes")
+for p in meta_files:
+    for r in pq.read_table(p).to_pylist():
+        if (r["meta/episodes/chunk_index"], r["meta/episodes/file_index"]) != chunk_file(p):
+            bad.append(f"episode {r['episode_index']} in {p} names another meta file")
+        eps.append(r)
+one_eps = pq.read_table(one / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+skip = lambda r: {k: v for k, v in r.items() if not k.endswith(("chunk_index", "file_index", "_timestamp"))}
+if [skip(r) for r in eps] != [skip(r) for r in one_eps]:
+    bad.append("meta/episodes rows differ from the single-file export's")
+# Data: each episode's rows in the file it names, at its dataset indices; every row once.
+data_files = files(split, "data/chunk-*/file-*.parquet")
+dense(data_files, "data")
+tables = {chunk_file(p): pq.read_table(p) for p in data_files}
+for r in eps:
+    t = tables.get((r["data/chunk_index"], r["data/file_index"]))
+    if t is None:
+        bad.append(f"episode {r['episode_index']} names a missing data file"); continue
+    idx = [i for i, e in zip(t.column("index").to_pylist(), t.column("episode_index").to_pylist()) if e == r["episode_index"]]
+    if idx != list(range(r["dataset_from_index"], r["dataset_to_index"])) or len(idx) != r["length"]:
+        bad.append(f"episode {r['episode_index']}: rows {idx[:3]}... not at {r['dataset_from_index']}..{r['dataset_to_index']}")
+split_data = pa.concat_tables([tables[chunk_file(p)] for p in data_files])
+one_data = pq.read_table(one / "data/chunk-000/file-000.parquet")
+if split_data.column("index").to_pylist() != list(range(info["total_frames"])):
+    bad.append("the data files' rows are not every index exactly once")
+if not split_data.equals(one_data):
+    bad.append("the data files' rows differ from the single-file export's")
+out["data_files"] = len(data_files)
+out["meta_files"] = len(meta_files)
+out["data_chunks"] = len({chunk_file(p)[0] for p in data_files})
+out["max_episodes_per_data_file"] = max(len(set(t.column("episode_index").to_pylist())) for t in tables.values())
+# Videos: the frames of each episode sit in [from_timestamp, to_timestamp) of its file and
+# decode to the single-file video's pictures.
+def decode(path):
+    with av.open(str(path)) as c:
+        s = c.streams.video[0]
+        return [(round(float(f.pts * s.time_base), 6), f.to_ndarray(format="rgb24").tobytes()) for f in c.decode(s)]
+out["video_files"] = {}
+for key, ft in info["features"].items():
+    if ft["dtype"] != "video":
+        continue
+    vfiles = files(split, f"videos/{key}/chunk-*/file-*.mp4")
+    dense(vfiles, key)
+    decoded = {chunk_file(p): decode(p) for p in vfiles}
+    single = decode(one / f"videos/{key}/chunk-000/file-000.mp4")
+    got = []
+    for r in eps:
+        frames = decoded.get((r[f"videos/{key}/chunk_index"], r[f"videos/{key}/file_index"]))
+        if frames is None:
+            bad.append(f"episode {r['episode_index']} names a missing {key} file"); continue
+        lo, hi = r[f"videos/{key}/from_timestamp"], r[f"videos/{key}/to_timestamp"]
+        mine = [px for ts, px in frames if lo - 1e-6 <= ts < hi - 1e-6]
+        if len(mine) != r["length"] or abs(hi - lo - r["length"] / info["fps"]) > 1e-9:
+            bad.append(f"episode {r['episode_index']}: {len(mine)} {key} frames in [{lo}, {hi}), length {r['length']}")
+        got.extend(mine)
+    if sum(len(f) for f in decoded.values()) != len(single):
+        bad.append(f"{key}: the files hold {sum(len(f) for f in decoded.values())} frames, expected {len(single)}")
+    if got != [px for _, px in single]:
+        bad.append(f"{key}: the episodes' frames differ from the single-file video's")
+    out["video_files"][key] = len(vfiles)
+out["bad"] = bad
+print(json.dumps(out))
+"#;
+
+#[test]
+fn lerobot_export_splits_files_and_chunks_by_size_as_lerobot() {
+    use mjskill::datasets::lerobot::{self, Limits};
+    let dir = tmp_dir("lerobot-split");
+    let mcap = dir.join("run.mcap");
+    record_rollout(&mcap, 5, 6, true);
+    let one = dir.join("one");
+    lerobot::write(&mcap, &one, Some(true)).unwrap();
+    // LeRobot's defaults in info.json; a small export fits one file of each kind.
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(one.join("meta/info.json")).unwrap()).unwrap();
+    assert_eq!(info["chunks_size"], 1000);
+    assert_eq!(info["data_files_size_in_mb"], 100);
+    assert_eq!(info["video_files_size_in_mb"], 200);
+    assert_eq!(listing(&one.join("data")), ["chunk-000"]);
+    assert_eq!(listing(&one.join("data/chunk-000")), ["file-000.parquet"]);
+    let size_mb = |p: &Path| std::fs::metadata(p).unwrap().len() as f64 / (1024.0 * 1024.0);
+    let data_mb = size_mb(&one.join("data/chunk-000/file-000.parquet"));
+    let video_mb =
+        size_mb(&one.join("videos/observation.images.render_camera/chunk-000/file-000.mp4"));
+
+    // Limits of 60 % of the single files: 2 or 3 files of 2 to 4 episodes each, one file
+    // per chunk. Tiny limits: one episode per file (episodes are never split).
+    let cases = [
+        (1, data_mb * 0.6, video_mb * 0.6, false),
+        (2, 1e-6, 1e-6, true),
+        (1, 1e-6, 1e-6, true),
+    ];
+    for (i, (chunks_size, data, video, one_each)) in cases.into_iter().enumerate() {
+        let limits = Limits {
+            chunks_size,
+            data_files_size_in_mb: data,
+            video_files_size_in_mb: video,
+        };
+        let ds = dir.join(format!("split{i}"));
+        let s = lerobot::write_with_limits(&mcap, &ds, Some(true), &limits).unwrap();
+        assert_eq!((s.episodes, s.steps), (5, 30));
+        let info: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(ds.join("meta/info.json")).unwrap()).unwrap();
+        assert_eq!(info["chunks_size"], chunks_size);
+        assert_eq!(info["data_files_size_in_mb"], data);
+        // Files under a directory of chunk folders.
+        let count = |sub: &str| -> usize {
+            std::fs::read_dir(ds.join(sub))
+                .unwrap()
+                .map(|c| std::fs::read_dir(c.unwrap().path()).unwrap().count())
+                .sum()
+        };
+        let video_files = count("videos/observation.images.render_camera");
+        let data_files = count("data");
+        if one_each {
+            assert_eq!((data_files, video_files, count("meta/episodes")), (5, 5, 5));
+            assert!(ds
+                .join(format!("data/chunk-00{}/file-000.parquet", 4 / chunks_size))
+                .is_file());
+        } else {
+            assert!((2..5).contains(&data_files), "{data_files} data files");
+            assert!((2..5).contains(&video_files), "{video_files} video files");
+            assert!(ds.join("data/chunk-001/file-000.parquet").is_file());
+        }
+        let Some(py) = python() else { continue };
+        let o = Command::new(&py)
+            .arg("-c")
+            .arg(SPLIT_CHECK)
+            .arg(&one)
+            .arg(&ds)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["bad"], serde_json::json!([]), "case {i}: {v}");
+        assert_eq!(v["data_files"], data_files, "{v}");
+        if !one_each {
+            assert!(
+                v["max_episodes_per_data_file"].as_u64().unwrap() >= 2,
+                "{v}"
+            );
+        }
+    }
+
+    // Bad limits are refused with the value and the valid range; nothing is written.
+    for (limits, needle) in [
+        (
+            Limits {
+                chunks_size: 0,
+                ..Limits::default()
+            },
+            "chunks_size 0",
+        ),
+        (
+            Limits {
+                video_files_size_in_mb: -1.0,
+                ..Limits::default()
+            },
+            "video_files_size_in_mb -1",
+        ),
+    ] {
+        let ds = dir.join("bad");
+        let e = lerobot::write_with_limits(&mcap, &ds, Some(true), &limits)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(needle) && e.contains("valid"), "{e}");
+        assert!(!ds.exists());
+    }
+
+    // The CLI flags.
+    let ds = dir.join("cli");
+    let o = mjskill()
+        .args(["export", "--format", "lerobot", "--chunks-size", "3"])
+        .args([
+            "--data-files-size-in-mb",
+            "0.000001",
+            "--video-files-size-in-mb",
+            "0.000001",
+        ])
+        .arg(&mcap)
+        .arg("-o")
+        .arg(&ds)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(ds.join("data/chunk-001/file-001.parquet").is_file());
+    assert!(ds
+        .join("videos/observation.images.render_camera/chunk-001/file-001.mp4")
+        .is_file());
+    let e = fails(
+        mjskill()
+            .args(["export", "--format", "maniskill", "--chunks-size", "3"])
+            .arg(&mcap),
+    );
+    assert!(e.contains("--format lerobot only"), "{e}");
 }

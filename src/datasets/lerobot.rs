@@ -37,6 +37,87 @@ pub const FPS: u32 = 20;
 /// LeRobot's format version written.
 pub const CODEBASE_VERSION: &str = "v3.0";
 
+/// LeRobot's `DEFAULT_CHUNK_SIZE`: files per `chunk-NNN` folder.
+pub const DEFAULT_CHUNK_SIZE: usize = 1000;
+/// LeRobot's `DEFAULT_DATA_FILE_SIZE_IN_MB` (data and meta/episodes parquet files).
+pub const DEFAULT_DATA_FILE_SIZE_IN_MB: f64 = 100.0;
+/// LeRobot's `DEFAULT_VIDEO_FILE_SIZE_IN_MB` (lerobot 0.4.4; 0.4.0 to 0.4.3 used 500).
+pub const DEFAULT_VIDEO_FILE_SIZE_IN_MB: f64 = 200.0;
+
+/// How a LeRobot export splits its files, as LeRobot's own writer does (info.json's
+/// `chunks_size`, `data_files_size_in_mb`, `video_files_size_in_mb`). Episodes are never
+/// split: an episode goes into a new file when the current file already holds episodes and
+/// its size plus the episode's would reach the limit; after `chunks_size` files the next
+/// file opens a new chunk folder. A megabyte is 1024² bytes, as in LeRobot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// Files per chunk folder (≥ 1).
+    pub chunks_size: usize,
+    /// Size limit of data and meta/episodes parquet files in MB (> 0; fractions allowed).
+    pub data_files_size_in_mb: f64,
+    /// Size limit of video files in MB (> 0; fractions allowed).
+    pub video_files_size_in_mb: f64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            chunks_size: DEFAULT_CHUNK_SIZE,
+            data_files_size_in_mb: DEFAULT_DATA_FILE_SIZE_IN_MB,
+            video_files_size_in_mb: DEFAULT_VIDEO_FILE_SIZE_IN_MB,
+        }
+    }
+}
+
+impl Limits {
+    /// An error naming the first bad limit.
+    pub fn validate(&self) -> Result<(), DatasetError> {
+        let bad = |name: &str, v: String, valid: &str| {
+            Err(DatasetError::Invalid {
+                msg: format!("{name} {v} is invalid; valid: {valid}"),
+            })
+        };
+        if self.chunks_size == 0 {
+            return bad("chunks_size", "0".into(), "an integer >= 1");
+        }
+        for (name, v) in [
+            ("data_files_size_in_mb", self.data_files_size_in_mb),
+            ("video_files_size_in_mb", self.video_files_size_in_mb),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(name, v.to_string(), "a number of megabytes > 0");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Bytes per megabyte (LeRobot's `get_file_size_in_mb` divides by 1024²).
+const MB: f64 = 1024.0 * 1024.0;
+
+/// The (chunk, file) after `at` (LeRobot's `update_chunk_file_indices`).
+fn next_file(at: (usize, usize), chunks_size: usize) -> (usize, usize) {
+    if at.1 + 1 >= chunks_size {
+        (at.0 + 1, 0)
+    } else {
+        (at.0, at.1 + 1)
+    }
+}
+
+/// `<prefix>/chunk-CCC/file-FFF.<ext>`.
+fn chunk_file(prefix: &str, at: (usize, usize), ext: &str) -> String {
+    format!("{prefix}/chunk-{:03}/file-{:03}.{ext}", at.0, at.1)
+}
+
+/// A JSON number: an integer when whole (info.json's sizes as LeRobot writes them).
+fn mb_json(v: f64) -> Value {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        json!(v as i64)
+    } else {
+        json!(v)
+    }
+}
+
 /// The task description of an env (ManiSkill's own wording), stored in `meta/tasks.parquet`.
 pub fn task_description(env_id: &str) -> String {
     match env_id {
@@ -370,16 +451,113 @@ fn write_parquet(out: &Path, final_path: &Path, batch: &RecordBatch) -> Result<(
     Ok(())
 }
 
-/// One camera's video, muxed into `out`; returns (width, height, image stats per episode).
+/// Writes one parquet file per (chunk, file) under `tmp/<prefix>/`: piece `k` (one episode's
+/// rows, or one episode's row of meta/episodes) of `rows_of(k)` rows is built by
+/// `make(k, (chunk, file))` and appended to the current file, unless that file already holds
+/// rows and its size plus the piece's expected size (the file's average bytes per row times
+/// the piece's rows, LeRobot's rule) reaches `limit_mb`: then the next file is opened.
+/// `flush_each`: every piece is its own row group (LeRobot's data files: one table per
+/// episode) and the file's size is the bytes written; otherwise the rows stay in one row
+/// group and the size is the writer's estimate of the buffered rows. Returns every piece's
+/// (chunk, file).
+#[allow(clippy::too_many_arguments)]
+fn write_split_parquet(
+    tmp: &Path,
+    dir: &Path,
+    prefix: &str,
+    pieces: usize,
+    rows_of: impl Fn(usize) -> usize,
+    make: impl Fn(usize, (usize, usize)) -> Result<RecordBatch, DatasetError>,
+    limits: (f64, usize),
+    flush_each: bool,
+) -> Result<Vec<(usize, usize)>, DatasetError> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::basic::Compression;
+    use parquet::file::properties::WriterProperties;
+    let (limit_mb, chunks_size) = limits;
+    let mut at = (0, 0);
+    let mut current: Option<(ArrowWriter<std::fs::File>, PathBuf)> = None;
+    let mut rows_in_file = 0usize;
+    let mut out = Vec::with_capacity(pieces);
+    let close = |w: ArrowWriter<std::fs::File>, path: &Path| {
+        w.close().map_err(|source| DatasetError::Parquet {
+            path: path.to_path_buf(),
+            source,
+        })
+    };
+    for k in 0..pieces {
+        let n = rows_of(k);
+        if let Some((w, _)) = &current {
+            let size = (w.bytes_written() + w.in_progress_size()) as f64;
+            let per_row = size / rows_in_file.max(1) as f64;
+            if rows_in_file > 0 && size + per_row * n as f64 >= limit_mb * MB {
+                let (w, path) = current.take().expect("checked above");
+                close(w, &path)?;
+                at = next_file(at, chunks_size);
+                rows_in_file = 0;
+            }
+        }
+        let batch = make(k, at)?;
+        if current.is_none() {
+            let rel = chunk_file(prefix, at, "parquet");
+            let (out_path, final_path) = (tmp.join(&rel), dir.join(&rel));
+            if let Some(d) = out_path.parent() {
+                std::fs::create_dir_all(d).map_err(DatasetError::io(&final_path))?;
+            }
+            let file = std::fs::File::create(&out_path).map_err(DatasetError::io(&final_path))?;
+            let props = WriterProperties::builder()
+                .set_compression(Compression::SNAPPY)
+                .build();
+            let w = ArrowWriter::try_new(file, batch.schema(), Some(props)).map_err(|source| {
+                DatasetError::Parquet {
+                    path: final_path.clone(),
+                    source,
+                }
+            })?;
+            current = Some((w, final_path));
+        }
+        let (w, path) = current.as_mut().expect("opened above");
+        let perr = |source| DatasetError::Parquet {
+            path: path.clone(),
+            source,
+        };
+        w.write(&batch).map_err(perr)?;
+        if flush_each {
+            w.flush().map_err(|source| DatasetError::Parquet {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        rows_in_file += n;
+        out.push(at);
+    }
+    if let Some((w, path)) = current {
+        close(w, &path)?;
+    }
+    Ok(out)
+}
+
+/// Where one episode's frames went in a camera's videos: (chunk, file), and its first and
+/// end timestamps in that file (seconds).
+type VideoPlace = ((usize, usize), f64, f64);
+
+/// One camera's video, muxed into files `tmp/<prefix>/chunk-CCC/file-FFF.mp4`, split as
+/// LeRobot's writer does: an episode opens the next file when the current one holds
+/// episodes and its size plus the episode's (the bytes of its encoded frames) reaches the
+/// limit; every file's timestamps start at 0. Returns (width, height, image stats per
+/// episode, every episode's place).
 fn write_video(
-    out: &Path,
-    final_path: &Path,
+    tmp: &Path,
+    dir: &Path,
+    prefix: &str,
     cam: &Camera,
     episodes: &[&EpisodeRec],
-) -> Result<(usize, usize, Vec<ImageStats>), DatasetError> {
+    limits: (f64, usize),
+) -> Result<(usize, usize, Vec<ImageStats>, Vec<VideoPlace>), DatasetError> {
     use openh264::formats::YUVSource;
+    let final_path = dir.join(prefix);
     let verr = |msg: String| DatasetError::Video {
-        path: final_path.to_path_buf(),
+        path: final_path.clone(),
         msg,
     };
     // The access units, re-encoding PNG frames.
@@ -491,32 +669,80 @@ fn write_video(
         }
     }
     let (w, h) = size.ok_or_else(|| verr(format!("camera {} has no frame", cam.name)))?;
-    if let Some(dir) = out.parent() {
-        std::fs::create_dir_all(dir).map_err(DatasetError::io(final_path))?;
+    // Split the episodes over files.
+    let (limit_mb, chunks_size) = limits;
+    let mut groups: Vec<((usize, usize), std::ops::Range<usize>)> = Vec::new();
+    let mut places = Vec::with_capacity(episodes.len());
+    let (mut file_bytes, mut file_rows) = (0usize, 0usize);
+    let mut start = 0;
+    for &end in &ends {
+        let ep_bytes: usize = units[start..end].iter().map(Vec::len).sum();
+        let roll = file_rows > 0 && (file_bytes + ep_bytes) as f64 >= limit_mb * MB;
+        match groups.last().map(|g| g.0) {
+            None => groups.push(((0, 0), start..end)),
+            Some(at) if roll => {
+                groups.push((next_file(at, chunks_size), start..end));
+                file_bytes = 0;
+                file_rows = 0;
+            }
+            Some(_) => groups.last_mut().expect("non-empty").1.end = end,
+        }
+        let at = groups.last().expect("pushed above").0;
+        places.push((
+            at,
+            file_rows as f64 / FPS as f64,
+            (file_rows + end - start) as f64 / FPS as f64,
+        ));
+        file_bytes += ep_bytes;
+        file_rows += end - start;
+        start = end;
     }
-    let file = std::fs::File::create(out).map_err(DatasetError::io(final_path))?;
-    let mut mux = muxide::api::MuxerBuilder::new(std::io::BufWriter::new(file))
-        .video(
-            muxide::api::VideoCodec::H264,
-            w as u32,
-            h as u32,
-            FPS as f64,
-        )
-        .with_fast_start(true)
-        .build()
-        .map_err(|e| verr(e.to_string()))?;
-    for (i, u) in units.iter().enumerate() {
-        mux.write_video(i as f64 / FPS as f64, u, is_idr(u))
-            .map_err(|e| verr(format!("frame {i}: {e}")))?;
+    for (at, range) in groups {
+        let rel = chunk_file(prefix, at, "mp4");
+        let (out, final_path) = (tmp.join(&rel), dir.join(&rel));
+        let verr = |msg: String| DatasetError::Video {
+            path: final_path.clone(),
+            msg,
+        };
+        if let Some(d) = out.parent() {
+            std::fs::create_dir_all(d).map_err(DatasetError::io(&final_path))?;
+        }
+        let file = std::fs::File::create(&out).map_err(DatasetError::io(&final_path))?;
+        let mut mux = muxide::api::MuxerBuilder::new(std::io::BufWriter::new(file))
+            .video(
+                muxide::api::VideoCodec::H264,
+                w as u32,
+                h as u32,
+                FPS as f64,
+            )
+            .with_fast_start(true)
+            .build()
+            .map_err(|e| verr(e.to_string()))?;
+        for (i, u) in units[range].iter().enumerate() {
+            mux.write_video(i as f64 / FPS as f64, u, is_idr(u))
+                .map_err(|e| verr(format!("frame {i}: {e}")))?;
+        }
+        mux.finish().map_err(|e| verr(e.to_string()))?;
     }
-    mux.finish().map_err(|e| verr(e.to_string()))?;
-    Ok((w, h, stats))
+    Ok((w, h, stats, places))
 }
 
 /// Exports the finished episodes of the recording `path` as a LeRobotDataset v3 in `dir`
 /// (which must not exist, or be empty). `video`: `Some(true)` requires camera frames,
-/// `Some(false)` leaves them out, `None` exports whatever cameras the recording has.
+/// `Some(false)` leaves them out, `None` exports whatever cameras the recording has. Files
+/// are split by LeRobot's default [`Limits`].
 pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSummary, DatasetError> {
+    write_with_limits(path, dir, video, &Limits::default())
+}
+
+/// [`write`], splitting data, video and meta/episodes files by `limits`.
+pub fn write_with_limits(
+    path: &Path,
+    dir: &Path,
+    video: Option<bool>,
+    limits: &Limits,
+) -> Result<ExportSummary, DatasetError> {
+    limits.validate()?;
     if dir.exists() {
         let empty = dir.is_dir()
             && std::fs::read_dir(dir)
@@ -710,17 +936,29 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     let mut staged = super::Staged::default();
     let tmp = staged.add(dir);
     std::fs::create_dir_all(&tmp).map_err(DatasetError::io(dir))?;
-    write_parquet(
-        &tmp.join("data/chunk-000/file-000.parquet"),
-        &dir.join("data/chunk-000/file-000.parquet"),
-        &data,
+    let data_limits = (limits.data_files_size_in_mb, limits.chunks_size);
+    let data_at = write_split_parquet(
+        &tmp,
+        dir,
+        "data",
+        ep_rows.len(),
+        |k| ep_rows[k].1 - ep_rows[k].0,
+        |k, _| Ok(data.slice(ep_rows[k].0, ep_rows[k].1 - ep_rows[k].0)),
+        data_limits,
+        true,
     )?;
     let mut videos = Vec::new();
     let mut ep_video_cols: Vec<(Field, ArrayRef)> = Vec::new();
     for cam in &cams {
         let key = format!("observation.images.{}", cam.name);
-        let rel = format!("videos/{key}/chunk-000/file-000.mp4");
-        let (w, h, per_episode) = write_video(&tmp.join(&rel), &dir.join(&rel), cam, &episodes)?;
+        let (w, h, per_episode, places) = write_video(
+            &tmp,
+            dir,
+            &format!("videos/{key}"),
+            cam,
+            &episodes,
+            (limits.video_files_size_in_mb, limits.chunks_size),
+        )?;
         let mut total = ImageStats::default();
         for st in &per_episode {
             total.merge(st);
@@ -744,23 +982,21 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
             per_episode.iter().map(ImageStats::stats).collect(),
         ));
         videos.push((cam.name.clone(), rows));
-        let zeros: ArrayRef = Arc::new(Int64Array::from(vec![0i64; episodes.len()]));
+        let ints = |f: &dyn Fn(&VideoPlace) -> usize| -> ArrayRef {
+            Arc::new(Int64Array::from(
+                places.iter().map(|p| f(p) as i64).collect::<Vec<_>>(),
+            ))
+        };
         ep_video_cols.push((
             Field::new(format!("videos/{key}/chunk_index"), DataType::Int64, false),
-            zeros.clone(),
+            ints(&|p| p.0 .0),
         ));
         ep_video_cols.push((
             Field::new(format!("videos/{key}/file_index"), DataType::Int64, false),
-            zeros,
+            ints(&|p| p.0 .1),
         ));
-        let from: Vec<f64> = ep_rows
-            .iter()
-            .map(|(a, _)| *a as f64 / FPS as f64)
-            .collect();
-        let to: Vec<f64> = ep_rows
-            .iter()
-            .map(|(_, b)| *b as f64 / FPS as f64)
-            .collect();
+        let from: Vec<f64> = places.iter().map(|p| p.1).collect();
+        let to: Vec<f64> = places.iter().map(|p| p.2).collect();
         ep_video_cols.push((
             Field::new(
                 format!("videos/{key}/from_timestamp"),
@@ -800,7 +1036,11 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
         Field::new("dataset_from_index", DataType::Int64, false),
         Field::new("dataset_to_index", DataType::Int64, false),
     ];
-    let zeros: ArrayRef = Arc::new(Int64Array::from(vec![0i64; n]));
+    let data_col = |f: fn(&(usize, usize)) -> usize| -> ArrayRef {
+        Arc::new(Int64Array::from(
+            data_at.iter().map(|p| f(p) as i64).collect::<Vec<_>>(),
+        ))
+    };
     let mut ep_cols: Vec<ArrayRef> = vec![
         Arc::new(Int64Array::from((0..n as i64).collect::<Vec<_>>())),
         Arc::new(tasks_col.finish()),
@@ -810,8 +1050,8 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
                 .map(|(a, b)| (b - a) as i64)
                 .collect::<Vec<_>>(),
         )),
-        zeros.clone(),
-        zeros.clone(),
+        data_col(|p| p.0),
+        data_col(|p| p.1),
         Arc::new(Int64Array::from(
             ep_rows.iter().map(|(a, _)| *a as i64).collect::<Vec<_>>(),
         )),
@@ -838,18 +1078,28 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
         DataType::Int64,
         false,
     ));
-    ep_cols.push(zeros.clone());
     ep_fields.push(Field::new(
         "meta/episodes/file_index",
         DataType::Int64,
         false,
     ));
-    ep_cols.push(zeros);
-    let ep_batch = RecordBatch::try_new(Arc::new(Schema::new(ep_fields)), ep_cols).map_err(aerr)?;
-    write_parquet(
-        &tmp.join("meta/episodes/chunk-000/file-000.parquet"),
-        &dir.join("meta/episodes/chunk-000/file-000.parquet"),
-        &ep_batch,
+    let ep_schema = Arc::new(Schema::new(ep_fields));
+    // Every episode's row, with the meta/episodes file it goes into.
+    let ep_row = |k: usize, at: (usize, usize)| -> Result<RecordBatch, DatasetError> {
+        let mut cols: Vec<ArrayRef> = ep_cols.iter().map(|c| c.slice(k, 1)).collect();
+        cols.push(Arc::new(Int64Array::from(vec![at.0 as i64])));
+        cols.push(Arc::new(Int64Array::from(vec![at.1 as i64])));
+        RecordBatch::try_new(ep_schema.clone(), cols).map_err(aerr)
+    };
+    write_split_parquet(
+        &tmp,
+        dir,
+        "meta/episodes",
+        n,
+        |_| 1,
+        ep_row,
+        data_limits,
+        false,
     )?;
 
     // Tasks: the task string is the pandas index (LeRobot reads it with pandas).
@@ -891,9 +1141,9 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
         "total_episodes": n,
         "total_frames": rows,
         "total_tasks": 1,
-        "chunks_size": 1000,
-        "data_files_size_in_mb": 100,
-        "video_files_size_in_mb": 500,
+        "chunks_size": limits.chunks_size,
+        "data_files_size_in_mb": mb_json(limits.data_files_size_in_mb),
+        "video_files_size_in_mb": mb_json(limits.video_files_size_in_mb),
         "fps": FPS,
         "splits": {"train": format!("0:{n}")},
         "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",

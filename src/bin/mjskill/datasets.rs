@@ -27,6 +27,16 @@ pub fn import_maniskill(
     })
 }
 
+/// `export --format lerobot`'s file size limits (None: LeRobot's default).
+pub struct LimitArgs {
+    /// `--chunks-size`.
+    pub chunks_size: Option<usize>,
+    /// `--data-files-size-in-mb`.
+    pub data_files_size_in_mb: Option<f64>,
+    /// `--video-files-size-in-mb`.
+    pub video_files_size_in_mb: Option<f64>,
+}
+
 /// Runs `export`.
 pub fn export(
     file: &Path,
@@ -35,7 +45,11 @@ pub fn export(
     json: Option<&Path>,
     video: Option<bool>,
     control_mode: Option<&str>,
+    limits: LimitArgs,
 ) -> Result<export::ExportSummary, DatasetError> {
+    let any_limit = limits.chunks_size.is_some()
+        || limits.data_files_size_in_mb.is_some()
+        || limits.video_files_size_in_mb.is_some();
     let format = Format::parse(format)?;
     let output = output.unwrap_or_else(|| export::default_output(file, format));
     match format {
@@ -44,6 +58,13 @@ pub fn export(
                 return Err(DatasetError::Invalid {
                     msg: "--video yes applies to --format lerobot only (ManiSkill's trajectory \
                           format holds no video)"
+                        .into(),
+                });
+            }
+            if any_limit {
+                return Err(DatasetError::Invalid {
+                    msg: "--chunks-size, --data-files-size-in-mb and --video-files-size-in-mb \
+                          apply to --format lerobot only"
                         .into(),
                 });
             }
@@ -60,7 +81,17 @@ pub fn export(
                     msg: "--control-mode applies to --format maniskill only".into(),
                 });
             }
-            mjskill::datasets::lerobot::write(file, &output, video)
+            let d = mjskill::datasets::lerobot::Limits::default();
+            let limits = mjskill::datasets::lerobot::Limits {
+                chunks_size: limits.chunks_size.unwrap_or(d.chunks_size),
+                data_files_size_in_mb: limits
+                    .data_files_size_in_mb
+                    .unwrap_or(d.data_files_size_in_mb),
+                video_files_size_in_mb: limits
+                    .video_files_size_in_mb
+                    .unwrap_or(d.video_files_size_in_mb),
+            };
+            mjskill::datasets::lerobot::write_with_limits(file, &output, video, &limits)
         }
     }
 }

@@ -322,6 +322,16 @@ pub enum Command {
         /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
         #[arg(long)]
         control_mode: Option<String>,
+        /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
+        #[arg(long)]
+        chunks_size: Option<usize>,
+        /// --format lerobot: size limit of data and meta/episodes parquet files in MB
+        /// (default 100); an episode that would reach it starts the next file.
+        #[arg(long)]
+        data_files_size_in_mb: Option<f64>,
+        /// --format lerobot: size limit of video files in MB (default 200).
+        #[arg(long)]
+        video_files_size_in_mb: Option<f64>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -512,6 +522,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             json,
             video,
             control_mode,
+            chunks_size,
+            data_files_size_in_mb,
+            video_files_size_in_mb,
         } => {
             let r = datasets::export(
                 &file,
@@ -520,6 +533,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 json.as_deref(),
                 video,
                 control_mode.as_deref(),
+                datasets::LimitArgs {
+                    chunks_size,
+                    data_files_size_in_mb,
+                    video_files_size_in_mb,
+                },
             )?;
             out!("{}", serde_json::to_string(&r)?);
             Ok(())
