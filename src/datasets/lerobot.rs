@@ -9,6 +9,9 @@
 //! videos/observation.images.<camera>/chunk-000/file-000.mp4   H.264, every episode one after another
 //! ```
 //!
+//! Larger datasets continue in `file-001`, ... and `chunk-001`, ..., split by [`Limits`] as
+//! LeRobot's writer splits them (episodes whole); meta/episodes says where each episode is.
+//!
 //! Row t of an episode holds `observation.state` (the obs before action t), `action`,
 //! `next.reward`, `next.done` (true on the episode's last row), `next.success`, `timestamp`
 //! (t / fps), `frame_index` (t), `episode_index`, `index` (the row's position in the dataset)
