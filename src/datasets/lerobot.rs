@@ -75,7 +75,7 @@ impl Default for Limits {
 impl Limits {
     /// An error naming the first bad limit.
     pub fn validate(&self) -> Result<(), DatasetError> {
-        let bad = |name: &str, v: String, valid: &str| {
+        let bad = |name: &str, v: String, valid: &str| -> Result<(), DatasetError> {
             Err(DatasetError::Invalid {
                 msg: format!("{name} {v} is invalid; valid: {valid}"),
             })
@@ -490,15 +490,16 @@ fn write_split_parquet(
     };
     for k in 0..pieces {
         let n = rows_of(k);
-        if let Some((w, _)) = &current {
+        let full = current.as_ref().is_some_and(|(w, _)| {
             let size = (w.bytes_written() + w.in_progress_size()) as f64;
             let per_row = size / rows_in_file.max(1) as f64;
-            if rows_in_file > 0 && size + per_row * n as f64 >= limit_mb * MB {
-                let (w, path) = current.take().expect("checked above");
-                close(w, &path)?;
-                at = next_file(at, chunks_size);
-                rows_in_file = 0;
-            }
+            rows_in_file > 0 && size + per_row * n as f64 >= limit_mb * MB
+        });
+        if full {
+            let (w, path) = current.take().expect("checked above");
+            close(w, &path)?;
+            at = next_file(at, chunks_size);
+            rows_in_file = 0;
         }
         let batch = make(k, at)?;
         if current.is_none() {
