@@ -986,18 +986,18 @@ pub fn write_with_limits(
             per_episode.iter().map(ImageStats::stats).collect(),
         ));
         videos.push((cam.name.clone(), rows));
-        let ints = |f: &dyn Fn(&VideoPlace) -> usize| -> ArrayRef {
+        let place_col = |f: &dyn Fn(&VideoPlace) -> usize| -> ArrayRef {
             Arc::new(Int64Array::from(
                 places.iter().map(|p| f(p) as i64).collect::<Vec<_>>(),
             ))
         };
         ep_video_cols.push((
             Field::new(format!("videos/{key}/chunk_index"), DataType::Int64, false),
-            ints(&|p| p.0 .0),
+            place_col(&|p| p.0 .0),
         ));
         ep_video_cols.push((
             Field::new(format!("videos/{key}/file_index"), DataType::Int64, false),
-            ints(&|p| p.0 .1),
+            place_col(&|p| p.0 .1),
         ));
         let from: Vec<f64> = places.iter().map(|p| p.1).collect();
         let to: Vec<f64> = places.iter().map(|p| p.2).collect();
