@@ -55,15 +55,17 @@ mod tests;
 
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
+pub use env::vec::MAX_NUM_ENVS;
 pub use env::{
-    default_robot, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage, Env, EnvConfig,
-    EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, RewardMode, SimConfig, StateDict,
-    StateDictError, Step, VecEnv, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
+    default_robot, depth_to_mm, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage,
+    DriveTargets, Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, PointCloud,
+    RewardMode, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv, CONTROL_FREQ,
+    DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use mjcf::urdf::RobotError as UrdfError;
 pub use mjcf::{Mjcf, SceneError};
 pub use models::ModelFileError;
-pub use mujoco::render::{RenderError, RenderOptions};
+pub use mujoco::render::{RenderError, RenderOptions, Segmentation};
 pub use record::{RecordError, Recorder};
 pub use robots::{robot_scene_mjcf, RobotError, RobotId};
 pub use tasks::CameraDef;

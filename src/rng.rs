@@ -134,17 +134,41 @@ impl Mt19937 {
     }
 }
 
+/// Largest magnitude of a cached Gaussian ([`NumpyRandomState`]'s `gauss_bits`) that
+/// deserialisation accepts.
+///
+/// The polar method cannot produce more: `x1`, `x2` are `2·d − 1` with `d` a multiple of
+/// 2⁻⁵³, so they are multiples of 2⁻⁵² and a non-zero `r2 = x1² + x2²` is at least 2⁻¹⁰⁴;
+/// the cached value `f·x1 = √(−2·ln r2 / r2)·x1` has `|f·x1| ≤ √(−2·ln r2) ≤ √(208·ln 2) ≈
+/// 12.0081`. The bound leaves room for rounding; a non-finite or larger value cannot be a
+/// cached standard-normal sample of this generator (it would turn the next unseeded reset's
+/// joint noise into NaN or a huge offset).
+pub const MAX_CACHED_GAUSS: f64 = 12.01;
+
 /// Serde helper storing an `Option<f64>` as its IEEE-754 bit pattern (`Option<u64>`), so the
 /// cached Gaussian survives a JSON round trip bit-exactly regardless of the float parser.
+/// Deserialisation rejects a value that is not finite or exceeds ±[`MAX_CACHED_GAUSS`].
 mod f64_bits_opt {
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+    use serde::{de::Error, Deserialize, Deserializer, Serialize, Serializer};
 
     pub fn serialize<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
         v.map(f64::to_bits).serialize(s)
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
-        Ok(Option::<u64>::deserialize(d)?.map(f64::from_bits))
+        let Some(bits) = Option::<u64>::deserialize(d)? else {
+            return Ok(None);
+        };
+        let g = f64::from_bits(bits);
+        if g.is_finite() && g.abs() <= super::MAX_CACHED_GAUSS {
+            Ok(Some(g))
+        } else {
+            Err(D::Error::custom(format!(
+                "gauss_bits = {bits:#018x} ({g:e}) is not a cached standard-normal sample: it \
+                 must be finite with |value| ≤ {} (the most the polar method yields), or null",
+                super::MAX_CACHED_GAUSS
+            )))
+        }
     }
 }
 
@@ -493,6 +517,31 @@ mod tests {
         }
         // A fresh RandomState (seeded reset) discards the cache.
         assert!(!NumpyRandomState::new(0).has_cached_gauss());
+    }
+
+    #[test]
+    fn cached_gauss_bound_covers_the_polar_method_and_rejects_the_rest() {
+        // The largest cached value the polar method can yield: x1 = 2⁻⁵², x2 = 0.
+        let x1 = 2f64.powi(-52);
+        let r2 = x1 * x1;
+        let max = (-2.0 * r2.ln() / r2).sqrt() * x1;
+        assert!(max > 12.0 && max <= MAX_CACHED_GAUSS, "{max}");
+        let mut rs = NumpyRandomState::new(0);
+        rs.fill_normal(0.0, 1.0, &mut [0.0; 3]);
+        let json = serde_json::to_string(&rs).unwrap();
+        let cached = rs.gauss.unwrap().to_bits();
+        assert!(json.contains(&format!("\"gauss_bits\":{cached}")), "{json}");
+        let with = |bits: u64| json.replace(&cached.to_string(), &bits.to_string());
+        for ok in [max, -max, 0.0, -1.5] {
+            let back: NumpyRandomState = serde_json::from_str(&with(ok.to_bits())).unwrap();
+            assert_eq!(back.gauss, Some(ok));
+        }
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -12.02] {
+            let e = serde_json::from_str::<NumpyRandomState>(&with(bad.to_bits()))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("gauss_bits = 0x") && e.contains("12.01"), "{e}");
+        }
     }
 
     /// Panda rest qpos + N(0, 0.02) noise on all 9 entries (fingers then reset to 0.04),

@@ -109,10 +109,11 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         0,
         "rgbd step or render allocated"
     );
-    // Fetch renders its two mounted cameras too, into buffers of their own.
+    // Fetch renders its two mounted cameras too, into buffers of their own; the point cloud
+    // mode renders colour, depth and segmentation of all three and fuses them in place.
     let config = mjskill::EnvConfig {
         robot: Some("fetch".into()),
-        obs_mode: mjskill::ObsMode::Rgbd,
+        obs_mode: mjskill::ObsMode::PointCloud,
         ..Default::default()
     };
     let mut env = mjskill::make("PickCube-v1", config).unwrap();
@@ -125,19 +126,21 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         for cam in ["fetch_head", "fetch_hand"] {
             let img = env.image(cam).unwrap();
             sum += img.rgb.unwrap()[0] as u64 + img.depth.unwrap()[0] as u64;
+            sum += img.segmentation.unwrap()[0] as u64 + img.depth_mm.unwrap()[0] as u64;
         }
+        sum += env.point_cloud().unwrap().xyzw[0] as u64;
     }
     COUNTING.store(false, Ordering::SeqCst);
     assert_eq!(
         ALLOCS.load(Ordering::SeqCst),
         0,
-        "fetch rgbd step allocated"
+        "fetch pointcloud step allocated"
     );
     // A visual-mode VecEnv: workers render into their envs' buffers, pack the pixels into the
     // image cells made by `VecEnv::new`, and the caller unpacks them into its own buffers.
     let config = mjskill::EnvConfig {
         robot: Some("fetch".into()),
-        obs_mode: mjskill::ObsMode::Rgbd,
+        obs_mode: mjskill::ObsMode::RgbDepthSegmentation,
         ..Default::default()
     };
     let mut v = mjskill::VecEnv::new("PickCube-v1", config, 3, 2).unwrap();
@@ -153,6 +156,7 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
             for cam in v.sensor_names() {
                 let img = v.image(i, cam).unwrap();
                 sum += img.rgb.unwrap()[0] as u64 + img.depth.unwrap()[0] as u64;
+                sum += img.segmentation.unwrap()[0] as u64;
             }
         }
     }
@@ -160,7 +164,7 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
     assert_eq!(
         ALLOCS.load(Ordering::SeqCst),
         0,
-        "rgbd VecEnv step allocated"
+        "rgb+depth+segmentation VecEnv step allocated"
     );
     std::hint::black_box(sum);
 }

@@ -867,3 +867,620 @@ fn recordings_with_png_frames_still_read_and_export_to_lerobot() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn mjskill() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mjskill"))
+}
+
+/// Runs `cmd`, expects a clean failure (an exit code, no signal) and returns its stderr.
+fn fails(cmd: &mut Command) -> String {
+    let o = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        o.status.code().is_some_and(|c| c != 0),
+        "{cmd:?} should fail with an exit code: {:?} {err}",
+        o.status
+    );
+    err
+}
+
+/// The file type of `p` (not following a symbolic link).
+fn file_type(p: &Path) -> std::fs::FileType {
+    std::fs::symlink_metadata(p).unwrap().file_type()
+}
+
+#[test]
+fn export_never_writes_over_its_input_or_one_output_over_another() {
+    let dir = tmp_dir("export-clobber");
+    let src = dir.join("src.mcap");
+    record_rollout(&src, 1, 3, false);
+    let original = std::fs::read(&src).unwrap();
+    std::fs::hard_link(&src, dir.join("hard.h5")).unwrap();
+    std::os::unix::fs::symlink(&src, dir.join("soft.h5")).unwrap();
+    std::fs::create_dir(dir.join("sub")).unwrap();
+    std::fs::write(dir.join("t3b.h5"), b"old t3b").unwrap();
+    std::fs::write(dir.join("same.json"), b"old same").unwrap();
+    let before = listing(&dir);
+    let export = |args: &[&str]| {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["export", "src.mcap", "--format", "maniskill"])
+            .args(args);
+        c
+    };
+    // The output is the recording: by its name, through `..`, a hard link, a symbolic link.
+    for o in ["src.mcap", "sub/../src.mcap", "hard.h5", "soft.h5"] {
+        let err = fails(&mut export(&["-o", o]));
+        assert!(
+            err.contains(&format!("-o {o} is the recording src.mcap"))
+                && err.contains("nothing was written"),
+            "{err}"
+        );
+    }
+    let err = fails(&mut export(&["-o", "t2.h5", "--json", "src.mcap"]));
+    assert!(
+        err.contains("--json src.mcap is the recording src.mcap"),
+        "{err}"
+    );
+    // The h5 and the json at one path, named or by the default json name.
+    let err = fails(&mut export(&["-o", "t3b.h5", "--json", "t3b.h5"]));
+    assert!(
+        err.contains("-o t3b.h5 and --json t3b.h5 are the same file"),
+        "{err}"
+    );
+    let err = fails(&mut export(&["-o", "same.json"]));
+    assert!(
+        err.contains("-o same.json and the json (default: -o with extension .json) same.json"),
+        "{err}"
+    );
+    let err = fails(&mut export(&["-o", "new.json"]));
+    assert!(err.contains("are the same file"), "{err}");
+    assert_eq!(std::fs::read(&src).unwrap(), original);
+    assert_eq!(std::fs::read(dir.join("t3b.h5")).unwrap(), b"old t3b");
+    assert_eq!(std::fs::read(dir.join("same.json")).unwrap(), b"old same");
+    assert_eq!(listing(&dir), before);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn export_refuses_non_regular_outputs_and_a_failed_export_leaves_nothing() {
+    let dir = tmp_dir("export-special");
+    let src = dir.join("src.mcap");
+    record_rollout(&src, 1, 3, false);
+    let fifo = dir.join("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    std::fs::create_dir(dir.join("d")).unwrap();
+    // A link to /dev/full rather than /dev/full itself: an export that renamed over it
+    // replaces the link, never the device (the test may run as root).
+    let full = dir.join("full");
+    std::os::unix::fs::symlink("/dev/full", &full).unwrap();
+    let before = listing(&dir);
+    let export = |args: &[&str]| {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["export", "src.mcap", "--format", "maniskill"])
+            .args(args);
+        c
+    };
+    // A device or a FIFO is neither replaced by a rename nor reported as written.
+    let err = fails(&mut export(&["-o", "full", "--json", "x.json"]));
+    assert!(
+        err.contains("-o full is a character device, not a regular file"),
+        "{err}"
+    );
+    assert!(file_type(&full).is_symlink());
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let err = fails(&mut export(&["-o", "t.h5", "--json", "fifo"]));
+        assert!(err.contains("--json fifo is a FIFO"), "{err}");
+        assert!(file_type(&fifo).is_fifo());
+    }
+    // --json naming a directory: refused before the h5 is written.
+    let err = fails(&mut export(&["-o", "t.h5", "--json", "d"]));
+    assert!(err.contains("--json d is a directory"), "{err}");
+    let err = fails(&mut export(&["-o", "nodir/t.h5"]));
+    assert!(err.contains("the directory nodir does not exist"), "{err}");
+    assert_eq!(listing(&dir), before);
+    // The same through the library: nothing is left behind either.
+    let e = export::to_maniskill(&src, &dir.join("t.h5"), Some(&dir.join("d")))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("is a directory"), "{e}");
+    assert_eq!(listing(&dir), before);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A copy of the PickCube demos (`v.h5`, `v.json`) in `dir`.
+fn demo_copy(dir: &Path) -> (PathBuf, PathBuf) {
+    let src = demos().join("PickCube-v1");
+    let (h5, json) = (dir.join("v.h5"), dir.join("v.json"));
+    std::fs::copy(src.join("trajectory.h5"), &h5).unwrap();
+    std::fs::copy(src.join("trajectory.json"), &json).unwrap();
+    (h5, json)
+}
+
+#[test]
+fn import_never_writes_over_its_input() {
+    let dir = tmp_dir("import-clobber");
+    let (h5, json) = demo_copy(&dir);
+    let (h5_bytes, json_bytes) = (std::fs::read(&h5).unwrap(), std::fs::read(&json).unwrap());
+    for (out, named) in [
+        ("v.h5", "the h5 v.h5"),
+        (
+            "v.json",
+            "the json (default: the h5 with extension .json) v.json",
+        ),
+    ] {
+        let err =
+            fails(
+                mjskill()
+                    .current_dir(&dir)
+                    .args(["import-maniskill", "v.h5", "--out", out]),
+            );
+        assert!(err.contains(&format!("--out {out} is {named}")), "{err}");
+    }
+    let err = fails(mjskill().current_dir(&dir).args([
+        "import-maniskill",
+        "v.h5",
+        "--json",
+        "v.json",
+        "--out",
+        "./v.json",
+    ]));
+    assert!(err.contains("--out ./v.json is --json v.json"), "{err}");
+    // A link to /dev/full (never the device itself: see the export test).
+    std::os::unix::fs::symlink("/dev/full", dir.join("full")).unwrap();
+    let err =
+        fails(
+            mjskill()
+                .current_dir(&dir)
+                .args(["import-maniskill", "v.h5", "--out", "full"]),
+        );
+    assert!(err.contains("--out full is a character device"), "{err}");
+    assert!(file_type(&dir.join("full")).is_symlink());
+    assert_eq!(std::fs::read(&h5).unwrap(), h5_bytes);
+    assert_eq!(std::fs::read(&json).unwrap(), json_bytes);
+    assert_eq!(listing(&dir), ["full", "v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Replaces `traj_0/actions` of `h5` by a chunked dataset of `shape` that holds no data (it
+/// reads as zeros): a few KB on disk, `shape` in memory.
+fn declare_actions(h5: &Path, shape: (usize, usize)) {
+    let f = hdf5_metno::File::open_rw(h5).unwrap();
+    let g = f.group("traj_0").unwrap();
+    g.unlink("actions").unwrap();
+    g.new_dataset::<f32>()
+        .chunk((shape.0.min(1 << 16), shape.1.min(8)))
+        .shape(shape)
+        .create("actions")
+        .unwrap();
+    f.close().unwrap();
+}
+
+#[test]
+fn import_checks_declared_shapes_before_reading() {
+    let dir = tmp_dir("import-shapes");
+    let (h5, json) = demo_copy(&dir);
+    declare_actions(&h5, (2_000_000_000, 8));
+    assert!(std::fs::metadata(&h5).unwrap().len() < 1 << 20);
+    let import = || {
+        let mut c = mjskill();
+        c.current_dir(&dir)
+            .args(["import-maniskill", "v.h5", "--out", "o.mcap"]);
+        c
+    };
+    let err = fails(&mut import());
+    assert!(
+        err.contains("traj_0/actions declares 2000000000 rows, expected 82")
+            && err.contains("elapsed_steps"),
+        "{err}"
+    );
+    // A json that agrees with the declared shape is refused by the step limit.
+    let text = std::fs::read_to_string(&json).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["episodes"][0]["elapsed_steps"] = 2_000_000_000u32.into();
+    std::fs::write(&json, v.to_string()).unwrap();
+    let err = fails(&mut import());
+    assert!(
+        err.contains("episode 0: elapsed_steps 2000000000 exceeds the limit of 100000"),
+        "{err}"
+    );
+    // Too many columns.
+    std::fs::write(&json, &text).unwrap();
+    declare_actions(&h5, (82, 1 << 20));
+    let err = fails(&mut import());
+    assert!(
+        err.contains("traj_0/actions declares 1048576 columns, beyond the limit of 4096"),
+        "{err}"
+    );
+    assert_eq!(listing(&dir), ["v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// An edit of a trajectory json.
+type JsonEdit = Box<dyn Fn(&mut serde_json::Value)>;
+
+#[test]
+fn import_rejects_a_json_that_disagrees_with_itself_or_the_h5() {
+    let dir = tmp_dir("import-json");
+    let (_, json) = demo_copy(&dir);
+    let text = std::fs::read_to_string(&json).unwrap();
+    let base: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let cases: Vec<(&str, JsonEdit, &str)> = vec![
+        (
+            "repeated episode id",
+            Box::new(|v| v["episodes"][1]["episode_id"] = 0.into()),
+            "episodes[0] and episodes[1] both have episode_id 0",
+        ),
+        (
+            "seed 2^32",
+            Box::new(|v| {
+                v["episodes"][0]["episode_seed"] = (1u64 << 32).into();
+                v["episodes"][0]["reset_kwargs"]["seed"] = (1u64 << 32).into();
+            }),
+            "episode 0: reset_kwargs.seed 4294967296 is not an integer in 0..=4294967295",
+        ),
+        (
+            "null seeds",
+            Box::new(|v| {
+                v["episodes"][1]["episode_seed"] = serde_json::Value::Null;
+                v["episodes"][1]["reset_kwargs"]["seed"] = serde_json::Value::Null;
+            }),
+            "episode 1: no seed",
+        ),
+        (
+            "seeds that disagree",
+            Box::new(|v| v["episodes"][2]["episode_seed"] = 7.into()),
+            "episode 2: reset_kwargs.seed 1302 and episode_seed 7 differ",
+        ),
+        (
+            "elapsed_steps",
+            Box::new(|v| v["episodes"][1]["elapsed_steps"] = 91.into()),
+            "traj_1/actions declares 92 rows, expected 91 (episode 1's elapsed_steps",
+        ),
+        (
+            "unknown robot",
+            Box::new(|v| v["env_info"]["env_kwargs"]["robot_uids"] = "ur5".into()),
+            "env_info.env_kwargs.robot_uids \"ur5\" is not a robot of PickCube-v1; valid: panda",
+        ),
+        (
+            "another robot",
+            Box::new(|v| v["env_info"]["env_kwargs"]["robot_uids"] = "fetch".into()),
+            "robot_uids is \"fetch\" but the h5's episodes hold the robot \"panda\"",
+        ),
+    ];
+    for (what, edit, expected) in cases {
+        let mut v = base.clone();
+        edit(&mut v);
+        std::fs::write(&json, v.to_string()).unwrap();
+        let err = fails(mjskill().current_dir(&dir).args([
+            "import-maniskill",
+            "v.h5",
+            "--out",
+            "o.mcap",
+        ]));
+        assert!(err.contains(expected), "{what}: {err}");
+        assert_eq!(listing(&dir), ["v.h5", "v.json"], "{what}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn import_by_states_names_a_row_with_a_zero_quaternion() {
+    let dir = tmp_dir("import-quat");
+    let (h5, _) = demo_copy(&dir);
+    {
+        let f = hdf5_metno::File::open_rw(&h5).unwrap();
+        let ds = f.dataset("traj_0/env_states/actors/cube").unwrap();
+        let mut v = ds.read_raw::<f32>().unwrap();
+        v[5 * 13 + 3..5 * 13 + 7].fill(0.0);
+        ds.write_raw(&v).unwrap();
+        f.close().unwrap();
+    }
+    for by in ["states", "actions"] {
+        let err = fails(mjskill().current_dir(&dir).args([
+            "import-maniskill",
+            "v.h5",
+            "--by",
+            by,
+            "--out",
+            "o.mcap",
+        ]));
+        assert!(
+            err.contains(
+                "traj_0/env_states/actors/cube row 5: the pose quaternion (w, x, y, z) \
+                 [0.0, 0.0, 0.0, 0.0] has norm 0"
+            ),
+            "{err}"
+        );
+    }
+    assert_eq!(listing(&dir), ["v.h5", "v.json"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Recomputes a LeRobot v3 dataset's statistics with numpy from its parquet rows and its
+/// decoded videos (PyAV), independently of mjskill: prints the largest deviations of
+/// `meta/stats.json` and of the per-episode `stats/<feature>/<stat>` columns, and of the
+/// per-episode stats aggregated as LeRobot's `aggregate_stats` does.
+const STATS_CHECK: &str = r#"
+import json, sys, pathlib
+import numpy as np, pyarrow.parquet as pq, av
+root = pathlib.Path(sys.argv[1])
+info = json.loads((root / "meta/info.json").read_text())
+stats = json.loads((root / "meta/stats.json").read_text())
+data = pq.read_table(root / "data/chunk-000/file-000.parquet").to_pydict()
+eps = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+Q = {"q01": 0.01, "q10": 0.10, "q50": 0.50, "q90": 0.90, "q99": 0.99}
+NAMES = ["min", "max", "mean", "std", "count"] + list(Q)
+def numpy_stats(a, axes):
+    s = {"min": a.min(axis=axes), "max": a.max(axis=axes), "mean": a.mean(axis=axes),
+         "std": a.std(axis=axes), "count": np.array([a.shape[0]])}
+    for k, q in Q.items():
+        s[k] = np.quantile(a, q, axis=axes)
+    return s
+out = {"missing": [], "dev_total": 0.0, "dev_episode": 0.0, "dev_aggregate": 0.0,
+       "dev_video": 0.0, "shapes": {}, "counts": {}}
+def dev(key, a, b):
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size != b.size:
+        out["missing"].append(f"{key}: size {a.size} vs {b.size}")
+        return 0.0
+    return float(np.abs(a.ravel() - b.ravel()).max())
+frames = {}
+for key, ft in info["features"].items():
+    if ft["dtype"] == "video":
+        path = root / info["video_path"].format(video_key=key, chunk_index=0, file_index=0)
+        with av.open(str(path)) as c:
+            imgs = [f.to_ndarray(format="rgb24") for f in c.decode(c.streams.video[0])]
+        frames[key] = np.stack(imgs).astype(np.float64) / 255.0
+for key, ft in info["features"].items():
+    video = ft["dtype"] == "video"
+    if video:
+        allrows, axes = frames[key], (0, 1, 2)
+    else:
+        allrows = np.array(data[key], dtype=np.float64)
+        allrows, axes = allrows.reshape(len(allrows), -1), 0
+    want = numpy_stats(allrows, axes)
+    for n in NAMES:
+        if n not in stats.get(key, {}):
+            out["missing"].append(f"stats.json {key}/{n}")
+            continue
+        got = np.asarray(stats[key][n], dtype=float)
+        if video and n != "count":
+            out["shapes"][key] = list(got.shape)
+        d = dev(f"{key}/{n}", got, want[n])
+        if n == "count":
+            out["counts"][key] = int(got[0])
+        elif video:
+            out["dev_video"] = max(out["dev_video"], d)
+        else:
+            out["dev_total"] = max(out["dev_total"], d)
+    per = []
+    for e in eps:
+        a, b = e["dataset_from_index"], e["dataset_to_index"]
+        w = numpy_stats(allrows[a:b], axes)
+        s = {}
+        for n in NAMES:
+            col = f"stats/{key}/{n}"
+            if col not in e:
+                out["missing"].append(col)
+                continue
+            s[n] = np.asarray(e[col], dtype=float)
+            if video and n != "count":
+                out["shapes"]["episode " + key] = list(s[n].shape)
+            d = dev(col, s[n], w[n])
+            out["dev_video" if video and n != "count" else "dev_episode"] = max(
+                out["dev_video" if video and n != "count" else "dev_episode"], d)
+        per.append(s)
+    if per and all(len(s) == len(NAMES) for s in per):
+        # LeRobot's aggregate_stats: weighted means, pooled variances, min of mins, max of maxes.
+        counts = np.array([s["count"][0] for s in per], dtype=float)
+        means = np.stack([s["mean"] for s in per])
+        c = counts.reshape((-1,) + (1,) * (means.ndim - 1))
+        mean = (means * c).sum(0) / counts.sum()
+        var = ((np.stack([s["std"] for s in per]) ** 2 + (means - mean) ** 2) * c).sum(0) / counts.sum()
+        agg = {"min": np.stack([s["min"] for s in per]).min(0), "max": np.stack([s["max"] for s in per]).max(0),
+               "mean": mean, "std": np.sqrt(var)}
+        for n, v in agg.items():
+            out["dev_aggregate"] = max(out["dev_aggregate"], dev(f"aggregate {key}/{n}", v, stats[key][n]))
+print(json.dumps(out))
+"#;
+
+#[test]
+fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
+    let dir = tmp_dir("lerobot-stats");
+    let mcap = dir.join("run.mcap");
+    record_rollout(&mcap, 2, 4, true);
+    let ds = dir.join("ds");
+    mjskill::datasets::lerobot::write(&mcap, &ds, Some(true)).unwrap();
+    let Some(py) = python() else { return };
+    let o = Command::new(py)
+        .arg("-c")
+        .arg(STATS_CHECK)
+        .arg(&ds)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["missing"], serde_json::json!([]), "{v}");
+    // Float32 data: the quantiles and moments agree with numpy's to rounding.
+    for k in ["dev_total", "dev_episode", "dev_aggregate"] {
+        assert!(v[k].as_f64().unwrap() < 1e-6, "{k}: {v}");
+    }
+    // Video statistics from mjskill's decoder against FFmpeg's (colour conversion rounding).
+    assert!(v["dev_video"].as_f64().unwrap() < 0.02, "{v}");
+    let cam = "observation.images.render_camera";
+    assert_eq!(v["shapes"][cam], serde_json::json!([3, 1, 1]));
+    assert_eq!(
+        v["shapes"][format!("episode {cam}")],
+        serde_json::json!([3, 1, 1])
+    );
+    assert_eq!(v["counts"]["action"], 8);
+    assert_eq!(v["counts"][cam], 8);
+
+fn mjskill_cli(args: &[&str], paths: &[&Path]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        .args(args)
+        .args(paths)
+        .output()
+        .unwrap()
+}
+
+/// `export --control-mode pd_joint_pos` writes the joint targets mjskill's controller set
+/// (Fetch's EE solver: the IK solution), so the episode replays in `pd_joint_pos` (which
+/// ManiSkill can build for Fetch) with the same outcome and objects.
+#[test]
+fn export_converts_fetch_ee_actions_to_joint_targets_that_replay_the_episode() {
+    let dir = tmp_dir("convert");
+    let mcap = dir.join("fetch.mcap");
+    let o = mjskill_cli(
+        &[
+            "rollout",
+            "--env",
+            "PickCube-v1",
+            "--robot",
+            "fetch",
+            "--episodes",
+            "2",
+            "--seed",
+            "3",
+            "--no-frame",
+            "--out",
+        ],
+        &[&mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = record::read(&mcap).unwrap();
+    assert_eq!(rec.meta.control_mode, "pd_ee_delta_pose");
+    let h5 = dir.join("fetch.h5");
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&h5, &mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = maniskill_h5::read(&h5, None).unwrap();
+    assert_eq!(t.json.env_info.env_kwargs["control_mode"], "pd_joint_pos");
+    for (info, (ep, rec_ep)) in t
+        .json
+        .episodes
+        .iter()
+        .zip(t.episodes.iter().zip(rec.finished()))
+    {
+        assert_eq!(info.control_mode, "pd_joint_pos");
+        // arm 7 joint targets, gripper, body 3, base 2.
+        assert_eq!(ep.action_dim, 13);
+        assert_eq!(ep.steps(), rec_ep.steps.len());
+        for (t, s) in rec_ep.steps.iter().enumerate() {
+            // The gripper, body and base parts are the recorded ones.
+            assert_eq!(ep.action(t)[7..], s.action[6..], "step {t}");
+        }
+    }
+    // Replayed in mjskill by actions: the recorded outcome, objects within 0.1 mm.
+    let r = import(&h5, None, &dir.join("back.mcap"), ReplayBy::Actions).unwrap();
+    assert_eq!(r.control_mode, "pd_joint_pos");
+    for (e, rec_ep) in r.episodes.iter().zip(rec.finished()) {
+        assert_eq!(e.by_actions_success, rec_ep.success, "seed {:?}", e.seed);
+        assert_eq!(e.maniskill_success, rec_ep.success);
+        assert!(e.max_object_error_m < 1e-4, "{e:?}");
+    }
+    // The recording's own mode exports as recorded; other modes are errors naming the valid
+    // ones; LeRobot takes no control mode.
+    let same = dir.join("same.h5");
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_ee_delta_pose",
+            "-o",
+        ],
+        &[&same, &mcap],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        maniskill_h5::read(&same, None).unwrap().episodes[0].action_dim,
+        12
+    );
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_vel",
+            "-o",
+        ],
+        &[&dir.join("bad.h5"), &mcap],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("\"pd_joint_vel\"")
+            && err.contains("valid: pd_joint_pos, pd_ee_delta_pose"),
+        "{err}"
+    );
+    assert!(!dir.join("bad.h5").exists());
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "lerobot",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&dir.join("lr"), &mcap],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--format maniskill only"),
+        "{err}"
+    );
+    // A mode that accumulates targets cannot be converted.
+    let tgt = dir.join("target.mcap");
+    let o = mjskill_cli(
+        &[
+            "rollout",
+            "--policy",
+            "zero",
+            "--episodes",
+            "1",
+            "--no-frame",
+            "--control-mode",
+            "pd_joint_target_delta_pos",
+            "--out",
+        ],
+        &[&tgt],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = mjskill_cli(
+        &[
+            "export",
+            "--format",
+            "maniskill",
+            "--control-mode",
+            "pd_joint_pos",
+            "-o",
+        ],
+        &[&dir.join("t.h5"), &tgt],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("accumulates targets"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

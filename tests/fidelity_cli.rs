@@ -252,3 +252,46 @@ fn the_grasp_split_counts_the_release_step_as_held() {
     let none = GraspSplit::of(&[(false, &a[..1])]);
     assert_eq!((none.held_steps, none.held), (0, None));
 }
+
+#[test]
+fn a_reference_file_with_short_joint_rows_or_a_64_bit_seed_is_refused() {
+    let f = reference("PickCube-v1__so100.json.gz");
+    let gz = std::fs::read(Path::new(&f)).unwrap();
+    let mut s = String::new();
+    std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&gz[..]), &mut s).unwrap();
+    let base: Value = serde_json::from_str(&s).unwrap();
+    let edited = |name: &str, edit: &dyn Fn(&mut Value)| {
+        let mut v = base.clone();
+        edit(&mut v);
+        let p = tmp(name);
+        std::fs::write(&p, v.to_string()).unwrap();
+        p.display().to_string()
+    };
+    let short = edited("short_qpos.json", &|v| {
+        v["episodes"][1]["steps"][2]["robot_qpos"]
+            .as_array_mut()
+            .unwrap()
+            .pop();
+    });
+    fails_with(
+        &["fidelity", &short],
+        "episode 1: step 3: robot_qpos has 5 values but joint_names lists 6 joints",
+    );
+    let long = edited("long_qvel.json", &|v| {
+        v["episodes"][0]["initial"]["robot_qvel"]
+            .as_array_mut()
+            .unwrap()
+            .push(0.0.into());
+    });
+    fails_with(
+        &["fidelity", &long],
+        "episode 0: the initial state: robot_qvel has 7 values but joint_names lists 6 joints",
+    );
+    let seed = edited("seed.json", &|v| {
+        v["episodes"][0]["seed"] = (1u64 << 32).into();
+    });
+    fails_with(
+        &["fidelity", &seed],
+        "episode 0: seed 4294967296 is not in 0..=4294967295",
+    );
+}

@@ -385,3 +385,69 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
         }
     }
 }
+
+/// Held-state figures per file, as measured: (file, states where ManiSkill's grasp flag is
+/// true, of those the ones where mjskill's flag is true when the state is imported with the
+/// drive targets of the action that led to it, states (of all) whose grasp flag differs,
+/// the largest dense-reward difference over all states). With a plain `set_state_dict`
+/// (no drive targets) mjskill's flag was false on every one of the held states.
+const HELD: [(&str, usize, usize, usize, f64); 11] = [
+    ("PickCube-v1__fetch", 0, 0, 0, 1.75e-6),
+    ("PickCube-v1__panda", 130, 130, 0, 2.01e-6),
+    ("PickCube-v1__so100", 0, 0, 0, 6.44e-7),
+    ("PickCube-v1__widowxai", 0, 0, 0, 5.25e-7),
+    // One smooth-walk state where the Robotiq fingers touch the cube's edge.
+    ("PickCube-v1__xarm6_robotiq", 1, 0, 1, 1.34),
+    ("PickCubeSO100-v1__so100", 0, 0, 0, 6.44e-7),
+    ("PickCubeWidowXAI-v1__widowxai", 0, 0, 0, 5.25e-7),
+    ("PlaceSphere-v1__fetch", 0, 0, 0, 4.14e-6),
+    ("PlaceSphere-v1__panda", 232, 232, 0, 3.89e-6),
+    ("PokeCube-v1__fetch", 0, 0, 0, 3.09e-6),
+    ("PokeCube-v1__panda", 1865, 1865, 0, 6.04e-6),
+];
+
+/// ManiSkill's recorded states lack the drive targets that PhysX keeps from the last action;
+/// imported with the targets of the action that led to them
+/// (`Env::set_state_dict_after_action`), held objects stay squeezed, so `is_grasped` and the
+/// dense reward evaluate as in ManiSkill. A plain `set_state_dict` (the drives hold the
+/// imported positions) loses every grasp.
+#[test]
+fn held_states_imported_with_the_actions_drive_targets_evaluate_as_in_maniskill() {
+    let mut failures = Vec::new();
+    for f in files() {
+        let name = format!("{}__{}", f.env_id, f.robot);
+        let (mut held, mut held_mj, mut differ, mut max_reward, mut held_plain) =
+            (0, 0, 0, 0.0f64, 0);
+        for ep in &f.episodes {
+            let mut env =
+                env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
+            let mut plain =
+                env_for(&f.env_id, &f.robot, &ep.control_mode, SimConfig::default()).unwrap();
+            env.reset(Some(ep.seed));
+            let key = env.grasp_info_key();
+            for s in &ep.steps {
+                env.set_state_dict_after_action(s.action.as_deref().unwrap(), &s.state_dict)
+                    .unwrap();
+                env.set_elapsed_steps(s.t);
+                plain.set_state_dict(&s.state_dict).unwrap();
+                let (ms, mj) = (s.flag(key), env.info().flag(key));
+                held += ms as usize;
+                held_mj += (ms && mj) as usize;
+                held_plain += (ms && plain.info().flag(key)) as usize;
+                differ += (ms != mj) as usize;
+                max_reward = max_reward.max((env.dense_reward() - s.reward_dense as f64).abs());
+            }
+        }
+        let want = HELD.iter().find(|h| h.0 == name).unwrap();
+        let got = format!("{name}: held {held}, grasped in mjskill {held_mj}, flag differs {differ}, max |Δ dense| {max_reward:.2e}, plain import grasped {held_plain}");
+        if held != want.1
+            || held_mj < want.2
+            || differ > want.3
+            || max_reward > 1.3 * want.4
+            || held_plain != 0
+        {
+            failures.push(format!("{got}; measured {want:?}"));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

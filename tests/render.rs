@@ -231,10 +231,11 @@ fn visual_obs_modes_have_state_free_vectors_and_images() {
     assert_eq!(s.render().unwrap().len(), 512 * 512 * 3);
     assert_eq!(s.render_size(), (512, 512));
     assert!(ObsMode::parse("rgbd").unwrap().is_visual());
-    assert!(ObsMode::parse("rgb+depth")
+    assert_eq!(ObsMode::parse("rgb+depth").unwrap(), ObsMode::Rgbd);
+    assert!(ObsMode::parse("rgb+dept")
         .unwrap_err()
         .to_string()
-        .contains("rgbd"));
+        .contains("rgb, depth, segmentation"));
 }
 
 #[test]

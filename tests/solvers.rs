@@ -160,3 +160,35 @@ fn every_registered_env_and_robot_has_a_scripted_solver() {
     solved.sort();
     assert_eq!(pairs, solved, "SOLVED lists exactly the registered pairs");
 }
+
+/// The WidowX AI solver holds PickCube's cube with a light squeeze (docs/outcome-physics.md):
+/// ManiSkill's carriage tendon turns the grip force into a wrist load whose reported velocity
+/// breaks `is_robot_static` at a full squeeze, so the episodes must end grasped, static and
+/// successful with well under the ~8.6 N a closing target of 0 m gives.
+#[test]
+fn widowxai_solver_holds_the_cube_with_a_light_grip() {
+    use mjskill::solvers::make_policy;
+    let config = EnvConfig {
+        robot: Some("widowxai".into()),
+        ..Default::default()
+    };
+    let mut env = eval::make_env("PickCubeWidowXAI-v1", config, "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    for seed in 0..4 {
+        let r = eval::run_episode(
+            &mut env,
+            policy.as_mut(),
+            Some(seed),
+            &mut action,
+            |_, _, _, _, _| Ok(()),
+        )
+        .unwrap();
+        assert!(r.success_at_end, "seed {seed}: {r:?}");
+        assert!(env.info().flag("is_grasped"), "seed {seed}");
+        for f in env.finger_forces() {
+            let n = f.iter().map(|x| x * x).sum::<f64>().sqrt();
+            assert!((0.5..6.0).contains(&n), "seed {seed}: finger force {n} N");
+        }
+    }
+}

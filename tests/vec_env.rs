@@ -106,6 +106,20 @@ fn bad_actions_are_errors_and_the_vec_env_stays_usable() {
     assert!(VecEnv::new("PickCube-v1", EnvConfig::default(), 0, 1).is_err());
 }
 
+#[test]
+fn num_envs_beyond_the_bound_is_an_error_not_a_huge_allocation() {
+    assert_eq!(mjskill::MAX_NUM_ENVS, 16_384);
+    for n in [mjskill::MAX_NUM_ENVS + 1, 1 << 62, usize::MAX] {
+        let e = VecEnv::new("PickCube-v1", EnvConfig::default(), n, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("num_envs {n} is out of range: 1..=16384")),
+            "{e}"
+        );
+    }
+}
+
 // ---- camera images (rendering: CI installs EGL/Mesa, see tests/render.rs) ----------------
 
 fn visual(mode: ObsMode, robot: Option<&str>, episode: u32) -> EnvConfig {

@@ -19,7 +19,22 @@ MAX_SEED = 2**32 - 1
 """ManiSkill's seeds are 32-bit."""
 
 RENDER_MODES = ["rgb_array"]
-OBS_MODES = ["state", "state_dict", "none", "rgb", "depth", "rgbd"]
+OBS_MODES = [
+    "state",
+    "state_dict",
+    "none",
+    "rgb",
+    "depth",
+    "rgbd",
+    "segmentation",
+    "rgb+segmentation",
+    "depth+segmentation",
+    "rgb+depth+segmentation",
+    "pointcloud",
+]
+"""ManiSkill's obs modes; any ``+`` combination of rgb, depth and segmentation is accepted."""
+DEPTH_DTYPES = ["float32", "int16"]
+"""Depth images: float32 metres, or ManiSkill's int16 millimetres."""
 _UNLIMITED = 2**32 - 1
 """Rust-side episode length of envs made by ``gym.make``: its ``TimeLimit`` truncates."""
 
@@ -30,7 +45,7 @@ def _check_seed(seed: Any) -> int | None:
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an int or None, not {type(seed).__name__} ({seed!r})")
     seed = int(seed)
-    if seed < 0:
+    if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}")
     return seed
 
@@ -43,9 +58,14 @@ def _check_render_mode(render_mode: Any) -> None:
         )
 
 
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
 def _as_actions(action: Any, ndim: int) -> np.ndarray:
     """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
-    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``."""
+    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``,
+    and a finite value beyond float32's range (which the cast would turn into infinity) a
+    ``ValueError`` naming the value given."""
     a = action if isinstance(action, np.ndarray) else np.asarray(action)
     if a.dtype.kind not in "biuf":
         raise TypeError(
@@ -55,6 +75,16 @@ def _as_actions(action: Any, ndim: int) -> np.ndarray:
     if a.ndim != ndim:
         want = "(action_dim,)" if ndim == 1 else "(num_envs, action_dim)"
         raise ValueError(f"actions have shape {a.shape}, expected {want}")
+    if a.dtype.kind == "f" and a.dtype.itemsize > 4:
+        with np.errstate(invalid="ignore"):
+            big = np.isfinite(a) & (np.abs(a) > _F32_MAX)
+        if big.any():
+            at = tuple(int(i) for i in np.argwhere(big)[0])
+            name = f"action[{at[0]}]" if ndim == 1 else f"actions[{at[0]}, {at[1]}]"
+            raise ValueError(
+                f"{name} = {float(a[at])!r} is outside the float32 range (|value| <= {_F32_MAX:.9g}); "
+                "actions are float32"
+            )
     if a.dtype != np.float32 or not a.flags.c_contiguous:
         a = np.ascontiguousarray(a, dtype=np.float32)
     return a
@@ -78,13 +108,25 @@ def _to_space(tree: Any) -> spaces.Space:
     return tree
 
 
+def _check_depth_dtype(depth_dtype: Any) -> None:
+    if depth_dtype not in DEPTH_DTYPES:
+        raise ValueError(
+            f"unknown depth_dtype {depth_dtype!r}; valid: {', '.join(DEPTH_DTYPES)} (float32: "
+            "metres; int16: ManiSkill's millimetres, 0 where nothing was seen)"
+        )
+
+
 class _Layout:
     """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
 
-    def __init__(self, spec: dict[str, Any]):
+    def __init__(self, spec: dict[str, Any], depth_dtype: str = "float32"):
         self.obs_mode = spec["obs_mode"]
         self.parts = [(name, a, b) for name, a, b in spec["obs_layout"]]
         self.cameras = spec["cameras"]
+        self.points = spec["point_count"]
+        self.depth_mm = depth_dtype == "int16"
+        ids = [i for i, _ in spec["segmentation_id_map"]]
+        max_id = max(ids, default=0)
         low, high = spec["obs_low"], spec["obs_high"]
         self.dict_obs = self.obs_mode not in ("state", "none")
         if not self.dict_obs:
@@ -94,30 +136,42 @@ class _Layout:
             name: spaces.Box(low[a:b], high[a:b], shape=(b - a,), dtype=np.float32)
             for name, a, b in self.parts
         }
-        for cam, w, h, rgb, depth in self.cameras:
+        for cam, w, h, rgb, depth, seg in self.cameras:
             if rgb:
                 flat[f"sensor_data/{cam}/rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
-            if depth:
+            if depth and self.depth_mm:
+                flat[f"sensor_data/{cam}/depth"] = spaces.Box(0, 32767, (h, w, 1), np.int16)
+            elif depth:
                 flat[f"sensor_data/{cam}/depth"] = spaces.Box(
                     0.0, np.inf, (h, w, 1), np.float32
                 )
+            if seg:
+                flat[f"sensor_data/{cam}/segmentation"] = spaces.Box(
+                    0, max_id, (h, w, 1), np.int16
+                )
+        if self.points is not None:
+            n = self.points
+            flat["pointcloud/xyzw"] = spaces.Box(-np.inf, np.inf, (n, 4), np.float32)
+            flat["pointcloud/rgb"] = spaces.Box(0, 255, (n, 3), np.uint8)
+            flat["pointcloud/segmentation"] = spaces.Box(0, max_id, (n, 1), np.int16)
         self.space = _to_space(_nest(flat))
+
+    def _visual(self, out: dict[str, Any], native: Any) -> dict[str, Any]:
+        if self.cameras:
+            out["sensor_data"] = native.images(self.depth_mm)
+        if self.points is not None:
+            out["pointcloud"] = native.point_cloud()
+        return out
 
     def single(self, obs: np.ndarray, native: Any) -> Any:
         if not self.dict_obs:
             return obs
-        out = _nest({name: obs[a:b] for name, a, b in self.parts})
-        if self.cameras:
-            out["sensor_data"] = native.images()
-        return out
+        return self._visual(_nest({name: obs[a:b] for name, a, b in self.parts}), native)
 
     def batch(self, obs: np.ndarray, native: Any) -> Any:
         if not self.dict_obs:
             return obs
-        out = _nest({name: obs[:, a:b] for name, a, b in self.parts})
-        if self.cameras:
-            out["sensor_data"] = native.images()
-        return out
+        return self._visual(_nest({name: obs[:, a:b] for name, a, b in self.parts}), native)
 
 
 class MjskillEnv(gym.Env):
@@ -129,6 +183,11 @@ class MjskillEnv(gym.Env):
     ManiSkill's exact initial state for seed ``s``. Made directly (not through ``gym.make``)
     the env truncates at ``max_episode_steps`` (default 50) itself; through ``gym.make``,
     gymnasium's ``TimeLimit`` wrapper truncates, as in ManiSkill.
+
+    When MuJoCo raised instability warnings during a step (e.g. ``BadQacc``: the simulation
+    diverged and MuJoCo reset it), ``info["warnings"]`` holds ``{kind: count}``, the Rust
+    ``info.warnings``; the key is absent otherwise. One env may be used from several threads:
+    the calls run one at a time (the GIL is released while a call waits for another).
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 20}
@@ -144,8 +203,10 @@ class MjskillEnv(gym.Env):
         max_episode_steps: int | None = None,
         robot_init_qpos_noise: float = 0.02,
         sim_freq: int = 100,
+        depth_dtype: str = "float32",
     ):
         _check_render_mode(render_mode)
+        _check_depth_dtype(depth_dtype)
         self._kwargs = dict(
             env_id=env_id,
             robot_uids=robot_uids,
@@ -164,7 +225,9 @@ class MjskillEnv(gym.Env):
         self.control_mode = spec["control_mode"]
         self.obs_mode = spec["obs_mode"]
         self.reward_mode = spec["reward_mode"]
-        self._layout = _Layout(spec)
+        self.depth_dtype = depth_dtype
+        self.segmentation_id_map = dict(spec["segmentation_id_map"])
+        self._layout = _Layout(spec, depth_dtype)
         self.observation_space = self._layout.space
         lo, hi = spec["action_low"], spec["action_high"]
         self.action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
@@ -218,7 +281,8 @@ class MjskillEnv(gym.Env):
 
     def get_state_dict(self) -> dict:
         """ManiSkill's ``get_state_dict()`` layout (``actors``, ``articulations``,
-        ``controller``) as nested lists."""
+        ``controller``) as nested lists, plus ``drive`` (the joints' drive targets, which
+        ``set_state_dict`` restores; ManiSkill's own dicts lack it)."""
         return json.loads(self._native.get_state_dict())
 
     def set_state_dict(self, state_dict: dict) -> None:
@@ -234,7 +298,8 @@ class MjskillEnv(gym.Env):
 
     # -- pickling (AsyncVectorEnv, Ray) ----------------------------------------------------
     def __reduce__(self):
-        return (_restore_env, (self._kwargs, self.render_mode, self._native.get_state()))
+        kwargs = dict(self._kwargs, depth_dtype=self.depth_dtype)
+        return (_restore_env, (kwargs, self.render_mode, self._native.get_state()))
 
 
 def _check_finite(value: Any, path: str) -> None:
@@ -288,7 +353,10 @@ class MjskillVectorEnv(VectorEnv):
     with reward 0. As in gymnasium's next-step mode there are no ``final_obs`` /
     ``final_info`` entries: the final observation is the one returned with the flag.
     ``reset(seed=s)`` seeds env i with ``s + i``, so results do not depend on T. The GIL is
-    released while the envs step.
+    released while the envs step. ``num_envs`` and ``num_threads`` are in
+    ``1..=mjskill._native.MAX_NUM_ENVS`` (16384). When some env raised MuJoCo warnings
+    during a step, ``info["warnings"]`` is an object array of env i's ``{kind: count}`` dict
+    (None for the others) with the mask ``info["_warnings"]``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -306,18 +374,23 @@ class MjskillVectorEnv(VectorEnv):
         robot_init_qpos_noise: float = 0.02,
         sim_freq: int = 100,
         render_mode: str | None = None,
+        depth_dtype: str = "float32",
     ):
+        _check_depth_dtype(depth_dtype)
         if render_mode is not None:
             raise ValueError(
                 f"render_mode {render_mode!r} is not supported by the vector env (it renders "
-                "no human frames; its sensor images come with the rgb/depth/rgbd obs modes); "
+                "no human frames; its sensor images come with the visual obs modes); "
                 "valid render modes: None"
             )
         for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
-            if v < 1:
-                raise ValueError(f"{name} {v} is out of range: use 1 or more")
+            if not 1 <= v <= _native.MAX_NUM_ENVS:
+                raise ValueError(
+                    f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS} (each env owns "
+                    "its MuJoCo model and data; more threads than envs are clamped)"
+                )
         self._kwargs = dict(
             env_id=env_id,
             robot_uids=robot_uids,
@@ -341,7 +414,9 @@ class MjskillVectorEnv(VectorEnv):
         self.control_mode = spec["control_mode"]
         self.obs_mode = spec["obs_mode"]
         self.max_episode_steps = spec["max_episode_steps"]
-        self._layout = _Layout(spec)
+        self.depth_dtype = depth_dtype
+        self.segmentation_id_map = dict(spec["segmentation_id_map"])
+        self._layout = _Layout(spec, depth_dtype)
         lo, hi = spec["action_low"], spec["action_high"]
         self.single_observation_space = self._layout.space
         self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
@@ -379,9 +454,26 @@ class MjskillVectorEnv(VectorEnv):
         """Envs that reset during the last step (their action was ignored)."""
         return self._native.autoreset()
 
-def make_env(**kwargs) -> MjskillEnv:
+def make_env(num_envs: int = 1, **kwargs) -> MjskillEnv:
     """``gym.make`` entry point: the env's own episode limit is lifted, because gymnasium's
-    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill."""
+    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill.
+
+    ``num_envs`` (ManiSkill's ``gym.make(..., num_envs=N)``): 1 is one env; more is an error
+    naming ``gym.make_vec``, because gymnasium 1.x's ``make`` only returns a
+    ``gymnasium.Env`` (it checks the type, then wraps it in ``TimeLimit``, whose scalar
+    truncation would end every env at once), so the native vector env cannot come from it.
+    """
+    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+        raise TypeError(f"num_envs must be an int, not {type(num_envs).__name__} ({num_envs!r})")
+    if num_envs != 1:
+        env_id = kwargs.get("env_id", "PickCube-v1")
+        raise ValueError(
+            f"gym.make('mjskill/{env_id}', num_envs={num_envs}): gymnasium's make returns one "
+            "gymnasium.Env (it checks the type and wraps it in TimeLimit), so it cannot return "
+            f"a vector env; use gym.make_vec('mjskill/{env_id}', num_envs={num_envs}, ...) with "
+            "the same keywords: it returns the native MjskillVectorEnv (the ids' vector entry "
+            "point), as ManiSkillVectorEnv wraps ManiSkill's batched env"
+        )
     kwargs.setdefault("max_episode_steps", _UNLIMITED)
     return MjskillEnv(**kwargs)
 

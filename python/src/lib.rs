@@ -8,20 +8,28 @@
 //! Every Rust error becomes a Python `ValueError` carrying the Rust message (which names the
 //! bad value and the valid choices); a failed render is a `RuntimeError`. The GIL is released
 //! while an env steps, resets or renders. Each class holds its env behind a `Mutex`, so a
-//! Python object can be shared between threads safely.
+//! Python object can be shared between threads: calls from several threads run one at a time.
+//! The lock is never waited for while holding the GIL ([`lock_without_gil`]): a thread that
+//! holds the lock may need the GIL to finish its call, so waiting with the GIL would deadlock.
+//!
+//! Integer arguments are taken as Python ints and range-checked here ([`int_arg`]), so an
+//! out-of-range value is a `ValueError` naming the argument and its valid range rather than a
+//! bare `OverflowError`.
 #![warn(missing_docs)]
 
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
 use mjskill::VecEnv;
 use mjskill::{Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, SimConfig};
 use numpy::ndarray::ArrayView2;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+
+use mjskill::mujoco::Warnings;
 
 /// A Rust env error as a Python `ValueError` with the same message.
 fn value_err(e: EnvError) -> PyErr {
@@ -38,27 +46,119 @@ fn poisoned<T>(_: T) -> PyErr {
     )
 }
 
+/// Locks `m` without ever blocking while holding the GIL.
+///
+/// The thread that holds the lock may be inside `py.detach` (stepping without the GIL) and
+/// needs the GIL back to build its results before it unlocks. A thread that blocked on the
+/// lock while holding the GIL would wait for it forever, and the holder for the GIL: the
+/// interpreter would hang. So the lock is only *tried* with the GIL; when it is busy, the
+/// wait happens with the GIL released, and then the lock is tried again. Pending signals
+/// (Ctrl-C) are checked between tries.
+fn lock_without_gil<'a, T: Send>(py: Python<'_>, m: &'a Mutex<T>) -> PyResult<MutexGuard<'a, T>> {
+    loop {
+        match m.try_lock() {
+            Ok(g) => return Ok(g),
+            Err(TryLockError::Poisoned(e)) => return Err(poisoned(e)),
+            Err(TryLockError::WouldBlock) => {
+                // Wait until the holder is done (the guard is dropped at once, the lock is
+                // re-taken with the GIL above).
+                py.detach(|| drop(m.lock()));
+                py.check_signals()?;
+            }
+        }
+    }
+}
+
+/// An integer argument as a Python int, range-checked: a value outside `lo..=hi` (also one
+/// beyond any fixed-width integer) is a `ValueError` `"{name} {value} is out of range:
+/// {valid}"`; a non-integer stays a `TypeError`.
+fn int_arg(
+    value: &Bound<'_, PyAny>,
+    name: &str,
+    lo: i128,
+    hi: i128,
+    valid: &str,
+) -> PyResult<i128> {
+    let out_of_range = || {
+        let shown = value
+            .str()
+            .map(|s| s.to_string())
+            .unwrap_or_else(|_| "(an int too large to print)".into());
+        PyValueError::new_err(format!("{name} {shown} is out of range: {valid}"))
+    };
+    match value.extract::<i128>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(out_of_range()),
+        Err(e) if e.is_instance_of::<PyOverflowError>(value.py()) => Err(out_of_range()),
+        Err(e) => Err(e),
+    }
+}
+
+/// A seed argument (`None` or `0..=MAX_SEED`; the message is [`EnvError::BadSeed`]'s).
+fn seed_arg(seed: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<u64>> {
+    seed.filter(|s| !s.is_none())
+        .map(|s| {
+            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
+            int_arg(s, name, 0, mjskill::MAX_SEED as i128, &valid).map(|v| v as u64)
+        })
+        .transpose()
+}
+
+/// A count argument in `1..=max` (`num_envs`, `num_threads`).
+fn count_arg(value: &Bound<'_, PyAny>, name: &str, max: usize, what: &str) -> PyResult<usize> {
+    int_arg(value, name, 1, max as i128, &format!("1..={max} ({what})")).map(|v| v as usize)
+}
+
+/// `{"BadQacc": 1, ...}`: the MuJoCo warnings that fired (kind names as
+/// [`mjskill::mujoco::Warning`]'s, with their counts); `None` when none did.
+fn warnings_dict<'py>(py: Python<'py>, w: &Warnings) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let fired = w.fired();
+    if fired.is_empty() {
+        return Ok(None);
+    }
+    let d = PyDict::new(py);
+    for k in fired {
+        d.set_item(format!("{k:?}"), w.count(k))?;
+    }
+    Ok(Some(d))
+}
+
 /// Whether an info key holds a boolean (stored as 0/1 on the Rust side): ManiSkill's
 /// `success`, `fail` and `is_*` keys.
 fn is_flag(key: &str) -> bool {
     key == "success" || key == "fail" || key.starts_with("is_")
 }
 
-/// The [`EnvConfig`] for ManiSkill's keyword arguments.
+/// The [`EnvConfig`] for ManiSkill's keyword arguments (`max_episode_steps` and `sim_freq`
+/// as Python ints: `None` is no limit and the default 100 Hz).
 fn config(
     robot_uids: Option<String>,
     obs_mode: &str,
     control_mode: Option<String>,
     reward_mode: &str,
-    max_episode_steps: Option<u32>,
+    max_episode_steps: Option<&Bound<'_, PyAny>>,
     robot_init_qpos_noise: f64,
-    sim_freq: u32,
+    sim_freq: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<EnvConfig> {
-    if max_episode_steps == Some(0) {
-        return Err(PyValueError::new_err(
-            "max_episode_steps 0 is out of range: an episode needs at least one step (1 or more)",
-        ));
-    }
+    let max_episode_steps = max_episode_steps
+        .filter(|m| !m.is_none())
+        .map(|m| {
+            let valid = format!("an episode needs at least one step (1..={})", u32::MAX);
+            int_arg(m, "max_episode_steps", 1, u32::MAX as i128, &valid).map(|v| v as u32)
+        })
+        .transpose()?;
+    let sim_freq = match sim_freq.filter(|f| !f.is_none()) {
+        None => SimConfig::DEFAULT_SIM_FREQ,
+        Some(f) => {
+            let valid = format!(
+                "use a multiple of the control frequency {c} Hz between {c} and 100000 (e.g. \
+                 100, 200, 500)",
+                c = mjskill::CONTROL_FREQ
+            );
+            // Beyond u32 here; within it, SimConfig's own check names the valid rates.
+            int_arg(f, "sim_freq", 0, u32::MAX as i128, &valid)? as u32
+        }
+    };
     Ok(EnvConfig {
         robot: robot_uids,
         obs_mode: ObsMode::parse(obs_mode).map_err(value_err)?,
@@ -84,6 +184,9 @@ fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> 
     }
     if let Some(r) = info.reconfigure {
         d.set_item("reconfigure", r)?;
+    }
+    if let Some(w) = warnings_dict(py, &info.warnings)? {
+        d.set_item("warnings", w)?;
     }
     Ok(d)
 }
@@ -112,7 +215,7 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     }
     d.set_item("obs_layout", layout)?;
     let cams = PyList::empty(py);
-    if cfg.obs_mode.is_visual() {
+    if cfg.obs_mode.is_visual() && !cfg.obs_mode.is_point_cloud() {
         for name in env.sensor_names() {
             if let Some(img) = env.image(name) {
                 cams.append((
@@ -121,33 +224,82 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
                     img.height,
                     img.rgb.is_some(),
                     img.depth.is_some(),
+                    img.segmentation.is_some(),
                 ))?;
             }
         }
     }
     d.set_item("cameras", cams)?;
+    d.set_item("point_count", env.point_cloud().map(|p| p.len))?;
+    d.set_item("segmentation_id_map", env.segmentation_id_map())?;
     let keys: Vec<(&str, bool)> = env.info().keys.iter().map(|k| (*k, is_flag(k))).collect();
     d.set_item("info_keys", keys)?;
     d.set_item("render_size", env.render_size())?;
     Ok(d)
 }
 
-/// `{camera: {"rgb": H×W×3 uint8, "depth": H×W×1 float32}}` of a single env.
-fn images_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+/// `{camera: {"rgb": H×W×3 uint8, "depth": H×W×1 float32 metres (int16 millimetres with
+/// `depth_mm`), "segmentation": H×W×1 int16}}` of a single env (the textures its obs mode
+/// renders).
+fn images_dict<'py>(py: Python<'py>, env: &Env, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for name in env.sensor_names() {
         let Some(img) = env.image(name) else { continue };
         let cam = PyDict::new(py);
+        let (h, w) = (img.height, img.width);
         if let Some(rgb) = img.rgb {
-            let a = PyArray1::from_slice(py, rgb).reshape([img.height, img.width, 3])?;
-            cam.set_item("rgb", a)?;
+            cam.set_item("rgb", PyArray1::from_slice(py, rgb).reshape([h, w, 3])?)?;
         }
-        if let Some(depth) = img.depth {
-            let a = PyArray1::from_slice(py, depth).reshape([img.height, img.width, 1])?;
-            cam.set_item("depth", a)?;
+        match (img.depth, img.depth_mm) {
+            (Some(_), Some(mm)) if depth_mm => {
+                cam.set_item("depth", PyArray1::from_slice(py, mm).reshape([h, w, 1])?)?
+            }
+            (Some(m), _) => {
+                cam.set_item("depth", PyArray1::from_slice(py, m).reshape([h, w, 1])?)?
+            }
+            _ => {}
+        }
+        if let Some(seg) = img.segmentation {
+            cam.set_item(
+                "segmentation",
+                PyArray1::from_slice(py, seg).reshape([h, w, 1])?,
+            )?;
         }
         d.set_item(img.name, cam)?;
     }
+    Ok(d)
+}
+
+/// ManiSkill's `pointcloud` dict of `n` stacked clouds: `xyzw` n×N×4 float32, `rgb` n×N×3
+/// uint8, `segmentation` n×N×1 int16 (`single`: without the leading n).
+fn point_cloud_dict<'py, 'a>(
+    py: Python<'py>,
+    clouds: impl Iterator<Item = mjskill::PointCloud<'a>>,
+    single: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (mut xyzw, mut rgb, mut seg) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut n, mut len) = (0usize, 0usize);
+    for c in clouds {
+        xyzw.extend_from_slice(c.xyzw);
+        rgb.extend_from_slice(c.rgb);
+        seg.extend_from_slice(c.segmentation);
+        n += 1;
+        len = c.len;
+    }
+    let d = PyDict::new(py);
+    let shape = |k: usize| {
+        if single {
+            vec![len, k]
+        } else {
+            vec![n, len, k]
+        }
+    };
+    d.set_item("xyzw", PyArray1::from_vec(py, xyzw).reshape(shape(4))?)?;
+    d.set_item("rgb", PyArray1::from_vec(py, rgb).reshape(shape(3))?)?;
+    d.set_item(
+        "segmentation",
+        PyArray1::from_vec(py, seg).reshape(shape(1))?,
+    )?;
     Ok(d)
 }
 
@@ -158,8 +310,8 @@ struct PyEnv {
 }
 
 impl PyEnv {
-    fn lock(&self) -> PyResult<MutexGuard<'_, Env>> {
-        self.env.lock().map_err(poisoned)
+    fn lock(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Env>> {
+        lock_without_gil(py, &self.env)
     }
 }
 
@@ -169,7 +321,7 @@ impl PyEnv {
     #[new]
     #[pyo3(signature = (env_id, robot_uids=None, obs_mode="state", control_mode=None,
         reward_mode="normalized_dense", max_episode_steps=None, robot_init_qpos_noise=0.02,
-        sim_freq=100))]
+        sim_freq=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -178,9 +330,9 @@ impl PyEnv {
         obs_mode: &str,
         control_mode: Option<String>,
         reward_mode: &str,
-        max_episode_steps: Option<u32>,
+        max_episode_steps: Option<&Bound<'_, PyAny>>,
         robot_init_qpos_noise: f64,
-        sim_freq: u32,
+        sim_freq: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let cfg = config(
             robot_uids,
@@ -202,7 +354,7 @@ impl PyEnv {
     /// The env's static description (ids, modes, space bounds, observation layout,
     /// cameras, info keys).
     fn spec<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        spec_dict(py, &*self.lock()?)
+        spec_dict(py, &*self.lock(py)?)
     }
 
     /// Resets (seeded: ManiSkill's exact initial state) and returns `(obs, info)`.
@@ -210,9 +362,10 @@ impl PyEnv {
     fn reset<'py>(
         &self,
         py: Python<'py>,
-        seed: Option<u64>,
+        seed: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyDict>)> {
-        let mut g = self.lock()?;
+        let seed = seed_arg(seed, "seed")?;
+        let mut g = self.lock(py)?;
         let env = &mut *g;
         py.detach(|| env.try_reset(seed).map(|_| ()))
             .map_err(value_err)?;
@@ -235,7 +388,7 @@ impl PyEnv {
         bool,
         Bound<'py, PyDict>,
     )> {
-        let mut g = self.lock()?;
+        let mut g = self.lock(py)?;
         let env = &mut *g;
         let a = action.as_slice()?;
         // Copied so that the numpy buffer is not touched without the GIL.
@@ -264,22 +417,33 @@ impl PyEnv {
 
     /// The current flat observation (empty for obs mode `none`).
     fn obs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f32>>> {
-        Ok(PyArray1::from_slice(py, self.lock()?.obs()))
+        Ok(PyArray1::from_slice(py, self.lock(py)?.obs()))
     }
 
     /// The current info dict.
     fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        info_dict(py, self.lock()?.info())
+        info_dict(py, self.lock(py)?.info())
     }
 
-    /// The sensor images of the current state (visual obs modes; else empty).
-    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        images_dict(py, &*self.lock()?)
+    /// The sensor images of the current state (visual obs modes; else empty); depth in
+    /// ManiSkill's int16 millimetres with `depth_mm=True`, else float32 metres.
+    #[pyo3(signature = (depth_mm=false))]
+    fn images<'py>(&self, py: Python<'py>, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
+        images_dict(py, &*self.lock(py)?, depth_mm)
+    }
+
+    /// ManiSkill's fused point cloud of the current state (obs mode `pointcloud`; else
+    /// `None`): `{"xyzw": N×4 float32, "rgb": N×3 uint8, "segmentation": N×1 int16}`.
+    fn point_cloud<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let env = self.lock(py)?;
+        env.point_cloud()
+            .map(|c| point_cloud_dict(py, std::iter::once(c), true))
+            .transpose()
     }
 
     /// The human camera's RGB frame (H×W×3 uint8).
     fn render<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let mut g = self.lock()?;
+        let mut g = self.lock(py)?;
         let env = &mut *g;
         let (w, h) = env.render_size();
         let frame = py
@@ -289,35 +453,35 @@ impl PyEnv {
     }
 
     /// [`Env::get_state`] as JSON (exact: floats round-trip).
-    fn get_state(&self) -> PyResult<String> {
-        serde_json::to_string(&self.lock()?.get_state())
+    fn get_state(&self, py: Python<'_>) -> PyResult<String> {
+        serde_json::to_string(&self.lock(py)?.get_state())
             .map_err(|e| PyRuntimeError::new_err(e.to_string()))
     }
 
     /// Restores a state from `get_state`; a bad state is a `ValueError` and changes nothing.
-    fn set_state(&self, state: &str) -> PyResult<()> {
+    fn set_state(&self, py: Python<'_>, state: &str) -> PyResult<()> {
         let s: EnvState = serde_json::from_str(state)
             .map_err(|e| PyValueError::new_err(format!("cannot set state: not a state: {e}")))?;
-        self.lock()?.set_state(&s).map_err(value_err)
+        self.lock(py)?.set_state(&s).map_err(value_err)
     }
 
     /// ManiSkill's `get_state_dict()` as nested JSON.
-    fn get_state_dict(&self) -> PyResult<String> {
-        Ok(self.lock()?.get_state_dict().to_json().to_string())
+    fn get_state_dict(&self, py: Python<'_>) -> PyResult<String> {
+        Ok(self.lock(py)?.get_state_dict().to_json().to_string())
     }
 
     /// ManiSkill's `set_state_dict()` from nested JSON.
-    fn set_state_dict(&self, state_dict: &str) -> PyResult<()> {
+    fn set_state_dict(&self, py: Python<'_>, state_dict: &str) -> PyResult<()> {
         let v: serde_json::Value = serde_json::from_str(state_dict)
             .map_err(|e| PyValueError::new_err(format!("cannot set state dict: not JSON: {e}")))?;
         let sd = mjskill::StateDict::from_json(&v)
             .map_err(|e| PyValueError::new_err(format!("cannot set state dict: {e}")))?;
-        self.lock()?.set_state_dict(&sd).map_err(value_err)
+        self.lock(py)?.set_state_dict(&sd).map_err(value_err)
     }
 
     /// Steps since the last reset.
-    fn elapsed_steps(&self) -> PyResult<u32> {
-        Ok(self.lock()?.info().elapsed_steps)
+    fn elapsed_steps(&self, py: Python<'_>) -> PyResult<u32> {
+        Ok(self.lock(py)?.info().elapsed_steps)
     }
 }
 
@@ -341,8 +505,8 @@ struct PyVecEnv {
 }
 
 impl PyVecEnv {
-    fn lock(&self) -> PyResult<MutexGuard<'_, VecState>> {
-        self.inner.lock().map_err(poisoned)
+    fn lock(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, VecState>> {
+        lock_without_gil(py, &self.inner)
     }
 
     /// `{key: [N] array, "_key": mask}` of the last reset/step.
@@ -362,6 +526,25 @@ impl PyVecEnv {
             }
             d.set_item(format!("_{key}"), masks)?;
         }
+        // Only when some env raised MuJoCo warnings: env i's `{kind: count}` dict (None for
+        // the others) and gymnasium's mask of the envs that have one.
+        let warnings = vec.warnings();
+        if warnings.iter().any(|w| !w.fired().is_empty()) {
+            let per_env = PyList::empty(py);
+            let mut mask = Vec::with_capacity(warnings.len());
+            for w in warnings {
+                let entry = warnings_dict(py, w)?;
+                mask.push(entry.is_some());
+                per_env.append(entry)?;
+            }
+            let np = py.import("numpy")?;
+            let kwargs = PyDict::new(py);
+            kwargs.set_item("dtype", np.getattr("object_")?)?;
+            let arr = np.call_method("empty", (warnings.len(),), Some(&kwargs))?;
+            arr.call_method1("__setitem__", (pyo3::types::PySlice::full(py), per_env))?;
+            d.set_item("warnings", arr)?;
+            d.set_item("_warnings", PyArray1::from_vec(py, mask))?;
+        }
         Ok(d)
     }
 
@@ -374,30 +557,42 @@ impl PyVecEnv {
 
 #[pymethods]
 impl PyVecEnv {
-    /// Builds `num_envs` envs of `env_id` on `num_threads` threads.
+    /// Builds `num_envs` envs of `env_id` on `num_threads` threads (default 1);
+    /// `num_envs` and `num_threads` are in `1..=MAX_NUM_ENVS` (more threads than envs are
+    /// clamped to `num_envs`).
     #[new]
-    #[pyo3(signature = (env_id, num_envs, num_threads=1, robot_uids=None, obs_mode="state",
+    #[pyo3(signature = (env_id, num_envs, num_threads=None, robot_uids=None, obs_mode="state",
         control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-        robot_init_qpos_noise=0.02, sim_freq=100))]
+        robot_init_qpos_noise=0.02, sim_freq=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         env_id: &str,
-        num_envs: usize,
-        num_threads: usize,
+        num_envs: &Bound<'_, PyAny>,
+        num_threads: Option<&Bound<'_, PyAny>>,
         robot_uids: Option<String>,
         obs_mode: &str,
         control_mode: Option<String>,
         reward_mode: &str,
-        max_episode_steps: Option<u32>,
+        max_episode_steps: Option<&Bound<'_, PyAny>>,
         robot_init_qpos_noise: f64,
-        sim_freq: u32,
+        sim_freq: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        if num_threads == 0 {
-            return Err(PyValueError::new_err(
-                "num_threads 0 is out of range: use 1 or more threads (the caller's counts)",
-            ));
-        }
+        let num_envs = count_arg(
+            num_envs,
+            "num_envs",
+            mjskill::MAX_NUM_ENVS,
+            "each env owns its MuJoCo model and data",
+        )?;
+        let num_threads = match num_threads.filter(|t| !t.is_none()) {
+            None => 1,
+            Some(t) => count_arg(
+                t,
+                "num_threads",
+                mjskill::MAX_NUM_ENVS,
+                "the caller's thread counts; more than num_envs are clamped to num_envs",
+            )?,
+        };
         let cfg = config(
             robot_uids,
             obs_mode,
@@ -434,8 +629,8 @@ impl PyVecEnv {
 
     /// Threads stepping the envs (the caller's included).
     #[getter]
-    fn num_threads(&self) -> PyResult<usize> {
-        Ok(self.lock()?.vec.num_threads())
+    fn num_threads(&self, py: Python<'_>) -> PyResult<usize> {
+        Ok(self.lock(py)?.vec.num_threads())
     }
 
     /// Resets every env (env i with `seed + i`, or unseeded): `(obs [N × D], info)`.
@@ -443,9 +638,10 @@ impl PyVecEnv {
     fn reset<'py>(
         &self,
         py: Python<'py>,
-        seed: Option<u64>,
+        seed: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
-        let mut g = self.lock()?;
+        let seed = seed_arg(seed, "seed")?;
+        let mut g = self.lock(py)?;
         let st = &mut *g;
         py.detach(|| st.vec.try_reset(seed).map(|_| ()))
             .map_err(value_err)?;
@@ -466,7 +662,7 @@ impl PyVecEnv {
         Bound<'py, PyArray1<bool>>,
         Bound<'py, PyDict>,
     )> {
-        let mut g = self.lock()?;
+        let mut g = self.lock(py)?;
         let st = &mut *g;
         let adim = st.vec.single_action_space().shape[0];
         let (rows, cols) = actions.as_array().dim();
@@ -495,43 +691,67 @@ impl PyVecEnv {
 
     /// Envs that reset during the last step (their action was ignored).
     fn autoreset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        Ok(PyArray1::from_slice(py, self.lock()?.vec.autoreset()))
+        Ok(PyArray1::from_slice(py, self.lock(py)?.vec.autoreset()))
     }
 
-    /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32}}` of the last reset/step.
-    fn images<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let g = self.lock()?;
+    /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32 (int16 millimetres with
+    /// `depth_mm`), "segmentation": N×H×W×1 int16}}` of the last reset/step.
+    #[pyo3(signature = (depth_mm=false))]
+    fn images<'py>(&self, py: Python<'py>, depth_mm: bool) -> PyResult<Bound<'py, PyDict>> {
+        let g = self.lock(py)?;
         let vec = &g.vec;
+        let n = self.num_envs;
         let d = PyDict::new(py);
         for name in vec.sensor_names() {
             let Some(first) = vec.image(0, name) else {
                 continue;
             };
             let (w, h) = (first.width, first.height);
+            let imgs = || (0..n).filter_map(|i| vec.image(i, name));
             let cam = PyDict::new(py);
             if first.rgb.is_some() {
-                let mut all = Vec::with_capacity(self.num_envs * h * w * 3);
-                for i in 0..self.num_envs {
-                    if let Some(rgb) = vec.image(i, name).and_then(|c| c.rgb) {
-                        all.extend_from_slice(rgb);
-                    }
-                }
-                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 3])?;
-                cam.set_item("rgb", a)?;
+                let all: Vec<u8> = imgs()
+                    .flat_map(|c| c.rgb.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("rgb", PyArray1::from_vec(py, all).reshape([n, h, w, 3])?)?;
             }
-            if first.depth.is_some() {
-                let mut all = Vec::with_capacity(self.num_envs * h * w);
-                for i in 0..self.num_envs {
-                    if let Some(depth) = vec.image(i, name).and_then(|c| c.depth) {
-                        all.extend_from_slice(depth);
-                    }
-                }
-                let a = PyArray1::from_vec(py, all).reshape([self.num_envs, h, w, 1])?;
-                cam.set_item("depth", a)?;
+            if first.depth.is_some() && depth_mm {
+                let all: Vec<i16> = imgs()
+                    .flat_map(|c| c.depth_mm.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("depth", PyArray1::from_vec(py, all).reshape([n, h, w, 1])?)?;
+            } else if first.depth.is_some() {
+                let all: Vec<f32> = imgs()
+                    .flat_map(|c| c.depth.unwrap_or_default())
+                    .copied()
+                    .collect();
+                cam.set_item("depth", PyArray1::from_vec(py, all).reshape([n, h, w, 1])?)?;
+            }
+            if first.segmentation.is_some() {
+                let all: Vec<i16> = imgs()
+                    .flat_map(|c| c.segmentation.unwrap_or_default())
+                    .copied()
+                    .collect();
+                let a = PyArray1::from_vec(py, all).reshape([n, h, w, 1])?;
+                cam.set_item("segmentation", a)?;
             }
             d.set_item(*name, cam)?;
         }
         Ok(d)
+    }
+
+    /// ManiSkill's fused point clouds of the last reset/step (obs mode `pointcloud`; else
+    /// `None`): `{"xyzw": N×P×4 float32, "rgb": N×P×3 uint8, "segmentation": N×P×1 int16}`.
+    fn point_cloud<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let g = self.lock(py)?;
+        let vec = &g.vec;
+        if vec.point_cloud(0).is_none() {
+            return Ok(None);
+        }
+        let clouds = (0..self.num_envs).filter_map(|i| vec.point_cloud(i));
+        point_cloud_dict(py, clouds, false).map(Some)
     }
 }
 
@@ -542,22 +762,37 @@ impl PyVecEnv {
 #[pyfunction]
 #[pyo3(signature = (path, env_id, seeds, actions, robot_uids=None, obs_mode="state",
     control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-    robot_init_qpos_noise=0.02, sim_freq=100))]
+    robot_init_qpos_noise=0.02, sim_freq=None))]
 #[allow(clippy::too_many_arguments)]
 fn record_episodes(
     py: Python<'_>,
     path: PathBuf,
     env_id: &str,
-    seeds: Vec<u64>,
+    seeds: Vec<Bound<'_, PyAny>>,
     actions: Vec<PyReadonlyArray2<'_, f32>>,
     robot_uids: Option<String>,
     obs_mode: &str,
     control_mode: Option<String>,
     reward_mode: &str,
-    max_episode_steps: Option<u32>,
+    max_episode_steps: Option<&Bound<'_, PyAny>>,
     robot_init_qpos_noise: f64,
-    sim_freq: u32,
+    sim_freq: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Vec<(f64, bool)>> {
+    let seeds = seeds
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
+            int_arg(
+                s,
+                &format!("seeds[{k}]"),
+                0,
+                mjskill::MAX_SEED as i128,
+                &valid,
+            )
+            .map(|v| v as u64)
+        })
+        .collect::<PyResult<Vec<u64>>>()?;
     if seeds.len() != actions.len() {
         return Err(PyValueError::new_err(format!(
             "{} seeds but {} action arrays: give one [steps × action_dim] array per seed",
@@ -702,5 +937,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MAX_NUM_ENVS", mjskill::MAX_NUM_ENVS)?;
     Ok(())
 }

@@ -12,7 +12,7 @@ from conftest import ENV
     "kwargs,message",
     [
         ({"robot_uids": "ur5"}, 'unknown robot "ur5"; valid robots: panda, fetch'),
-        ({"obs_mode": "pointcloud"}, "valid obs modes: state, state_dict, none, rgb, depth, rgbd"),
+        ({"obs_mode": "voxel"}, "valid obs modes: state, state_dict, none, rgb, depth, rgbd"),
         ({"reward_mode": "great"}, "valid reward modes: normalized_dense, dense, sparse, none"),
         ({"control_mode": "pd_magic"}, "pd_joint_delta_pos"),
         ({"render_mode": "human"}, "valid render modes: rgb_array"),

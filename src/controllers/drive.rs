@@ -262,6 +262,12 @@ impl Drives {
         }
     }
 
+    /// Position and velocity target of robot joint `k` (ManiSkill order); `None` for an
+    /// undriven joint.
+    pub fn joint_target(&self, k: usize) -> Option<(f64, f64)> {
+        self.by_joint[k].map(|d| self.target(d))
+    }
+
     /// Position and velocity target of drive `k`.
     pub fn target(&self, k: usize) -> (f64, f64) {
         (self.target_q[k], self.target_v[k])

@@ -7,7 +7,7 @@ use serde_json::{json, Map, Value};
 
 use super::import::TOPIC_MANISKILL_STATE;
 use super::maniskill_h5::{self, EnvInfo, EpisodeData, EpisodeInfo, Trajectory, TrajectoryJson};
-use super::DatasetError;
+use super::{DatasetError, Named};
 use crate::env::{make, Env, StateDict};
 use crate::record::{EpisodeRec, Recording};
 
@@ -134,21 +134,178 @@ fn info_flag(info: &[(String, f64)], key: &str) -> Option<bool> {
 }
 
 /// Exports the finished episodes of the recording `path` to ManiSkill's format: `h5` and
-/// `json` (default: `h5` with extension `.json`).
+/// `json` (default: `h5` with extension `.json`). Refused before anything is read or written
+/// when an output is the recording, when the two outputs are one file, or when an output
+/// exists and is not a regular file (see [`crate::datasets`]).
 pub fn to_maniskill(
     path: &Path,
     h5: &Path,
     json_path: Option<&Path>,
 ) -> Result<ExportSummary, DatasetError> {
+    to_maniskill_in_mode(path, h5, json_path, None)
+}
+
+/// The control mode [`to_maniskill_in_mode`] converts actions to.
+pub const CONVERTIBLE_MODE: &str = "pd_joint_pos";
+
+/// How one part of the converted action is filled.
+enum PartFill {
+    /// Copied from the recorded action's slice (the part is the same in both modes).
+    Copy(std::ops::Range<usize>),
+    /// The drive position targets of these joints (ManiSkill indices).
+    Targets(Vec<usize>),
+}
+
+/// How to turn a recorded action into an action of [`CONVERTIBLE_MODE`]: per part of that
+/// mode, in action order. Errors name the part that cannot be converted.
+fn conversion_plan(
+    path: &Path,
+    env: &Env,
+    target_mode: &str,
+) -> Result<Vec<PartFill>, DatasetError> {
+    let bad = |msg: String| DatasetError::Invalid { msg };
+    let spec = env.robot_spec();
+    let source_mode = env.control_mode().to_string();
+    if target_mode != CONVERTIBLE_MODE {
+        return Err(bad(format!(
+            "--control-mode {target_mode:?}: actions convert to {CONVERTIBLE_MODE} only \
+             (the recording is in {source_mode}); valid: {CONVERTIBLE_MODE}, {source_mode}"
+        )));
+    }
+    if !env.get_state_dict().controller.is_empty() {
+        return Err(bad(format!(
+            "--control-mode {target_mode}: the recording's mode {source_mode} accumulates \
+             targets across steps (controller state), which {target_mode} has not; convert \
+             from a mode without `target` in its name"
+        )));
+    }
+    let (_, source_parts) = spec
+        .control_mode(&source_mode)
+        .map_err(|e| DatasetError::env(path)(e.into()))?;
+    let (_, target_parts) = spec
+        .control_mode(target_mode)
+        .map_err(|e| bad(format!("--control-mode {target_mode}: {e}")))?;
+    let source_ranges = env.action_parts();
+    let joints = &env.robot().joints.names;
+    let mut plan = Vec::new();
+    for part in &target_parts {
+        let same = source_parts.iter().find(|p| p.name == part.name) == Some(part);
+        let absolute = matches!(
+            &part.kind,
+            crate::controllers::PartKind::JointPos(c) if !c.use_delta && !c.normalize
+        );
+        let range = source_ranges
+            .iter()
+            .find(|r| r.name == part.name)
+            .map(|r| r.range.clone());
+        match (same, range) {
+            (true, Some(r)) => plan.push(PartFill::Copy(r)),
+            // A part that takes no action in either mode (the xArm6's passive linkage).
+            (true, None) => {}
+            _ if absolute => {
+                let idx = part
+                    .joints
+                    .iter()
+                    .map(|j| {
+                        joints.iter().position(|n| n == j).ok_or_else(|| {
+                            bad(format!("part {} names an unknown joint {j}", part.name))
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                plan.push(PartFill::Targets(idx));
+            }
+            _ => {
+                return Err(bad(format!(
+                    "--control-mode {target_mode}: its part {:?} differs from {source_mode}'s \
+                     and takes no absolute joint positions, so it cannot be derived from the \
+                     recorded actions",
+                    part.name
+                )))
+            }
+        }
+    }
+    Ok(plan)
+}
+
+/// Like [`to_maniskill`]; with `control_mode` [`CONVERTIBLE_MODE`] (`pd_joint_pos`) the
+/// actions are converted the way ManiSkill's `replay_trajectory -c` converts modes, but
+/// exactly: every step's absolute joint targets are the drive targets the recorded action
+/// set in mjskill (for EE modes: the IK solution), the other parts (gripper, body, base)
+/// are copied where both modes define them alike. Replayed in `pd_joint_pos`, the episode
+/// gives the drives the same targets as the recording; this also makes episodes of modes
+/// ManiSkill cannot build (Fetch's EE modes) replayable there. `None`, or the recording's
+/// own mode, exports the actions as recorded. Modes with accumulated targets
+/// (`*_target_*`) are not converted (error).
+pub fn to_maniskill_in_mode(
+    path: &Path,
+    h5: &Path,
+    json_path: Option<&Path>,
+    control_mode: Option<&str>,
+) -> Result<ExportSummary, DatasetError> {
+    let json_given = json_path.is_some();
     let json_path = json_path.map_or_else(|| maniskill_h5::json_path_for(h5), Path::to_path_buf);
+    super::check_outputs(
+        &[Named::new("the recording", path)],
+        &[
+            Named::new("-o", h5),
+            Named::new(
+                if json_given {
+                    "--json"
+                } else {
+                    "the json (default: -o with extension .json)"
+                },
+                &json_path,
+            ),
+        ],
+    )?;
     let (rec, imported) = read_recording(path)?;
     let mut env = env_of(path, &rec)?;
     let m = &rec.meta;
+    let convert = control_mode.filter(|c| *c != m.control_mode);
+    let plan = match convert {
+        Some(c) => Some(conversion_plan(path, &env, c)?),
+        None => None,
+    };
+    let out_mode = convert.unwrap_or(&m.control_mode).to_string();
     let mut infos = Vec::new();
     let mut episodes = Vec::new();
     let mut steps = 0;
     for (k, ep) in rec.finished().enumerate() {
-        let env_states = episode_states(path, &mut env, ep, imported.get(ep.index as usize))?;
+        let mut env_states = episode_states(path, &mut env, ep, imported.get(ep.index as usize))?;
+        let actions: Vec<f32> = match &plan {
+            None => ep
+                .steps
+                .iter()
+                .flat_map(|s| s.action.iter().copied())
+                .collect(),
+            Some(plan) => {
+                let mut out = Vec::new();
+                for s in &ep.steps {
+                    env.set_state(&s.state).map_err(DatasetError::env(path))?;
+                    let d = env
+                        .action_drive_targets(&s.action)
+                        .map_err(DatasetError::env(path))?;
+                    for fill in plan {
+                        match fill {
+                            PartFill::Copy(r) => out.extend_from_slice(&s.action[r.clone()]),
+                            PartFill::Targets(idx) => {
+                                out.extend(idx.iter().map(|&j| d.qpos[j] as f32))
+                            }
+                        }
+                    }
+                }
+                // The source mode keeps no controller state (checked), nor does the target.
+                for sd in &mut env_states {
+                    sd.controller.clear();
+                }
+                out
+            }
+        };
+        let action_dim = if ep.steps.is_empty() {
+            m.action_space.low.len()
+        } else {
+            actions.len() / ep.steps.len()
+        };
         let t = ep.steps.len();
         steps += t;
         let has_fail = ep
@@ -163,12 +320,8 @@ pub fn to_maniskill(
             (o, ep.initial_obs.len())
         });
         let data = EpisodeData {
-            actions: ep
-                .steps
-                .iter()
-                .flat_map(|s| s.action.iter().copied())
-                .collect(),
-            action_dim: m.action_space.low.len(),
+            actions,
+            action_dim,
             env_states,
             terminated: ep.steps.iter().map(|s| s.terminated).collect(),
             truncated: ep.steps.iter().map(|s| s.truncated).collect(),
@@ -190,7 +343,7 @@ pub fn to_maniskill(
         infos.push(EpisodeInfo {
             episode_id: k,
             episode_seed: ep.seed,
-            control_mode: m.control_mode.clone(),
+            control_mode: out_mode.clone(),
             elapsed_steps: t as u32,
             reset_kwargs: json!({"options": null, "seed": ep.seed}),
             success: Some(ep.success),
@@ -205,7 +358,7 @@ pub fn to_maniskill(
     }
     let mut env_kwargs = Map::new();
     env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
-    env_kwargs.insert("control_mode".into(), json!(m.control_mode));
+    env_kwargs.insert("control_mode".into(), json!(out_mode));
     env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
     env_kwargs.insert("robot_uids".into(), json!(m.robot));
     env_kwargs.insert("render_mode".into(), Value::Null);
@@ -214,11 +367,20 @@ pub fn to_maniskill(
     extra.insert("source_type".into(), json!("mjskill"));
     extra.insert(
         "source_desc".into(),
-        json!(format!(
-            "exported by mjskill {} from {}",
-            env!("CARGO_PKG_VERSION"),
-            path.display()
-        )),
+        json!(match convert {
+            None => format!(
+                "exported by mjskill {} from {}",
+                env!("CARGO_PKG_VERSION"),
+                path.display()
+            ),
+            Some(c) => format!(
+                "exported by mjskill {} from {}; actions converted from {} to {c} (the joint \
+                 targets mjskill's controller set)",
+                env!("CARGO_PKG_VERSION"),
+                path.display(),
+                m.control_mode
+            ),
+        }),
     );
     let traj = Trajectory {
         json: TrajectoryJson {

@@ -6,7 +6,9 @@
 //! * By actions: the env is reset with the episode's seed and the actions are applied open
 //!   loop.
 //! * By states: every `env_states` row is imported with [`Env::set_state_dict`] (and
-//!   `elapsed_steps` set to its index); obs, reward and info are recomputed from it. Step t of
+//!   `elapsed_steps` set to its index), rows after the first with the drive targets of the
+//!   action that led to them ([`Env::set_state_dict_after_action`]: held objects stay
+//!   squeezed, as in ManiSkill); obs, reward and info are recomputed from it. Step t of
 //!   the recording then carries the state of row t as the state before it and the obs, reward
 //!   and flags of row t+1, so `mjskill replay` of such a file reports the physics difference
 //!   between ManiSkill and mjskill rather than zero.
@@ -21,7 +23,7 @@ use serde::Serialize;
 use serde_json::json;
 
 use super::maniskill_h5::{self, EpisodeData, Trajectory};
-use super::{DatasetError, Staged};
+use super::{check_outputs, DatasetError, Named, Staged};
 use crate::env::{make, Env, EnvConfig, ObsMode, RewardMode, SimConfig, StateDict};
 use crate::record::Recorder;
 
@@ -44,7 +46,7 @@ pub fn maniskill_state_schema() -> serde_json::Value {
             "step": {"type": "integer", "minimum": 0},
             "state": {
                 "type": "object",
-                "properties": {"actors": map, "articulations": map, "controller": {"type": "object"}},
+                "properties": {"actors": map, "articulations": map, "controller": {"type": "object"}, "drive": {"type": "object"}},
                 "required": ["actors", "articulations"]
             }
         },
@@ -160,8 +162,17 @@ pub fn env_config(
             ),
         ));
     };
-    let Some(first) = traj.episodes.first() else {
+    let (Some(first), Some(first_info)) = (traj.episodes.first(), traj.json.episodes.first())
+    else {
         return Err(DatasetError::format(h5, "holds no episodes"));
+    };
+    let first_id = first_info.episode_id;
+    let valid_robots = || {
+        info.robots
+            .iter()
+            .map(|(r, _)| *r)
+            .collect::<Vec<_>>()
+            .join(", ")
     };
     let robots: Vec<&String> = first.env_states[0].articulations.keys().collect();
     let robot = match robots.as_slice() {
@@ -170,7 +181,8 @@ pub fn env_config(
             return Err(DatasetError::format(
                 h5,
                 format!(
-                    "traj_0/env_states/articulations holds {robots:?}; expected exactly one robot"
+                    "traj_{first_id}/env_states/articulations holds {robots:?}; expected exactly \
+                     one robot"
                 ),
             ))
         }
@@ -180,13 +192,32 @@ pub fn env_config(
             h5,
             format!(
                 "robot {robot:?} is not available for {env_id}; valid: {}",
-                info.robots
-                    .iter()
-                    .map(|(r, _)| *r)
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                valid_robots()
             ),
         ));
+    }
+    match traj.json.env_info.env_kwargs.get("robot_uids") {
+        None | Some(serde_json::Value::Null) => {}
+        Some(serde_json::Value::String(u)) if *u == robot => {}
+        Some(serde_json::Value::String(u)) if info.robots.iter().any(|(r, _)| r == u) => {
+            return Err(DatasetError::format(
+                json_path,
+                format!(
+                    "env_info.env_kwargs.robot_uids is {u:?} but the h5's episodes hold the \
+                     robot {robot:?} (traj_{}/env_states/articulations); they must agree",
+                    first_id
+                ),
+            ))
+        }
+        Some(v) => {
+            return Err(DatasetError::format(
+                json_path,
+                format!(
+                    "env_info.env_kwargs.robot_uids {v} is not a robot of {env_id}; valid: {}",
+                    valid_robots()
+                ),
+            ))
+        }
     }
     let mode = traj.json.episodes[0].control_mode.clone();
     if let Some(e) = traj.json.episodes.iter().find(|e| e.control_mode != mode) {
@@ -215,6 +246,47 @@ pub fn env_config(
             ..EnvConfig::default()
         },
     ))
+}
+
+/// Largest deviation from 1 of the norm of a pose quaternion in an `env_states` row: the
+/// poses come from a physics engine, normalised to float32 precision.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+
+/// Checks every `env_states` row of episode `id` before anything is replayed: the actor rows
+/// and the robot's row are finite and their pose quaternions (entries 3..7, `w x y z`) have
+/// unit norm within [`QUATERNION_NORM_TOLERANCE`]. Errors name the dataset, the row and the
+/// values.
+fn check_states(h5: &Path, id: usize, ep: &EpisodeData) -> Result<(), DatasetError> {
+    for (t, s) in ep.env_states.iter().enumerate() {
+        let rows = s.actors.iter().map(|(n, a)| ("actors", n, &a[..])).chain(
+            s.articulations
+                .iter()
+                .map(|(n, a)| ("articulations", n, &a[..])),
+        );
+        for (kind, name, row) in rows {
+            let what = format!("traj_{id}/env_states/{kind}/{name} row {t}");
+            if let Some((i, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(DatasetError::format(
+                    h5,
+                    format!("{what}: entry {i} is {v}; states must be finite"),
+                ));
+            }
+            let Some(q) = row.get(3..7) else {
+                continue; // set_state_dict reports the length
+            };
+            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                return Err(DatasetError::format(
+                    h5,
+                    format!(
+                        "{what}: the pose quaternion (w, x, y, z) {q:?} has norm {norm}, not 1 \
+                         (within {QUATERNION_NORM_TOLERANCE}): it is no rotation"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The reward of the env's current state in its reward mode.
@@ -318,8 +390,14 @@ fn replay_states(
     path: &Path,
     mut sink: Option<Sink<'_>>,
 ) -> Result<Vec<bool>, DatasetError> {
+    // Row t > 0 is imported with the drive targets of action t − 1, applied to row t − 1
+    // (ManiSkill's rows lack them; PhysX keeps them across steps).
     let import = |env: &mut Env, t: usize| -> Result<(), DatasetError> {
-        env.set_state_dict(&ep.env_states[t]).map_err(|e| {
+        let r = match t {
+            0 => env.set_state_dict(&ep.env_states[0]),
+            _ => env.set_state_dict_after_action(ep.action(t - 1), &ep.env_states[t]),
+        };
+        r.map_err(|e| {
             DatasetError::format(path, format!("env_states row {t} cannot be imported: {e}"))
         })?;
         env.set_elapsed_steps(t as u32);
@@ -360,13 +438,46 @@ fn replay_states(
 
 /// Runs the import (see the [module docs](self)); the recording is written under a
 /// temporary name and moved to `out` only when every episode is recorded.
+///
+/// Refused before anything is written: an `out` that is the h5 or the json, or that exists
+/// and is not a regular file; a json whose episode ids repeat, whose seeds are missing, not
+/// 32-bit or disagree (`episode_seed` and `reset_kwargs.seed`), whose
+/// `env_kwargs.robot_uids` is not the h5's robot, or whose `elapsed_steps` differ from the
+/// h5's action counts (checked on the declared shapes, before the data is read); state rows
+/// with non-finite values or non-unit quaternions.
 pub fn run(a: &ImportArgs) -> Result<ImportReport, DatasetError> {
     let json_path = a
         .json
         .clone()
         .unwrap_or_else(|| maniskill_h5::json_path_for(&a.h5));
-    let traj = maniskill_h5::read(&a.h5, Some(&json_path))?;
+    check_outputs(
+        &[
+            Named::new("the h5", &a.h5),
+            Named::new(
+                if a.json.is_some() {
+                    "--json"
+                } else {
+                    "the json (default: the h5 with extension .json)"
+                },
+                &json_path,
+            ),
+        ],
+        &[Named::new("--out", &a.out)],
+    )?;
+    let json = maniskill_h5::read_json(&json_path)?;
+    let seeds = json
+        .episodes
+        .iter()
+        .map(|e| {
+            e.checked_seed()
+                .map_err(|msg| DatasetError::format(&json_path, msg))
+        })
+        .collect::<Result<Vec<u64>, _>>()?;
+    let traj = maniskill_h5::read_h5(&a.h5, &json_path, json)?;
     let (env_id, config) = env_config(&traj, &a.h5, &json_path, a.sim)?;
+    for (info, ep) in traj.json.episodes.iter().zip(&traj.episodes) {
+        check_states(&a.h5, info.episode_id, ep)?;
+    }
     let mut env = make(&env_id, config.clone()).map_err(DatasetError::env(&json_path))?;
     for (info, ep) in traj.json.episodes.iter().zip(&traj.episodes) {
         let dim = env.action_space().low.len();
@@ -394,7 +505,7 @@ pub fn run(a: &ImportArgs) -> Result<ImportReport, DatasetError> {
     )?;
     let mut episodes = Vec::new();
     for (k, (info, ep)) in traj.json.episodes.iter().zip(&traj.episodes).enumerate() {
-        let seed = info.seed();
+        let seed = Some(seeds[k]);
         let sink = Sink {
             rec: &mut rec,
             channel,

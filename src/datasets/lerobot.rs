@@ -2,9 +2,9 @@
 //!
 //! ```text
 //! meta/info.json                                   codebase_version v3.0, fps 20, robot_type, features
-//! meta/stats.json                                  min / max / mean / std / count per feature
+//! meta/stats.json                                  min / max / mean / std / count / q01 q10 q50 q90 q99 per feature
 //! meta/tasks.parquet                               task (the pandas index) → task_index
-//! meta/episodes/chunk-000/file-000.parquet         per episode: length, tasks, data and video locations
+//! meta/episodes/chunk-000/file-000.parquet         per episode: length, tasks, data and video locations, stats/<feature>/<stat>
 //! data/chunk-000/file-000.parquet                  one row per step
 //! videos/observation.images.<camera>/chunk-000/file-000.mp4   H.264, every episode one after another
 //! ```
@@ -114,71 +114,222 @@ fn cameras(path: &Path, messages: &[RawMessage]) -> Result<Vec<Camera>, DatasetE
     Ok(cams)
 }
 
-/// Running per-channel statistics of RGB frames (values scaled to 0..1, as LeRobot's).
-#[derive(Default)]
+/// The quantiles LeRobot stores with every feature's statistics (its `q01` ... `q99`).
+pub const QUANTILES: [(&str, f64); 5] = [
+    ("q01", 0.01),
+    ("q10", 0.10),
+    ("q50", 0.50),
+    ("q90", 0.90),
+    ("q99", 0.99),
+];
+
+/// Statistics of one feature over a set of rows: `min`, `max`, `mean`, `std` (population),
+/// the [`QUANTILES`] (linear interpolation between order statistics, numpy's default) per
+/// component, and `count` (rows, or frames for images).
+#[derive(Debug, Clone)]
+struct Stats {
+    /// Image statistics: per channel, stored with shape (3, 1, 1) as LeRobot's.
+    image: bool,
+    /// (name, per-component values), in LeRobot's order.
+    entries: Vec<(&'static str, Vec<f64>)>,
+    count: u64,
+}
+
+/// The `q`-quantile of sorted values (numpy's linear method).
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    let pos = q * (sorted.len().max(1) - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = (lo + 1).min(sorted.len().saturating_sub(1));
+    let f = pos - lo as f64;
+    sorted.get(lo).map_or(0.0, |a| a + (sorted[hi] - a) * f)
+}
+
+impl Stats {
+    /// Statistics of the rows of a (rows × dim) matrix.
+    fn of_rows(values: &[f64], dim: usize) -> Stats {
+        let dim = dim.max(1);
+        let rows = values.len() / dim;
+        let n = rows.max(1) as f64;
+        let mut names: Vec<(&'static str, Vec<f64>)> = ["min", "max", "mean", "std"]
+            .iter()
+            .chain(QUANTILES.iter().map(|(q, _)| q))
+            .map(|k| (*k, Vec::with_capacity(dim)))
+            .collect();
+        let mut column = Vec::with_capacity(rows);
+        for j in 0..dim {
+            column.clear();
+            column.extend(values.iter().skip(j).step_by(dim).copied());
+            let mean = column.iter().sum::<f64>() / n;
+            let var = column.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+            column.sort_by(f64::total_cmp);
+            let mut v = vec![
+                column.first().copied().unwrap_or(0.0),
+                column.last().copied().unwrap_or(0.0),
+                mean,
+                var.sqrt(),
+            ];
+            v.extend(QUANTILES.iter().map(|(_, q)| quantile(&column, *q)));
+            for (e, x) in names.iter_mut().zip(v) {
+                e.1.push(x);
+            }
+        }
+        Stats {
+            image: false,
+            entries: names,
+            count: rows as u64,
+        }
+    }
+
+    /// `{"min": [...], ..., "count": [n]}` (images: every value as `[[x]]`).
+    fn to_json(&self) -> Value {
+        let mut m = Map::new();
+        for (k, v) in &self.entries {
+            let v = if self.image {
+                json!(v.iter().map(|x| json!([[x]])).collect::<Vec<_>>())
+            } else {
+                json!(v)
+            };
+            m.insert((*k).into(), v);
+            if *k == "std" {
+                m.insert("count".into(), json!([self.count]));
+            }
+        }
+        Value::Object(m)
+    }
+}
+
+/// Running per-channel statistics of RGB frames (values scaled to 0..1, as LeRobot's): a
+/// histogram of the 256 levels per channel, from which every statistic is exact.
+#[derive(Clone)]
 struct ImageStats {
-    min: [f64; 3],
-    max: [f64; 3],
-    sum: [f64; 3],
-    sum_sq: [f64; 3],
+    hist: Vec<[u64; 256]>,
     pixels: u64,
     frames: u64,
 }
 
+impl Default for ImageStats {
+    fn default() -> Self {
+        ImageStats {
+            hist: vec![[0; 256]; 3],
+            pixels: 0,
+            frames: 0,
+        }
+    }
+}
+
 impl ImageStats {
     fn add(&mut self, rgb: &[u8]) {
-        if self.pixels == 0 {
-            self.min = [1.0; 3];
-            self.max = [0.0; 3];
-        }
         for px in rgb.chunks_exact(3) {
             for (c, &p) in px.iter().enumerate() {
-                let v = p as f64 / 255.0;
-                self.min[c] = self.min[c].min(v);
-                self.max[c] = self.max[c].max(v);
-                self.sum[c] += v;
-                self.sum_sq[c] += v * v;
+                self.hist[c][p as usize] += 1;
             }
         }
         self.pixels += (rgb.len() / 3) as u64;
         self.frames += 1;
     }
 
-    fn to_json(&self) -> Value {
+    fn merge(&mut self, o: &ImageStats) {
+        for (h, oh) in self.hist.iter_mut().zip(&o.hist) {
+            for (a, b) in h.iter_mut().zip(oh) {
+                *a += b;
+            }
+        }
+        self.pixels += o.pixels;
+        self.frames += o.frames;
+    }
+
+    /// The value of rank `k` (0-based) of channel `c`.
+    fn ranked(&self, c: usize, k: u64) -> f64 {
+        let mut seen = 0;
+        for (level, &n) in self.hist[c].iter().enumerate() {
+            seen += n;
+            if seen > k {
+                return level as f64 / 255.0;
+            }
+        }
+        1.0
+    }
+
+    fn stats(&self) -> Stats {
         let n = self.pixels.max(1) as f64;
-        let mean: Vec<f64> = self.sum.iter().map(|s| s / n).collect();
+        let moment = |c: usize, f: &dyn Fn(f64) -> f64| -> f64 {
+            self.hist[c]
+                .iter()
+                .enumerate()
+                .map(|(level, &k)| k as f64 * f(level as f64 / 255.0))
+                .sum::<f64>()
+                / n
+        };
+        let mean: Vec<f64> = (0..3).map(|c| moment(c, &|v| v)).collect();
         let std: Vec<f64> = (0..3)
-            .map(|c| (self.sum_sq[c] / n - mean[c] * mean[c]).max(0.0).sqrt())
+            .map(|c| moment(c, &|v| (v - mean[c]) * (v - mean[c])).sqrt())
             .collect();
-        let chw = |v: &[f64]| json!(v.iter().map(|x| json!([[x]])).collect::<Vec<_>>());
-        json!({
-            "min": chw(&self.min), "max": chw(&self.max), "mean": chw(&mean), "std": chw(&std),
-            "count": [self.frames]
-        })
+        let last = self.pixels.saturating_sub(1);
+        let quant = |q: f64| -> Vec<f64> {
+            (0..3)
+                .map(|c| {
+                    let pos = q * last as f64;
+                    let lo = pos.floor() as u64;
+                    let a = self.ranked(c, lo);
+                    a + (self.ranked(c, (lo + 1).min(last)) - a) * (pos - lo as f64)
+                })
+                .collect()
+        };
+        let mut entries = vec![
+            ("min", quant(0.0)),
+            ("max", quant(1.0)),
+            ("mean", mean),
+            ("std", std),
+        ];
+        entries.extend(QUANTILES.iter().map(|(k, q)| (*k, quant(*q))));
+        Stats {
+            image: true,
+            entries,
+            count: self.frames,
+        }
     }
 }
 
-/// min / max / mean / std / count of the rows of a (rows × dim) matrix.
-fn vector_stats(values: &[f64], dim: usize) -> Value {
-    let rows = values.len() / dim.max(1);
-    let mut min = vec![f64::INFINITY; dim];
-    let mut max = vec![f64::NEG_INFINITY; dim];
-    let mut sum = vec![0.0; dim];
-    let mut sq = vec![0.0; dim];
-    for r in values.chunks_exact(dim.max(1)) {
-        for (j, &x) in r.iter().enumerate() {
-            min[j] = min[j].min(x);
-            max[j] = max[j].max(x);
-            sum[j] += x;
-            sq[j] += x * x;
+/// The per-episode columns of one feature's statistics, in LeRobot's order (`min`, `max`,
+/// `mean`, `std`, `count`, quantiles): lists of float64 (images: 3 × [[x]], shape (3, 1, 1)),
+/// `count` a list of one int64.
+fn stats_columns(per_episode: &[Stats]) -> Vec<(&'static str, ArrayRef)> {
+    use arrow_array::builder::{Float64Builder, Int64Builder};
+    let Some(first) = per_episode.first() else {
+        return Vec::new();
+    };
+    let mut out: Vec<(&'static str, ArrayRef)> = Vec::new();
+    for (i, (name, _)) in first.entries.iter().enumerate() {
+        let col: ArrayRef = if first.image {
+            let mut b = ListBuilder::new(ListBuilder::new(ListBuilder::new(Float64Builder::new())));
+            for st in per_episode {
+                for &x in &st.entries[i].1 {
+                    b.values().values().values().append_value(x);
+                    b.values().values().append(true);
+                    b.values().append(true);
+                }
+                b.append(true);
+            }
+            Arc::new(b.finish())
+        } else {
+            let mut b = ListBuilder::new(Float64Builder::new());
+            for st in per_episode {
+                b.values().append_slice(&st.entries[i].1);
+                b.append(true);
+            }
+            Arc::new(b.finish())
+        };
+        out.push((name, col));
+        if *name == "std" {
+            let mut b = ListBuilder::new(Int64Builder::new());
+            for st in per_episode {
+                b.values().append_value(st.count as i64);
+                b.append(true);
+            }
+            out.push(("count", Arc::new(b.finish())));
         }
     }
-    let n = rows.max(1) as f64;
-    let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
-    let std: Vec<f64> = (0..dim)
-        .map(|j| (sq[j] / n - mean[j] * mean[j]).max(0.0).sqrt())
-        .collect();
-    json!({"min": min, "max": max, "mean": mean, "std": std, "count": [rows]})
+    out
 }
 
 fn names(prefix: &str, n: usize) -> Vec<String> {
@@ -219,13 +370,13 @@ fn write_parquet(out: &Path, final_path: &Path, batch: &RecordBatch) -> Result<(
     Ok(())
 }
 
-/// One camera's video, muxed into `out`; returns (width, height, image stats).
+/// One camera's video, muxed into `out`; returns (width, height, image stats per episode).
 fn write_video(
     out: &Path,
     final_path: &Path,
     cam: &Camera,
     episodes: &[&EpisodeRec],
-) -> Result<(usize, usize, ImageStats), DatasetError> {
+) -> Result<(usize, usize, Vec<ImageStats>), DatasetError> {
     use openh264::formats::YUVSource;
     let verr = |msg: String| DatasetError::Video {
         path: final_path.to_path_buf(),
@@ -233,10 +384,19 @@ fn write_video(
     };
     // The access units, re-encoding PNG frames.
     let mut units: Vec<Vec<u8>> = Vec::new();
-    let mut stats = ImageStats::default();
+    let mut stats = vec![ImageStats::default(); episodes.len()];
+    // Row after the last of each episode: frame i belongs to the first episode ending after it.
+    let ends: Vec<usize> = episodes
+        .iter()
+        .scan(0, |n, ep| {
+            *n += ep.steps.len();
+            Some(*n)
+        })
+        .collect();
+    let episode_of = |i: usize| ends.partition_point(|&e| e <= i).min(ends.len() - 1);
     let mut size: Option<(usize, usize)> = None;
     let mut encoder: Option<H264Encoder> = None;
-    for ep in episodes {
+    for (k, ep) in episodes.iter().enumerate() {
         let frames = cam.frames.get(&ep.index).map_or(&[][..], Vec::as_slice);
         let rows = ep.steps.len();
         if frames.len() != rows + 1 {
@@ -279,7 +439,7 @@ fn write_video(
                     .expect("made above")
                     .encode(rgb, t == 0, &mut unit)
                     .map_err(|e| verr(format!("episode {} frame {t}: {e}", ep.index)))?;
-                stats.add(rgb);
+                stats[k].add(rgb);
                 units.push(unit);
             } else {
                 if t == 0 && !is_idr(f) {
@@ -297,6 +457,7 @@ fn write_video(
         // stream decodes to one picture per row.
         let mut dec = openh264::decoder::Decoder::new().map_err(|e| verr(e.to_string()))?;
         let mut rgb = Vec::new();
+        let mut decoded = 0;
         for (i, u) in units.iter().enumerate() {
             let pic = dec
                 .decode(u)
@@ -306,7 +467,8 @@ fn write_video(
                 rgb.resize(w * h * 3, 0);
                 p.write_rgb8(&mut rgb);
                 size.get_or_insert((w, h));
-                stats.add(&rgb);
+                stats[episode_of(decoded)].add(&rgb);
+                decoded += 1;
             }
         }
         for p in dec
@@ -316,14 +478,15 @@ fn write_video(
             let (w, h) = p.dimensions();
             rgb.resize(w * h * 3, 0);
             p.write_rgb8(&mut rgb);
-            stats.add(&rgb);
+            stats[episode_of(decoded)].add(&rgb);
+            decoded += 1;
         }
-        if stats.frames != units.len() as u64 {
+        if decoded != units.len() {
             return Err(verr(format!(
                 "camera {}: {} frames decode to {} pictures",
                 cam.name,
                 units.len(),
-                stats.frames
+                decoded
             )));
         }
     }
@@ -509,25 +672,37 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     let widen = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
     let bools = |v: &[bool]| v.iter().map(|&x| x as u8 as f64).collect::<Vec<_>>();
     let ints = |v: &[i64]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
-    let mut stats = Map::new();
+    // Statistics of the whole dataset (meta/stats.json) and of every episode (the
+    // `stats/<feature>/<stat>` columns of meta/episodes, from which LeRobot's
+    // delete_episodes / split_dataset rebuild stats.json).
+    let mut columns: Vec<(&str, Vec<f64>, usize)> = Vec::new();
     if obs_dim > 0 {
-        stats.insert(
-            "observation.state".into(),
-            vector_stats(&widen(&state), obs_dim),
-        );
+        columns.push(("observation.state", widen(&state), obs_dim));
     }
-    stats.insert("action".into(), vector_stats(&widen(&action), act_dim));
-    stats.insert("next.reward".into(), vector_stats(&widen(&reward), 1));
-    stats.insert("next.done".into(), vector_stats(&bools(&done), 1));
-    stats.insert("next.success".into(), vector_stats(&bools(&success), 1));
-    stats.insert("timestamp".into(), vector_stats(&widen(&timestamp), 1));
+    columns.push(("action", widen(&action), act_dim));
+    columns.push(("next.reward", widen(&reward), 1));
+    columns.push(("next.done", bools(&done), 1));
+    columns.push(("next.success", bools(&success), 1));
+    columns.push(("timestamp", widen(&timestamp), 1));
     for (name, v) in [
         ("frame_index", &frame_index),
         ("episode_index", &episode_index),
         ("index", &index),
         ("task_index", &task_index),
     ] {
-        stats.insert(name.into(), vector_stats(&ints(v), 1));
+        columns.push((name, ints(v), 1));
+    }
+    let mut stats = Map::new();
+    let mut ep_stats: Vec<(String, Vec<Stats>)> = Vec::new();
+    for (name, values, dim) in &columns {
+        stats.insert((*name).into(), Stats::of_rows(values, *dim).to_json());
+        ep_stats.push((
+            (*name).into(),
+            ep_rows
+                .iter()
+                .map(|(a, b)| Stats::of_rows(&values[a * dim..b * dim], *dim))
+                .collect(),
+        ));
     }
 
     // Write everything under a temporary directory.
@@ -545,7 +720,11 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     for cam in &cams {
         let key = format!("observation.images.{}", cam.name);
         let rel = format!("videos/{key}/chunk-000/file-000.mp4");
-        let (w, h, st) = write_video(&tmp.join(&rel), &dir.join(&rel), cam, &episodes)?;
+        let (w, h, per_episode) = write_video(&tmp.join(&rel), &dir.join(&rel), cam, &episodes)?;
+        let mut total = ImageStats::default();
+        for st in &per_episode {
+            total.merge(st);
+        }
         features.insert(
             key.clone(),
             json!({
@@ -559,7 +738,11 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
                 }
             }),
         );
-        stats.insert(key.clone(), st.to_json());
+        stats.insert(key.clone(), total.stats().to_json());
+        ep_stats.push((
+            key.clone(),
+            per_episode.iter().map(ImageStats::stats).collect(),
+        ));
         videos.push((cam.name.clone(), rows));
         let zeros: ArrayRef = Arc::new(Int64Array::from(vec![0i64; episodes.len()]));
         ep_video_cols.push((
@@ -639,6 +822,16 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     for (f, c) in ep_video_cols {
         ep_fields.push(f);
         ep_cols.push(c);
+    }
+    for (key, per) in &ep_stats {
+        for (name, col) in stats_columns(per) {
+            ep_fields.push(Field::new(
+                format!("stats/{key}/{name}"),
+                col.data_type().clone(),
+                true,
+            ));
+            ep_cols.push(col);
+        }
     }
     ep_fields.push(Field::new(
         "meta/episodes/chunk_index",

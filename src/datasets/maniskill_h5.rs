@@ -68,6 +68,41 @@ impl EpisodeInfo {
             .and_then(Value::as_u64)
             .or(self.episode_seed)
     }
+
+    /// The reset seed a replay must use, checked: `episode_seed` and `reset_kwargs.seed`
+    /// (a null counts as absent) must be integers in `0..=`[`crate::MAX_SEED`] (ManiSkill's
+    /// seeds are 32-bit), must agree when both are given, and at least one must be given.
+    /// The error names the episode, the field and the value.
+    pub fn checked_seed(&self) -> Result<u64, String> {
+        let id = self.episode_id;
+        let max = crate::MAX_SEED;
+        let kw = match self.reset_kwargs.get("seed") {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {
+                format!(
+                    "episode {id}: reset_kwargs.seed {v} is not an integer in 0..={max} \
+                     (ManiSkill's seeds are 32-bit)"
+                )
+            })?),
+        };
+        if let Some(s) = self.episode_seed.filter(|s| *s > max) {
+            return Err(format!(
+                "episode {id}: episode_seed {s} is not in 0..={max} (ManiSkill's seeds are \
+                 32-bit)"
+            ));
+        }
+        match (kw, self.episode_seed) {
+            (Some(a), Some(b)) if a != b => Err(format!(
+                "episode {id}: reset_kwargs.seed {a} and episode_seed {b} differ; an episode \
+                 has one reset seed"
+            )),
+            (Some(s), _) | (None, Some(s)) => Ok(s),
+            (None, None) => Err(format!(
+                "episode {id}: no seed (episode_seed and reset_kwargs.seed are null or \
+                 missing); the episode cannot be replayed from its reset"
+            )),
+        }
+    }
 }
 
 /// The whole `trajectory.json`.
@@ -134,15 +169,60 @@ pub fn json_path_for(h5: &Path) -> std::path::PathBuf {
     h5.with_extension("json")
 }
 
-/// Reads and checks `trajectory.json`.
+/// Longest episode the reader accepts (steps). An episode's `elapsed_steps` must not exceed
+/// it, and every dataset's declared row count must match `elapsed_steps` before the dataset
+/// is read.
+pub const MAX_EPISODE_STEPS: u32 = 100_000;
+/// Most columns a dataset may declare (entries per action, observation or state row).
+pub const MAX_COLUMNS: usize = 4096;
+/// Most values the reader loads from one h5 file (2²⁸ float32 values, 1 GiB), summed over
+/// the declared shapes of everything it reads, checked before each dataset is read.
+pub const MAX_VALUES: u64 = 1 << 28;
+
+/// Reads and checks `trajectory.json` (see [`TrajectoryJson::check`]).
 pub fn read_json(path: &Path) -> Result<TrajectoryJson, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(DatasetError::io(path))?;
-    serde_json::from_str(&text).map_err(|e| {
+    let json: TrajectoryJson = serde_json::from_str(&text).map_err(|e| {
         DatasetError::format(
             path,
             format!("not a ManiSkill trajectory json (env_info, episodes): {e}"),
         )
-    })
+    })?;
+    json.check(path)?;
+    Ok(json)
+}
+
+impl TrajectoryJson {
+    /// Checks what the h5 reader relies on: every `episode_id` is listed once (it names the
+    /// group `traj_<id>`, so a repeated id would read one group twice and another never),
+    /// and no episode is longer than [`MAX_EPISODE_STEPS`]. `path` is the json, for errors.
+    pub fn check(&self, path: &Path) -> Result<(), DatasetError> {
+        let mut seen = std::collections::HashMap::new();
+        for (i, e) in self.episodes.iter().enumerate() {
+            if let Some(j) = seen.insert(e.episode_id, i) {
+                return Err(DatasetError::format(
+                    path,
+                    format!(
+                        "episodes[{j}] and episodes[{i}] both have episode_id {}; each \
+                         episode_id names one h5 group traj_<id>, so one episode would be \
+                         read twice and another never",
+                        e.episode_id
+                    ),
+                ));
+            }
+            if e.elapsed_steps > MAX_EPISODE_STEPS {
+                return Err(DatasetError::format(
+                    path,
+                    format!(
+                        "episode {}: elapsed_steps {} exceeds the limit of {MAX_EPISODE_STEPS} \
+                         steps per episode",
+                        e.episode_id, e.elapsed_steps
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Reads an h5 file and its json (default: the h5 path with extension `.json`) and checks
@@ -150,6 +230,19 @@ pub fn read_json(path: &Path) -> Result<TrajectoryJson, DatasetError> {
 pub fn read(h5_path: &Path, json_path: Option<&Path>) -> Result<Trajectory, DatasetError> {
     let jp = json_path.map_or_else(|| json_path_for(h5_path), Path::to_path_buf);
     let json = read_json(&jp)?;
+    read_h5(h5_path, &jp, json)
+}
+
+/// Reads the h5 file of an already read and checked json (`json_path` names it in errors).
+/// Every dataset's declared shape is checked against the json's `elapsed_steps`,
+/// [`MAX_COLUMNS`] and [`MAX_VALUES`] before it is read.
+pub fn read_h5(
+    h5_path: &Path,
+    json_path: &Path,
+    json: TrajectoryJson,
+) -> Result<Trajectory, DatasetError> {
+    let jp = json_path;
+    json.check(jp)?;
     let file = h5::File::open(h5_path).map_err(DatasetError::hdf5(h5_path))?;
     let names = file.member_names().map_err(DatasetError::hdf5(h5_path))?;
     let trajs = names.iter().filter(|n| n.starts_with("traj_")).count();
@@ -163,6 +256,11 @@ pub fn read(h5_path: &Path, json_path: Option<&Path>) -> Result<Trajectory, Data
             ),
         ));
     }
+    let mut reader = Reader {
+        path: h5_path,
+        json: jp,
+        left: MAX_VALUES,
+    };
     let mut episodes = Vec::with_capacity(trajs);
     for info in &json.episodes {
         let name = format!("traj_{}", info.episode_id);
@@ -176,63 +274,235 @@ pub fn read(h5_path: &Path, json_path: Option<&Path>) -> Result<Trajectory, Data
                 ),
             )
         })?;
-        let ep = read_episode(h5_path, &name, &g)?;
+        let ep = reader.episode(&name, &g, info)?;
         episodes.push(ep);
     }
     Ok(Trajectory { json, episodes })
 }
 
-fn read_matrix(
-    path: &Path,
-    g: &h5::Group,
-    what: &str,
-    name: &str,
-) -> Result<(Vec<f32>, usize, usize), DatasetError> {
-    let ds = g
-        .dataset(name)
-        .map_err(|_| DatasetError::format(path, format!("{what}: missing dataset {name}")))?;
-    let shape = ds.shape();
-    let (rows, cols) = match shape.as_slice() {
-        [r] => (*r, 1),
-        [r, c] => (*r, *c),
-        s => {
-            return Err(DatasetError::format(
-                path,
-                format!("{what}/{name} has shape {s:?}, expected 1 or 2 dimensions"),
-            ))
-        }
-    };
-    let v = ds.read_raw::<f32>().map_err(DatasetError::hdf5(path))?;
-    Ok((v, rows, cols))
+/// Reads datasets after checking their declared shapes (see [`read_h5`]).
+struct Reader<'a> {
+    path: &'a Path,
+    json: &'a Path,
+    /// Values still allowed by [`MAX_VALUES`].
+    left: u64,
 }
 
-fn read_bools(
-    path: &Path,
-    g: &h5::Group,
-    what: &str,
-    name: &str,
-    steps: usize,
-    required: bool,
-) -> Result<Option<Vec<bool>>, DatasetError> {
-    if !g.link_exists(name) {
-        return if required {
-            Err(DatasetError::format(
-                path,
-                format!("{what}: missing dataset {name}"),
-            ))
-        } else {
-            Ok(None)
+impl Reader<'_> {
+    fn err(&self, msg: String) -> DatasetError {
+        DatasetError::format(self.path, msg)
+    }
+
+    /// Takes `rows × cols` values from the budget.
+    fn charge(&mut self, what: &str, rows: usize, cols: usize) -> Result<(), DatasetError> {
+        let n = rows as u128 * cols as u128;
+        if n > self.left as u128 {
+            return Err(self.err(format!(
+                "{what} declares {rows}×{cols} values, beyond the limit of {MAX_VALUES} values \
+                 read from one file; refusing to read it"
+            )));
+        }
+        self.left -= n as u64;
+        Ok(())
+    }
+
+    /// A 1- or 2-dimensional float dataset of `rows` rows (`why` says where that count comes
+    /// from); returns (values, columns). The shape is checked before anything is read.
+    fn matrix(
+        &mut self,
+        g: &h5::Group,
+        what: &str,
+        name: &str,
+        rows: usize,
+        why: &str,
+    ) -> Result<(Vec<f32>, usize), DatasetError> {
+        let ds = g
+            .dataset(name)
+            .map_err(|_| self.err(format!("{what}: missing dataset {name}")))?;
+        let shape = ds.shape();
+        let (r, cols) = match shape.as_slice() {
+            [r] => (*r, 1),
+            [r, c] => (*r, *c),
+            s => {
+                return Err(self.err(format!(
+                    "{what}/{name} has shape {s:?}, expected 1 or 2 dimensions"
+                )))
+            }
         };
+        if r != rows {
+            return Err(self.err(format!(
+                "{what}/{name} declares {r} rows, expected {rows} ({why})"
+            )));
+        }
+        if cols > MAX_COLUMNS {
+            return Err(self.err(format!(
+                "{what}/{name} declares {cols} columns, beyond the limit of {MAX_COLUMNS}"
+            )));
+        }
+        self.charge(&format!("{what}/{name}"), rows, cols)?;
+        let v = ds
+            .read_raw::<f32>()
+            .map_err(DatasetError::hdf5(self.path))?;
+        if v.len() != rows * cols {
+            return Err(self.err(format!(
+                "{what}/{name} holds {} values, expected {rows}×{cols}",
+                v.len()
+            )));
+        }
+        Ok((v, cols))
     }
-    let ds = g.dataset(name).map_err(DatasetError::hdf5(path))?;
-    let v = ds.read_raw::<bool>().map_err(DatasetError::hdf5(path))?;
-    if v.len() != steps {
-        return Err(DatasetError::format(
-            path,
-            format!("{what}/{name} has {} entries, expected {steps}", v.len()),
-        ));
+
+    /// A boolean dataset of shape (`steps`,), or None when absent and not `required`.
+    fn bools(
+        &mut self,
+        g: &h5::Group,
+        what: &str,
+        name: &str,
+        steps: usize,
+        required: bool,
+    ) -> Result<Option<Vec<bool>>, DatasetError> {
+        if !g.link_exists(name) {
+            return if required {
+                Err(self.err(format!("{what}: missing dataset {name}")))
+            } else {
+                Ok(None)
+            };
+        }
+        let ds = g.dataset(name).map_err(DatasetError::hdf5(self.path))?;
+        let shape = ds.shape();
+        if shape != [steps] {
+            return Err(self.err(format!(
+                "{what}/{name} has shape {shape:?}, expected [{steps}] (one flag per action)"
+            )));
+        }
+        self.charge(&format!("{what}/{name}"), steps, 1)?;
+        let v = ds
+            .read_raw::<bool>()
+            .map_err(DatasetError::hdf5(self.path))?;
+        if v.len() != steps {
+            return Err(self.err(format!(
+                "{what}/{name} has {} entries, expected {steps}",
+                v.len()
+            )));
+        }
+        Ok(Some(v))
     }
-    Ok(Some(v))
+
+    fn episode(
+        &mut self,
+        name: &str,
+        g: &h5::Group,
+        info: &EpisodeInfo,
+    ) -> Result<EpisodeData, DatasetError> {
+        let path = self.path;
+        let steps = info.elapsed_steps as usize;
+        let why = format!(
+            "episode {}'s elapsed_steps in {}: one action per step",
+            info.episode_id,
+            self.json.display()
+        );
+        let (actions, action_dim) = self.matrix(g, name, "actions", steps, &why)?;
+        if action_dim == 0 {
+            return Err(self.err(format!("{name}/actions has 0 columns")));
+        }
+        let terminated = self
+            .bools(g, name, "terminated", steps, true)?
+            .unwrap_or_default();
+        let truncated = self
+            .bools(g, name, "truncated", steps, true)?
+            .unwrap_or_default();
+        let success = self.bools(g, name, "success", steps, false)?;
+        let fail = self.bools(g, name, "fail", steps, false)?;
+        let rewards = if g.link_exists("rewards") {
+            Some(self.matrix(g, name, "rewards", steps, "one per action")?.0)
+        } else {
+            None
+        };
+        let states_why = format!("one more than the {steps} actions");
+        let obs = match g.dataset("obs") {
+            Ok(_) => Some(self.matrix(g, name, "obs", steps + 1, &states_why)?),
+            Err(_) => None,
+        };
+        let es = g
+            .group("env_states")
+            .map_err(|_| self.err(format!("{name}: missing group env_states")))?;
+        let mut states = vec![StateDict::default(); steps + 1];
+        let mut leaf = |r: &mut Self,
+                        kind: &str,
+                        key: String,
+                        g: &h5::Group,
+                        ds_name: &str|
+         -> Result<(), DatasetError> {
+            let what = format!("{name}/env_states/{kind}");
+            if kind == "actors" {
+                // The column count is known: check it before reading.
+                if let Ok(ds) = g.dataset(ds_name) {
+                    if let [_, c] = ds.shape().as_slice() {
+                        if *c != 13 {
+                            return Err(
+                                r.err(format!("{what}/{ds_name} has {c} columns, expected 13"))
+                            );
+                        }
+                    }
+                }
+            }
+            let (v, cols) = r.matrix(g, &what, ds_name, steps + 1, &states_why)?;
+            for (t, s) in states.iter_mut().enumerate() {
+                let row: Vec<f64> = v[t * cols..(t + 1) * cols]
+                    .iter()
+                    .map(|&x| x as f64)
+                    .collect();
+                match kind {
+                    "actors" => {
+                        let arr: [f64; 13] = row.as_slice().try_into().map_err(|_| {
+                            DatasetError::format(
+                                path,
+                                format!("{what}/{ds_name} has {cols} columns, expected 13"),
+                            )
+                        })?;
+                        s.actors.insert(key.clone(), arr);
+                    }
+                    "articulations" => {
+                        s.articulations.insert(key.clone(), row);
+                    }
+                    _ => {
+                        s.controller.insert(key.clone(), row);
+                    }
+                }
+            }
+            Ok(())
+        };
+        for kind in ["actors", "articulations"] {
+            let sub = es.group(kind).map_err(|_| {
+                DatasetError::format(path, format!("{name}: missing group env_states/{kind}"))
+            })?;
+            for m in members(path, &sub)? {
+                leaf(self, kind, m.clone(), &sub, &m)?;
+            }
+        }
+        if let Ok(ctrl) = es.group("controller") {
+            for m in members(path, &ctrl)? {
+                if let Ok(part) = ctrl.group(&m) {
+                    for k in members(path, &part)? {
+                        leaf(self, "controller", format!("{m}.{k}"), &part, &k)?;
+                    }
+                } else {
+                    leaf(self, "controller", m.clone(), &ctrl, &m)?;
+                }
+            }
+        }
+        Ok(EpisodeData {
+            actions,
+            action_dim,
+            env_states: states,
+            terminated,
+            truncated,
+            success,
+            fail,
+            rewards,
+            obs,
+        })
+    }
 }
 
 /// A group's member names in creation order when the file tracks it (h5py's
@@ -243,115 +513,6 @@ fn members(path: &Path, g: &h5::Group) -> Result<Vec<String>, DatasetError> {
         Ok(v) => Ok(v),
         Err(_) => g.member_names().map_err(DatasetError::hdf5(path)),
     }
-}
-
-fn read_episode(path: &Path, name: &str, g: &h5::Group) -> Result<EpisodeData, DatasetError> {
-    let (actions, steps, action_dim) = read_matrix(path, g, name, "actions")?;
-    let terminated = read_bools(path, g, name, "terminated", steps, true)?.unwrap_or_default();
-    let truncated = read_bools(path, g, name, "truncated", steps, true)?.unwrap_or_default();
-    let success = read_bools(path, g, name, "success", steps, false)?;
-    let fail = read_bools(path, g, name, "fail", steps, false)?;
-    let rewards = if g.link_exists("rewards") {
-        let (r, n, _) = read_matrix(path, g, name, "rewards")?;
-        if n != steps {
-            return Err(DatasetError::format(
-                path,
-                format!("{name}/rewards has {n} entries, expected {steps}"),
-            ));
-        }
-        Some(r)
-    } else {
-        None
-    };
-    let obs = match g.dataset("obs") {
-        Ok(_) => {
-            let (o, n, d) = read_matrix(path, g, name, "obs")?;
-            if n != steps + 1 {
-                return Err(DatasetError::format(
-                    path,
-                    format!("{name}/obs has {n} rows, expected {}", steps + 1),
-                ));
-            }
-            Some((o, d))
-        }
-        Err(_) => None,
-    };
-    let es = g
-        .group("env_states")
-        .map_err(|_| DatasetError::format(path, format!("{name}: missing group env_states")))?;
-    let mut states = vec![StateDict::default(); steps + 1];
-    let leaf = |kind: &str,
-                key: String,
-                g: &h5::Group,
-                ds_name: &str,
-                states: &mut Vec<StateDict>|
-     -> Result<(), DatasetError> {
-        let what = format!("{name}/env_states/{kind}");
-        let (v, rows, cols) = read_matrix(path, g, &what, ds_name)?;
-        if rows != steps + 1 {
-            return Err(DatasetError::format(
-                path,
-                format!(
-                    "{what}/{ds_name} has {rows} rows, expected {} (one more than the {steps} actions)",
-                    steps + 1
-                ),
-            ));
-        }
-        for (t, s) in states.iter_mut().enumerate() {
-            let row: Vec<f64> = v[t * cols..(t + 1) * cols]
-                .iter()
-                .map(|&x| x as f64)
-                .collect();
-            match kind {
-                "actors" => {
-                    let arr: [f64; 13] = row.as_slice().try_into().map_err(|_| {
-                        DatasetError::format(
-                            path,
-                            format!("{what}/{ds_name} has {cols} columns, expected 13"),
-                        )
-                    })?;
-                    s.actors.insert(key.clone(), arr);
-                }
-                "articulations" => {
-                    s.articulations.insert(key.clone(), row);
-                }
-                _ => {
-                    s.controller.insert(key.clone(), row);
-                }
-            }
-        }
-        Ok(())
-    };
-    for kind in ["actors", "articulations"] {
-        let sub = es.group(kind).map_err(|_| {
-            DatasetError::format(path, format!("{name}: missing group env_states/{kind}"))
-        })?;
-        for m in members(path, &sub)? {
-            leaf(kind, m.clone(), &sub, &m, &mut states)?;
-        }
-    }
-    if let Ok(ctrl) = es.group("controller") {
-        for m in members(path, &ctrl)? {
-            if let Ok(part) = ctrl.group(&m) {
-                for k in members(path, &part)? {
-                    leaf("controller", format!("{m}.{k}"), &part, &k, &mut states)?;
-                }
-            } else {
-                leaf("controller", m.clone(), &ctrl, &m, &mut states)?;
-            }
-        }
-    }
-    Ok(EpisodeData {
-        actions,
-        action_dim,
-        env_states: states,
-        terminated,
-        truncated,
-        success,
-        fail,
-        rewards,
-        obs,
-    })
 }
 
 fn h5_group(parent: &h5::Group, name: &str) -> h5::Result<h5::Group> {
@@ -464,6 +625,13 @@ pub fn write(traj: &Trajectory, h5_path: &Path, json_path: &Path) -> Result<(), 
             ));
         }
     }
+    super::check_outputs(
+        &[],
+        &[
+            super::Named::new("the h5", h5_path),
+            super::Named::new("the json", json_path),
+        ],
+    )?;
     let mut staged = super::Staged::default();
     let tmp_h5 = staged.add(h5_path);
     let tmp_json = staged.add(json_path);

@@ -8,7 +8,13 @@
 //! * [`lerobot`]: the LeRobotDataset v3 writer (parquet + H.264 mp4).
 //!
 //! Every writer works on temporary files next to the output and moves them into place only
-//! when everything is written, so a failure leaves no partial output behind.
+//! when everything is written (all outputs or none), so a failure leaves no partial output
+//! behind. Before anything is read or written, the outputs are checked: an output that is
+//! one of the command's inputs (the same device and inode, through any link; or, for a file
+//! yet to be created, the same canonical directory and name), two outputs at one path, and
+//! an existing output that is not a regular file (a directory, `/dev/full`, a FIFO: a rename
+//! would replace the node rather than write into it) are refused with an error naming both
+//! paths.
 use std::path::{Path, PathBuf};
 
 use crate::env::EnvError;
@@ -18,6 +24,9 @@ pub mod export;
 pub mod import;
 pub mod lerobot;
 pub mod maniskill_h5;
+mod paths;
+
+pub(crate) use paths::{check_outputs, Named};
 
 /// Errors of the dataset importers and exporters; each names the file concerned.
 #[derive(Debug, thiserror::Error)]
@@ -142,21 +151,73 @@ impl Staged {
         tmp
     }
 
-    /// Moves every temporary to its final name (replacing a file of that name).
+    /// Moves every temporary to its final name (replacing a file of that name). All or
+    /// nothing: if a rename fails, the outputs already moved are taken back (the files they
+    /// replaced restored) and the temporaries removed.
     pub(crate) fn commit(mut self) -> Result<(), DatasetError> {
         let entries = std::mem::take(&mut self.entries);
-        for (i, (tmp, fin)) in entries.iter().enumerate() {
-            if let Err(e) = std::fs::rename(tmp, fin) {
-                for (t, _) in &entries[i..] {
-                    remove_any(t);
+        // (final name, where the file it replaced was kept) of the outputs moved so far.
+        let mut moved: Vec<(&Path, Option<PathBuf>)> = Vec::new();
+        let mut failure = None;
+        for (tmp, fin) in &entries {
+            // With more than one output, keep the file being replaced (a hard link: the
+            // final name never goes missing) until every output is in place.
+            let kept = (entries.len() > 1 && fin.symlink_metadata().is_ok()).then(|| {
+                let k = fin.with_file_name(format!(
+                    ".{}.old-{}",
+                    fin.file_name()
+                        .map_or_else(|| "output".into(), |n| n.to_string_lossy()),
+                    std::process::id()
+                ));
+                remove_any(&k);
+                std::fs::hard_link(fin, &k).map(|()| k)
+            });
+            let kept = match kept.transpose() {
+                Ok(k) => k,
+                Err(source) => {
+                    failure = Some(DatasetError::Io {
+                        path: fin.clone(),
+                        source,
+                    });
+                    break;
                 }
-                return Err(DatasetError::Io {
+            };
+            if let Err(source) = std::fs::rename(tmp, fin) {
+                if let Some(k) = kept {
+                    remove_any(&k);
+                }
+                failure = Some(DatasetError::Io {
                     path: fin.clone(),
-                    source: e,
+                    source,
                 });
+                break;
+            }
+            moved.push((fin, kept));
+        }
+        match failure {
+            None => {
+                for (_, kept) in moved {
+                    if let Some(k) = kept {
+                        remove_any(&k);
+                    }
+                }
+                Ok(())
+            }
+            Some(e) => {
+                for (fin, kept) in moved.into_iter().rev() {
+                    match kept {
+                        Some(k) => {
+                            let _ = std::fs::rename(&k, fin);
+                        }
+                        None => remove_any(fin),
+                    }
+                }
+                for (tmp, _) in &entries {
+                    remove_any(tmp);
+                }
+                Err(e)
             }
         }
-        Ok(())
     }
 }
 
@@ -173,5 +234,49 @@ fn remove_any(p: &Path) {
         let _ = std::fs::remove_dir_all(p);
     } else {
         let _ = std::fs::remove_file(p);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_commit_restores_the_outputs_already_moved() {
+        let d = std::env::temp_dir().join(format!("mjskill-staged-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let (old, new) = (d.join("old.h5"), d.join("new.h5"));
+        std::fs::write(&old, b"old h5").unwrap();
+        // The second output's name is a non-empty directory: its rename fails.
+        let blocked = d.join("blocked.json");
+        std::fs::create_dir_all(blocked.join("x")).unwrap();
+        let mut staged = Staged::default();
+        for p in [&old, &new, &blocked] {
+            let tmp = staged.add(p);
+            std::fs::write(tmp, b"new").unwrap();
+        }
+        let e = staged.commit().unwrap_err().to_string();
+        assert!(e.contains("blocked.json"), "{e}");
+        assert_eq!(std::fs::read(&old).unwrap(), b"old h5");
+        assert!(!new.exists());
+        let mut names: Vec<String> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["blocked.json", "old.h5"]);
+        // Committed in full, the outputs replace the old files and nothing else is left.
+        std::fs::remove_dir_all(&blocked).unwrap();
+        let mut staged = Staged::default();
+        for p in [&old, &blocked] {
+            let tmp = staged.add(p);
+            std::fs::write(tmp, b"new").unwrap();
+        }
+        staged.commit().unwrap();
+        assert_eq!(std::fs::read(&old).unwrap(), b"new");
+        assert_eq!(std::fs::read(&blocked).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 2);
+        std::fs::remove_dir_all(&d).unwrap();
     }
 }

@@ -1,53 +1,54 @@
 //! Camera images of an env: the sensor images of the visual obs modes and the human render
 //! (the renderer itself is `render.rs`).
-use super::render::{self, CameraImage};
+use super::render::{self, CameraImage, PointCloud};
 use super::{Env, EnvError};
 
 impl Env {
     /// The sensor camera's colour image of the current state (H×W×3 bytes, top row first),
-    /// rewritten in place by every step; `None` unless the obs mode is `rgb` or `rgbd`.
+    /// rewritten in place by every step; `None` unless the obs mode renders colour.
     pub fn sensor_rgb(&self) -> Option<&[u8]> {
-        self.vision
-            .as_ref()
-            .filter(|v| v.rgb_on)
-            .map(|v| v.sensor_rgb.as_slice())
+        self.vision.as_ref()?.sensor_image(0)?.rgb
     }
 
     /// The sensor camera's depth image (H×W×1 metres along the optical axis); `None` unless
-    /// the obs mode is `depth` or `rgbd`.
+    /// the obs mode renders depth.
     pub fn sensor_depth(&self) -> Option<&[f32]> {
-        self.vision
-            .as_ref()
-            .filter(|v| v.depth_on)
-            .map(|v| v.sensor_depth.as_slice())
+        self.vision.as_ref()?.sensor_image(0)?.depth
     }
 
     /// A sensor camera's images by name (ManiSkill's `obs["sensor_data"][name]`): the task's
     /// `env.image("base_camera")` or a robot-mounted camera (Fetch's `"fetch_head"`,
-    /// `"fetch_hand"`); `None` for an unknown name or a non-visual obs mode.
+    /// `"fetch_hand"`); `None` for an unknown name or a non-visual obs mode. In the
+    /// `pointcloud` mode the images the point cloud is made of are served too.
     pub fn image(&self, camera: &str) -> Option<CameraImage<'_>> {
         let v = self.vision.as_ref()?;
-        if !(v.rgb_on || v.depth_on) {
-            return None;
-        }
-        let def = v.sensor_def();
-        if def.name == camera {
-            return Some(CameraImage {
-                name: def.name,
-                width: def.size.0,
-                height: def.size.1,
-                rgb: self.sensor_rgb(),
-                depth: self.sensor_depth(),
-            });
-        }
-        let m = v.mounted.iter().find(|m| m.name == camera)?;
-        Some(CameraImage {
-            name: m.name,
-            width: m.size.0,
-            height: m.size.1,
-            rgb: v.rgb_on.then_some(m.rgb.as_slice()),
-            depth: v.depth_on.then_some(m.depth.as_slice()),
-        })
+        (0..v.sensor_count())
+            .filter_map(|k| v.sensor_image(k))
+            .find(|img| img.name == camera)
+    }
+
+    /// Sensor image `k` in [`Env::sensor_names`] order; `None` past the last camera or in a
+    /// non-visual obs mode. No lookups, no allocation.
+    pub fn image_at(&self, k: usize) -> Option<CameraImage<'_>> {
+        self.vision.as_ref()?.sensor_image(k)
+    }
+
+    /// ManiSkill's fused point cloud of all sensor cameras (obs mode `pointcloud`; else
+    /// `None`), rewritten in place by every step. See docs/observations.md for the layout.
+    pub fn point_cloud(&self) -> Option<PointCloud<'_>> {
+        self.vision.as_ref()?.point_cloud()
+    }
+
+    /// ManiSkill's `segmentation_id_map` of this env: `(id, name)` of every robot link and
+    /// actor (`table-workspace`, `ground`, the task's actors), background (0) excluded. The
+    /// ids are those of the `segmentation` images and of the point cloud.
+    pub fn segmentation_id_map(&self) -> Vec<(i16, &str)> {
+        self.seg_ids.id_map()
+    }
+
+    /// The segmentation id of every model geom (0: none), as the renderer labels pixels.
+    pub fn geom_segmentation_ids(&self) -> &[i16] {
+        &self.seg_ids.geom_labels
     }
 
     /// Names of the sensor cameras of a visual obs mode, as [`Env::image`] takes them: the
@@ -74,8 +75,9 @@ impl Env {
                     &self.sim.model,
                     self.sim.task.cameras(),
                     self.sim.spec.cameras,
+                    Default::default(),
                     false,
-                    false,
+                    self.seg_ids.geom_labels.clone(),
                     self.render_options,
                 )
                 .map_err(EnvError::from)?,
@@ -101,14 +103,15 @@ impl Env {
         &mut self,
         options: crate::mujoco::render::RenderOptions,
     ) -> Result<(), EnvError> {
-        if let Some(old) = self.vision.as_ref() {
+        if self.vision.is_some() {
             // Build the new renderer first: on error the env keeps the old one.
             let new = render::Vision::new(
                 &self.sim.model,
                 self.sim.task.cameras(),
                 self.sim.spec.cameras,
-                old.rgb_on,
-                old.depth_on,
+                self.config.obs_mode.textures(),
+                self.config.obs_mode.is_point_cloud(),
+                self.seg_ids.geom_labels.clone(),
                 options,
             )
             .map_err(EnvError::from)?;

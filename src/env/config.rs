@@ -40,6 +40,19 @@ pub enum EnvError {
         /// The valid modes.
         valid: String,
     },
+    /// A `+` obs mode with a part that is not a camera texture.
+    #[error(
+        "unknown obs mode part {part:?} in {mode:?}; the parts of a + obs mode are camera \
+         textures: {valid} (e.g. rgb+depth+segmentation)"
+    )]
+    UnknownObsModePart {
+        /// The bad part.
+        part: String,
+        /// The whole mode string.
+        mode: String,
+        /// The valid parts.
+        valid: String,
+    },
     /// A control mode the robot does not have (the message lists the robot's modes).
     #[error(transparent)]
     UnknownControlMode(RobotError),
@@ -95,6 +108,13 @@ pub enum EnvError {
     /// A [`VecEnv`](super::VecEnv) of zero envs.
     #[error("a VecEnv needs at least one env")]
     NoEnvs,
+    /// A [`VecEnv`](super::VecEnv) of more than
+    /// [`MAX_NUM_ENVS`](super::vec::MAX_NUM_ENVS) envs.
+    #[error(
+        "num_envs {0} is out of range: 1..={max} (each env owns its MuJoCo model and data)",
+        max = super::vec::MAX_NUM_ENVS
+    )]
+    TooManyEnvs(usize),
     /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
     #[error("cannot start a VecEnv worker thread: {0}")]
     WorkerThread(String),
@@ -116,7 +136,12 @@ pub enum EnvError {
     Render(#[from] RenderError),
 }
 
-/// Observation modes.
+/// Observation modes: ManiSkill's `obs_mode` strings.
+///
+/// The camera modes name the textures the sensor cameras render, ManiSkill's way: `rgb`,
+/// `depth`, `segmentation` and their `+` combinations in any order (`rgb+depth+segmentation`;
+/// `rgb+depth` is the same mode as `rgbd`), plus `pointcloud` (the fused point cloud of all
+/// sensor cameras; docs/observations.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ObsMode {
     /// One flat f32 vector.
@@ -130,32 +155,140 @@ pub enum ObsMode {
     Rgb,
     /// As `Rgb` with the depth image ([`Env::sensor_depth`](super::Env::sensor_depth)) instead of colour.
     Depth,
-    /// As `Rgb` with both colour and depth.
+    /// As `Rgb` with both colour and depth (`rgbd`, also spelt `rgb+depth`).
     Rgbd,
+    /// As `Rgb` with the segmentation image (ManiSkill's per-link / per-actor ids) instead of
+    /// colour.
+    Segmentation,
+    /// Colour and segmentation.
+    RgbSegmentation,
+    /// Depth and segmentation.
+    DepthSegmentation,
+    /// Colour, depth and segmentation.
+    RgbDepthSegmentation,
+    /// The state-free vector plus ManiSkill's fused point cloud of all sensor cameras
+    /// ([`Env::point_cloud`](super::Env::point_cloud)): world-frame `xyzw`, `rgb`,
+    /// `segmentation` per pixel.
+    PointCloud,
 }
 
+/// The camera textures a visual obs mode renders (ManiSkill's `CameraObsTextures`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Textures {
+    /// Colour, H×W×3 bytes.
+    pub rgb: bool,
+    /// Depth: metres (f32) and ManiSkill's int16 millimetres.
+    pub depth: bool,
+    /// ManiSkill's per-link / per-actor segmentation ids (int16).
+    pub segmentation: bool,
+}
+
+impl Textures {
+    /// Whether any texture is on.
+    pub fn any(self) -> bool {
+        self.rgb || self.depth || self.segmentation
+    }
+}
+
+/// The parts a `+` obs mode may combine.
+const TEXTURE_PARTS: [&str; 3] = ["rgb", "depth", "segmentation"];
+
 impl ObsMode {
-    /// All modes, by name.
-    pub const ALL: [(&'static str, ObsMode); 6] = [
+    /// All modes, by name (`rgb+depth` is [`ObsMode::Rgbd`] and not listed).
+    pub const ALL: [(&'static str, ObsMode); 11] = [
         ("state", ObsMode::State),
         ("state_dict", ObsMode::StateDict),
         ("none", ObsMode::None),
         ("rgb", ObsMode::Rgb),
         ("depth", ObsMode::Depth),
         ("rgbd", ObsMode::Rgbd),
+        ("segmentation", ObsMode::Segmentation),
+        ("rgb+segmentation", ObsMode::RgbSegmentation),
+        ("depth+segmentation", ObsMode::DepthSegmentation),
+        ("rgb+depth+segmentation", ObsMode::RgbDepthSegmentation),
+        ("pointcloud", ObsMode::PointCloud),
     ];
     /// Whether the mode renders camera images.
     pub fn is_visual(self) -> bool {
-        matches!(self, ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd)
+        self.textures().any()
+    }
+    /// Whether the mode is `pointcloud`.
+    pub fn is_point_cloud(self) -> bool {
+        self == ObsMode::PointCloud
+    }
+    /// The textures the sensor cameras render (all three for `pointcloud`, none for the
+    /// state modes).
+    pub fn textures(self) -> Textures {
+        let t = |rgb, depth, segmentation| Textures {
+            rgb,
+            depth,
+            segmentation,
+        };
+        match self {
+            ObsMode::State | ObsMode::StateDict | ObsMode::None => Textures::default(),
+            ObsMode::Rgb => t(true, false, false),
+            ObsMode::Depth => t(false, true, false),
+            ObsMode::Rgbd => t(true, true, false),
+            ObsMode::Segmentation => t(false, false, true),
+            ObsMode::RgbSegmentation => t(true, false, true),
+            ObsMode::DepthSegmentation => t(false, true, true),
+            ObsMode::RgbDepthSegmentation | ObsMode::PointCloud => t(true, true, true),
+        }
     }
     /// Whether the observation includes privileged state (object poses): ManiSkill's
     /// `"state" in obs_mode`.
     pub fn is_state(self) -> bool {
         matches!(self, ObsMode::State | ObsMode::StateDict)
     }
-    /// Parses a mode name.
+    /// Parses a mode name: one of [`ObsMode::ALL`], or camera textures joined with `+` in any
+    /// order (`depth+rgb`). The error names the bad part and the valid ones.
     pub fn parse(s: &str) -> Result<ObsMode, EnvError> {
-        parse_named(&Self::ALL, s, "obs_mode")
+        if let Some((_, m)) = Self::ALL.iter().find(|(n, _)| *n == s) {
+            return Ok(*m);
+        }
+        let valid = || {
+            format!(
+                "{}, or camera textures joined with + ({}; e.g. rgb+depth+segmentation)",
+                names(&Self::ALL),
+                TEXTURE_PARTS.join(", ")
+            )
+        };
+        if !s.contains('+') {
+            return Err(EnvError::UnknownMode {
+                what: "obs_mode",
+                got: s.to_string(),
+                valid: valid(),
+            });
+        }
+        let mut t = Textures::default();
+        for part in s.split('+') {
+            match part {
+                "rgb" => t.rgb = true,
+                "depth" => t.depth = true,
+                "segmentation" => t.segmentation = true,
+                _ => {
+                    return Err(EnvError::UnknownObsModePart {
+                        part: part.to_string(),
+                        mode: s.to_string(),
+                        valid: TEXTURE_PARTS.join(", "),
+                    })
+                }
+            }
+        }
+        Ok(Self::of_textures(t))
+    }
+    /// The camera mode rendering exactly `t` ([`ObsMode::None`] for no texture).
+    pub fn of_textures(t: Textures) -> ObsMode {
+        match (t.rgb, t.depth, t.segmentation) {
+            (false, false, false) => ObsMode::None,
+            (true, false, false) => ObsMode::Rgb,
+            (false, true, false) => ObsMode::Depth,
+            (true, true, false) => ObsMode::Rgbd,
+            (false, false, true) => ObsMode::Segmentation,
+            (true, false, true) => ObsMode::RgbSegmentation,
+            (false, true, true) => ObsMode::DepthSegmentation,
+            (true, true, true) => ObsMode::RgbDepthSegmentation,
+        }
     }
     /// The mode's name.
     pub fn name(self) -> &'static str {

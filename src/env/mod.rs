@@ -10,16 +10,17 @@ pub mod checks;
 mod config;
 mod registry;
 pub mod render;
+mod segmentation;
 pub mod state_dict;
 mod types;
 pub mod vec;
 pub use config::{
-    EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, CONSTRUCTION_SEED, CONTROL_FREQ,
+    EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, Textures, CONSTRUCTION_SEED, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
-pub use render::CameraImage;
-pub use state_dict::{ActionPart, StateDict, StateDictError};
+pub use render::{depth_to_mm, CameraImage, PointCloud};
+pub use state_dict::{ActionPart, DriveTargets, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
 pub use vec::VecEnv;
 
@@ -112,6 +113,8 @@ pub struct Env {
     scratch_state: Vec<f64>,
     vision: Option<render::Vision>,
     render_options: crate::mujoco::render::RenderOptions,
+    /// ManiSkill's segmentation ids of the scene and of every geom.
+    seg_ids: segmentation::SegmentationIds,
 }
 
 /// Creates an env (gymnasium's `make`). Like ManiSkill, the new env has already been reset
@@ -180,16 +183,20 @@ impl Env {
         };
         let max_episode_steps = config.max_episode_steps.unwrap_or(spec.max_episode_steps);
         let render_options = crate::mujoco::render::RenderOptions::default();
-        let vision = match config.obs_mode {
-            ObsMode::Rgb | ObsMode::Depth | ObsMode::Rgbd => Some(render::Vision::new(
+        let seg_ids =
+            segmentation::SegmentationIds::new(model, &sim.robot.link_bodies, task.actor_names());
+        let vision = if config.obs_mode.is_visual() {
+            Some(render::Vision::new(
                 model,
                 task.cameras(),
                 rs.cameras,
-                config.obs_mode != ObsMode::Depth,
-                config.obs_mode != ObsMode::Rgb,
+                config.obs_mode.textures(),
+                config.obs_mode.is_point_cloud(),
+                seg_ids.geom_labels.clone(),
                 render_options,
-            )?),
-            _ => None,
+            )?)
+        } else {
+            None
         };
         let mut env = Env {
             id: spec.id.id(),
@@ -221,6 +228,7 @@ impl Env {
             scratch_state: Vec::new(),
             vision,
             render_options,
+            seg_ids,
         };
         env.reset(Some(CONSTRUCTION_SEED));
         Ok(env)
@@ -417,6 +425,8 @@ impl Env {
             .controller
             .reset(&self.sim.robot.joints, &self.sim.data, &mut self.sim.drives);
         self.sim.data.clear_warnings();
+        // `info.warnings` belongs to the step that raised them, not to the new episode.
+        self.info.warnings = Warnings::default();
         // Contacts are not refreshed by a reset (docs/env.md §3 step 8): the grasp check sees the
         // previous episode's last finger forces at the new poses.
         self.info.reconfigure = Some(false);
@@ -426,6 +436,18 @@ impl Env {
 
     /// One control step (docs/env.md §4). Errors (wrong length, NaN/inf) leave the env unchanged.
     pub fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
+        self.check_action(action)?;
+        self.sim.controller.set_action(
+            action,
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
+        );
+        Ok(self.advance())
+    }
+
+    /// An action's length and finiteness ([`Env::step`]'s errors).
+    fn check_action(&self, action: &[f32]) -> Result<(), EnvError> {
         let expected = self.sim.controller.action_dim();
         if action.len() != expected {
             return Err(EnvError::ActionLength {
@@ -437,13 +459,7 @@ impl Env {
         if let Some((index, &value)) = action.iter().enumerate().find(|(_, a)| !a.is_finite()) {
             return Err(EnvError::ActionNotFinite { index, value });
         }
-        self.sim.controller.set_action(
-            action,
-            &self.sim.robot.joints,
-            &self.sim.data,
-            &mut self.sim.drives,
-        );
-        Ok(self.advance())
+        Ok(())
     }
 
     /// A control step without a new action (`action=None` upstream): the drives keep their

@@ -10,12 +10,20 @@
 //! * `controller[.<part>].target_qpos` / `target_pose`: the accumulated targets of the
 //!   `*_target_*` control modes (nested under the part name when the mode has several parts).
 //!
+//! mjskill adds one entry ManiSkill's dict lacks: `drive`, the joints' PD drive targets
+//! ([`DriveTargets`]). PhysX keeps its drive targets across `set_state_dict` (they are what the
+//! last action set), so a ManiSkill state in which the gripper holds an object still squeezes
+//! it; a state dict without `drive` cannot say that the fingers push, and importing it leaves
+//! the drives at the imported positions. [`Env::set_state_dict_after_action`] imports such a
+//! state with the targets the action that led to it sets.
+//!
 //! mjskill's robots are fixed at their table pose (the root is welded to the world), so a
 //! state dict whose root pose differs from it is rejected rather than silently ignored.
 use indexmap::IndexMap;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::{json, Map, Value};
 
+use super::checks::{MAX_STATE_VALUE, MAX_TARGET_VALUE};
 use super::{Env, EnvError};
 use crate::mujoco::{JointType, Model};
 
@@ -35,10 +43,25 @@ pub struct StateDict {
     /// Controller state: `"<part>.target_qpos"` / `"<part>.target_pose"` for modes with
     /// several parts, `"target_qpos"` for single-part modes (so100).
     pub controller: IndexMap<String, Vec<f64>>,
+    /// The drive targets (mjskill's addition; `None` in ManiSkill's own dicts): when given,
+    /// [`Env::set_state_dict`] holds the drives on them instead of on the imported positions.
+    pub drive: Option<DriveTargets>,
+}
+
+/// The PD drive targets of the robot's joints, in ManiSkill's joint order (what ManiSkill's
+/// `robot.get_drive_targets()` / `get_drive_velocities()` return; undriven joints read 0 and
+/// are ignored when set).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DriveTargets {
+    /// Position target per joint (rad or m).
+    pub qpos: Vec<f64>,
+    /// Velocity target per joint (rad/s or m/s).
+    pub qvel: Vec<f64>,
 }
 
 impl StateDict {
-    /// The flat vector of ManiSkill's `env.get_state()` (leaves concatenated in order).
+    /// The flat vector of ManiSkill's `env.get_state()` (leaves concatenated in order; the
+    /// drive targets, which ManiSkill's vector lacks, are left out).
     pub fn flat(&self) -> Vec<f64> {
         let mut v = Vec::new();
         for a in self.actors.values() {
@@ -54,7 +77,9 @@ impl StateDict {
     }
 
     /// ManiSkill's nested JSON form (`{"actors": {...}, "articulations": {...},
-    /// "controller": {...}}`; no `controller` key when the mode keeps no state).
+    /// "controller": {...}}`; no `controller` key when the mode keeps no state), plus
+    /// `"drive": {"target_qpos": [...], "target_qvel": [...]}` when the drive targets are
+    /// known (ManiSkill's `set_state_dict` ignores keys it does not know).
     pub fn to_json(&self) -> Value {
         let mut top = Map::new();
         top.insert("actors".into(), json!(self.actors));
@@ -78,6 +103,12 @@ impl StateDict {
             }
             top.insert("controller".into(), Value::Object(c));
         }
+        if let Some(d) = &self.drive {
+            top.insert(
+                "drive".into(),
+                json!({"target_qpos": d.qpos, "target_qvel": d.qvel}),
+            );
+        }
         Value::Object(top)
     }
 
@@ -86,7 +117,10 @@ impl StateDict {
     pub fn from_json(v: &Value) -> Result<StateDict, StateDictError> {
         let obj = v.as_object().ok_or(StateDictError::NotJsonObject)?;
         for k in obj.keys() {
-            if !matches!(k.as_str(), "actors" | "articulations" | "controller") {
+            if !matches!(
+                k.as_str(),
+                "actors" | "articulations" | "controller" | "drive"
+            ) {
                 return Err(StateDictError::UnknownKey(k.clone()));
             }
         }
@@ -144,6 +178,25 @@ impl StateDict {
                 }
             }
         }
+        if let Some(d) = obj.get("drive") {
+            let d = d.as_object().ok_or(StateDictError::NotObject("drive"))?;
+            if let Some(k) = d
+                .keys()
+                .find(|k| !matches!(k.as_str(), "target_qpos" | "target_qvel"))
+            {
+                return Err(StateDictError::UnknownKey(format!("drive.{k}")));
+            }
+            let qpos = match d.get("target_qpos") {
+                Some(v) => floats("drive.target_qpos", v)?,
+                None => return Err(StateDictError::Missing("drive.target_qpos")),
+            };
+            // Position-only drives: a missing velocity target is zero.
+            let qvel = match d.get("target_qvel") {
+                Some(v) => floats("drive.target_qvel", v)?,
+                None => vec![0.0; qpos.len()],
+            };
+            sd.drive = Some(DriveTargets { qpos, qvel });
+        }
         Ok(sd)
     }
 }
@@ -158,9 +211,16 @@ pub enum StateDictError {
     /// One of the groups (`actors`, `articulations`, `controller`) is not a JSON object.
     #[error("{0} must be an object")]
     NotObject(&'static str),
-    /// A top-level key other than `actors`, `articulations` and `controller`.
-    #[error("unknown state dict key {0:?}; valid keys: actors, articulations, controller")]
+    /// A top-level key other than `actors`, `articulations`, `controller` and `drive` (or a
+    /// `drive` entry other than `target_qpos` and `target_qvel`).
+    #[error(
+        "unknown state dict key {0:?}; valid keys: actors, articulations, controller, drive \
+         (drive: target_qpos, target_qvel)"
+    )]
     UnknownKey(String),
+    /// A required entry is missing.
+    #[error("{0} is missing")]
+    Missing(&'static str),
     /// An entry that is not an array.
     #[error("{0} must be an array of numbers")]
     NotNumbers(String),
@@ -266,14 +326,23 @@ fn rotation_distance(a: &[f64], b: &[f64]) -> f64 {
     quat_of(a).angle_to(&quat_of(b))
 }
 
-fn check_finite(key: &str, v: &[f64]) -> Result<(), EnvError> {
-    match v.iter().position(|x| !x.is_finite()) {
-        Some(i) => Err(EnvError::BadState(format!(
-            "{key}[{i}] = {} is not finite",
-            v[i]
-        ))),
-        None => Ok(()),
+/// Checks that every value of `v` is finite and within ±`max` (the bounds of
+/// [`Env::set_state`]: [`MAX_STATE_VALUE`] for poses and velocities, [`MAX_TARGET_VALUE`] for
+/// controller targets), naming the first bad entry.
+fn check_values(key: &str, v: &[f64], max: f64) -> Result<(), EnvError> {
+    for (i, &x) in v.iter().enumerate() {
+        if !x.is_finite() {
+            return Err(EnvError::BadState(format!(
+                "{key}[{i}] = {x} is not finite"
+            )));
+        }
+        if x.abs() > max {
+            return Err(EnvError::BadState(format!(
+                "{key}[{i}] = {x} is out of range (|value| ≤ {max:e})"
+            )));
+        }
     }
+    Ok(())
 }
 
 /// A named slice of the action vector (ManiSkill's `action_space` dict entry of one
@@ -371,17 +440,81 @@ impl Env {
         for (key, v) in self.sim.controller.state_entries() {
             sd.controller.insert(key, v);
         }
+        sd.drive = Some(self.drive_targets());
         sd
+    }
+
+    /// The drive targets the robot's joints are held on (ManiSkill's
+    /// `robot.get_drive_targets()` / `get_drive_velocities()`; 0 for undriven joints).
+    pub fn drive_targets(&self) -> DriveTargets {
+        let n = self.sim.qpos.len();
+        let (mut qpos, mut qvel) = (vec![0.0; n], vec![0.0; n]);
+        for k in 0..n {
+            if let Some((q, v)) = self.sim.drives.joint_target(k) {
+                (qpos[k], qvel[k]) = (q, v);
+            }
+        }
+        DriveTargets { qpos, qvel }
+    }
+
+    /// The drive targets `action` sets from the current state: what ManiSkill's controller
+    /// hands PhysX in `env.step(action)` before the physics substeps (for delta modes they
+    /// depend on the current joint positions). The env is left unchanged. Errors as
+    /// [`Env::step`]'s for a bad action.
+    pub fn action_drive_targets(&mut self, action: &[f32]) -> Result<DriveTargets, EnvError> {
+        self.check_action(action)?;
+        let mut saved = Vec::with_capacity(self.sim.controller.save_len());
+        self.sim.controller.save(&mut saved);
+        let mut drives = Vec::with_capacity(self.sim.drives.save_len());
+        self.sim.drives.save(&mut drives);
+        self.sim.controller.set_action(
+            action,
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
+        );
+        let targets = self.drive_targets();
+        self.sim.controller.load(&saved);
+        self.sim.drives.load(&drives);
+        Ok(targets)
+    }
+
+    /// Imports `after`, a state ManiSkill reached by `action` from the env's current state
+    /// (typically the previous row of the same trajectory, imported before), with the drive
+    /// targets that action sets ([`Env::action_drive_targets`]) unless `after` carries its
+    /// own. ManiSkill's recorded states lack the drive targets that PhysX keeps across
+    /// steps; with them the imported state evaluates as in ManiSkill: fingers that hold an
+    /// object squeeze it (`is_grasped`, the dense reward), a velocity-driven base keeps its
+    /// commanded velocity. Errors as [`Env::set_state_dict`]'s, and for a bad action.
+    pub fn set_state_dict_after_action(
+        &mut self,
+        action: &[f32],
+        after: &StateDict,
+    ) -> Result<(), EnvError> {
+        if after.drive.is_some() {
+            return self.set_state_dict(after);
+        }
+        let drive = self.action_drive_targets(action)?;
+        let mut sd = after.clone();
+        sd.drive = Some(drive);
+        self.set_state_dict(&sd)
     }
 
     /// Sets the state from ManiSkill's `get_state_dict()` layout (as
     /// [`Env::get_state_dict`] returns it). Every actor and the robot must be present; the
     /// controller entries of `*_target_*` modes are optional (missing ones keep their
-    /// values). Afterwards the drive targets hold the new positions (or the restored
-    /// controller targets), contacts are recomputed, and `obs`, `info` and every reward mode
-    /// describe the new state; `elapsed_steps` and the RNG streams are unchanged. Errors
-    /// (missing or unknown names, wrong lengths, non-finite values, a root pose other than
-    /// the robot's fixed table pose) leave the env unchanged.
+    /// values). Afterwards the drives hold the dict's `drive` targets if it has them, else
+    /// the new positions (or the restored controller targets); contacts are recomputed
+    /// with those drive forces, and `obs`, `info` and every reward mode describe the new
+    /// state; `elapsed_steps` and the RNG streams are unchanged. Values have the bounds of
+    /// [`Env::set_state`]: poses and velocities within ±[`MAX_STATE_VALUE`], controller and
+    /// drive targets within ±[`MAX_TARGET_VALUE`] (the largest f32, as targets are observed
+    /// as f32). Errors (missing or unknown names, wrong lengths, non-finite or out-of-range
+    /// values, a root pose other than the robot's fixed table pose) leave the env unchanged.
+    ///
+    /// ManiSkill's own dicts have no `drive`: a state in which the gripper holds an object
+    /// then loses the squeeze (`is_grasped` false). [`Env::set_state_dict_after_action`]
+    /// supplies the targets of the action that led to the state.
     pub fn set_state_dict(&mut self, sd: &StateDict) -> Result<(), EnvError> {
         // Validate everything before touching the simulation.
         for name in sd.actors.keys() {
@@ -396,7 +529,7 @@ impl Env {
             let s = sd.actors.get(a.name).ok_or_else(|| {
                 EnvError::BadState(format!("state dict lacks actor {:?}", a.name))
             })?;
-            check_finite(&format!("actors.{}", a.name), s)?;
+            check_values(&format!("actors.{}", a.name), s, MAX_STATE_VALUE)?;
             if let ActorBody::Fixed(p) = a.body {
                 let dp = Vector3::from_column_slice(&s[..3]) - Vector3::from_column_slice(&p[..3]);
                 if dp.norm() > ROOT_POSE_TOLERANCE
@@ -429,7 +562,7 @@ impl Env {
                 13 + 2 * n
             )));
         }
-        check_finite(&format!("articulations.{uid}"), art)?;
+        check_values(&format!("articulations.{uid}"), art, MAX_STATE_VALUE)?;
         let root = self.sim.robot.root_body;
         let rp = &self.sim.data.xpos()[3 * root..3 * root + 3];
         let rq = &self.sim.data.xquat()[4 * root..4 * root + 4];
@@ -476,7 +609,21 @@ impl Env {
                         v.len()
                     )))
                 }
-                _ => check_finite(&format!("controller.{k}"), v)?,
+                _ => check_values(&format!("controller.{k}"), v, MAX_TARGET_VALUE)?,
+            }
+        }
+        if let Some(d) = &sd.drive {
+            for (key, v) in [
+                ("drive.target_qpos", &d.qpos),
+                ("drive.target_qvel", &d.qvel),
+            ] {
+                if v.len() != n {
+                    return Err(EnvError::BadState(format!(
+                        "{key} has {} values, expected {n} (one per joint of {uid})",
+                        v.len()
+                    )));
+                }
+                check_values(key, v, MAX_TARGET_VALUE)?;
             }
         }
 
@@ -522,6 +669,11 @@ impl Env {
             &mut self.sim.drives,
             &sd.controller,
         );
+        if let Some(d) = &sd.drive {
+            for k in 0..n {
+                self.sim.drives.set_joint_target(k, d.qpos[k], d.qvel[k]);
+            }
+        }
         self.sim.data.qacc_warmstart_mut().fill(0.0);
         self.refresh_after_state_change();
         Ok(())

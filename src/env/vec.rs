@@ -15,11 +15,13 @@
 //! [`VecEnv::autoreset`] marks those envs. So the final observation of an episode is simply
 //! the observation returned with its terminated/truncated flag.
 //!
-//! **Camera images.** In the visual obs modes (`rgb`, `depth`, `rgbd`) every env renders its
+//! **Camera images.** In the visual obs modes (`rgb`, `depth`, `segmentation`, their `+`
+//! combinations, `rgbd`, `pointcloud`) every env renders its
 //! sensor cameras (the task's sensor camera, then the robot's mounted ones, e.g. Fetch's
 //! `fetch_head` and `fetch_hand`) on the thread that steps it. The pixels cross threads through
-//! atomic cells made in [`VecEnv::new`] (colour bytes packed four per `AtomicU32`, each camera
-//! padded to whole cells; depth as f32 bits) and are unpacked into the VecEnv's own buffers
+//! atomic cells made in [`VecEnv::new`] (colour bytes packed four per `AtomicU32`,
+//! segmentation ids two per cell, each env's block padded to whole cells; depth and point
+//! coordinates as f32 bits) and are unpacked into the VecEnv's own buffers
 //! once every thread is done. [`VecEnv::image`]`(i, name)` returns env i's images of the last
 //! `reset`/`step` (after an autoreset: the new episode's first frame, like `obs()`);
 //! [`VecEnv::sensor_names`] lists the cameras. A state-only VecEnv has no image cells.
@@ -40,7 +42,19 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering}
 use std::sync::{Arc, Mutex};
 use std::thread::{JoinHandle, Thread};
 
-use super::{make, BoxSpace, CameraImage, Env, EnvConfig, EnvError};
+use super::config::Textures;
+use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, PointCloud};
+use crate::mujoco::Warnings;
+
+/// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
+///
+/// Every env owns its MuJoCo model and data: measured 3.25 MB and 18 ms to build per
+/// PickCube-v1/panda env (1 MB for fetch), so 16384 envs already need about 53 GB and five
+/// minutes to construct, and 10⁶ would need 3.3 TB. 16384 is 4× the largest batch
+/// ManiSkill's GPU simulation is usually run with (4096). A larger request is far more likely a mistake (e.g. `2**62`) than a workload, and
+/// is refused up front with [`EnvError::TooManyEnvs`] instead of attempting a multi-terabyte
+/// allocation.
+pub const MAX_NUM_ENVS: usize = 16_384;
 
 const CMD_STEP: u64 = 0;
 const CMD_RESET: u64 = 1;
@@ -56,52 +70,91 @@ const SPINS: u32 = 20_000;
 struct CamSlot {
     name: &'static str,
     size: (usize, usize),
-    /// First rgb cell (4 bytes each) within the env's rgb block; the camera's `w·h·3` bytes
-    /// start at `4 × rgb_cell` in the unpacked buffer.
-    rgb_cell: usize,
-    /// First depth value within the env's depth block.
-    depth_at: usize,
+    /// First pixel of the camera within the env's block (cameras are concatenated).
+    at: usize,
 }
 
 /// Image layout of one env (identical for all envs of a VecEnv); empty for non-visual modes.
+/// Every texture of an env travels as one block: colour bytes packed four per cell,
+/// segmentation ids two per cell, depth and point coordinates as f32 bits.
 #[derive(Debug, Clone, Default)]
 struct ImageLayout {
     cams: Vec<CamSlot>,
-    rgb_on: bool,
-    depth_on: bool,
-    /// rgb cells per env (each camera rounded up to whole cells).
+    tex: Textures,
+    point_cloud: bool,
+    /// Pixels per env (all cameras).
+    px: usize,
+    /// rgb cells per env (`3·px` bytes rounded up to whole cells).
     rgb_cells: usize,
+    /// segmentation cells per env (`2·px` bytes rounded up).
+    seg_cells: usize,
     /// depth values per env.
     depth_len: usize,
+    /// point-cloud values per env (`4·px`).
+    xyzw_len: usize,
+    /// The far clip plane (the depth of nothing), for the millimetre depth.
+    far: f32,
 }
 
 impl ImageLayout {
     /// The layout of `env`'s sensor images (empty unless its obs mode renders).
     fn of(env: &Env) -> ImageLayout {
         let mut l = ImageLayout::default();
-        let Some(v) = env.vision.as_ref().filter(|v| v.rgb_on || v.depth_on) else {
+        let Some(v) = env.vision.as_ref().filter(|v| v.tex.any()) else {
             return l;
         };
-        l.rgb_on = v.rgb_on;
-        l.depth_on = v.depth_on;
+        l.tex = v.tex;
+        l.point_cloud = env.point_cloud().is_some();
+        l.far = env.render_options().clip.1 as f32;
         let mut k = 0;
         while let Some(img) = v.sensor_image(k) {
-            let px = img.width * img.height;
             l.cams.push(CamSlot {
                 name: img.name,
                 size: (img.width, img.height),
-                rgb_cell: l.rgb_cells,
-                depth_at: l.depth_len,
+                at: l.px,
             });
-            if l.rgb_on {
-                l.rgb_cells += (px * 3).div_ceil(4);
-            }
-            if l.depth_on {
-                l.depth_len += px;
-            }
+            l.px += img.width * img.height;
             k += 1;
         }
+        if l.tex.rgb {
+            l.rgb_cells = (3 * l.px).div_ceil(4);
+        }
+        if l.tex.segmentation {
+            l.seg_cells = (2 * l.px).div_ceil(4);
+        }
+        if l.tex.depth {
+            l.depth_len = l.px;
+        }
+        if l.point_cloud {
+            l.xyzw_len = 4 * l.px;
+        }
         l
+    }
+}
+
+/// Packs int16 values two per cell (little-endian; an odd last value is zero-padded).
+fn pack_i16(cells: &[AtomicU32], values: &[i16]) {
+    for (cell, c) in cells.iter().zip(values.chunks(2)) {
+        let hi = c.get(1).copied().unwrap_or(0) as u16 as u32;
+        cell.store(c[0] as u16 as u32 | hi << 16, Ordering::Relaxed);
+    }
+}
+
+/// Unpacks cells written by [`pack_i16`] into `dst`.
+fn unpack_i16(dst: &mut [i16], cells: &[AtomicU32]) {
+    for (d, cell) in dst.chunks_mut(2).zip(cells) {
+        let v = cell.load(Ordering::Relaxed);
+        d[0] = v as u16 as i16;
+        if let Some(x) = d.get_mut(1) {
+            *x = (v >> 16) as u16 as i16;
+        }
+    }
+}
+
+/// Stores f32 values as bits.
+fn store_f32(cells: &[AtomicU32], values: &[f32]) {
+    for (cell, v) in cells.iter().zip(values) {
+        cell.store(v.to_bits(), Ordering::Relaxed);
     }
 }
 
@@ -149,11 +202,17 @@ struct Shared {
     truncated: Vec<AtomicBool>,
     autoreset: Vec<AtomicBool>,
     info: Vec<AtomicU64>,
+    /// `[N × 8]` MuJoCo warning counts ([`Warnings::counts`]) of each env's last reset/step.
+    warnings: Vec<AtomicU32>,
     images: ImageLayout,
     /// `[N × images.rgb_cells]` packed colour bytes (empty unless the mode renders rgb).
     rgb: Vec<AtomicU32>,
     /// `[N × images.depth_len]` depth values as f32 bits (empty unless the mode renders depth).
     depth: Vec<AtomicU32>,
+    /// `[N × images.seg_cells]` packed segmentation ids (empty unless the mode renders them).
+    seg: Vec<AtomicU32>,
+    /// `[N × images.xyzw_len]` point coordinates as f32 bits (`pointcloud` mode only).
+    xyzw: Vec<AtomicU32>,
     /// Set by a worker whose envs panicked; the payload waits in `panic_payload`.
     panicked: AtomicBool,
     /// The first worker panic, re-raised on the caller's thread (locked only after a panic).
@@ -191,21 +250,20 @@ impl Worker {
         {
             cell.store(v.to_bits(), Ordering::Relaxed);
         }
+        let nw = Warnings::default().counts.len();
+        for (cell, c) in sh.warnings[g * nw..(g + 1) * nw]
+            .iter()
+            .zip(env.info().warnings.counts)
+        {
+            cell.store(c as u32, Ordering::Relaxed);
+        }
         let l = &sh.images;
         if let Some(v) = env.vision.as_ref().filter(|_| !l.cams.is_empty()) {
-            let (rgb_base, depth_base) = (g * l.rgb_cells, g * l.depth_len);
-            for (k, slot) in l.cams.iter().enumerate() {
-                let Some(img) = v.sensor_image(k) else {
-                    break;
-                };
-                if let Some(rgb) = img.rgb {
-                    pack_bytes(&sh.rgb[rgb_base + slot.rgb_cell..], rgb);
-                }
-                let depth = img.depth.unwrap_or_default();
-                for (cell, d) in sh.depth[depth_base + slot.depth_at..].iter().zip(depth) {
-                    cell.store(d.to_bits(), Ordering::Relaxed);
-                }
-            }
+            let (rgb, depth, seg, xyzw) = v.buffers();
+            pack_bytes(&sh.rgb[g * l.rgb_cells..(g + 1) * l.rgb_cells], rgb);
+            store_f32(&sh.depth[g * l.depth_len..(g + 1) * l.depth_len], depth);
+            pack_i16(&sh.seg[g * l.seg_cells..(g + 1) * l.seg_cells], seg);
+            store_f32(&sh.xyzw[g * l.xyzw_len..(g + 1) * l.xyzw_len], xyzw);
         }
     }
 
@@ -275,18 +333,26 @@ pub struct VecEnv {
     truncated: Vec<bool>,
     autoreset: Vec<bool>,
     info: Vec<f64>,
+    warnings: Vec<Warnings>,
     sensor_names: Vec<&'static str>,
     /// Unpacked colour bytes, `[N × 4·rgb_cells]` (camera k of env i at
     /// `4·(i·rgb_cells + rgb_cell)`).
     rgb: Vec<u8>,
     /// Depth values, `[N × depth_len]`.
     depth: Vec<f32>,
+    /// ManiSkill's millimetre depth of `depth`.
+    depth_mm: Vec<i16>,
+    /// Segmentation ids, `[N × px]`.
+    seg: Vec<i16>,
+    /// Point clouds, `[N × 4·px]`.
+    xyzw: Vec<f32>,
 }
 
 impl VecEnv {
     /// Builds `num_envs` envs of `env_id` with `config`, spread over `threads` threads (the
-    /// calling thread counts as one). Like [`make`], every env starts reset (env i with seed
-    /// 2022 + i).
+    /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
+    /// [`make`], every env starts reset (env i with seed 2022 + i). `num_envs` must be in
+    /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]).
     pub fn new(
         env_id: &str,
         config: EnvConfig,
@@ -295,6 +361,9 @@ impl VecEnv {
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
             return Err(EnvError::NoEnvs);
+        }
+        if num_envs > MAX_NUM_ENVS {
+            return Err(EnvError::TooManyEnvs(num_envs));
         }
         let threads = threads.clamp(1, num_envs);
         let mut envs = Vec::with_capacity(num_envs);
@@ -311,6 +380,7 @@ impl VecEnv {
         let images = ImageLayout::of(first);
         let sensor_names: Vec<&'static str> = images.cams.iter().map(|c| c.name).collect();
         let (rgb_cells, depth_len) = (images.rgb_cells, images.depth_len);
+        let (seg_cells, xyzw_len, px) = (images.seg_cells, images.xyzw_len, images.px);
         let cells32 = |n: usize| (0..n).map(|_| AtomicU32::new(0)).collect::<Vec<_>>();
         let flags = |n: usize| (0..n).map(|_| AtomicBool::new(false)).collect::<Vec<_>>();
         let shared = Arc::new(Shared {
@@ -326,9 +396,12 @@ impl VecEnv {
             truncated: flags(num_envs),
             autoreset: flags(num_envs),
             info: (0..num_envs * nkeys).map(|_| AtomicU64::new(0)).collect(),
+            warnings: cells32(num_envs * Warnings::default().counts.len()),
             images,
             rgb: cells32(num_envs * rgb_cells),
             depth: cells32(num_envs * depth_len),
+            seg: cells32(num_envs * seg_cells),
+            xyzw: cells32(num_envs * xyzw_len),
             panicked: AtomicBool::new(false),
             panic_payload: Mutex::new(None),
         });
@@ -418,9 +491,13 @@ impl VecEnv {
             truncated: vec![false; num_envs],
             autoreset: vec![false; num_envs],
             info: vec![0.0; num_envs * nkeys],
+            warnings: vec![Warnings::default(); num_envs],
             sensor_names,
             rgb: vec![0; num_envs * rgb_cells * 4],
             depth: vec![0.0; num_envs * depth_len],
+            depth_mm: vec![0; num_envs * depth_len],
+            seg: vec![0; if seg_cells > 0 { num_envs * px } else { 0 }],
+            xyzw: vec![0.0; num_envs * xyzw_len],
         };
         v.shared.has_seed.store(true, Ordering::Relaxed);
         v.shared
@@ -471,8 +548,27 @@ impl VecEnv {
         for (dst, cell) in self.info.iter_mut().zip(&sh.info) {
             *dst = f64::from_bits(cell.load(Ordering::Relaxed));
         }
+        let nw = Warnings::default().counts.len();
+        for (dst, cells) in self.warnings.iter_mut().zip(sh.warnings.chunks_exact(nw)) {
+            for (d, cell) in dst.counts.iter_mut().zip(cells) {
+                *d = cell.load(Ordering::Relaxed) as i32;
+            }
+        }
         unpack_bytes(&mut self.rgb, &sh.rgb);
-        for (dst, cell) in self.depth.iter_mut().zip(&sh.depth) {
+        let far = sh.images.far;
+        for ((dst, mm), cell) in self.depth.iter_mut().zip(&mut self.depth_mm).zip(&sh.depth) {
+            *dst = f32::from_bits(cell.load(Ordering::Relaxed));
+            *mm = depth_to_mm(*dst, far);
+        }
+        let px = sh.images.px;
+        for (dst, cells) in self
+            .seg
+            .chunks_exact_mut(px.max(1))
+            .zip(sh.seg.chunks_exact(sh.images.seg_cells.max(1)))
+        {
+            unpack_i16(dst, cells);
+        }
+        for (dst, cell) in self.xyzw.iter_mut().zip(&sh.xyzw) {
             *dst = f32::from_bits(cell.load(Ordering::Relaxed));
         }
     }
@@ -576,9 +672,15 @@ impl VecEnv {
     pub fn info(&self) -> &[f64] {
         &self.info
     }
+    /// MuJoCo instability warnings of each env's last reset/step (`[N]`, as
+    /// [`Env::info`]'s `warnings`: e.g. BADQACC when env i's simulation diverged and MuJoCo
+    /// reset it; all zero after a reset or an autoreset).
+    pub fn warnings(&self) -> &[Warnings] {
+        &self.warnings
+    }
     /// Names of the sensor cameras [`VecEnv::image`] serves, as [`Env::sensor_names`] lists
     /// them (the task's sensor camera, then the robot's mounted cameras); empty unless the obs
-    /// mode is `rgb`, `depth` or `rgbd`.
+    /// mode is visual.
     pub fn sensor_names(&self) -> &[&'static str] {
         &self.sensor_names
     }
@@ -592,14 +694,33 @@ impl VecEnv {
         let l = &self.shared.images;
         let slot = l.cams.iter().find(|c| c.name == camera)?;
         let (w, h) = slot.size;
-        let rgb_at = 4 * (i * l.rgb_cells + slot.rgb_cell);
-        let depth_at = i * l.depth_len + slot.depth_at;
+        let px = i * l.px + slot.at..i * l.px + slot.at + w * h;
+        let rgb_at = 4 * i * l.rgb_cells + 3 * slot.at;
+        let t = l.tex;
         Some(CameraImage {
             name: slot.name,
             width: w,
             height: h,
-            rgb: l.rgb_on.then(|| &self.rgb[rgb_at..rgb_at + w * h * 3]),
-            depth: l.depth_on.then(|| &self.depth[depth_at..depth_at + w * h]),
+            rgb: t.rgb.then(|| &self.rgb[rgb_at..rgb_at + w * h * 3]),
+            depth: t.depth.then(|| &self.depth[px.clone()]),
+            depth_mm: t.depth.then(|| &self.depth_mm[px.clone()]),
+            segmentation: t.segmentation.then(|| &self.seg[px]),
+        })
+    }
+
+    /// Env `i`'s fused point cloud after the last `reset`/`step` (obs mode `pointcloud`), as
+    /// [`Env::point_cloud`] gives it; `None` for `i ≥ N` or another obs mode.
+    pub fn point_cloud(&self, i: usize) -> Option<PointCloud<'_>> {
+        let l = &self.shared.images;
+        if i >= self.num_envs || !l.point_cloud {
+            return None;
+        }
+        let rgb_at = 4 * i * l.rgb_cells;
+        Some(PointCloud {
+            len: l.px,
+            xyzw: &self.xyzw[i * l.xyzw_len..(i + 1) * l.xyzw_len],
+            rgb: &self.rgb[rgb_at..rgb_at + 3 * l.px],
+            segmentation: &self.seg[i * l.px..(i + 1) * l.px],
         })
     }
 }

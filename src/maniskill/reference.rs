@@ -196,6 +196,33 @@ impl RefFile {
             });
         }
         for e in &f.episodes {
+            let bad = |msg: String| ReferenceError::Format {
+                path: p.clone(),
+                msg: format!("episode {}: {msg}", e.episode_index),
+            };
+            if e.seed > crate::MAX_SEED {
+                return Err(bad(format!(
+                    "seed {} is not in 0..={} (ManiSkill's seeds are 32-bit)",
+                    e.seed,
+                    crate::MAX_SEED
+                )));
+            }
+            let n = f.joint_names.len();
+            for (t, s) in std::iter::once(&e.initial).chain(&e.steps).enumerate() {
+                for (key, v) in [("robot_qpos", &s.robot_qpos), ("robot_qvel", &s.robot_qvel)] {
+                    if v.len() != n {
+                        let at = if t == 0 {
+                            "the initial state".to_string()
+                        } else {
+                            format!("step {t}")
+                        };
+                        return Err(bad(format!(
+                            "{at}: {key} has {} values but joint_names lists {n} joints",
+                            v.len()
+                        )));
+                    }
+                }
+            }
             if e.steps.len() != e.n_steps || e.steps.iter().any(|s| s.action.is_none()) {
                 return Err(ReferenceError::Format {
                     path: p,

@@ -15,6 +15,12 @@
 //! * Frames are read back with `mjr_readPixels` (bottom row first) and flipped to top row
 //!   first. Depth is converted from MuJoCo's non-linear [0, 1] depth buffer to metres along
 //!   the optical axis (the camera-frame −z of the surface point, as ManiSkill's depth).
+//! * Segmentation ([`Renderer::render_frame`] with a [`Segmentation`]) is a second pass of
+//!   the same scene with MuJoCo's `mjRND_SEGMENT` + `mjRND_IDCOLOR` flags: every drawn
+//!   `mjvGeom` is painted flat in the colour `segid + 1` (24 bits, background 0), which is
+//!   decoded through the scene's geoms (`segid` → model geom id) and the caller's label
+//!   table (model geom id → label). Geoms that are not drawn (groups switched off) never
+//!   appear; decorations (no model geom) read as 0.
 use std::ffi::c_int;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -224,6 +230,21 @@ pub struct Renderer {
     options: RenderOptions,
     row: Vec<u8>,
     rowf: Vec<f32>,
+    /// Id colours of the segmentation pass (grown once to the largest image segmented).
+    seg_rgb: Vec<u8>,
+    /// Label of each scene geom by `segid` (`maxgeom` entries), rebuilt every segmented frame.
+    seg_labels: Vec<i16>,
+}
+
+/// The segmentation output of [`Renderer::render_frame`]: `out` (H·W labels, top row first)
+/// receives, per pixel, `labels[g]` of the model geom `g` drawn there, or 0 for the
+/// background, for decorations and for geoms beyond `labels`.
+#[derive(Debug)]
+pub struct Segmentation<'a> {
+    /// Label per model geom id (e.g. the id of the geom's body or actor).
+    pub labels: &'a [i16],
+    /// The label image, H·W, top row first.
+    pub out: &'a mut [i16],
 }
 
 // SAFETY: the GL context is current on no thread between calls (every method releases it
@@ -365,6 +386,8 @@ impl Renderer {
             options,
             row: vec![0; 3 * w],
             rowf: vec![0.0; w],
+            seg_rgb: Vec::new(),
+            seg_labels: vec![0; maxgeom as usize],
         };
         if r.con.currentBuffer != sys::mjtFramebuffer__mjFB_OFFSCREEN as c_int
             || r.con.offWidth < w as c_int
@@ -406,6 +429,25 @@ impl Renderer {
         rgb: Option<&mut [u8]>,
         depth: Option<&mut [f32]>,
     ) -> Result<(), RenderError> {
+        self.render_frame(data, camera, size, geom_groups, rgb, depth, None)
+    }
+
+    /// [`Renderer::render`] plus, optionally, a segmentation image (see [`Segmentation`]).
+    /// The scene is built once; colour is one pass, segmentation another (depth comes from
+    /// the first pass drawn). Segmentation is exact with any `msaa_samples` (MuJoCo turns
+    /// multisampling off in that pass). After the first segmented frame of the largest size,
+    /// allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_frame(
+        &mut self,
+        data: &mut Data,
+        camera: usize,
+        size: (usize, usize),
+        geom_groups: [bool; 6],
+        rgb: Option<&mut [u8]>,
+        depth: Option<&mut [f32]>,
+        seg: Option<Segmentation<'_>>,
+    ) -> Result<(), RenderError> {
         let (w, h) = size;
         let (mw, mh) = self.max_size();
         if !Arc::ptr_eq(data.model(), &self.model) {
@@ -426,10 +468,15 @@ impl Renderer {
         }
         if rgb.as_ref().is_some_and(|b| b.len() != w * h * 3)
             || depth.as_ref().is_some_and(|b| b.len() != w * h)
+            || seg.as_ref().is_some_and(|s| s.out.len() != w * h)
         {
             return Err(RenderError::Invalid(format!(
-                "image buffers must hold {w}x{h}x3 bytes (rgb) and {w}x{h} floats (depth)"
+                "image buffers must hold {w}x{h}x3 bytes (rgb), {w}x{h} floats (depth) and \
+                 {w}x{h} labels (segmentation)"
             )));
+        }
+        if seg.is_some() && self.seg_rgb.len() < w * h * 3 {
+            self.seg_rgb.resize(w * h * 3, 0);
         }
         make_current(self.egl, self.ctx).map_err(|e| RenderError::Failed(e.to_string()))?;
         for (g, on) in self.opt.geomgroup.iter_mut().zip(geom_groups) {
@@ -450,11 +497,23 @@ impl Renderer {
         let depth_ptr = depth
             .as_deref_mut()
             .map_or(std::ptr::null_mut(), |b| b.as_mut_ptr());
+        let seg_ptr = if seg.is_some() {
+            self.seg_rgb.as_mut_ptr()
+        } else {
+            std::ptr::null_mut()
+        };
+        let flags = [
+            sys::mjtRndFlag__mjRND_SEGMENT as usize,
+            sys::mjtRndFlag__mjRND_IDCOLOR as usize,
+            sys::mjtRndFlag__mjRND_SHADOW as usize,
+            sys::mjtRndFlag__mjRND_REFLECTION as usize,
+        ];
         // SAFETY: model header, data, scene and context are valid and belong together; the
         // renderer's context is current on this thread (checked above); the buffers hold
-        // w·h·3 bytes / w·h floats (checked above) and the viewport lies inside the offscreen
-        // buffer. The pointers come from the exclusive borrows `rgb`/`depth`, which outlive
-        // the call.
+        // w·h·3 bytes / w·h floats (checked above; `seg_rgb` was grown to w·h·3) and the
+        // viewport lies inside the offscreen buffer. The pointers come from the exclusive
+        // borrows `rgb`/`depth` and from `self.seg_rgb`, which outlive the calls and are not
+        // touched otherwise until they return.
         unsafe {
             sys::mjv_updateScene(
                 &*self.vis,
@@ -472,8 +531,24 @@ impl Renderer {
                 }
             }
             sys::mjr_setBuffer(sys::mjtFramebuffer__mjFB_OFFSCREEN as c_int, &mut *self.con);
-            sys::mjr_render(viewport, &mut *self.scn, &*self.con);
-            sys::mjr_readPixels(rgb_ptr, depth_ptr, viewport, &*self.con);
+            let mut depth_ptr = depth_ptr;
+            if !rgb_ptr.is_null() || seg_ptr.is_null() {
+                sys::mjr_render(viewport, &mut *self.scn, &*self.con);
+                sys::mjr_readPixels(rgb_ptr, depth_ptr, viewport, &*self.con);
+                depth_ptr = std::ptr::null_mut();
+            }
+            if !seg_ptr.is_null() {
+                let saved = flags.map(|f| self.scn.flags[f]);
+                self.scn.flags[flags[0]] = 1;
+                self.scn.flags[flags[1]] = 1;
+                self.scn.flags[flags[2]] = 0;
+                self.scn.flags[flags[3]] = 0;
+                sys::mjr_render(viewport, &mut *self.scn, &*self.con);
+                sys::mjr_readPixels(seg_ptr, depth_ptr, viewport, &*self.con);
+                for (f, v) in flags.iter().zip(saved) {
+                    self.scn.flags[*f] = v;
+                }
+            }
         }
         release(self.egl);
         if let Some(buf) = rgb {
@@ -487,7 +562,49 @@ impl Renderer {
                 *d = linear_depth(*d as f64, n, f) as f32;
             }
         }
+        if let Some(s) = seg {
+            self.decode_segmentation(w, h, s);
+        }
         Ok(())
+    }
+
+    /// Turns the id colours of the last segmentation pass (bottom row first) into labels
+    /// (top row first).
+    fn decode_segmentation(&mut self, w: usize, h: usize, seg: Segmentation<'_>) {
+        self.seg_labels.fill(0);
+        let n = self.scn.ngeom.max(0) as usize;
+        // SAFETY: `geoms` holds `maxgeom` initialised entries (mjv_makeScene) of which the
+        // first `ngeom` were written by mjv_updateScene; nothing else aliases the scene.
+        let geoms = unsafe { std::slice::from_raw_parts(self.scn.geoms, n) };
+        let geom_obj = sys::mjtObj__mjOBJ_GEOM as c_int;
+        for g in geoms {
+            let Ok(segid) = usize::try_from(g.segid) else {
+                continue;
+            };
+            if g.objtype != geom_obj {
+                continue;
+            }
+            let label = usize::try_from(g.objid)
+                .ok()
+                .and_then(|id| seg.labels.get(id))
+                .copied()
+                .unwrap_or(0);
+            if let Some(slot) = self.seg_labels.get_mut(segid) {
+                *slot = label;
+            }
+        }
+        let table = &self.seg_labels;
+        for (r, out_row) in seg.out.chunks_exact_mut(w).enumerate() {
+            let src = &self.seg_rgb[(h - 1 - r) * 3 * w..(h - r) * 3 * w];
+            for (o, c) in out_row.iter_mut().zip(src.chunks_exact(3)) {
+                let id = c[0] as usize | (c[1] as usize) << 8 | (c[2] as usize) << 16;
+                *o = if id == 0 {
+                    0
+                } else {
+                    table.get(id - 1).copied().unwrap_or(0)
+                };
+            }
+        }
     }
 }
 

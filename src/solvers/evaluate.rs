@@ -1,11 +1,15 @@
 //! Policy evaluation (`mjskill eval`): success rate and mean return of a policy over seeded
 //! episodes, and the episode loop `rollout` records from.
+use std::path::Path;
+use std::sync::Arc;
+
 use serde::Serialize;
 
 use crate::env::checks::MAX_SEED;
 use crate::env::{make, Env, EnvConfig, EnvError};
 use crate::robots::RobotError;
-use crate::solvers::{make_policy, required_control_mode, Policy, SolverError};
+use crate::solvers::onnx::{PolicyFile, PolicyFileError};
+use crate::solvers::{make_policy, required_control_mode, Policy, SolverError, POLICIES};
 
 /// Why an evaluation could not run. The seed-range messages name the `eval`/`rollout` flags
 /// the arguments come from.
@@ -49,6 +53,95 @@ pub enum EvalError {
     /// The policy could not be built for the env.
     #[error(transparent)]
     Policy(#[from] SolverError),
+}
+
+impl From<PolicyFileError> for EvalError {
+    fn from(e: PolicyFileError) -> Self {
+        EvalError::Policy(e.into())
+    }
+}
+
+/// The env id `eval` and `rollout` run when neither `--env` nor a policy file names one.
+pub const DEFAULT_ENV: &str = "PickCube-v1";
+
+/// A policy `eval` and `rollout` run: a built-in one by name ([`POLICIES`]) or a policy file
+/// ([`PolicyFile`], docs/training.md).
+#[derive(Debug, Clone)]
+pub enum PolicySpec {
+    /// A built-in policy: solver, random or zero.
+    Builtin(String),
+    /// A policy file.
+    File(Arc<PolicyFile>),
+}
+
+impl PolicySpec {
+    /// A built-in policy's name, or a policy file's path: a name ending in `.onnx` or an
+    /// existing file is loaded as a policy file; anything else must be a built-in name.
+    pub fn parse(policy: &str) -> Result<PolicySpec, EvalError> {
+        if POLICIES.contains(&policy) {
+            return Ok(PolicySpec::Builtin(policy.to_string()));
+        }
+        let path = Path::new(policy);
+        let onnx = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("onnx"));
+        if onnx || path.is_file() {
+            return Ok(PolicySpec::File(Arc::new(PolicyFile::load(path)?)));
+        }
+        Err(EvalError::Policy(SolverError::UnknownPolicy {
+            name: policy.to_string(),
+            valid: format!("{}, or a policy file (FILE.onnx)", POLICIES.join(", ")),
+        }))
+    }
+
+    /// The name reports give it: the built-in name or the file's path.
+    pub fn name(&self) -> String {
+        match self {
+            PolicySpec::Builtin(n) => n.clone(),
+            PolicySpec::File(f) => f.path().display().to_string(),
+        }
+    }
+
+    /// The env id and configuration to run: `env` (default [`DEFAULT_ENV`]) and `config` for a
+    /// built-in policy; for a policy file, its env id, robot, control mode and obs mode fill
+    /// what was not given (`env` None, `config.robot`/`control_mode` None, `obs_mode_given`
+    /// false) and a given value that differs from the file's is an error naming both
+    /// ([`PolicyFile::configure`]).
+    pub fn target(
+        &self,
+        env: Option<&str>,
+        mut config: EnvConfig,
+        obs_mode_given: bool,
+    ) -> Result<(String, EnvConfig), EvalError> {
+        match self {
+            PolicySpec::Builtin(_) => Ok((env.unwrap_or(DEFAULT_ENV).to_string(), config)),
+            PolicySpec::File(f) => {
+                let id = f.configure(env, &mut config, obs_mode_given)?;
+                Ok((id, config))
+            }
+        }
+    }
+
+    /// Builds the env (a built-in policy's control mode is chosen for it: [`make_env`]).
+    pub fn make_env(&self, env_id: &str, config: EnvConfig) -> Result<Env, EvalError> {
+        match self {
+            PolicySpec::Builtin(name) => make_env(env_id, config, name),
+            PolicySpec::File(f) => {
+                let mut config = config;
+                f.configure(Some(env_id), &mut config, true)?;
+                Ok(make(env_id, config)?)
+            }
+        }
+    }
+
+    /// Builds the policy for `env` (random: seeded with `seed`; a policy file: fitted to the
+    /// env's observation and action sizes, [`PolicyFile::policy`]).
+    pub fn make_policy(&self, env: &Env, seed: u64) -> Result<Box<dyn Policy>, EvalError> {
+        match self {
+            PolicySpec::Builtin(name) => Ok(make_policy(name, env, seed)?),
+            PolicySpec::File(f) => Ok(Box::new(f.policy(env)?)),
+        }
+    }
 }
 
 /// Checks that `episodes` episodes with seeds `seed..seed + episodes` are at least one and
@@ -157,7 +250,7 @@ pub fn run_episode(
         first_success: None,
     };
     loop {
-        policy.act(env, action);
+        policy.try_act(env, action)?;
         let (reward, terminated, truncated) = {
             let s = env.step(action)?;
             (s.reward, s.terminated, s.truncated)
@@ -176,11 +269,8 @@ pub fn run_episode(
     }
 }
 
-/// Evaluates policy `policy` ([`POLICIES`](super::POLICIES)) on `env_id`: runs `episodes`
-/// episodes with seeds `seed..seed + episodes` (32-bit seeds: the range must end at
-/// [`MAX_SEED`] or below), each to truncation. The solver's control mode is chosen for it
-/// ([`make_env`]). Results are accumulated as the episodes run, so memory does not grow with
-/// `episodes`.
+/// Evaluates policy `policy` ([`POLICIES`], or a policy file: [`PolicySpec::parse`]) on
+/// `env_id`: [`evaluate_spec`].
 pub fn evaluate(
     env_id: &str,
     config: EnvConfig,
@@ -188,9 +278,26 @@ pub fn evaluate(
     episodes: usize,
     seed: u64,
 ) -> Result<EvalReport, EvalError> {
+    let spec = PolicySpec::parse(policy)?;
+    let (env_id, config) = spec.target(Some(env_id), config, true)?;
+    evaluate_spec(&env_id, config, &spec, episodes, seed)
+}
+
+/// Evaluates `policy` on `env_id` (resolved with [`PolicySpec::target`]): runs `episodes`
+/// episodes with seeds `seed..seed + episodes` (32-bit seeds: the range must end at
+/// [`MAX_SEED`] or below), each to truncation. The solver's control mode is chosen for it
+/// ([`make_env`]). Results are accumulated as the episodes run, so memory does not grow with
+/// `episodes`.
+pub fn evaluate_spec(
+    env_id: &str,
+    config: EnvConfig,
+    policy: &PolicySpec,
+    episodes: usize,
+    seed: u64,
+) -> Result<EvalReport, EvalError> {
     check_seed_range(seed, episodes as u64)?;
-    let mut env = make_env(env_id, config, policy)?;
-    let mut pol = make_policy(policy, &env, seed)?;
+    let mut env = policy.make_env(env_id, config)?;
+    let mut pol = policy.make_policy(&env, seed)?;
     let mut action = vec![0.0f32; env.action_space().shape[0]];
     let (mut successes, mut at_end, mut returns) = (0usize, 0usize, 0.0f64);
     let (mut first_sum, mut first_count) = (0.0f64, 0usize);
@@ -215,7 +322,7 @@ pub fn evaluate(
         env: env_id.to_string(),
         robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
-        policy: policy.to_string(),
+        policy: policy.name(),
         episodes,
         successes,
         success_rate: successes as f64 / n,

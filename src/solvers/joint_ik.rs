@@ -82,10 +82,19 @@ pub const SO100: JointIkRobot = JointIkRobot {
     hold: 6,
 };
 
+/// Carriage target (m) the WidowX AI closes to on PickCube's 36 mm cube (carriages at 18 mm):
+/// a squeeze of kp · 8 mm ≈ 8 N instead of 18 N. ManiSkill couples the two carriages with a
+/// PhysX fixed tendon (stiffness 1e5) whose tension under the squeeze (about 1.7 × the grip
+/// force) also loads the wrist: at 18 N, joint_4 sits 0.03 rad off its target and PhysX reports
+/// kp/kd × that deflection, 0.3 rad/s, as its velocity, so `is_robot_static` never holds
+/// (1 success in 50 replays). At 8 N the reported wrist velocity stays near 0.1 rad/s.
+pub const WIDOWXAI_GRIP: f32 = 0.010;
+
 /// WidowX AI: the grasp point is the middle of the fingertip pads, 13 mm behind
 /// ee_gripper_link (the gripper points along link x and closes along y). The arm part's 7th
 /// entry (the left carriage, overridden by the gripper part) repeats the gripper target; the
-/// gripper action is normalised: +1 = 0.044 m open, −1 = 0 m closed.
+/// gripper action is normalised: +1 = 0.044 m open, −1 = 0 m closed. The gripper closes to
+/// [`WIDOWXAI_GRIP`], not to 0 (docs/outcome-physics.md).
 pub const WIDOWXAI: JointIkRobot = JointIkRobot {
     link: "ee_gripper_link",
     point: [-0.013, 0.0, 0.0],
@@ -93,7 +102,7 @@ pub const WIDOWXAI: JointIkRobot = JointIkRobot {
     closing: [0.0, 1.0, 0.0],
     n_arm: 6,
     open: &[(6, 0.044), (7, 1.0)],
-    close: &[(6, 0.0), (7, -1.0)],
+    close: &[(6, WIDOWXAI_GRIP), (7, 2.0 * WIDOWXAI_GRIP / 0.044 - 1.0)],
     approach_height: 0.05,
     grasp_height: 0.0,
     hold: 4,

@@ -1,5 +1,5 @@
-//! Policies for rollouts: the scripted `solver`s of docs/solvers.md §7 and the `random` and `zero`
-//! baselines.
+//! Policies for rollouts: the scripted `solver`s of docs/solvers.md §7, the `random` and `zero`
+//! baselines, and trained policies from policy files ([`onnx`], docs/training.md).
 //!
 //! The solvers are the EE-space scripted policies (control mode `pd_ee_delta_pos`): every step
 //! `action = [clip((target − tcp)/0.1, −L, L), gripper]`, with phases checked in order and
@@ -12,14 +12,17 @@ pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
+pub mod onnx;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
 pub(crate) mod xarm6;
 
 pub use evaluate::{
-    check_seed_range, evaluate, make_env, run_episode, EpisodeResult, EvalError, EvalReport,
+    check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
+    EvalReport, PolicySpec, DEFAULT_ENV,
 };
+pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -72,6 +75,9 @@ pub enum SolverError {
     /// A task body the solver needs is missing from the model.
     #[error(transparent)]
     Mujoco(#[from] MjError),
+    /// A policy file could not be loaded, fitted to the env or run.
+    #[error(transparent)]
+    PolicyFile(#[from] PolicyFileError),
 }
 
 /// The policy names `rollout` and `eval` accept.
@@ -83,6 +89,12 @@ pub trait Policy: std::fmt::Debug {
     fn reset(&mut self, env: &Env);
     /// Writes the next action into `action` (length = the env's action dimension).
     fn act(&mut self, env: &Env, action: &mut [f32]);
+    /// As [`Policy::act`], for the episode loops: a policy that can fail at run time (a
+    /// policy file's runtime) returns its error here.
+    fn try_act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError> {
+        self.act(env, action);
+        Ok(())
+    }
 }
 
 /// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
@@ -105,7 +117,8 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     })
 }
 
-/// Builds a policy by name for `env` (random: seeded with `seed`).
+/// Builds a built-in policy by name for `env` (random: seeded with `seed`); policy files:
+/// [`PolicySpec`].
 pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, SolverError> {
     match name {
         "zero" => Ok(Box::new(Zero)),
@@ -113,7 +126,7 @@ pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, 
         "solver" => solver(env),
         _ => Err(SolverError::UnknownPolicy {
             name: name.to_string(),
-            valid: POLICIES.join(", "),
+            valid: format!("{}, or a policy file (FILE.onnx)", POLICIES.join(", ")),
         }),
     }
 }

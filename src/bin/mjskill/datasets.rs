@@ -34,6 +34,7 @@ pub fn export(
     output: Option<PathBuf>,
     json: Option<&Path>,
     video: Option<bool>,
+    control_mode: Option<&str>,
 ) -> Result<export::ExportSummary, DatasetError> {
     let format = Format::parse(format)?;
     let output = output.unwrap_or_else(|| export::default_output(file, format));
@@ -46,12 +47,17 @@ pub fn export(
                         .into(),
                 });
             }
-            export::to_maniskill(file, &output, json)
+            export::to_maniskill_in_mode(file, &output, json, control_mode)
         }
         Format::LeRobot => {
             if json.is_some() {
                 return Err(DatasetError::Invalid {
                     msg: "--json applies to --format maniskill only".into(),
+                });
+            }
+            if control_mode.is_some() {
+                return Err(DatasetError::Invalid {
+                    msg: "--control-mode applies to --format maniskill only".into(),
                 });
             }
             mjskill::datasets::lerobot::write(file, &output, video)

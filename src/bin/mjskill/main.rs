@@ -31,6 +31,7 @@ pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
 
 mod args;
 mod bench;
+mod compare_images;
 mod datasets;
 mod fidelity;
 mod info_dir;
@@ -52,10 +53,10 @@ pub struct Cli {
 /// Which env, robot and control mode a command runs.
 #[derive(Debug, Clone, clap::Args)]
 pub struct EnvArgs {
-    /// Env id.
-    #[arg(long, default_value = "PickCube-v1")]
-    pub env: String,
-    /// Robot uid (default: the env's default robot).
+    /// Env id (default: a policy file's, else PickCube-v1).
+    #[arg(long)]
+    pub env: Option<String>,
+    /// Robot uid (default: a policy file's, else the env's default robot).
     #[arg(long)]
     pub robot: Option<String>,
     /// Control mode (default: the policy's if it needs one, else the robot's default).
@@ -68,6 +69,11 @@ pub struct EnvArgs {
 }
 
 impl EnvArgs {
+    /// The env id: `--env` or [`mjskill::solvers::DEFAULT_ENV`].
+    pub fn env_id(&self) -> &str {
+        self.env.as_deref().unwrap_or(mjskill::solvers::DEFAULT_ENV)
+    }
+
     /// The env configuration (other fields at their defaults).
     pub fn config(&self) -> mjskill::EnvConfig {
         mjskill::EnvConfig {
@@ -113,8 +119,9 @@ pub enum Command {
         /// available cores). The report gives the number used.
         #[arg(long, value_parser = args::threads, allow_hyphen_values = true)]
         threads: Option<usize>,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd (the visual modes
-        /// render the 128x128 sensor camera, and Fetch its two robot cameras, every step).
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud (the visual modes render
+        /// the 128x128 sensor camera, and Fetch its two robot cameras, every step).
         #[arg(long, default_value = "state")]
         obs_mode: String,
         /// Also time this many human-camera frames (1..=100000; Env::render, 512x512):
@@ -151,7 +158,8 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Policy: solver, random or zero.
+        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
+        /// env, robot and modes are the defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (seeds seed, seed+1, ...; the last must be a 32-bit seed).
@@ -167,13 +175,16 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Observation mode: state, state_dict, none, rgb, depth or rgbd.
-        #[arg(long, default_value = "state")]
-        obs_mode: String,
+        /// Observation mode: state, state_dict, none, rgb, depth, segmentation, their +
+        /// combinations (rgb+depth+segmentation), rgbd or pointcloud (default: a policy
+        /// file's, else state).
+        #[arg(long)]
+        obs_mode: Option<String>,
         /// Reward mode: normalized_dense, dense, sparse or none.
         #[arg(long, default_value = "normalized_dense")]
         reward_mode: String,
-        /// Policy: solver, random or zero.
+        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
+        /// env, robot and modes are the defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (1 or more; the last seed must be a 32-bit seed).
@@ -193,7 +204,8 @@ pub enum Command {
         #[arg(long)]
         video: bool,
         /// Also record a sensor camera's colour frames (H.264) on /<camera>/video
-        /// (foxglove.CompressedVideo); repeatable. Needs --obs-mode rgb or rgbd (cameras:
+        /// (foxglove.CompressedVideo); repeatable. Needs an obs mode with colour (rgb, rgbd,
+        /// rgb+..., pointcloud; cameras:
         /// base_camera; Fetch also fetch_head, fetch_hand).
         #[arg(long = "camera")]
         cameras: Vec<String>,
@@ -246,6 +258,26 @@ pub enum Command {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
+    /// Replay the fixed action sequences of outcome files (tests/data/outcomes, written by
+    /// examples/maniskill_outcomes.py with ManiSkill) in mjskill and count how often the
+    /// outcome and the per-step flags agree with ManiSkill's: one JSON line per file, or a
+    /// Markdown table (docs/outcome-agreement.md).
+    Outcomes {
+        /// An outcome file (.json.gz) or a directory of them.
+        path: PathBuf,
+        /// Replay only the first N episodes of every file (1..=4294967296).
+        #[arg(long, value_parser = args::episodes, allow_hyphen_values = true)]
+        episodes: Option<usize>,
+        /// Physics steps per second of the replaying env.
+        #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
+        sim_freq: u32,
+        /// Include every episode's result.
+        #[arg(long)]
+        per_episode: bool,
+        /// Print a Markdown table instead of JSON.
+        #[arg(long)]
+        table: bool,
+    },
     /// Replay ManiSkill demos (trajectory.h5 + .json) in mjskill, by actions (open loop from
     /// each episode's seed) or by states (importing every env_states row), record them to
     /// MCAP and print per-episode success and divergence (JSON).
@@ -284,9 +316,38 @@ pub enum Command {
         /// default whatever frames the recording has.
         #[arg(long, value_parser = clap::builder::BoolishValueParser::new())]
         video: Option<bool>,
+        /// --format maniskill: write the actions in this control mode. pd_joint_pos writes
+        /// every step's joint targets as mjskill's controller set them (e.g. the IK solution
+        /// of an EE mode), so that ManiSkill replays them even where it cannot build the
+        /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
+        #[arg(long)]
+        control_mode: Option<String>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Compare mjskill's sensor camera images with ManiSkill's for the same states: loads
+    /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
+    /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
+    /// (mm), mean absolute colour difference. See docs/observations.md.
+    CompareImages {
+        /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
+        /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
+        /// `state_json`, `control_mode`).
+        reference: PathBuf,
+        /// Only this `<env>__<robot>` directory (repeatable).
+        #[arg(long = "pair")]
+        pairs: Vec<String>,
+        /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
+        /// above, segmentation below).
+        #[arg(long)]
+        panels: Option<PathBuf>,
+        /// At most this many states per pair (1..=1000000).
+        #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
+        limit: Option<usize>,
+        /// Include every state's per-camera scores (and per-id IoU).
+        #[arg(long)]
+        per_state: bool,
+    },
     /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
     /// prints a JSON summary.
     Render {
@@ -346,7 +407,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
                 ..target.config()
             };
-            let report = bench::run(&target.env, config, steps, vec, render)?;
+            let report = bench::run(target.env_id(), config, steps, vec, render)?;
             out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
@@ -364,8 +425,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             episodes,
             seed,
         } => {
-            let report =
-                mjskill::solvers::evaluate(&target.env, target.config(), &policy, episodes, seed)?;
+            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
+            let (env, config) = policy.target(target.env.as_deref(), target.config(), false)?;
+            let report = mjskill::solvers::evaluate_spec(&env, config, &policy, episodes, seed)?;
             out!("{}", serde_json::to_string(&report)?);
             Ok(())
         }
@@ -383,12 +445,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => {
             use std::io::IsTerminal;
             let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+                obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
                 reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
                 ..target.config()
             };
+            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
+            let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
             let args = rollout::RolloutArgs {
-                env: target.env,
+                env,
                 config,
                 policy,
                 episodes,
@@ -447,8 +511,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
             output,
             json,
             video,
+            control_mode,
         } => {
-            let r = datasets::export(&file, &format, output, json.as_deref(), video)?;
+            let r = datasets::export(
+                &file,
+                &format,
+                output,
+                json.as_deref(),
+                video,
+                control_mode.as_deref(),
+            )?;
             out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
@@ -458,8 +530,25 @@ fn run(cli: Cli) -> Result<(), CliError> {
             camera,
             output,
         } => {
-            let s = render::run(&target.env, target.config(), seed, &camera, &output)?;
+            let s = render::run(target.env_id(), target.config(), seed, &camera, &output)?;
             out!("{}", serde_json::to_string(&s)?);
+            Ok(())
+        }
+        Command::CompareImages {
+            reference,
+            pairs,
+            panels,
+            limit,
+            per_state,
+        } => {
+            let r = compare_images::run(&compare_images::CompareArgs {
+                reference,
+                pairs,
+                panels,
+                limit,
+                per_state,
+            })?;
+            out!("{}", serde_json::to_string(&r)?);
             Ok(())
         }
         Command::Fidelity {
@@ -477,6 +566,13 @@ fn run(cli: Cli) -> Result<(), CliError> {
             summary,
             plot,
         }),
+        Command::Outcomes {
+            path,
+            episodes,
+            sim_freq,
+            per_episode,
+            table,
+        } => outcomes(&path, episodes, sim_freq, per_episode, table),
         Command::Envs => {
             out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
@@ -590,5 +686,57 @@ fn fit_primitives(
         "<!-- primitives volume {total:.3e} m^3, mesh volume {:.3e} m^3 -->",
         mesh_fit::mesh_volume(&tris)
     );
+    Ok(())
+}
+
+/// `mjskill outcomes`: replays every outcome file under `path` and prints the agreement.
+fn outcomes(
+    path: &std::path::Path,
+    episodes: Option<usize>,
+    sim_freq: u32,
+    per_episode: bool,
+    table: bool,
+) -> Result<(), CliError> {
+    use mjskill::maniskill::outcome::{files, measure, OutcomeFile};
+    let sim = mjskill::SimConfig { sim_freq };
+    sim.validate()?;
+    let paths = files(path)?;
+    if paths.is_empty() {
+        return Err(format!("{} holds no outcome files (*.json.gz)", path.display()).into());
+    }
+    if table {
+        out!("| source | env | robot | control mode | episodes | ManiSkill successes | mjskill successes | same outcome | steps with all flags equal | per flag: steps equal |");
+        out!("|---|---|---|---|---|---|---|---|---|---|");
+    }
+    for p in paths {
+        let f = OutcomeFile::open(&p)?;
+        let mut r = measure(&f, &p, episodes, sim)?;
+        if table {
+            let flags: Vec<String> = r
+                .flags
+                .iter()
+                .map(|(k, a)| format!("{k} {}/{}", a.agree, a.steps))
+                .collect();
+            out!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {}/{} | {} |",
+                r.source,
+                r.env_id,
+                r.robot,
+                r.control_mode,
+                r.episodes,
+                r.maniskill_successes,
+                r.mjskill_successes,
+                r.same_outcome,
+                r.steps_all_flags_agree,
+                r.steps,
+                flags.join(", ")
+            );
+        } else {
+            if !per_episode {
+                r.per_episode.clear();
+            }
+            out!("{}", serde_json::to_string(&r)?);
+        }
+    }
     Ok(())
 }

@@ -9,7 +9,7 @@ use crate::CliError;
 use mjskill::record::image::write_png;
 use mjskill::record::RecordError;
 use mjskill::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
-use mjskill::solvers::{check_seed_range, make_env, make_policy, Policy};
+use mjskill::solvers::{check_seed_range, Policy, PolicySpec};
 use mjskill::{Env, EnvConfig};
 
 /// The one-line JSON summary of a rollout.
@@ -50,8 +50,8 @@ pub struct RolloutArgs {
     pub env: String,
     /// Env configuration (robot and modes).
     pub config: EnvConfig,
-    /// Policy name.
-    pub policy: String,
+    /// The policy.
+    pub policy: PolicySpec,
     /// Episodes.
     pub episodes: usize,
     /// Seed of the first episode (episode k uses seed + k).
@@ -120,8 +120,8 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, CliE
 /// under `out`, and a run killed later keeps its finished episodes there.
 pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     check_seed_range(a.seed, a.episodes as u64)?;
-    let mut env = make_env(&a.env, a.config.clone(), &a.policy)?;
-    let mut policy = make_policy(&a.policy, &env, a.seed)?;
+    let mut env = a.policy.make_env(&a.env, a.config.clone())?;
+    let mut policy = a.policy.make_policy(&env, a.seed)?;
     let frame_png = check_frame_path(&a.out, a.frame)?;
     let (render_w, render_h) = env.render_size();
     let camera = env.cameras().1.name;
@@ -173,7 +173,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
         env: a.env.clone(),
         robot: env.robot_id().uid().to_string(),
         control_mode: env.control_mode().to_string(),
-        policy: a.policy.clone(),
+        policy: a.policy.name(),
         episodes: a.episodes,
         successes: run.successes,
         mean_return: run.total_return / a.episodes.max(1) as f64,
@@ -285,7 +285,7 @@ fn record_all(
         record_sensors(env, rec, &a.cameras, &sensors)?;
         let (mut ret, mut success) = (0.0f64, false);
         loop {
-            policy.act(env, &mut action);
+            policy.try_act(env, &mut action)?;
             let (reward, terminated, truncated) = rec.step(env, &action).map_err(|e| match e {
                 // A rejected action reads as the env's own error.
                 RecordError::Env { source, .. } => source.to_string(),

@@ -1,0 +1,118 @@
+"""Evaluates an mjskill policy file in the real ManiSkill 3 (SAPIEN/PhysX), closed loop: the
+env, robot, control mode and obs mode come from the file's metadata, and the episodes use the
+seeds `mjskill eval --policy` uses (seed, seed+1, ...), so the two success rates compare the
+simulators on the same initial states.
+
+    pip install mani_skill onnxruntime      # in an environment where ManiSkill runs
+    python examples/eval_in_maniskill.py policy.onnx --episodes 100 --seed 0
+    python examples/eval_in_maniskill.py policy.onnx --mjskill target/release/mjskill
+
+Each episode runs to truncation (50 steps), as `mjskill eval` does; prints one JSON line with
+the success rate (success at any step), the success-at-end rate and the mean return, and with
+--mjskill also `mjskill eval --policy`'s report on the same seeds. Needs numpy, onnxruntime
+and mani_skill (not mjskill).
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode")
+
+
+def load(path):
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    sess = ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
+    meta = dict(sess.get_modelmeta().custom_metadata_map)
+    missing = [k for k in KEYS if k not in meta]
+    if missing:
+        sys.exit(f"policy file {path} lacks the metadata_props {', '.join(missing)}")
+    if meta["obs_mode"] not in ("state", "state_dict"):
+        sys.exit(f"policy file {path} has obs_mode {meta['obs_mode']!r}; expected state")
+    (inp,) = sess.get_inputs()
+    return sess, inp.name, len(inp.shape), meta
+
+
+def to_numpy(x):
+    if hasattr(x, "cpu"):
+        x = x.cpu().numpy()
+    return np.asarray(x)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("policy", help="ONNX policy file")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    p.add_argument("--sim-backend", default="cpu", help="ManiSkill sim_backend (cpu or gpu)")
+    p.add_argument("--reward-mode", default="normalized_dense")
+    p.add_argument("--mjskill", help="mjskill binary: also run `mjskill eval --policy` on the seeds")
+    a = p.parse_args()
+
+    sess, inp, rank, meta = load(a.policy)
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401  (registers ManiSkill's envs)
+
+    env = gym.make(meta["env_id"], num_envs=1, obs_mode="state", robot_uids=meta["robot_uids"],
+                   control_mode=meta["control_mode"], reward_mode=a.reward_mode,
+                   sim_backend=a.sim_backend)
+    space = env.unwrapped.single_action_space if hasattr(env.unwrapped, "single_action_space") \
+        else env.action_space
+    low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
+    obs_dim = int(np.prod(env.unwrapped.single_observation_space.shape))
+    declared = sess.get_inputs()[0].shape[-1]
+    if isinstance(declared, int) and declared != obs_dim:
+        sys.exit(f"policy file {a.policy} takes observations of {declared} values, but "
+                 f"ManiSkill's {meta['env_id']} gives {obs_dim}")
+    successes = at_end = 0
+    returns, first = [], []
+    for k in range(a.episodes):
+        obs, _ = env.reset(seed=a.seed + k)
+        ret, ever, t = 0.0, False, 0
+        while True:
+            o = to_numpy(obs).astype(np.float32).reshape(1, -1)
+            (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
+            act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
+            obs, r, term, trunc, info = env.step(act[None])
+            t += 1
+            ret += float(to_numpy(r).reshape(-1)[0])
+            success = bool(to_numpy(info["success"]).reshape(-1)[0])
+            if success and not ever:
+                first.append(t)
+            ever |= success
+            if bool(to_numpy(trunc).reshape(-1)[0]):
+                break
+        successes += ever
+        at_end += success
+        returns.append(ret)
+    report = {
+        "simulator": "maniskill",
+        "env": meta["env_id"],
+        "robot": meta["robot_uids"],
+        "control_mode": meta["control_mode"],
+        "policy": a.policy,
+        "episodes": a.episodes,
+        "seed": a.seed,
+        "successes": int(successes),
+        "success_rate": successes / a.episodes,
+        "success_at_end_rate": at_end / a.episodes,
+        "mean_return": float(np.mean(returns)),
+        "mean_first_success_step": float(np.mean(first)) if first else None,
+    }
+    if a.mjskill:
+        out = subprocess.run([a.mjskill, "eval", "--policy", a.policy, "--episodes",
+                              str(a.episodes), "--seed", str(a.seed)],
+                             check=True, capture_output=True, text=True).stdout
+        report["mjskill"] = json.loads(out)
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()

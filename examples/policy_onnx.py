@@ -1,0 +1,125 @@
+"""Writes mjskill policy files: an MLP as an ONNX graph with the observation normalisation inside
+and the metadata `mjskill eval --policy` reads (docs/training.md).
+
+Needs only numpy and the `onnx` package (no torch): examples/ppo.py passes its trained weights,
+examples/make_test_policy.py seeded random ones.
+
+The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
+clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
+last); output ``action`` (float32, [batch, act_dim]), the mean action.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+#: The metadata_props every policy file carries (docs/training.md).
+METADATA_KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode", "training_command")
+
+#: ONNX opset and IR version: old enough for tract and onnxruntime 1.1x alike.
+OPSET = 17
+IR_VERSION = 8
+
+
+def mlp_forward(obs, layers, obs_mean, obs_std, obs_clip):
+    """The graph's computation in numpy (float64): the reference the tests compare against."""
+    x = (np.asarray(obs, np.float64) - obs_mean) / obs_std
+    if obs_clip is not None:
+        x = np.clip(x, -obs_clip, obs_clip)
+    for k, (w, b) in enumerate(layers):
+        x = x @ np.asarray(w, np.float64) + np.asarray(b, np.float64)
+        if k + 1 < len(layers):
+            x = np.tanh(x)
+    return x
+
+
+def write_mlp_policy(path, layers, obs_mean, obs_std, metadata, obs_clip=None):
+    """Writes the MLP ``layers`` (a list of (W [in, out], b [out]) arrays) with the observation
+    normalisation ``(obs - obs_mean) / obs_std`` (clipped to ±obs_clip unless None) as an ONNX
+    policy file at ``path``, with ``metadata`` (a dict of str) as its metadata_props: it must
+    hold METADATA_KEYS. Returns the ModelProto."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    missing = [k for k in METADATA_KEYS if k not in metadata]
+    if missing:
+        raise ValueError(f"metadata lacks {missing}; a policy file carries {list(METADATA_KEYS)}")
+    obs_mean = np.asarray(obs_mean, np.float32)
+    obs_std = np.asarray(obs_std, np.float32)
+    obs_dim = obs_mean.shape[0]
+    if obs_std.shape != (obs_dim,) or not np.all(obs_std > 0):
+        raise ValueError("obs_std must be positive, one value per observation")
+    if np.asarray(layers[0][0]).shape[0] != obs_dim:
+        raise ValueError(
+            f"the first layer takes {np.asarray(layers[0][0]).shape[0]} values, the "
+            f"normalisation {obs_dim}"
+        )
+    act_dim = np.asarray(layers[-1][1]).shape[0]
+    inits = [
+        numpy_helper.from_array(obs_mean, "obs_mean"),
+        numpy_helper.from_array(obs_std, "obs_std"),
+    ]
+    nodes = [
+        helper.make_node("Sub", ["obs", "obs_mean"], ["obs_centred"]),
+        helper.make_node("Div", ["obs_centred", "obs_std"], ["obs_norm"]),
+    ]
+    x = "obs_norm"
+    if obs_clip is not None:
+        inits += [
+            numpy_helper.from_array(np.array(-obs_clip, np.float32), "obs_clip_lo"),
+            numpy_helper.from_array(np.array(obs_clip, np.float32), "obs_clip_hi"),
+        ]
+        nodes.append(helper.make_node("Clip", [x, "obs_clip_lo", "obs_clip_hi"], ["obs_clipped"]))
+        x = "obs_clipped"
+    for k, (w, b) in enumerate(layers):
+        w = np.asarray(w, np.float32)
+        b = np.asarray(b, np.float32)
+        inits += [numpy_helper.from_array(w, f"w{k}"), numpy_helper.from_array(b, f"b{k}")]
+        last = k + 1 == len(layers)
+        nodes.append(helper.make_node("MatMul", [x, f"w{k}"], [f"mm{k}"]))
+        out = "action" if last else f"lin{k}"
+        nodes.append(helper.make_node("Add", [f"mm{k}", f"b{k}"], [out]))
+        if not last:
+            nodes.append(helper.make_node("Tanh", [out], [f"h{k}"]))
+            x = f"h{k}"
+    graph = helper.make_graph(
+        nodes,
+        "mjskill_policy",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["batch", obs_dim])],
+        [helper.make_tensor_value_info("action", TensorProto.FLOAT, ["batch", act_dim])],
+        initializer=inits,
+    )
+    model = helper.make_model(
+        graph,
+        opset_imports=[helper.make_opsetid("", OPSET)],
+        producer_name="mjskill",
+        doc_string="mjskill policy: observation in, mean action out (docs/training.md)",
+    )
+    model.ir_version = IR_VERSION
+    helper.set_model_props(model, {k: str(v) for k, v in metadata.items()})
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+    return model
+
+
+def save_weights_json(path, layers, obs_mean, obs_std, obs_clip):
+    """Writes the weights as JSON (for a reference computation in another language)."""
+    with open(path, "w") as f:
+        json.dump(
+            {
+                "obs_mean": np.asarray(obs_mean, np.float32).tolist(),
+                "obs_std": np.asarray(obs_std, np.float32).tolist(),
+                "obs_clip": obs_clip,
+                "activation": "tanh",
+                "layers": [
+                    {
+                        "w": np.asarray(w, np.float32).tolist(),
+                        "b": np.asarray(b, np.float32).tolist(),
+                    }
+                    for w, b in layers
+                ],
+            },
+            f,
+        )

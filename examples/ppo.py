@@ -1,0 +1,399 @@
+"""PPO on any mjskill env and robot, on the CPU, with state observations and the native vector
+env; saves the policy as an ONNX policy file (docs/training.md) that `mjskill eval --policy`,
+`mjskill rollout --policy`, mjskill.policy.OnnxPolicy and examples/eval_in_maniskill.py run.
+
+    pip install torch                 # any build; the CPU one is enough
+    python examples/ppo.py --env-id PickCube-v1 --robot panda
+    python examples/plot_training.py runs/<run>/log.csv
+
+The algorithm and its defaults are ManiSkill 3's state PPO baseline (examples/baselines/ppo/
+ppo.py, per-task settings from its examples.sh; docs/training.md lists each default and its
+source): actor and critic MLPs of 3x256 tanh units, a state-independent log std (init -0.5),
+gamma 0.8, GAE lambda 0.9, 4 or 8 update epochs of 32 minibatches with a target KL of 0.1,
+partial resets (an env resets at success), and the value of the final observation bootstrapped
+at every episode end. Differences, all for the native env or the ONNX file:
+
+* mjskill's vector env resets an ended env on the *next* step (gymnasium's next-step
+  autoreset): that step's transition (action ignored, reward 0) is masked out of the update,
+  and the final observation is the one returned with the end flag, so bootstrapping needs no
+  ``final_observation``;
+* observations are normalised by running statistics (clip 10), which the exported graph
+  contains (--no-obs-norm for ManiSkill's raw observations);
+* evaluation runs --num-eval-envs episodes on fixed seeds with the mean action; an episode
+  ends at success (mjskill's env always resets at termination), so eval success is
+  ManiSkill's ``success_once``.
+
+Logs ``log.csv`` in the run directory every iteration: iteration, env_steps, wall_time,
+sim_time (seconds in env.reset/step), learner_time (policy inference during rollouts, GAE and
+the update; wall time also counts evaluations), train_success and train_return (episodes that
+ended during the iteration); evaluations are rows of their own (train columns empty) with
+eval_success and eval_return of the policy after env_steps steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import shlex
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from policy_onnx import write_mlp_policy  # noqa: E402
+
+#: ManiSkill's ppo.py defaults (its Args dataclass).
+BASE = dict(
+    num_envs=512,
+    num_steps=50,
+    total_timesteps=10_000_000,
+    learning_rate=3e-4,
+    gamma=0.8,
+    gae_lambda=0.9,
+    update_epochs=4,
+    num_minibatches=32,
+    target_kl=0.1,
+    clip_coef=0.2,
+    ent_coef=0.0,
+    vf_coef=0.5,
+    max_grad_norm=0.5,
+    eval_freq=25,
+    num_eval_envs=8,
+    control_mode="pd_joint_delta_pos",
+)
+
+#: Per-task settings of ManiSkill's examples/baselines/ppo/examples.sh; the tasks it does not
+#: list take PickCube-v1's (same robot, same 50-step horizon).
+TASKS = {
+    "PickCube-v1": dict(num_envs=1024, update_epochs=8, num_minibatches=32,
+                        total_timesteps=10_000_000),
+    "PokeCube-v1": dict(num_envs=1024, update_epochs=8, num_minibatches=32,
+                        total_timesteps=5_000_000, eval_freq=10, num_steps=20),
+}
+
+
+def defaults(env_id: str) -> dict:
+    return {**BASE, **TASKS.get(env_id, TASKS["PickCube-v1"])}
+
+
+def parse_args(argv=None):
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--env-id", default="PickCube-v1")
+    env_id = pre.parse_known_args(argv)[0].env_id
+    d = defaults(env_id)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--env-id", default="PickCube-v1", help="mjskill env id")
+    p.add_argument("--robot", default=None, help="robot uid (default: the env's)")
+    p.add_argument("--control-mode", default=d["control_mode"])
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--num-envs", type=int, default=d["num_envs"])
+    p.add_argument("--num-threads", type=int, default=os.cpu_count() or 1,
+                   help="threads of the native vector env")
+    p.add_argument("--torch-threads", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--num-steps", type=int, default=d["num_steps"],
+                   help="rollout length per env and iteration")
+    p.add_argument("--total-timesteps", type=int, default=d["total_timesteps"])
+    p.add_argument("--max-minutes", type=float, default=None,
+                   help="stop after this much wall time (the policy is saved)")
+    p.add_argument("--learning-rate", type=float, default=d["learning_rate"])
+    p.add_argument("--anneal-lr", action="store_true")
+    p.add_argument("--gamma", type=float, default=d["gamma"])
+    p.add_argument("--gae-lambda", type=float, default=d["gae_lambda"])
+    p.add_argument("--finite-horizon-gae", action="store_true",
+                   help="ManiSkill's finite-horizon GAE (its default: off)")
+    p.add_argument("--update-epochs", type=int, default=d["update_epochs"])
+    p.add_argument("--num-minibatches", type=int, default=d["num_minibatches"])
+    p.add_argument("--target-kl", type=float, default=d["target_kl"])
+    p.add_argument("--clip-coef", type=float, default=d["clip_coef"])
+    p.add_argument("--ent-coef", type=float, default=d["ent_coef"])
+    p.add_argument("--vf-coef", type=float, default=d["vf_coef"])
+    p.add_argument("--max-grad-norm", type=float, default=d["max_grad_norm"])
+    p.add_argument("--reward-scale", type=float, default=1.0)
+    p.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256])
+    p.add_argument("--no-obs-norm", action="store_true")
+    p.add_argument("--eval-freq", type=int, default=d["eval_freq"],
+                   help="evaluate every N iterations (and at the first and last)")
+    p.add_argument("--num-eval-envs", type=int, default=d["num_eval_envs"])
+    p.add_argument("--eval-seed", type=int, default=2**31,
+                   help="seed of the first evaluation episode (the same seeds every time)")
+    p.add_argument("--out", default=None, help="run directory (default runs/<env>__<robot>__<seed>)")
+    return p.parse_args(argv)
+
+
+class RunningMeanStd:
+    """Running mean and variance (parallel algorithm), float64."""
+
+    def __init__(self, dim):
+        self.mean = np.zeros(dim)
+        self.var = np.ones(dim)
+        self.count = 1e-4
+
+    def update(self, x):
+        m, v, n = x.mean(0), x.var(0), x.shape[0]
+        delta, total = m - self.mean, self.count + n
+        self.mean = self.mean + delta * n / total
+        self.var = (self.var * self.count + v * n + delta**2 * self.count * n / total) / total
+        self.count = total
+
+    def std(self):
+        return np.sqrt(self.var + 1e-8)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    import torch
+    import torch.nn as nn
+    from torch.distributions.normal import Normal
+
+    import mjskill  # noqa: F401  (registers the envs)
+
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    torch.set_num_threads(args.torch_threads)
+    gid = f"mjskill/{args.env_id}"
+    kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state",
+              num_threads=args.num_threads)
+    envs = gym.make_vec(gid, num_envs=args.num_envs, **kw)
+    eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, **kw)
+    robot, mode = envs.unwrapped.robot_uids, envs.unwrapped.control_mode
+    max_steps = envs.unwrapped.max_episode_steps
+    out = args.out or os.path.join("runs", f"{args.env_id}__{robot}__{mode}__{args.seed}")
+    os.makedirs(out, exist_ok=True)
+    obs_dim = envs.single_observation_space.shape[0]
+    act_dim = envs.single_action_space.shape[0]
+    low = torch.as_tensor(envs.single_action_space.low)
+    high = torch.as_tensor(envs.single_action_space.high)
+    command = "python " + " ".join(shlex.quote(a) for a in sys.argv)
+
+    def mlp(n_out, last_std):
+        layers, n_in = [], obs_dim
+        for h in args.hidden:
+            lin = nn.Linear(n_in, h)
+            nn.init.orthogonal_(lin.weight, np.sqrt(2))
+            nn.init.constant_(lin.bias, 0.0)
+            layers += [lin, nn.Tanh()]
+            n_in = h
+        lin = nn.Linear(n_in, n_out)
+        nn.init.orthogonal_(lin.weight, last_std)
+        nn.init.constant_(lin.bias, 0.0)
+        return nn.Sequential(*layers, lin)
+
+    actor = mlp(act_dim, 0.01 * np.sqrt(2))
+    critic = mlp(1, 1.0)
+    logstd = nn.Parameter(torch.full((1, act_dim), -0.5))
+    params = list(actor.parameters()) + list(critic.parameters()) + [logstd]
+    opt = torch.optim.Adam(params, lr=args.learning_rate, eps=1e-5)
+    rms = RunningMeanStd(obs_dim)
+
+    def norm(o):
+        if args.no_obs_norm:
+            return torch.as_tensor(o, dtype=torch.float32)
+        x = (o - rms.mean) / rms.std()
+        return torch.as_tensor(np.clip(x, -10.0, 10.0), dtype=torch.float32)
+
+    def save(tag, eval_success):
+        layers = []
+        for m in actor:
+            if isinstance(m, nn.Linear):
+                layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()))
+        mean = np.zeros(obs_dim) if args.no_obs_norm else rms.mean
+        std = np.ones(obs_dim) if args.no_obs_norm else rms.std()
+        meta = {
+            "env_id": args.env_id,
+            "robot_uids": robot,
+            "control_mode": mode,
+            "obs_mode": "state",
+            "training_command": command,
+            "algorithm": "ppo (examples/ppo.py)",
+            "env_steps": str(global_step),
+            "eval_success": "" if eval_success is None else f"{eval_success:.4f}",
+            "mjskill_version": mjskill.__version__,
+        }
+        path = os.path.join(out, f"{tag}.onnx")
+        write_mlp_policy(path, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0)
+        torch.save({"actor": actor.state_dict(), "critic": critic.state_dict(),
+                    "logstd": logstd.detach(), "obs_mean": rms.mean, "obs_var": rms.var,
+                    "obs_count": rms.count}, os.path.join(out, f"{tag}.pt"))
+        return path
+
+    def evaluate():
+        """One episode per eval env on fixed seeds, mean actions; (success rate, mean return)."""
+        obs, _ = eval_envs.reset(seed=args.eval_seed)
+        n = args.num_eval_envs
+        done = np.zeros(n, bool)
+        success = np.zeros(n, bool)
+        ret = np.zeros(n)
+        for _ in range(max_steps):
+            with torch.no_grad():
+                a = torch.clamp(actor(norm(obs)), low, high).numpy()
+            obs, r, term, trunc, _ = eval_envs.step(a)
+            ret += np.where(done, 0.0, r)
+            success |= term & ~done
+            done |= term | trunc
+            if done.all():
+                break
+        return float(success.mean()), float(ret.mean())
+
+    T, N = args.num_steps, args.num_envs
+    batch = T * N
+    minibatch = batch // args.num_minibatches
+    iterations = max(1, args.total_timesteps // batch)
+    b_obs = np.zeros((T, N, obs_dim), np.float32)
+    b_act = torch.zeros((T, N, act_dim))
+    b_logp = torch.zeros((T, N))
+    b_rew = torch.zeros((T, N))
+    b_val = torch.zeros((T, N))
+    b_done = torch.zeros((T, N))  # the episode ended at this step
+    b_valid = torch.zeros((T, N))  # this step was not an autoreset step
+
+    log = open(os.path.join(out, "log.csv"), "w", newline="")
+    writer = csv.writer(log)
+    writer.writerow(["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
+                     "train_success", "train_return", "eval_success", "eval_return"])
+    print(f"{args.env_id} {robot} {mode}: obs {obs_dim}, act {act_dim}; {N} envs x {T} steps, "
+          f"{iterations} iterations -> {out}", flush=True)
+
+    t_start = time.perf_counter()
+    sim_time = learner_time = 0.0
+    global_step = 0
+    t0 = time.perf_counter()
+    next_obs, _ = envs.reset(seed=args.seed)
+    sim_time += time.perf_counter() - t0
+    prev_done = np.zeros(N, bool)
+    ep_ret = np.zeros(N)
+    best = None
+    for it in range(1, iterations + 1):
+        if it % args.eval_freq == 1 or args.eval_freq == 1:
+            eval_s, eval_r = evaluate()
+            # An evaluation row: the policy after `global_step` env steps.
+            writer.writerow([it - 1, global_step, f"{time.perf_counter() - t_start:.3f}",
+                             f"{sim_time:.3f}", f"{learner_time:.3f}", "", "", eval_s, eval_r])
+            print(f"eval after {global_step} steps: success {eval_s:.3f} return {eval_r:.2f}",
+                  flush=True)
+            save("policy", eval_s)
+            if best is None or eval_s >= best:
+                best = eval_s
+                save("best", eval_s)
+        if args.anneal_lr:
+            opt.param_groups[0]["lr"] = (1.0 - (it - 1.0) / iterations) * args.learning_rate
+        ended_success, ended_return = [], []
+        # -- rollout ------------------------------------------------------------------------
+        for t in range(T):
+            t0 = time.perf_counter()
+            b_obs[t] = next_obs
+            with torch.no_grad():
+                x = norm(next_obs)
+                mean = actor(x)
+                dist = Normal(mean, logstd.exp().expand_as(mean))
+                a = dist.sample()
+                b_logp[t] = dist.log_prob(a).sum(1)
+                b_val[t] = critic(x).view(-1)
+            b_act[t] = a
+            act = torch.clamp(a, low, high).numpy()
+            t1 = time.perf_counter()
+            next_obs, r, term, trunc, _ = envs.step(act)
+            t2 = time.perf_counter()
+            sim_time += t2 - t1
+            learner_time += t1 - t0
+            valid = ~prev_done  # an env that ended on the last step resets now
+            done = (term | trunc) & valid
+            b_rew[t] = torch.as_tensor(r * args.reward_scale, dtype=torch.float32)
+            b_done[t] = torch.as_tensor(done, dtype=torch.float32)
+            b_valid[t] = torch.as_tensor(valid, dtype=torch.float32)
+            ep_ret += np.where(valid, r, 0.0)
+            for i in np.flatnonzero(done):
+                ended_success.append(bool(term[i]))
+                ended_return.append(ep_ret[i])
+                ep_ret[i] = 0.0
+            prev_done = done
+            global_step += N
+        t0 = time.perf_counter()
+        if not args.no_obs_norm:
+            rms.update(b_obs.reshape(-1, obs_dim)[b_valid.numpy().reshape(-1) > 0])
+        # -- GAE: the value after step t is V(obs[t+1]), the final observation at an end -----
+        with torch.no_grad():
+            next_value = critic(norm(next_obs)).view(-1)
+            adv = torch.zeros((T, N))
+            last = torch.zeros(N)
+            lam_sum = rew_sum = val_sum = torch.zeros(N)
+            for t in reversed(range(T)):
+                nv = next_value if t == T - 1 else b_val[t + 1]
+                # Propagate from step t+1 only when the episode goes on and t+1 is a real step.
+                cont = 1.0 - b_done[t]
+                if args.finite_horizon_gae:
+                    lam_sum, rew_sum, val_sum = lam_sum * cont, rew_sum * cont, val_sum * cont
+                    lam_sum = 1 + args.gae_lambda * lam_sum
+                    rew_sum = args.gae_lambda * args.gamma * rew_sum + lam_sum * b_rew[t]
+                    val_sum = args.gae_lambda * args.gamma * val_sum + args.gamma * nv
+                    adv[t] = (rew_sum + val_sum) / lam_sum - b_val[t]
+                else:
+                    delta = b_rew[t] + args.gamma * nv - b_val[t]
+                    last = delta + args.gamma * args.gae_lambda * cont * last
+                    adv[t] = last
+                adv[t] *= b_valid[t]
+            returns = adv + b_val
+        # -- update -------------------------------------------------------------------------
+        keep = b_valid.reshape(-1) > 0
+        f_obs = norm(b_obs.reshape(-1, obs_dim))[keep]
+        f_act, f_logp = b_act.reshape(-1, act_dim)[keep], b_logp.reshape(-1)[keep]
+        f_adv, f_ret = adv.reshape(-1)[keep], returns.reshape(-1)[keep]
+        n = f_obs.shape[0]
+        mb = max(1, min(minibatch, n))
+        stop = False
+        for _ in range(args.update_epochs):
+            perm = torch.randperm(n)
+            for s in range(0, n, mb):
+                idx = perm[s:s + mb]
+                mean = actor(f_obs[idx])
+                dist = Normal(mean, logstd.exp().expand_as(mean))
+                logratio = dist.log_prob(f_act[idx]).sum(1) - f_logp[idx]
+                ratio = logratio.exp()
+                with torch.no_grad():
+                    approx_kl = ((ratio - 1) - logratio).mean()
+                if args.target_kl is not None and approx_kl > args.target_kl:
+                    stop = True
+                    break
+                a = f_adv[idx]
+                a = (a - a.mean()) / (a.std() + 1e-8)
+                pg = torch.max(-a * ratio,
+                               -a * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)).mean()
+                v_loss = 0.5 * ((critic(f_obs[idx]).view(-1) - f_ret[idx]) ** 2).mean()
+                ent = dist.entropy().sum(1).mean()
+                loss = pg - args.ent_coef * ent + args.vf_coef * v_loss
+                opt.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(params, args.max_grad_norm)
+                opt.step()
+            if stop:
+                break
+        learner_time += time.perf_counter() - t0
+        wall = time.perf_counter() - t_start
+        ts = float(np.mean(ended_success)) if ended_success else ""
+        tr = float(np.mean(ended_return)) if ended_return else ""
+        writer.writerow([it, global_step, f"{wall:.3f}", f"{sim_time:.3f}", f"{learner_time:.3f}",
+                         ts, tr, "", ""])
+        log.flush()
+        print(f"it {it}/{iterations} steps {global_step} wall {wall:.0f}s "
+              f"(sim {sim_time:.0f}s, learner {learner_time:.0f}s) "
+              f"{global_step / wall:.0f} steps/s train success "
+              f"{ts if ts == '' else round(ts, 3)}", flush=True)
+        if args.max_minutes is not None and wall > 60 * args.max_minutes:
+            break
+    eval_s, eval_r = evaluate()
+    writer.writerow([it, global_step, f"{time.perf_counter() - t_start:.3f}", f"{sim_time:.3f}",
+                     f"{learner_time:.3f}", "", "", eval_s, eval_r])
+    log.close()
+    path = save("policy", eval_s)
+    if best is None or eval_s >= best:
+        save("best", eval_s)
+    print(f"final eval success {eval_s:.3f} return {eval_r:.2f}; policy: {path}")
+    print(f"  mjskill eval --policy {path}")
+
+
+if __name__ == "__main__":
+    main()

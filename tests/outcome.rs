@@ -1,0 +1,493 @@
+//! Outcome agreement with ManiSkill 3, without ManiSkill: fixed action sequences of every
+//! pair, with what ManiSkill did with them, in `tests/data/outcomes/` (written by
+//! `examples/maniskill_outcomes.py` with a local ManiSkill; these are the first 10 episodes
+//! of each file of the 50-episode recording measured in docs/outcome-agreement.md):
+//!
+//! * `solver__<env>__<robot>`: mjskill's scripted-solver episodes, exported with
+//!   `mjskill export --format maniskill` (Fetch with `--control-mode pd_joint_pos`), replayed
+//!   in ManiSkill;
+//! * `motionplanning__<env>__<robot>`: ManiSkill's own motion-planning demos.
+//!
+//! Each file is replayed open loop in mjskill and compared with ManiSkill's final `success`
+//! and per-step flags. The test fails if agreement drops below [`EXPECTED`], the figures
+//! measured when the files were recorded. When the physics changes, re-measure and update
+//! the table: `cargo test --release --test outcome -- --nocapture` prints the measured
+//! figures in its form (and `mjskill outcomes tests/data/outcomes --table` as Markdown).
+use std::path::{Path, PathBuf};
+
+use mjskill::maniskill::outcome::{files, measure, OutcomeFile, PairAgreement};
+use mjskill::SimConfig;
+
+fn data_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/outcomes")
+}
+
+/// The figures of one outcome file: episodes, ManiSkill's and mjskill's final successes,
+/// episodes with the same final success, steps, steps on which every flag agrees, and the
+/// steps on which each flag agrees.
+struct Expected {
+    file: &'static str,
+    episodes: usize,
+    maniskill_successes: usize,
+    mjskill_successes: usize,
+    same_outcome: usize,
+    steps: usize,
+    steps_all_flags_agree: usize,
+    flags: &'static [(&'static str, usize)],
+}
+
+/// Agreement measured when the files were recorded (the single table to update when the
+/// physics changes; see the module docs).
+const EXPECTED: &[Expected] = &[
+    Expected {
+        file: "motionplanning__PickCube-v1__panda",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 726,
+        steps_all_flags_agree: 723,
+        flags: &[
+            ("success", 725),
+            ("is_obj_placed", 726),
+            ("is_robot_static", 723),
+            ("is_grasped", 726),
+        ],
+    },
+    Expected {
+        file: "motionplanning__PickCube-v1__xarm6_robotiq",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 728,
+        steps_all_flags_agree: 712,
+        flags: &[
+            ("success", 727),
+            ("is_obj_placed", 725),
+            ("is_robot_static", 725),
+            ("is_grasped", 718),
+        ],
+    },
+    Expected {
+        file: "motionplanning__PickCubeSO100-v1__so100",
+        episodes: 10,
+        maniskill_successes: 8,
+        mjskill_successes: 7,
+        same_outcome: 9,
+        steps: 894,
+        steps_all_flags_agree: 772,
+        flags: &[
+            ("success", 839),
+            ("is_obj_placed", 843),
+            ("is_robot_static", 819),
+            ("is_grasped", 886),
+        ],
+    },
+    Expected {
+        file: "motionplanning__PlaceSphere-v1__panda",
+        episodes: 10,
+        maniskill_successes: 3,
+        mjskill_successes: 7,
+        same_outcome: 6,
+        steps: 1179,
+        steps_all_flags_agree: 1049,
+        flags: &[
+            ("is_obj_grasped", 1179),
+            ("is_obj_on_bin", 1179),
+            ("is_obj_static", 1049),
+            ("success", 1166),
+        ],
+    },
+    Expected {
+        file: "solver__PickCube-v1__fetch",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 473,
+        flags: &[
+            ("success", 495),
+            ("is_obj_placed", 493),
+            ("is_robot_static", 482),
+            ("is_grasped", 498),
+        ],
+    },
+    Expected {
+        file: "solver__PickCube-v1__panda",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 471,
+        flags: &[
+            ("success", 488),
+            ("is_obj_placed", 486),
+            ("is_robot_static", 491),
+            ("is_grasped", 494),
+        ],
+    },
+    Expected {
+        file: "solver__PickCube-v1__so100",
+        episodes: 10,
+        maniskill_successes: 4,
+        mjskill_successes: 10,
+        same_outcome: 4,
+        steps: 500,
+        steps_all_flags_agree: 301,
+        flags: &[
+            ("success", 336),
+            ("is_obj_placed", 401),
+            ("is_robot_static", 419),
+            ("is_grasped", 387),
+        ],
+    },
+    Expected {
+        file: "solver__PickCube-v1__widowxai",
+        episodes: 10,
+        maniskill_successes: 0,
+        mjskill_successes: 10,
+        same_outcome: 0,
+        steps: 500,
+        steps_all_flags_agree: 282,
+        flags: &[
+            ("success", 301),
+            ("is_obj_placed", 499),
+            ("is_robot_static", 293),
+            ("is_grasped", 490),
+        ],
+    },
+    Expected {
+        file: "solver__PickCube-v1__xarm6_robotiq",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 484,
+        flags: &[
+            ("success", 499),
+            ("is_obj_placed", 495),
+            ("is_robot_static", 499),
+            ("is_grasped", 490),
+        ],
+    },
+    Expected {
+        file: "solver__PickCubeSO100-v1__so100",
+        episodes: 10,
+        maniskill_successes: 4,
+        mjskill_successes: 10,
+        same_outcome: 4,
+        steps: 500,
+        steps_all_flags_agree: 301,
+        flags: &[
+            ("success", 336),
+            ("is_obj_placed", 401),
+            ("is_robot_static", 419),
+            ("is_grasped", 387),
+        ],
+    },
+    Expected {
+        file: "solver__PickCubeWidowXAI-v1__widowxai",
+        episodes: 10,
+        maniskill_successes: 0,
+        mjskill_successes: 10,
+        same_outcome: 0,
+        steps: 500,
+        steps_all_flags_agree: 282,
+        flags: &[
+            ("success", 301),
+            ("is_obj_placed", 499),
+            ("is_robot_static", 293),
+            ("is_grasped", 490),
+        ],
+    },
+    Expected {
+        file: "solver__PlaceSphere-v1__fetch",
+        episodes: 10,
+        maniskill_successes: 8,
+        mjskill_successes: 10,
+        same_outcome: 8,
+        steps: 500,
+        steps_all_flags_agree: 450,
+        flags: &[
+            ("is_obj_grasped", 500),
+            ("is_obj_on_bin", 493),
+            ("is_obj_static", 457),
+            ("success", 474),
+        ],
+    },
+    Expected {
+        file: "solver__PlaceSphere-v1__panda",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 468,
+        flags: &[
+            ("is_obj_grasped", 500),
+            ("is_obj_on_bin", 499),
+            ("is_obj_static", 469),
+            ("success", 481),
+        ],
+    },
+    Expected {
+        file: "solver__PokeCube-v1__fetch",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 472,
+        flags: &[
+            ("success", 495),
+            ("is_cube_placed", 498),
+            ("is_peg_cube_fit", 477),
+            ("is_peg_grasped", 500),
+        ],
+    },
+    Expected {
+        file: "solver__PokeCube-v1__panda",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 438,
+        flags: &[
+            ("success", 499),
+            ("is_cube_placed", 499),
+            ("is_peg_cube_fit", 440),
+            ("is_peg_grasped", 500),
+        ],
+    },
+];
+
+/// The Demo pairs: ManiSkill ships motion-planning solutions for these (none for PokeCube,
+/// Fetch or the WidowX AI).
+const DEMO_PAIRS: [(&str, &str); 4] = [
+    ("PickCube-v1", "panda"),
+    ("PickCube-v1", "xarm6_robotiq"),
+    ("PickCubeSO100-v1", "so100"),
+    ("PlaceSphere-v1", "panda"),
+];
+
+fn stem(p: &Path) -> String {
+    p.file_name()
+        .unwrap()
+        .to_string_lossy()
+        .trim_end_matches(".json.gz")
+        .to_string()
+}
+
+/// The measured figures as an [`EXPECTED`] entry.
+fn as_entry(name: &str, r: &PairAgreement) -> String {
+    let flags: Vec<String> = r
+        .flags
+        .iter()
+        .map(|(k, a)| format!("(\"{k}\", {})", a.agree))
+        .collect();
+    format!(
+        "    Expected {{\n        file: \"{name}\",\n        episodes: {},\n        maniskill_successes: {},\n        mjskill_successes: {},\n        same_outcome: {},\n        steps: {},\n        steps_all_flags_agree: {},\n        flags: &[{}],\n    }},",
+        r.episodes,
+        r.maniskill_successes,
+        r.mjskill_successes,
+        r.same_outcome,
+        r.steps,
+        r.steps_all_flags_agree,
+        flags.join(", ")
+    )
+}
+
+#[test]
+fn every_solver_pair_and_demo_pair_has_an_outcome_file() {
+    let names: Vec<String> = files(&data_dir())
+        .unwrap()
+        .iter()
+        .map(|p| stem(p))
+        .collect();
+    let mut want: Vec<String> = mjskill::solvers::SOLVED
+        .iter()
+        .map(|(e, r)| format!("solver__{e}__{r}"))
+        .collect();
+    want.extend(
+        DEMO_PAIRS
+            .iter()
+            .map(|(e, r)| format!("motionplanning__{e}__{r}")),
+    );
+    want.sort();
+    assert_eq!(names, want);
+    let expected: Vec<&str> = EXPECTED.iter().map(|e| e.file).collect();
+    assert_eq!(expected.len(), want.len(), "one EXPECTED entry per file");
+    for w in &want {
+        assert!(expected.contains(&w.as_str()), "no EXPECTED entry for {w}");
+    }
+}
+
+#[test]
+fn outcomes_agree_with_maniskill_at_least_as_measured() {
+    let mut measured = Vec::new();
+    let mut failures = Vec::new();
+    for p in files(&data_dir()).unwrap() {
+        let name = stem(&p);
+        let f = OutcomeFile::open(&p).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.episodes.len(), 10, "{name}");
+        assert!(
+            f.episodes.iter().all(|e| e.seed < 5000),
+            "{name}: held-out seed"
+        );
+        let r = measure(&f, &p, None, SimConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        measured.push(as_entry(&name, &r));
+        let Some(want) = EXPECTED.iter().find(|e| e.file == name) else {
+            failures.push(format!("{name}: no EXPECTED entry"));
+            continue;
+        };
+        let mut check = |ok: bool, what: &str, got: usize, want: usize| {
+            if !ok {
+                failures.push(format!("{name}: {what} {got} (measured {want})"));
+            }
+        };
+        check(
+            r.episodes == want.episodes,
+            "episodes",
+            r.episodes,
+            want.episodes,
+        );
+        check(r.steps == want.steps, "steps", r.steps, want.steps);
+        check(
+            r.maniskill_successes == want.maniskill_successes,
+            "ManiSkill successes",
+            r.maniskill_successes,
+            want.maniskill_successes,
+        );
+        let gap = r.mjskill_successes.abs_diff(r.maniskill_successes);
+        let want_gap = want.mjskill_successes.abs_diff(want.maniskill_successes);
+        check(gap <= want_gap, "|success count gap|", gap, want_gap);
+        check(
+            r.same_outcome >= want.same_outcome,
+            "same outcome",
+            r.same_outcome,
+            want.same_outcome,
+        );
+        check(
+            r.steps_all_flags_agree >= want.steps_all_flags_agree,
+            "steps with every flag agreeing",
+            r.steps_all_flags_agree,
+            want.steps_all_flags_agree,
+        );
+        for (k, w) in want.flags {
+            let got = r.flags.get(*k).map_or(0, |a| a.agree);
+            check(got >= *w, &format!("steps with {k} agreeing"), got, *w);
+        }
+    }
+    println!(
+        "const EXPECTED: &[Expected] = &[\n{}\n];",
+        measured.join("\n")
+    );
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn bad_outcome_files_are_errors_naming_the_problem() {
+    let dir = std::env::temp_dir().join(format!("mjskill-outcome-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, v: &serde_json::Value| {
+        let p = dir.join(name);
+        std::fs::write(&p, v.to_string()).unwrap();
+        p
+    };
+    let good = serde_json::json!({
+        "format": "mjskill-outcomes/1", "source": "solver", "env_id": "PickCube-v1",
+        "robot": "panda", "control_mode": "pd_ee_delta_pos",
+        "episodes": [{"seed": 0, "steps": 2, "final_success": false,
+                      "flags": {"success": "00", "is_grasped": "00"},
+                      "actions": [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]]}]
+    });
+    let p = write("good.json", &good);
+    let r = measure(
+        &OutcomeFile::open(&p).unwrap(),
+        &p,
+        None,
+        SimConfig::default(),
+    )
+    .unwrap();
+    assert_eq!((r.episodes, r.steps, r.same_outcome), (1, 2, 1));
+    assert_eq!(r.flags["is_grasped"].agree, 2);
+    let mut bad = good.clone();
+    bad["episodes"][0]["flags"]["success"] = "0".into();
+    let err = OutcomeFile::open(&write("short.json", &bad))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("flags.success is not 2 characters"), "{err}");
+    let mut bad = good.clone();
+    bad["episodes"][0]["flags"]["is_cube_placed"] = "00".into();
+    let p = write("flag.json", &bad);
+    let err = measure(
+        &OutcomeFile::open(&p).unwrap(),
+        &p,
+        None,
+        SimConfig::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("\"is_cube_placed\"") && err.contains("is_grasped"),
+        "{err}"
+    );
+    let mut bad = good.clone();
+    bad["format"] = "other".into();
+    let err = OutcomeFile::open(&write("fmt.json", &bad))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("mjskill-outcomes/1"), "{err}");
+    let mut bad = good;
+    bad["episodes"][0]["actions"][1] = serde_json::json!([0.0, 1.0]);
+    let p = write("dim.json", &bad);
+    let err = measure(
+        &OutcomeFile::open(&p).unwrap(),
+        &p,
+        None,
+        SimConfig::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("dim.json") && err.contains('2'), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_outcomes_command_prints_the_agreement() {
+    let file = data_dir().join("solver__PlaceSphere-v1__panda.json.gz");
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+            .arg("outcomes")
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = run(&[file.to_str().unwrap(), "--episodes", "2", "--per-episode"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["env_id"], "PlaceSphere-v1");
+    assert_eq!(r["episodes"], 2);
+    assert_eq!(r["per_episode"].as_array().unwrap().len(), 2);
+    assert_eq!(r["steps"], 100);
+    let o = run(&[file.to_str().unwrap(), "--episodes", "1", "--table"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.starts_with("| source |") && text.contains("| solver | PlaceSphere-v1 | panda |"),
+        "{text}"
+    );
+    let empty = std::env::temp_dir().join(format!("mjskill-outcomes-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).unwrap();
+    let o = run(&[empty.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("holds no outcome files"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&empty).unwrap();
+}
