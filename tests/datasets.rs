@@ -1322,6 +1322,8 @@ fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
     );
     assert_eq!(v["counts"]["action"], 8);
     assert_eq!(v["counts"][cam], 8);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
 
 fn mjskill_cli(args: &[&str], paths: &[&Path]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
