@@ -107,6 +107,49 @@ fn bad_actions_are_errors_and_the_vec_env_stays_usable() {
 }
 
 #[test]
+fn mujoco_warnings_of_each_env_are_reported_and_cleared_by_reset() {
+    // Absolute joint targets 100× beyond the action space at one 0.05 s substep diverge.
+    let cfg = EnvConfig {
+        control_mode: Some("pd_joint_pos".into()),
+        sim: mjskill::SimConfig { sim_freq: 20 },
+        max_episode_steps: Some(1000),
+        ..Default::default()
+    };
+    let mut v = VecEnv::new("PickCube-v1", cfg, 2, 2).unwrap();
+    v.reset(Some(0));
+    assert!(v.warnings().iter().all(|w| w.fired().is_empty()));
+    let (lo, hi) = (
+        v.single_action_space().low.clone(),
+        v.single_action_space().high.clone(),
+    );
+    let mut fired = false;
+    for k in 0..100 {
+        let a: Vec<f32> = (0..16)
+            .map(|i| {
+                let j = i % 8;
+                100.0
+                    * if (i * 7 + k * 3) % 5 < 2 {
+                        lo[j]
+                    } else {
+                        hi[j]
+                    }
+            })
+            .collect();
+        v.step(&a).unwrap();
+        if v.warnings().iter().any(|w| !w.fired().is_empty()) {
+            fired = true;
+            break;
+        }
+    }
+    assert!(fired, "no MuJoCo warning in 100 diverging steps");
+    v.reset(Some(0));
+    assert!(
+        v.warnings().iter().all(|w| w.fired().is_empty()),
+        "a reset clears the warnings"
+    );
+}
+
+#[test]
 fn num_envs_beyond_the_bound_is_an_error_not_a_huge_allocation() {
     assert_eq!(mjskill::MAX_NUM_ENVS, 16_384);
     for n in [mjskill::MAX_NUM_ENVS + 1, 1 << 62, usize::MAX] {
