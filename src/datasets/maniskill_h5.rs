@@ -70,12 +70,13 @@ impl EpisodeInfo {
     }
 
     /// The reset seed a replay must use, checked: `episode_seed` and `reset_kwargs.seed`
-    /// (a null counts as absent) must be integers in `0..=`[`crate::MAX_SEED`] (ManiSkill's
-    /// seeds are 32-bit), must agree when both are given, and at least one must be given.
+    /// (a null counts as absent) must be integers in `0..=`[`crate::env::checks::MAX_SEED`]
+    /// (ManiSkill's seeds are 32-bit), must agree when both are given, and at least one must
+    /// be given.
     /// The error names the episode, the field and the value.
     pub fn checked_seed(&self) -> Result<u64, String> {
         let id = self.episode_id;
-        let max = crate::MAX_SEED;
+        let max = crate::env::checks::MAX_SEED;
         let kw = match self.reset_kwargs.get("seed") {
             None | Some(Value::Null) => None,
             Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {

@@ -160,7 +160,7 @@ impl Staged {
         let mut moved: Vec<(&Path, Option<PathBuf>)> = Vec::new();
         let mut failure = None;
         for (tmp, fin) in &entries {
-            // With more than one output, keep the file being replaced (a hard link: the
+            // With more than one output, keep the file being replaced (a hard link, so the
             // final name never goes missing) until every output is in place.
             let kept = (entries.len() > 1 && fin.symlink_metadata().is_ok()).then(|| {
                 let k = fin.with_file_name(format!(
@@ -170,7 +170,10 @@ impl Staged {
                     std::process::id()
                 ));
                 remove_any(&k);
-                std::fs::hard_link(fin, &k).map(|()| k)
+                // A copy where the file system has no hard links.
+                std::fs::hard_link(fin, &k)
+                    .or_else(|_| std::fs::copy(fin, &k).map(|_| ()))
+                    .map(|()| k)
             });
             let kept = match kept.transpose() {
                 Ok(k) => k,

@@ -200,11 +200,11 @@ impl RefFile {
                 path: p.clone(),
                 msg: format!("episode {}: {msg}", e.episode_index),
             };
-            if e.seed > crate::MAX_SEED {
+            if e.seed > crate::env::checks::MAX_SEED {
                 return Err(bad(format!(
                     "seed {} is not in 0..={} (ManiSkill's seeds are 32-bit)",
                     e.seed,
-                    crate::MAX_SEED
+                    crate::env::checks::MAX_SEED
                 )));
             }
             let n = f.joint_names.len();
