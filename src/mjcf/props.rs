@@ -35,11 +35,12 @@ pub const TABLE_MODEL: &str = "scene/table.urdf";
 pub const GROUND_TEXTURE: &str = "scene/grid.png";
 /// Colour the floor texture is multiplied by.
 pub const GROUND_RGBA: Rgba = [1.0, 1.0, 1.0, 1.0];
-/// Ambient light (MuJoCo's headlight ambient), standing in for ManiSkill's ambient 0.3 after
-/// its sRGB output encoding.
-pub const AMBIENT: f64 = 0.3;
+/// Ambient light (MuJoCo's headlight ambient). ManiSkill's ambient is 0.3 in linear light,
+/// ≈ 0.55 after its sRGB output encoding; MuJoCo's fixed-function lighting works on display
+/// values, so the intensities were fitted to ManiSkill's frames (docs/rendering.md).
+pub const AMBIENT: f64 = 0.55;
 /// Diffuse intensity of the directional lights along (1, 1, −1) and (0, 0, −1).
-pub const LIGHT_DIFFUSE: [f64; 2] = [0.5, 0.5];
+pub const LIGHT_DIFFUSE: [f64; 2] = [0.2, 0.25];
 /// Specular intensity of both directional lights.
 pub const LIGHT_SPECULAR: f64 = 0.1;
 
@@ -112,8 +113,9 @@ impl Scene {
             // Geoms of the world body (a body of their own would renumber the robot's).
             let files = |f: &str| crate::models::file_near(TABLE_MODEL, f).map(<[u8]>::to_vec);
             for (k, mut shape) in table_visuals.into_iter().enumerate() {
-                shape.origin =
-                    actor * Isometry3::from_parts(Translation3::identity(), table_rot) * shape.origin;
+                shape.origin = actor
+                    * Isometry3::from_parts(Translation3::identity(), table_rot)
+                    * shape.origin;
                 if let Ok(g) = self.visual_geom(&shape, &format!("{TABLE}_visual{k}"), 0, &files) {
                     self.worldbody().push(g);
                 }
@@ -153,15 +155,15 @@ impl Scene {
                         .attr("file", "ground_grid.png"),
                 );
                 self.section("asset").push(
-                        Element::new("material")
-                            .attr("name", "ground_grid")
-                            .attr("texture", "ground_grid")
-                            .attr("texuniform", "true")
-                            .attr_nums("texrepeat", &[0.25, 0.25])
-                            .attr_nums("rgba", &GROUND_RGBA)
-                            .attr("specular", "0")
-                            .attr("shininess", "0"),
-                    );
+                    Element::new("material")
+                        .attr("name", "ground_grid")
+                        .attr("texture", "ground_grid")
+                        .attr("texuniform", "true")
+                        .attr_nums("texrepeat", &[0.25, 0.25])
+                        .attr_nums("rgba", &GROUND_RGBA)
+                        .attr("specular", "0")
+                        .attr("shininess", "0"),
+                );
                 ground = ground.attr("material", "ground_grid");
             }
             None => ground = ground.attr("rgba", "0.45 0.47 0.5 1"),
@@ -370,7 +372,8 @@ mod tests {
         assert!((d.xpos()[3 * peg + 2] - 0.025).abs() < 1e-3);
         // The table is drawn from its shipped model (mesh geoms), not as its collision box.
         assert!(!table_visuals().is_empty());
-        m.require_id(ObjType::Geom, &format!("{TABLE}_visual0")).unwrap();
+        m.require_id(ObjType::Geom, &format!("{TABLE}_visual0"))
+            .unwrap();
         // The goal marker is a mocap body that does not fall.
         let goal = m.require_id(ObjType::Body, "goal").unwrap();
         assert_eq!(m.body_mocapid()[goal], 0);

@@ -119,3 +119,24 @@ pub fn max_triangles(s: &str) -> Result<usize, String> {
 pub fn texture_size(s: &str) -> Result<u32, String> {
     ranged(s, 1, 8192).map(|v| v as u32)
 }
+
+/// `convert-visuals --material NAME=R,G,B,A`: four numbers in 0..=1.
+pub fn named_rgba(s: &str) -> Result<(String, [f32; 4]), String> {
+    let (name, rest) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?} is not NAME=R,G,B,A"))?;
+    let v: Vec<f32> = rest
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|v| (0.0..=1.0).contains(v))
+                .ok_or_else(|| format!("{x:?} in {s:?} is not a number in 0..=1"))
+        })
+        .collect::<Result<_, _>>()?;
+    if name.is_empty() || v.len() != 4 {
+        return Err(format!("{s:?} is not NAME=R,G,B,A (four numbers)"));
+    }
+    Ok((name.to_string(), [v[0], v[1], v[2], v[3]]))
+}

@@ -177,6 +177,10 @@ pub enum Command {
         /// Triangle budget per mesh file (12..=1000000).
         #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
         max_triangles: usize,
+        /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
+        /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
+        #[arg(long = "material", value_parser = args::named_rgba)]
+        materials: Vec<(String, [f32; 4])>,
         /// Largest texture side in pixels (1..=8192; halved until it fits).
         #[arg(long, default_value_t = meshes::visual::DEFAULT_TEXTURE_SIZE, value_parser = args::texture_size, allow_hyphen_values = true)]
         texture_size: u32,
@@ -403,8 +407,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
             name,
             max_triangles,
             texture_size,
+            materials,
         } => {
             let opts = meshes::visual::Options {
+                materials,
                 max_triangles,
                 texture_size,
             };
@@ -412,7 +418,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 (Some(u), None, None) => meshes::visual::Source::Urdf { urdf: u, into },
                 (None, Some(m), None) => meshes::visual::Source::Mesh { mesh: m, scale },
                 (None, None, Some(t)) => meshes::visual::Source::Texture(t),
-                _ => return Err("convert-visuals needs exactly one of --urdf, --mesh or --texture".into()),
+                _ => {
+                    return Err(
+                        "convert-visuals needs exactly one of --urdf, --mesh or --texture".into(),
+                    )
+                }
             };
             for line in meshes::visual::run(source, &out_dir, &name, opts)? {
                 out!("{line}");

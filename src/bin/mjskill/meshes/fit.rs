@@ -20,7 +20,6 @@ pub const MAX_PARTS: usize = 64;
 /// stay proportional to the mesh.
 pub const MAX_SAMPLES: usize = 400_000;
 
-
 /// Subdivisions of a triangle's longest edge at `spacing` (1..=200).
 fn subdivisions(t: &Triangle, spacing: f64) -> usize {
     let longest = (t[1] - t[0])

@@ -93,7 +93,10 @@ impl SourceMesh {
                 (Some(a), Some(b)) => a.extend_from_slice(b),
                 (a, _) => *a = None,
             }
-            debug_assert!(m.normals.as_ref().is_none_or(|v| v.len() == m.positions.len()));
+            debug_assert!(m
+                .normals
+                .as_ref()
+                .is_none_or(|v| v.len() == m.positions.len()));
             let _ = n;
             m.indices.extend(p.indices.iter().map(|i| i + base));
         }
@@ -419,9 +422,9 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                 if let Some(t) = child(d, "texture").and_then(|t| t.attribute("texture")) {
                     // sampler newparam → surface newparam → image, or an image id directly.
                     let param = |sid: &str| {
-                        effect
-                            .descendants()
-                            .find(|n| n.tag_name().name() == "newparam" && n.attribute("sid") == Some(sid))
+                        effect.descendants().find(|n| {
+                            n.tag_name().name() == "newparam" && n.attribute("sid") == Some(sid)
+                        })
                     };
                     let mut image_id = t.to_string();
                     if let Some(sampler) = param(t) {
@@ -443,7 +446,10 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     }
                     texture = by_id
                         .get(image_id.as_str())
-                        .and_then(|img| img.descendants().find(|n| n.tag_name().name() == "init_from"))
+                        .and_then(|img| {
+                            img.descendants()
+                                .find(|n| n.tag_name().name() == "init_from")
+                        })
                         .and_then(|n| n.text())
                         .map(|f| dir.join(f.trim().trim_start_matches("file://")));
                     rgba = [1.0, 1.0, 1.0, 1.0];
@@ -508,7 +514,9 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
             };
             let mut sources: HashMap<String, DaeSource> = HashMap::new();
             for s in mesh.children().filter(|c| c.tag_name().name() == "source") {
-                let Some(id) = s.attribute("id") else { continue };
+                let Some(id) = s.attribute("id") else {
+                    continue;
+                };
                 let data = child(s, "float_array")
                     .and_then(|a| a.text())
                     .map(floats)
@@ -523,11 +531,19 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
             }
             // <vertices id> → its POSITION (and possibly NORMAL) sources.
             let mut vertices_inputs: HashMap<String, Vec<(String, String)>> = HashMap::new();
-            for v in mesh.children().filter(|c| c.tag_name().name() == "vertices") {
+            for v in mesh
+                .children()
+                .filter(|c| c.tag_name().name() == "vertices")
+            {
                 let ins = v
                     .children()
                     .filter(|c| c.tag_name().name() == "input")
-                    .filter_map(|i| Some((i.attribute("semantic")?.to_string(), id_of(i.attribute("source")?))))
+                    .filter_map(|i| {
+                        Some((
+                            i.attribute("semantic")?.to_string(),
+                            id_of(i.attribute("source")?),
+                        ))
+                    })
                     .collect();
                 vertices_inputs.insert(v.attribute("id").unwrap_or("").to_string(), ins);
             }
@@ -537,14 +553,18 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                 .try_inverse()
                 .unwrap_or_else(Matrix3::identity)
                 .transpose();
-            for prims in mesh.children().filter(|c| {
-                matches!(c.tag_name().name(), "triangles" | "polylist" | "polygons")
-            }) {
+            for prims in mesh
+                .children()
+                .filter(|c| matches!(c.tag_name().name(), "triangles" | "polylist" | "polygons"))
+            {
                 // (semantic, source id, offset)
                 let mut inputs: Vec<(String, String, usize)> = Vec::new();
                 let mut stride = 0;
                 for i in prims.children().filter(|c| c.tag_name().name() == "input") {
-                    let off: usize = i.attribute("offset").and_then(|o| o.parse().ok()).unwrap_or(0);
+                    let off: usize = i
+                        .attribute("offset")
+                        .and_then(|o| o.parse().ok())
+                        .unwrap_or(0);
                     stride = stride.max(off + 1);
                     let sem = i.attribute("semantic").unwrap_or("");
                     let src = id_of(i.attribute("source").unwrap_or(""));
@@ -579,7 +599,10 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     None => vec![3; p.len() / (3 * stride.max(1))],
                 };
                 let symbol = prims.attribute("material").unwrap_or("");
-                let mat_id = bind.get(symbol).cloned().unwrap_or_else(|| symbol.to_string());
+                let mat_id = bind
+                    .get(symbol)
+                    .cloned()
+                    .unwrap_or_else(|| symbol.to_string());
                 let (mat_name, rgba, tex_path) = resolve_material(&mat_id);
                 let texture = match &tex_path {
                     Some(path) if uv.is_some() => {
@@ -590,7 +613,13 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     }
                     _ => None,
                 };
-                let slot_key = format!("{mat_id}|{}", texture.as_ref().map(|p| p.display().to_string()).unwrap_or_default());
+                let slot_key = format!(
+                    "{mat_id}|{}",
+                    texture
+                        .as_ref()
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default()
+                );
                 let material = *mat_slots.entry(slot_key).or_insert_with(|| {
                     out.materials.push(Material {
                         name: mat_name,
@@ -647,7 +676,10 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
         }
     }
     if out.parts.is_empty() {
-        return Err(malformed(name, "COLLADA file has no triangles in its visual scene"));
+        return Err(malformed(
+            name,
+            "COLLADA file has no triangles in its visual scene",
+        ));
     }
     Ok(out)
 }
@@ -698,7 +730,10 @@ mod tests {
         let f = dir.join("x.ply");
         std::fs::write(&f, b"ply").unwrap();
         let e = read_visual(&f, [1.0; 4]).unwrap_err().to_string();
-        assert!(e.contains("ply") && e.contains("glb, gltf, dae, stl, obj"), "{e}");
+        assert!(
+            e.contains("ply") && e.contains("glb, gltf, dae, stl, obj"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -31,8 +31,10 @@ pub const DEFAULT_TEXTURE_SIZE: u32 = 512;
 pub const CREASE_DEG: f32 = 35.0;
 
 /// Options of a conversion.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Options {
+    /// Colours (linear RGBA) of materials a URDF names without defining them.
+    pub materials: Vec<(String, [f32; 4])>,
     /// Triangle budget per mesh file.
     pub max_triangles: usize,
     /// Largest texture side; larger textures are box-filtered down by powers of two.
@@ -96,13 +98,14 @@ pub fn simplify(part: &Part, target: usize) -> Part {
         indices
     };
     if indices.len() / 3 > target {
-        // Still over budget at that error: allow larger errors.
+        // Still over budget at that error (texture seams hold it back): allow larger errors
+        // and collapses across seams.
         indices = meshopt::simplify_decoder(
             &indices,
             &positions,
             target * 3,
             0.08,
-            meshopt::SimplifyOptions::None,
+            meshopt::SimplifyOptions::Permissive,
             None,
         );
     }
@@ -143,7 +146,9 @@ fn corner_normals(part: &Part) -> Vec<[f32; 3]> {
         .collect();
     for (f, t) in part.indices.chunks(3).enumerate() {
         for &i in t {
-            at.entry(key(part.positions[i as usize])).or_default().push(f);
+            at.entry(key(part.positions[i as usize]))
+                .or_default()
+                .push(f);
         }
     }
     let cos = CREASE_DEG.to_radians().cos();
@@ -166,85 +171,115 @@ fn corner_normals(part: &Part) -> Vec<[f32; 3]> {
     out
 }
 
-/// The OBJ text of `part` (normals always, texture coordinates if it has them). Degenerate
-/// and repeated triangles are dropped; a triangle repeating a directed edge gets its own
-/// vertices. Returns the text and the triangles written.
+/// The OBJ text of `part` (normals always, texture coordinates if it has them): positions,
+/// normals and texture coordinates are each written once and indexed separately.
+/// Degenerate and repeated triangles are dropped; a triangle repeating a directed edge of
+/// another gets its own copies of its positions (MuJoCo's orientation check works on the
+/// position indices). Returns the text and the triangles written.
 pub fn obj_text(part: &Part) -> (String, usize) {
     let normals = corner_normals(part);
-    // OBJ vertices: (position, normal, uv) per corner, shared where equal.
-    let mut key_of: HashMap<[u32; 8], u32> = HashMap::new();
-    let mut v: Vec<[f32; 8]> = Vec::new();
-    let mut tris: Vec<[u32; 3]> = Vec::new();
+    let mut text = String::new();
+    // Each attribute once, by its printed form (so that rounding merges equal values).
+    struct Table {
+        index: HashMap<String, u32>,
+        lines: String,
+        tag: &'static str,
+    }
+    impl Table {
+        fn id(&mut self, printed: String) -> u32 {
+            let n = self.index.len() as u32;
+            let tag = self.tag;
+            *self.index.entry(printed).or_insert_with_key(|k| {
+                let _ = writeln!(self.lines, "{tag} {k}");
+                n
+            })
+        }
+        fn fresh(&mut self, printed: &str) -> u32 {
+            // A copy under a new index (the key gets a unique suffix that is not printed).
+            let n = self.index.len() as u32;
+            let _ = writeln!(self.lines, "{} {printed}", self.tag);
+            self.index.insert(format!("{printed}#{n}"), n);
+            n
+        }
+    }
+    let table = |tag| Table {
+        index: HashMap::new(),
+        lines: String::new(),
+        tag,
+    };
+    let (mut vs, mut vns, mut vts) = (table("v"), table("vn"), table("vt"));
+    let mut faces: Vec<[(u32, u32, u32); 3]> = Vec::new();
     let mut seen_tris = std::collections::HashSet::new();
     let mut edges = std::collections::HashSet::new();
     for (f, t) in part.indices.chunks(3).enumerate() {
         if face_normal(&part.positions, t).norm() <= 1e-12 {
             continue;
         }
-        let corner = |k: usize| {
-            let i = t[k] as usize;
-            let p = part.positions[i];
-            let n = normals[3 * f + k];
-            let uv = part.uvs.as_ref().map_or([0.0; 2], |u| u[i]);
-            [p[0], p[1], p[2], n[0], n[1], n[2], uv[0], uv[1]]
+        let pos = |k: usize| {
+            let p = part.positions[t[k] as usize];
+            format!("{} {} {}", fmt(p[0]), fmt(p[1]), fmt(p[2]))
         };
-        let c = [corner(0), corner(1), corner(2)];
-        let mut ids = [0u32; 3];
-        for k in 0..3 {
-            let bits = c[k].map(f32::to_bits);
-            ids[k] = *key_of.entry(bits).or_insert_with(|| {
-                v.push(c[k]);
-                (v.len() - 1) as u32
-            });
+        let printed = [pos(0), pos(1), pos(2)];
+        if printed[0] == printed[1] || printed[1] == printed[2] || printed[0] == printed[2] {
+            continue; // degenerate once rounded
         }
-        // MuJoCo's edge check works on OBJ `v` indices, which are these ids.
-        let mut sorted = ids;
+        let mut v = [0u32; 3];
+        for k in 0..3 {
+            v[k] = vs.id(printed[k].clone());
+        }
+        let mut sorted = v;
         sorted.sort();
         if !seen_tris.insert(sorted) {
             continue;
         }
-        let dir = [(ids[0], ids[1]), (ids[1], ids[2]), (ids[2], ids[0])];
+        let dir = [(v[0], v[1]), (v[1], v[2]), (v[2], v[0])];
         if dir.iter().any(|e| edges.contains(e)) {
-            // Own copies: new OBJ vertices whose edges repeat nothing.
             for k in 0..3 {
-                v.push(c[k]);
-                ids[k] = (v.len() - 1) as u32;
+                v[k] = vs.fresh(&printed[k]);
             }
         } else {
             edges.extend(dir);
         }
-        tris.push(ids);
+        let mut face = [(0u32, 0u32, 0u32); 3];
+        for k in 0..3 {
+            let n = normals[3 * f + k];
+            let vn = vns.id(format!("{} {} {}", fmt3(n[0]), fmt3(n[1]), fmt3(n[2])));
+            let vt = match &part.uvs {
+                // OBJ's v grows upwards from the image's bottom row.
+                Some(uv) => {
+                    let c = uv[t[k] as usize];
+                    vts.id(format!("{} {}", fmt4(c[0]), fmt4(1.0 - c[1])))
+                }
+                None => 0,
+            };
+            face[k] = (v[k] + 1, vt + 1, vn + 1);
+        }
+        faces.push(face);
     }
-    // One `v`, `vn` (and `vt`) per distinct corner, all with the same index.
-    let mut text = String::new();
+    text.push_str(&vs.lines);
+    text.push_str(&vns.lines);
+    text.push_str(&vts.lines);
     let textured = part.uvs.is_some();
-    for x in &v {
-        let _ = writeln!(text, "v {} {} {}", fmt(x[0]), fmt(x[1]), fmt(x[2]));
+    for f in &faces {
+        let c = |(v, t, n): (u32, u32, u32)| {
+            if textured {
+                format!("{v}/{t}/{n}")
+            } else {
+                format!("{v}//{n}")
+            }
+        };
+        let _ = writeln!(text, "f {} {} {}", c(f[0]), c(f[1]), c(f[2]));
     }
-    for x in &v {
-        let _ = writeln!(text, "vn {} {} {}", fmt4(x[3]), fmt4(x[4]), fmt4(x[5]));
-    }
-    if textured {
-        for x in &v {
-            // OBJ's v grows upwards from the image's bottom row.
-            let _ = writeln!(text, "vt {} {}", fmt4(x[6]), fmt4(1.0 - x[7]));
-        }
-    }
-    for t in &tris {
-        let [a, b, c] = t.map(|i| i + 1);
-        if textured {
-            let _ = writeln!(text, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}");
-        } else {
-            let _ = writeln!(text, "f {a}//{a} {b}//{b} {c}//{c}");
-        }
-    }
-    (text, tris.len())
+    (text, faces.len())
 }
 
-/// A coordinate in metres to 0.01 mm.
+fn fmt3(x: f32) -> String {
+    trim(format!("{:.3}", x))
+}
+
+/// A coordinate in metres to 0.1 mm (well below a pixel of any camera at the table).
 fn fmt(x: f32) -> String {
-    let s = format!("{:.5}", x);
-    trim(s)
+    trim(format!("{:.4}", x))
 }
 
 fn fmt4(x: f32) -> String {
@@ -273,7 +308,9 @@ pub fn downsample(img: &Image, max: u32) -> Image {
         for y in 0..h {
             for x in 0..w {
                 for c in 0..4 {
-                    let at = |xx: u32, yy: u32| cur.rgba[((yy * cur.width + xx) * 4 + c) as usize] as u32;
+                    let at = |xx: u32, yy: u32| {
+                        cur.rgba[((yy * cur.width + xx) * 4 + c) as usize] as u32
+                    };
                     let s = at(2 * x, 2 * y)
                         + at(2 * x + 1, 2 * y)
                         + at(2 * x, 2 * y + 1)
@@ -350,7 +387,7 @@ pub fn convert_mesh(
     override_rgba: Option<[f32; 4]>,
     out_dir: &Path,
     stem: &str,
-    opts: Options,
+    opts: &Options,
     notes: &mut Vec<String>,
 ) -> Result<Vec<WrittenPart>, MeshError> {
     let default_rgba = override_rgba.unwrap_or([1.0, 1.0, 1.0, 1.0]);
@@ -480,7 +517,7 @@ pub fn convert_urdf(
     src: &Path,
     out_dir: &Path,
     prefix: &str,
-    opts: Options,
+    opts: &Options,
     log: &mut Vec<String>,
 ) -> Result<Vec<(String, Vec<String>)>, MeshError> {
     let name = src.display().to_string();
@@ -490,11 +527,14 @@ pub fn convert_urdf(
         name: name.clone(),
         reason: e.to_string(),
     })?;
-    let global: HashMap<String, [f32; 4]> = robot
+    let mut global: HashMap<String, [f32; 4]> = robot
         .materials
         .iter()
         .filter_map(|m| Some((m.name.clone(), m.color.as_ref()?.rgba.map(|x| x as f32))))
         .collect();
+    for (n, c) in &opts.materials {
+        global.entry(n.clone()).or_insert(*c);
+    }
     let dir = src.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(out_dir)
         .map_err(|e| MeshError::Invalid(format!("cannot create {}: {e}", out_dir.display())))?;
@@ -551,9 +591,14 @@ pub fn convert_urdf(
                         urdf_rs::Geometry::Mesh { .. } => unreachable!("handled above"),
                     };
                     let c = rgba.unwrap_or([1.0; 4]);
-                    let c = [linear_to_srgb(c[0]), linear_to_srgb(c[1]), linear_to_srgb(c[2]), c[3]]
-                        .map(|x| trim(format!("{x:.4}")))
-                        .join(" ");
+                    let c = [
+                        linear_to_srgb(c[0]),
+                        linear_to_srgb(c[1]),
+                        linear_to_srgb(c[2]),
+                        c[3],
+                    ]
+                    .map(|x| trim(format!("{x:.4}")))
+                    .join(" ");
                     elements.push(format!(
                         "<visual><origin xyz=\"{}\" rpy=\"{}\"/><geometry>{geom}</geometry>\
                          <material name=\"{}_{k}\"><color rgba=\"{c}\"/></material></visual>",
@@ -593,7 +638,10 @@ pub fn splice_visuals(model: &str, visuals: &[(String, Vec<String>)]) -> Result<
             .map(|e| format!("\n{inner_indent}{e}"))
             .collect();
         if self_closing {
-            let replacement = format!("{}>{new_lines}\n{indent}</link>", &text[start..tag_end - 1].trim_end());
+            let replacement = format!(
+                "{}>{new_lines}\n{indent}</link>",
+                &text[start..tag_end - 1].trim_end()
+            );
             text.replace_range(start..tag_end + 1, &replacement);
             continue;
         }
@@ -604,9 +652,10 @@ pub fn splice_visuals(model: &str, visuals: &[(String, Vec<String>)]) -> Result<
         // Remove the existing visuals (each with the line it sits on when alone there).
         let mut body = text[tag_end + 1..close].to_string();
         while let Some(a) = body.find("<visual") {
-            let b = a + body[a..]
-                .find("</visual>")
-                .ok_or_else(|| format!("link {link:?}: unterminated <visual>"))?
+            let b = a
+                + body[a..]
+                    .find("</visual>")
+                    .ok_or_else(|| format!("link {link:?}: unterminated <visual>"))?
                 + "</visual>".len();
             let line_a = body[..a].rfind('\n').unwrap_or(a);
             let only_ws = body[line_a..a].trim().is_empty();
@@ -648,7 +697,12 @@ pub enum Source {
 
 /// Runs a conversion into `out_dir`; returns the lines to print (a summary per mesh, and the
 /// `<visual>` elements when they are not spliced into a model).
-pub fn run(source: Source, out_dir: &Path, name: &str, opts: Options) -> Result<Vec<String>, MeshError> {
+pub fn run(
+    source: Source,
+    out_dir: &Path,
+    name: &str,
+    opts: Options,
+) -> Result<Vec<String>, MeshError> {
     std::fs::create_dir_all(out_dir)
         .map_err(|e| MeshError::Invalid(format!("cannot create {}: {e}", out_dir.display())))?;
     let mut log = Vec::new();
@@ -684,17 +738,20 @@ pub fn run(source: Source, out_dir: &Path, name: &str, opts: Options) -> Result<
                 }
                 None => String::new(),
             };
-            let visuals = convert_urdf(&urdf, out_dir, &prefix, opts, &mut log)?;
+            let visuals = convert_urdf(&urdf, out_dir, &prefix, &opts, &mut log)?;
             match into {
                 Some(model) => {
                     let text = std::fs::read_to_string(&model).map_err(|e| {
                         MeshError::Invalid(format!("cannot read {}: {e}", model.display()))
                     })?;
-                    let new = splice_visuals(&text, &visuals).map_err(|e| {
-                        MeshError::Invalid(format!("{}: {e}", model.display()))
-                    })?;
+                    let new = splice_visuals(&text, &visuals)
+                        .map_err(|e| MeshError::Invalid(format!("{}: {e}", model.display())))?;
                     write(&model, new.as_bytes())?;
-                    log.push(format!("rewrote the visuals of {} links in {}", visuals.len(), model.display()));
+                    log.push(format!(
+                        "rewrote the visuals of {} links in {}",
+                        visuals.len(),
+                        model.display()
+                    ));
                 }
                 None => {
                     for (link, elements) in &visuals {
@@ -707,7 +764,7 @@ pub fn run(source: Source, out_dir: &Path, name: &str, opts: Options) -> Result<
         Source::Mesh { mesh, scale } => {
             let s = scale as f32;
             let mut notes = Vec::new();
-            let parts = convert_mesh(&mesh, [s; 3], None, out_dir, name, opts, &mut notes)?;
+            let parts = convert_mesh(&mesh, [s; 3], None, out_dir, name, &opts, &mut notes)?;
             let before: usize = parts.iter().map(|p| p.triangles.0).sum();
             let after: usize = parts.iter().map(|p| p.triangles.1).sum();
             log.push(format!(
@@ -827,9 +884,18 @@ mod tests {
             ],
         )
         .unwrap();
-        assert!(out.contains("<link name=\"a\">\n    <visual>A</visual>\n    <collision/>"), "{out}");
-        assert!(out.contains("<link name=\"b\">\n    <visual>B</visual>\n  </link>"), "{out}");
-        assert!(out.contains("<link name=\"c\">\n    <visual><geometry>"), "{out}");
+        assert!(
+            out.contains("<link name=\"a\">\n    <visual>A</visual>\n    <collision/>"),
+            "{out}"
+        );
+        assert!(
+            out.contains("<link name=\"b\">\n    <visual>B</visual>\n  </link>"),
+            "{out}"
+        );
+        assert!(
+            out.contains("<link name=\"c\">\n    <visual><geometry>"),
+            "{out}"
+        );
         assert_eq!(out.matches("<visual").count(), 3);
         let e = splice_visuals(model, &[("zz".into(), vec![])]).unwrap_err();
         assert!(e.contains("zz"), "{e}");
