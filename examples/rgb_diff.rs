@@ -20,8 +20,9 @@ type Error = Box<dyn std::error::Error>;
 /// The members of a zip archive (stored or deflated), by name.
 fn unzip(bytes: &[u8]) -> Result<BTreeMap<String, Vec<u8>>, Error> {
     let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]) as usize;
-    let u32_at =
-        |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]) as usize;
+    let u32_at = |o: usize| {
+        u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]) as usize
+    };
     // End of central directory record: the last "PK\x05\x06".
     let eocd = (0..bytes.len().saturating_sub(21))
         .rev()
@@ -48,7 +49,9 @@ fn unzip(bytes: &[u8]) -> Result<BTreeMap<String, Vec<u8>>, Error> {
                 flate2::read::DeflateDecoder::new(raw).read_to_end(&mut v)?;
                 v
             }
-            m => return Err(format!("zip member {name}: compression method {m} unsupported").into()),
+            m => {
+                return Err(format!("zip member {name}: compression method {m} unsupported").into())
+            }
         };
         out.insert(name, data);
     }
@@ -122,7 +125,10 @@ fn load(path: &Path) -> Result<Frame, Error> {
         .split_once("__")
         .ok_or_else(|| format!("directory {pair:?} is not <env>__<robot>"))?;
     let z = unzip(&std::fs::read(path)?)?;
-    let get = |k: &str| z.get(k).ok_or_else(|| format!("{} lacks {k}", path.display()));
+    let get = |k: &str| {
+        z.get(k)
+            .ok_or_else(|| format!("{} lacks {k}", path.display()))
+    };
     let state_json = npy_str(get("state_json.npy")?)?;
     let control_mode = npy_str(get("control_mode.npy")?)?;
     let (descr, shape, data) = npy(get("base_camera_rgb.npy")?)?;
@@ -195,7 +201,12 @@ fn main() -> Result<(), Error> {
         let img = env.image("base_camera").ok_or("no base_camera")?;
         let ours = img.rgb.ok_or("no rgb")?;
         if (img.width, img.height) != fr.size {
-            return Err(format!("size {:?} vs ManiSkill's {:?}", (img.width, img.height), fr.size).into());
+            return Err(format!(
+                "size {:?} vs ManiSkill's {:?}",
+                (img.width, img.height),
+                fr.size
+            )
+            .into());
         }
         let d = mad(ours, &fr.rgb);
         println!("{:.2}\t{}", d, f.display());
@@ -203,12 +214,17 @@ fn main() -> Result<(), Error> {
             let (w, h) = fr.size;
             let mut side = vec![0u8; w * 2 * h * 3];
             for y in 0..h {
-                side[y * w * 6..y * w * 6 + w * 3].copy_from_slice(&fr.rgb[y * w * 3..(y + 1) * w * 3]);
-                side[y * w * 6 + w * 3..(y + 1) * w * 6].copy_from_slice(&ours[y * w * 3..(y + 1) * w * 3]);
+                side[y * w * 6..y * w * 6 + w * 3]
+                    .copy_from_slice(&fr.rgb[y * w * 3..(y + 1) * w * 3]);
+                side[y * w * 6 + w * 3..(y + 1) * w * 6]
+                    .copy_from_slice(&ours[y * w * 3..(y + 1) * w * 3]);
             }
             let name = format!(
                 "{}__{}.png",
-                f.parent().and_then(|p| p.file_name()).and_then(|n| n.to_str()).unwrap_or("x"),
+                f.parent()
+                    .and_then(|p| p.file_name())
+                    .and_then(|n| n.to_str())
+                    .unwrap_or("x"),
                 f.file_stem().and_then(|n| n.to_str()).unwrap_or("x")
             );
             mjskill::record::image::write_png(&dir.join(name), &side, w * 2, h)?;
@@ -221,11 +237,19 @@ fn main() -> Result<(), Error> {
     let mut all = Vec::new();
     println!("pair\tframes\tmean_abs_rgb_diff");
     for (pair, v) in &per_pair {
-        println!("{pair}\t{}\t{:.2}", v.len(), v.iter().sum::<f64>() / v.len() as f64);
+        println!(
+            "{pair}\t{}\t{:.2}",
+            v.len(),
+            v.iter().sum::<f64>() / v.len() as f64
+        );
         all.extend(v);
     }
     if !all.is_empty() {
-        println!("all\t{}\t{:.2}", all.len(), all.iter().sum::<f64>() / all.len() as f64);
+        println!(
+            "all\t{}\t{:.2}",
+            all.len(),
+            all.iter().sum::<f64>() / all.len() as f64
+        );
     }
     Ok(())
 }
