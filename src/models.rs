@@ -8,6 +8,15 @@ pub fn file(path: &str) -> Option<&'static [u8]> {
     FILES.iter().find(|(p, _)| *p == path).map(|(_, b)| *b)
 }
 
+/// The bytes of the file a model file at `base` (relative to `models/`) names as `file`
+/// (relative to `base`'s directory, e.g. a URDF's `"visual/link0_0.obj"`).
+pub fn file_near(base: &str, file: &str) -> Option<&'static [u8]> {
+    match base.rsplit_once('/') {
+        Some((dir, _)) => self::file(&format!("{dir}/{file}")),
+        None => self::file(file),
+    }
+}
+
 /// Why a model file cannot be read: the error names the file.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ModelFileError {

@@ -61,14 +61,13 @@ fn every_geom_a_sensor_camera_draws_has_an_id() {
         let labels = e.geom_segmentation_ids();
         assert_eq!(labels.len(), m.ngeom());
         let max = e.segmentation_id_map().len() as i16;
-        for g in 0..m.ngeom() {
+        for (g, &l) in labels.iter().enumerate() {
             let group = m.geom_group()[g];
             let alpha = m.geom_rgba()[4 * g + 3];
             // Groups 2 (hidden markers) and 3 (collision shapes) are not drawn by sensors.
             if group == 2 || group == 3 || alpha == 0.0 {
                 continue;
             }
-            let l = labels[g];
             assert!(
                 l > 0 && l <= max,
                 "{id}/{robot}: drawn geom {:?} (group {group}) has no segmentation id ({l})",

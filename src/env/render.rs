@@ -51,7 +51,8 @@ pub struct PointCloud<'a> {
 /// ManiSkill's `(position * 1000).to(int16)`, 0 for the far plane (nothing drawn), clamped
 /// to 32767.
 pub fn depth_to_mm(d: f32, far: f32) -> i16 {
-    if !(d < far * 0.999_99) {
+    // NaN (never produced) and the far plane read as nothing seen.
+    if d.is_nan() || d >= far * 0.999_99 {
         return 0;
     }
     (d * 1000.0).clamp(0.0, i16::MAX as f32) as i16

@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::npz::{read_npz, NpyData};
+use crate::env::{make, Env, EnvError};
 use crate::env::{CameraImage, EnvConfig, ObsMode, StateDict};
-use crate::Env;
 
 /// One camera of a reference state.
 #[derive(Debug, Clone, PartialEq)]
@@ -79,7 +79,7 @@ pub enum CompareError {
         /// Which state.
         what: String,
         /// The env's error.
-        source: crate::EnvError,
+        source: EnvError,
     },
     /// A directory could not be listed or a panel not written.
     #[error("{0}")]
@@ -340,7 +340,7 @@ impl Comparer {
                 obs_mode: ObsMode::RgbDepthSegmentation,
                 ..EnvConfig::default()
             };
-            let env = crate::make(&s.env_id, cfg).map_err(env_err)?;
+            let env = make(&s.env_id, cfg).map_err(env_err)?;
             self.envs.insert(key.clone(), env);
         }
         let env = self.envs.get_mut(&key).expect("inserted above");

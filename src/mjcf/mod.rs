@@ -286,6 +286,8 @@ pub struct Scene {
     root: Element,
     assets: Vec<(String, Vec<u8>)>,
     timestep: f64,
+    /// Mesh and texture assets already added: (source file, scale) → asset name.
+    added: std::collections::HashMap<String, String>,
 }
 
 impl Scene {
@@ -343,6 +345,7 @@ impl Scene {
             root,
             assets: Vec::new(),
             timestep,
+            added: std::collections::HashMap::new(),
         }
     }
 
@@ -356,7 +359,8 @@ impl Scene {
         self.root.section(name)
     }
 
-    /// Adds a robot. `mesh_bytes` resolves a URDF mesh file name to its bytes.
+    /// Adds a robot. `mesh_bytes` resolves a file name of the URDF (mesh or texture) to its
+    /// bytes.
     pub fn add_robot(
         &mut self,
         robot: &RobotDesc,
@@ -592,15 +596,8 @@ impl Scene {
             body.push(g);
         }
         for (k, s) in l.visuals.iter().enumerate() {
-            let mut g = self.shape_geom(s, &format!("{}_v{k}", l.name), mesh_bytes)?;
-            g.set("name", format!("{}_visual{k}", l.name));
-            g.set("group", GROUP_ROBOT_VISUAL);
-            g.set("contype", 0);
-            g.set("conaffinity", 0);
-            g.set("density", 0);
-            if let Some(c) = s.rgba {
-                g.set("rgba", nums(&c));
-            }
+            let name = format!("{}_visual{k}", l.name);
+            let g = self.visual_geom(s, &name, GROUP_ROBOT_VISUAL, mesh_bytes)?;
             body.push(g);
         }
         for (name, site_link, p) in &opts.sites {
@@ -631,6 +628,61 @@ impl Scene {
         Ok(body)
     }
 
+    /// A drawn-only geom (no contacts, no mass) of `shape` named `name` in `group`, with its
+    /// colour, or a material with its texture (resolved by `files` like a mesh).
+    pub fn visual_geom(
+        &mut self,
+        s: &urdf::Shape,
+        name: &str,
+        group: i32,
+        files: &dyn Fn(&str) -> Option<Vec<u8>>,
+    ) -> std::result::Result<Element, SceneError> {
+        let mut g = self.shape_geom(s, &format!("{name}_mesh"), files)?;
+        g.set("name", name);
+        g.set("group", group);
+        g.set("contype", 0);
+        g.set("conaffinity", 0);
+        g.set("density", 0);
+        match &s.texture {
+            Some(file) => {
+                let key = format!("texture {file}");
+                let tex = match self.added.get(&key) {
+                    Some(t) => t.clone(),
+                    None => {
+                        let bytes = files(file)
+                            .ok_or_else(|| SceneError::MeshNotFound(file.to_string()))?;
+                        let tex = format!("{name}_tex");
+                        let vfs = format!("{tex}.png");
+                        self.assets.push((vfs.clone(), bytes));
+                        self.section("asset").push(
+                            Element::new("texture")
+                                .attr("name", &tex)
+                                .attr("type", "2d")
+                                .attr("file", &vfs),
+                        );
+                        self.added.insert(key, tex.clone());
+                        tex
+                    }
+                };
+                let mat = format!("{name}_mat");
+                let mut m = Element::new("material")
+                    .attr("name", &mat)
+                    .attr("texture", &tex);
+                if let Some(c) = s.rgba {
+                    m = m.attr("rgba", nums(&c));
+                }
+                self.section("asset").push(m);
+                g.set("material", mat);
+            }
+            None => {
+                if let Some(c) = s.rgba {
+                    g.set("rgba", nums(&c));
+                }
+            }
+        }
+        Ok(g)
+    }
+
     fn shape_geom(
         &mut self,
         s: &urdf::Shape,
@@ -644,6 +696,10 @@ impl Scene {
             ShapeGeom::Capsule(r, hl) => g.attr("type", "capsule").attr_nums("size", &[*r, *hl]),
             ShapeGeom::Sphere(r) => g.attr("type", "sphere").attr_nums("size", &[*r]),
             ShapeGeom::Mesh(file, scale) => {
+                let key = format!("mesh {file} {}", nums(scale));
+                if let Some(name) = self.added.get(&key) {
+                    return Ok(g.attr("type", "mesh").attr("mesh", name));
+                }
                 let bytes =
                     mesh_bytes(file).ok_or_else(|| SceneError::MeshNotFound(file.to_string()))?;
                 let ext = file
@@ -659,6 +715,7 @@ impl Scene {
                         .attr("file", &vfs_name)
                         .attr_nums("scale", scale),
                 );
+                self.added.insert(key, mesh_name.to_string());
                 g.attr("type", "mesh").attr("mesh", mesh_name)
             }
         })

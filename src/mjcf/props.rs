@@ -28,6 +28,31 @@ pub const GROUND_DRAWN_SIZE: [f64; 3] = [50.0, 50.0, 5.0];
 /// RGBA colour.
 pub type Rgba = [f64; 4];
 
+/// The table model (converted from ManiSkill's `table.glb` at scale 1.75; docs/rendering.md),
+/// relative to `models/`.
+pub const TABLE_MODEL: &str = "scene/table.urdf";
+/// The floor's grid texture, relative to `models/`.
+pub const GROUND_TEXTURE: &str = "scene/grid.png";
+/// Colour the floor texture is multiplied by.
+pub const GROUND_RGBA: Rgba = [1.0, 1.0, 1.0, 1.0];
+/// Ambient light (MuJoCo's headlight ambient). ManiSkill's ambient is 0.3 in linear light,
+/// ≈ 0.55 after its sRGB output encoding; MuJoCo's fixed-function lighting works on display
+/// values, so the intensities were fitted to ManiSkill's frames (docs/rendering.md).
+pub const AMBIENT: f64 = 0.55;
+/// Diffuse intensity of the directional lights along (1, 1, −1) and (0, 0, −1).
+pub const LIGHT_DIFFUSE: [f64; 2] = [0.2, 0.25];
+/// Specular intensity of both directional lights.
+pub const LIGHT_SPECULAR: f64 = 0.1;
+
+/// The table model's visual shapes (empty if the model is missing or malformed: the table
+/// is then drawn as its collision box).
+fn table_visuals() -> Vec<super::urdf::Shape> {
+    crate::models::text(TABLE_MODEL)
+        .ok()
+        .and_then(|t| super::urdf::visuals_of(t, TABLE_MODEL).ok())
+        .unwrap_or_default()
+}
+
 fn visual(e: Element, rgba: &Rgba, group: i32) -> Element {
     e.attr("contype", 0)
         .attr("conaffinity", 0)
@@ -37,47 +62,68 @@ fn visual(e: Element, rgba: &Rgba, group: i32) -> Element {
 }
 
 impl Scene {
-    /// The static table scene: the table-workspace box (top face at z = 0), the ground plane
-    /// at [`GROUND_Z`], and lights like ManiSkill's defaults (ambient 0.3, two directional).
+    /// The static table scene as ManiSkill draws it (docs/rendering.md): the table-workspace
+    /// box (top face at z = 0; collision only) with the table model of `models/scene/` drawn
+    /// at ManiSkill's pose and scale, the ground plane at [`GROUND_Z`] with the grid texture
+    /// (one tile per 4 m), ManiSkill's lights (ambient 0.3, directional along (1, 1, −1)
+    /// and (0, 0, −1)) and a black background.
     pub fn add_table_scene(&mut self) {
         let table_rot = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         let table_pose = Isometry3::from_parts(
             Translation3::new(TABLE_POS[0], TABLE_POS[1], TABLE_POS[2] + TABLE_HALF[2]),
             table_rot,
         );
-        let wb = self.worldbody();
-        wb.push(
-            Element::new("light")
-                .attr("name", "dir1")
-                .attr("directional", "true")
-                .attr("castshadow", "false")
-                .attr_nums("pos", &[-1.0, -1.0, 2.0])
-                .attr_nums("dir", &[1.0, 1.0, -1.0])
-                .attr_nums("diffuse", &[0.5, 0.5, 0.5])
-                .attr_nums("specular", &[0.1, 0.1, 0.1]),
-        );
-        wb.push(
-            Element::new("light")
-                .attr("name", "dir2")
-                .attr("directional", "true")
-                .attr("castshadow", "false")
-                .attr_nums("pos", &[0.0, 0.0, 2.0])
-                .attr_nums("dir", &[0.0, 0.0, -1.0])
-                .attr_nums("diffuse", &[0.5, 0.5, 0.5])
-                .attr_nums("specular", &[0.1, 0.1, 0.1]),
-        );
-        wb.push(
-            pose_attrs(Element::new("geom"), &table_pose)
-                .attr("name", TABLE)
-                .attr("type", "box")
-                .attr_nums("size", &TABLE_HALF)
-                .attr("contype", CONTACT_TABLE_BOX)
-                .attr("conaffinity", CONTACT_TABLE_BOX)
-                .attr("rgba", "0.82 0.72 0.58 1"),
-        );
+        for (name, dir, diffuse) in [
+            ("dir1", [1.0, 1.0, -1.0], LIGHT_DIFFUSE[0]),
+            ("dir2", [0.0, 0.0, -1.0], LIGHT_DIFFUSE[1]),
+        ] {
+            self.worldbody().push(
+                Element::new("light")
+                    .attr("name", name)
+                    .attr("directional", "true")
+                    .attr("castshadow", "false")
+                    .attr_nums("pos", &[-dir[0], -dir[1], 2.0])
+                    .attr_nums("dir", &dir)
+                    .attr_nums("diffuse", &[diffuse; 3])
+                    .attr_nums("specular", &[LIGHT_SPECULAR; 3]),
+            );
+        }
+        // The table model, drawn where ManiSkill draws it (its visual is turned a further
+        // 90° in the table actor's frame); falls back to drawing the collision box.
+        let table_visuals = table_visuals();
+        let mut table_box = pose_attrs(Element::new("geom"), &table_pose)
+            .attr("name", TABLE)
+            .attr("type", "box")
+            .attr_nums("size", &TABLE_HALF)
+            .attr("contype", CONTACT_TABLE_BOX)
+            .attr("conaffinity", CONTACT_TABLE_BOX);
+        if table_visuals.is_empty() {
+            table_box = table_box.attr("rgba", "0.82 0.72 0.58 1");
+        } else {
+            table_box = table_box
+                .attr("group", super::GROUP_COLLISION)
+                .attr("rgba", "0 0 0 0");
+        }
+        self.worldbody().push(table_box);
+        if !table_visuals.is_empty() {
+            let actor = Isometry3::from_parts(
+                Translation3::new(TABLE_POS[0], TABLE_POS[1], TABLE_POS[2]),
+                table_rot,
+            );
+            // Geoms of the world body (a body of their own would renumber the robot's).
+            let files = |f: &str| crate::models::file_near(TABLE_MODEL, f).map(<[u8]>::to_vec);
+            for (k, mut shape) in table_visuals.into_iter().enumerate() {
+                shape.origin = actor
+                    * Isometry3::from_parts(Translation3::identity(), table_rot)
+                    * shape.origin;
+                if let Ok(g) = self.visual_geom(&shape, &format!("{TABLE}_visual{k}"), 0, &files) {
+                    self.worldbody().push(g);
+                }
+            }
+        }
         // The table top as props feel it (see the collision bits in the parent module);
         // collision only, never drawn.
-        wb.push(
+        self.worldbody().push(
             Element::new("geom")
                 .attr("name", TABLE_TOP_PLANE)
                 .attr("type", "plane")
@@ -91,23 +137,47 @@ impl Scene {
         // Planes collide as infinite planes whatever their size; the size only bounds what is
         // drawn. MuJoCo draws a size-0 ("infinite") plane out to the far clip plane, which
         // costs software rasterisation ~4x the rest of the scene, so the ground is drawn as
-        // a 100 m square (beyond every camera's view of the table).
-        wb.push(
-            Element::new("geom")
-                .attr("name", GROUND)
-                .attr("type", "plane")
-                .attr_nums("pos", &[0.0, 0.0, GROUND_Z])
-                .attr_nums("size", &GROUND_DRAWN_SIZE)
-                .attr("contype", CONTACT_GROUND)
-                .attr("conaffinity", CONTACT_GROUND)
-                .attr("rgba", "0.9 0.9 0.9 1"),
-        );
-        self.section("visual").push(
+        // a 100 m square (ManiSkill's floor) with the grid texture, one tile per 4 m.
+        let mut ground = Element::new("geom")
+            .attr("name", GROUND)
+            .attr("type", "plane")
+            .attr_nums("pos", &[0.0, 0.0, GROUND_Z])
+            .attr_nums("size", &GROUND_DRAWN_SIZE)
+            .attr("contype", CONTACT_GROUND)
+            .attr("conaffinity", CONTACT_GROUND);
+        match crate::models::file(GROUND_TEXTURE) {
+            Some(png) => {
+                self.assets.push(("ground_grid.png".into(), png.to_vec()));
+                self.section("asset").push(
+                    Element::new("texture")
+                        .attr("name", "ground_grid")
+                        .attr("type", "2d")
+                        .attr("file", "ground_grid.png"),
+                );
+                self.section("asset").push(
+                    Element::new("material")
+                        .attr("name", "ground_grid")
+                        .attr("texture", "ground_grid")
+                        .attr("texuniform", "true")
+                        .attr_nums("texrepeat", &[0.25, 0.25])
+                        .attr_nums("rgba", &GROUND_RGBA)
+                        .attr("specular", "0")
+                        .attr("shininess", "0"),
+                );
+                ground = ground.attr("material", "ground_grid");
+            }
+            None => ground = ground.attr("rgba", "0.45 0.47 0.5 1"),
+        }
+        self.worldbody().push(ground);
+        let vis = self.section("visual");
+        vis.push(
             Element::new("headlight")
-                .attr_nums("ambient", &[0.3, 0.3, 0.3])
+                .attr_nums("ambient", &[AMBIENT; 3])
                 .attr_nums("diffuse", &[0.0, 0.0, 0.0])
                 .attr_nums("specular", &[0.0, 0.0, 0.0]),
         );
+        // ManiSkill's background is black: no haze where the floor meets the horizon.
+        vis.push(Element::new("rgba").attr("haze", "0 0 0 1"));
     }
 
     /// A dynamic box (free joint named `name`) with half extents `half`, at `pos`.
@@ -300,6 +370,10 @@ mod tests {
             d.xpos()[3 * cube + 2]
         );
         assert!((d.xpos()[3 * peg + 2] - 0.025).abs() < 1e-3);
+        // The table is drawn from its shipped model (mesh geoms), not as its collision box.
+        assert!(!table_visuals().is_empty());
+        m.require_id(ObjType::Geom, &format!("{TABLE}_visual0"))
+            .unwrap();
         // The goal marker is a mocap body that does not fall.
         let goal = m.require_id(ObjType::Body, "goal").unwrap();
         assert_eq!(m.body_mocapid()[goal], 0);

@@ -72,6 +72,8 @@ pub struct Shape {
     pub geom: ShapeGeom,
     /// Colour (visuals with a material colour).
     pub rgba: Option<[f64; 4]>,
+    /// Texture image file (visuals whose material names one), as written in the URDF.
+    pub texture: Option<String>,
 }
 
 /// Mass properties of a link, expressed in the link frame.
@@ -200,7 +202,34 @@ fn shape(
         origin: pose(origin),
         geom,
         rgba,
+        texture: None,
     })
+}
+
+/// The visual shapes of every link of a URDF document, in document order (used for scene
+/// models such as the table, which are one link without joints). `file` names it in errors.
+pub fn visuals_of(urdf: &str, file: &str) -> Result<Vec<Shape>, RobotError> {
+    let robot = urdf_rs::read_from_string(urdf).map_err(|e| RobotError::Urdf {
+        file: file.to_string(),
+        msg: e.to_string(),
+    })?;
+    let mut out = Vec::new();
+    for l in &robot.links {
+        for v in &l.visual {
+            let m = v.material.as_ref();
+            let mut s = shape(
+                &v.origin,
+                &v.geometry,
+                m.and_then(|m| m.color.as_ref()).map(|c| *c.rgba),
+                file,
+            )?;
+            s.texture = m
+                .and_then(|m| m.texture.as_ref())
+                .map(|t| t.filename.clone());
+            out.push(s);
+        }
+    }
+    Ok(out)
 }
 
 impl RobotDesc {
@@ -244,7 +273,13 @@ impl RobotDesc {
                     .as_ref()
                     .and_then(|m| m.color.as_ref())
                     .map(|c| *c.rgba);
-                visuals.push(shape(&v.origin, &v.geometry, rgba, file)?);
+                let mut s = shape(&v.origin, &v.geometry, rgba, file)?;
+                s.texture = v
+                    .material
+                    .as_ref()
+                    .and_then(|m| m.texture.as_ref())
+                    .map(|t| t.filename.clone());
+                visuals.push(s);
             }
             links.push(LinkDesc {
                 name: l.name.clone(),

@@ -644,7 +644,7 @@ impl TableScene {
         scene.add_robot(
             &desc,
             &spec.options(spec.table_base(), drive_list.clone()),
-            &|_| None,
+            &|file| crate::models::file_near(spec.urdf, file).map(<[u8]>::to_vec),
         )?;
         extra(&mut scene);
         let mjcf = scene.finish();

@@ -178,7 +178,11 @@ fn robot_options_naming_what_the_robot_lacks_are_typed_scene_errors() {
     let desc = spec.description().unwrap();
     let add = |opts: &crate::mjcf::RobotOptions| {
         let mut scene = Scene::new("t", 0.002);
-        scene.add_robot(&desc, opts, &|_| None).unwrap_err()
+        scene
+            .add_robot(&desc, opts, &|file| {
+                crate::models::file_near(spec.urdf, file).map(<[u8]>::to_vec)
+            })
+            .unwrap_err()
     };
     let mut opts = spec.options(spec.table_base(), vec![]);
     opts.drives.push(Drive {

@@ -47,9 +47,9 @@ pub fn render_frames(s: &str) -> Result<usize, String> {
     ranged(s, 1, super::bench::MAX_RENDER as u64).map(|v| v as usize)
 }
 
-/// `fit-primitives --parts` and `--segments`: 1..=[`crate::mesh_fit::MAX_PARTS`].
+/// `fit-primitives --parts` and `--segments`: 1..=[`crate::meshes::MAX_PARTS`].
 pub fn parts(s: &str) -> Result<usize, String> {
-    ranged(s, 1, crate::mesh_fit::MAX_PARTS as u64).map(|v| v as usize)
+    ranged(s, 1, crate::meshes::MAX_PARTS as u64).map(|v| v as usize)
 }
 
 /// A finite float ≥ 0 (`replay --tolerance`).
@@ -64,9 +64,9 @@ pub fn tolerance(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-/// A mesh scale: finite, > 0 and at most [`crate::mesh_fit::MAX_SCALE`].
+/// A mesh scale: finite, > 0 and at most [`crate::meshes::MAX_SCALE`].
 pub fn scale(s: &str) -> Result<f64, String> {
-    let max = crate::mesh_fit::MAX_SCALE;
+    let max = crate::meshes::MAX_SCALE;
     let v: f64 = s
         .trim()
         .parse()
@@ -108,4 +108,35 @@ mod tests {
         assert!(scale("1e308").unwrap_err().contains("--scale"));
         assert!(scale("0").unwrap_err().contains("got 0"));
     }
+}
+
+/// `convert-visuals --max-triangles`: 12..=1000000.
+pub fn max_triangles(s: &str) -> Result<usize, String> {
+    ranged(s, 12, 1_000_000).map(|v| v as usize)
+}
+
+/// `convert-visuals --texture-size`: 1..=8192.
+pub fn texture_size(s: &str) -> Result<u32, String> {
+    ranged(s, 1, 8192).map(|v| v as u32)
+}
+
+/// `convert-visuals --material NAME=R,G,B,A`: four numbers in 0..=1.
+pub fn named_rgba(s: &str) -> Result<(String, [f32; 4]), String> {
+    let (name, rest) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?} is not NAME=R,G,B,A"))?;
+    let v: Vec<f32> = rest
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|v| (0.0..=1.0).contains(v))
+                .ok_or_else(|| format!("{x:?} in {s:?} is not a number in 0..=1"))
+        })
+        .collect::<Result<_, _>>()?;
+    if name.is_empty() || v.len() != 4 {
+        return Err(format!("{s:?} is not NAME=R,G,B,A (four numbers)"));
+    }
+    Ok((name.to_string(), [v[0], v[1], v[2], v[3]]))
 }

@@ -1,6 +1,6 @@
 //! The `mjskill` command line (`mjskill --help`), built on the library's public API. Its
 //! modules are the binary's own: argument parsing, output files, and the commands that are
-//! not library API (bench, plots, `fit-primitives`'s [`mesh_fit`]).
+//! not library API (bench, plots, `fit-primitives` and `convert-visuals`: [`meshes`]).
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -35,7 +35,7 @@ mod compare_images;
 mod datasets;
 mod fidelity;
 mod info_dir;
-mod mesh_fit;
+mod meshes;
 mod output;
 mod plot;
 mod render;
@@ -152,6 +152,45 @@ pub enum Command {
         /// for meshes in millimetres; positive, up to 1e6); crop boxes are in the scaled frame.
         #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
         scale: f64,
+    },
+    /// Convert visual meshes (glTF/glb, COLLADA .dae, STL) into simplified OBJ files with
+    /// PNG textures that MuJoCo 2.2 draws (docs/rendering.md). Exactly one of --urdf (every
+    /// mesh visual of an upstream URDF), --mesh (one mesh, e.g. the table) or --texture (a
+    /// PNG re-encoded and downsampled).
+    ConvertVisuals {
+        /// Upstream URDF whose mesh visuals to convert (paths relative to it).
+        #[arg(long, conflicts_with_all = ["mesh", "texture"])]
+        urdf: Option<PathBuf>,
+        /// With --urdf: the model URDF whose links' `<visual>` elements are replaced by the
+        /// converted ones (its directory must contain --out-dir). Without it they are printed.
+        #[arg(long, requires = "urdf")]
+        into: Option<PathBuf>,
+        /// One mesh file to convert; writes <out-dir>/<name>.urdf, a one-link URDF with its
+        /// visuals.
+        #[arg(long, conflicts_with = "texture")]
+        mesh: Option<PathBuf>,
+        /// With --mesh: uniform scale baked into the vertices (positive, up to 1e6).
+        #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
+        scale: f64,
+        /// A PNG texture to re-encode as <out-dir>/<name>.png.
+        #[arg(long)]
+        texture: Option<PathBuf>,
+        /// Output directory (created if missing).
+        #[arg(long)]
+        out_dir: PathBuf,
+        /// File stem for --mesh and --texture.
+        #[arg(long, default_value = "visual")]
+        name: String,
+        /// Triangle budget per mesh file (12..=1000000).
+        #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
+        max_triangles: usize,
+        /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
+        /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
+        #[arg(long = "material", value_parser = args::named_rgba)]
+        materials: Vec<(String, [f32; 4])>,
+        /// Largest texture side in pixels (1..=8192; halved until it fits).
+        #[arg(long, default_value_t = meshes::visual::DEFAULT_TEXTURE_SIZE, value_parser = args::texture_size, allow_hyphen_values = true)]
+        texture_size: u32,
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
     Eval {
@@ -429,6 +468,38 @@ fn run(cli: Cli) -> Result<(), CliError> {
             crop,
             scale,
         } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref(), scale),
+        Command::ConvertVisuals {
+            urdf,
+            into,
+            mesh,
+            scale,
+            texture,
+            out_dir,
+            name,
+            max_triangles,
+            texture_size,
+            materials,
+        } => {
+            let opts = meshes::visual::Options {
+                materials,
+                max_triangles,
+                texture_size,
+            };
+            let source = match (urdf, mesh, texture) {
+                (Some(u), None, None) => meshes::visual::Source::Urdf { urdf: u, into },
+                (None, Some(m), None) => meshes::visual::Source::Mesh { mesh: m, scale },
+                (None, None, Some(t)) => meshes::visual::Source::Texture(t),
+                _ => {
+                    return Err(
+                        "convert-visuals needs exactly one of --urdf, --mesh or --texture".into(),
+                    )
+                }
+            };
+            for line in meshes::visual::run(source, &out_dir, &name, opts)? {
+                out!("{line}");
+            }
+            Ok(())
+        }
         Command::Eval {
             target,
             policy,
@@ -647,7 +718,7 @@ fn fit_primitives(
     crop: Option<&str>,
     scale: f64,
 ) -> Result<(), CliError> {
-    use crate::mesh_fit;
+    use crate::meshes as mesh_fit;
     let kinds: Vec<mesh_fit::Kind> = shape
         .split(',')
         .map(|s| s.trim().parse())
