@@ -6,8 +6,17 @@ use mjskill::mujoco::Model;
 /// Runs `mjskill export-mjcf --robot ROBOT --env ENV` to stdout (success asserted) and
 /// compiles the printed scene with mjskill's MuJoCo.
 pub fn export_mjcf_model(robot: &str, env_id: &str) -> Model {
+    // Written with -o into a directory of its own: the mesh and texture files go next to the
+    // XML, never into the working directory.
+    let dir = std::env::temp_dir().join(format!(
+        "mjskill-export-{robot}-{env_id}-{}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.xml");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
-        .args(["export-mjcf", "--robot", robot, "--env", env_id])
+        .args(["export-mjcf", "--robot", robot, "--env", env_id, "-o"])
+        .arg(&path)
         .output()
         .unwrap();
     assert!(
@@ -15,8 +24,23 @@ pub fn export_mjcf_model(robot: &str, env_id: &str) -> Model {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let xml = String::from_utf8(out.stdout).unwrap();
-    Model::from_xml_string(&xml, &[]).unwrap()
+    let xml = std::fs::read_to_string(&path).unwrap();
+    let files: Vec<(String, Vec<u8>)> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| *p != path)
+        .map(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(&p).unwrap())
+        })
+        .collect();
+    let assets: Vec<(&str, &[u8])> = files
+        .iter()
+        .map(|(n, b)| (n.as_str(), b.as_slice()))
+        .collect();
+    let model = Model::from_xml_string(&xml, &assets).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    model
 }
 
 /// Runs `mjskill export-mjcf ARGS -o FILE` (success asserted), compiles FILE with Debian's
