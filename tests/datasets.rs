@@ -1707,4 +1707,53 @@ fn lerobot_export_splits_files_and_chunks_by_size_as_lerobot() {
             .arg(&mcap),
     );
     assert!(e.contains("--format lerobot only"), "{e}");
+
+/// A child process started by another thread while an h5 file is being written inherits the
+/// writer's file descriptor (HDF5 opens without `O_CLOEXEC`). With HDF5's file locking that
+/// child would hold the writer's exclusive lock after the writer closed the file, and reading
+/// the finished file failed with "unable to lock file, errno = 11" (seen in CI). The writer
+/// therefore takes no lock: its file has a private temporary name until it is complete.
+#[test]
+fn h5_written_while_other_threads_start_processes_reads_back_at_once() {
+    let dir = tmp_dir("h5-children");
+    let mcap = dir.join("demo.mcap");
+    import(
+        &demos().join("PokeCube-v1/trajectory.h5"),
+        None,
+        &mcap,
+        ReplayBy::States,
+    )
+    .unwrap();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let spawner = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let mut children = Vec::new();
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                children.push(Command::new("sleep").arg("3").spawn().unwrap());
+                std::thread::sleep(std::time::Duration::from_millis(2));
+                if children.len() > 200 {
+                    for mut c in children.drain(..100) {
+                        let _ = c.kill();
+                        let _ = c.wait();
+                    }
+                }
+            }
+            for mut c in children {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        })
+    };
+    let mut failures = Vec::new();
+    for k in 0..20 {
+        let out = dir.join(format!("traj{k}.h5"));
+        export::to_maniskill(&mcap, &out, None).unwrap();
+        if let Err(e) = maniskill_h5::read(&out, None) {
+            failures.push(format!("{k}: {e}"));
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    spawner.join().unwrap();
+    assert!(failures.is_empty(), "{failures:#?}");
 }

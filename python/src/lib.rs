@@ -9,10 +9,10 @@
 //! bad value and the valid choices); a failed render is a `RuntimeError`. The GIL is released
 //! while an env steps, resets or renders. Each class holds its env behind a `Mutex`, so a
 //! Python object can be shared between threads: calls from several threads run one at a time.
-//! The lock is never waited for while holding the GIL ([`lock_without_gil`]): a thread that
+//! The lock is never waited for while holding the GIL (`lock_without_gil`): a thread that
 //! holds the lock may need the GIL to finish its call, so waiting with the GIL would deadlock.
 //!
-//! Integer arguments are taken as Python ints and range-checked here ([`int_arg`]), so an
+//! Integer arguments are taken as Python ints and range-checked here (`int_arg`), so an
 //! out-of-range value is a `ValueError` naming the argument and its valid range rather than a
 //! bare `OverflowError`.
 #![warn(missing_docs)]

@@ -638,7 +638,12 @@ pub fn write(traj: &Trajectory, h5_path: &Path, json_path: &Path) -> Result<(), 
     let tmp_json = staged.add(json_path);
     {
         use h5::plist::file_create::LinkCreationOrder;
+        // No HDF5 file lock: the file has a private temporary name until it is complete, and
+        // HDF5 opens it without O_CLOEXEC, so a child process another thread starts meanwhile
+        // would keep an exclusive lock alive after `close` and make the finished file
+        // unreadable ("unable to lock file, errno = 11").
         let file = h5::File::with_options()
+            .with_fapl(|p| p.file_locking(false))
             .with_fcpl(|p| p.link_creation_order(LinkCreationOrder::Indexed))
             .create(&tmp_h5)
             .map_err(DatasetError::hdf5(h5_path))?;

@@ -507,8 +507,8 @@ impl Env {
     /// the new positions (or the restored controller targets); contacts are recomputed
     /// with those drive forces, and `obs`, `info` and every reward mode describe the new
     /// state; `elapsed_steps` and the RNG streams are unchanged. Values have the bounds of
-    /// [`Env::set_state`]: poses and velocities within ±[`MAX_STATE_VALUE`], controller and
-    /// drive targets within ±[`MAX_TARGET_VALUE`] (the largest f32, as targets are observed
+    /// [`Env::set_state`]: poses and velocities within ±1e10 (`MAX_STATE_VALUE`), controller and
+    /// drive targets within ±`f32::MAX` (`MAX_TARGET_VALUE`, the largest f32, as targets are observed
     /// as f32). Errors (missing or unknown names, wrong lengths, non-finite or out-of-range
     /// values, a root pose other than the robot's fixed table pose) leave the env unchanged.
     ///

@@ -8,7 +8,6 @@
 //! ManiSkill did with them: every boolean of the task's `evaluate()` after every step, the
 //! final `success` and the final object positions. [`measure`] replays the actions in
 //! mjskill and counts the agreement (docs/outcome-agreement.md).
-use std::io::Read;
 use std::path::Path;
 
 use indexmap::IndexMap;
@@ -92,19 +91,7 @@ impl OutcomeFile {
             path: p.clone(),
             source,
         };
-        let mut raw = Vec::new();
-        std::fs::File::open(path)
-            .and_then(|mut f| f.read_to_end(&mut raw))
-            .map_err(io)?;
-        let text = if raw.starts_with(&[0x1f, 0x8b]) {
-            let mut s = Vec::new();
-            flate2::read::GzDecoder::new(raw.as_slice())
-                .read_to_end(&mut s)
-                .map_err(io)?;
-            s
-        } else {
-            raw
-        };
+        let text = super::read_maybe_gzip(path).map_err(io)?;
         let bad = |msg: String| OutcomeError::Format {
             path: p.clone(),
             msg,

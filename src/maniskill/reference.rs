@@ -1,7 +1,6 @@
 //! Reader of ManiSkill reference trajectory files (`<env>__<robot>.json.gz`, format
 //! `mjskill-ref-traj/1`): per-step actions and post-step states recorded from ManiSkill 3
 //! (PhysX CPU). The format is described in `docs/reference-trajectories.md`.
-use std::io::Read;
 use std::path::Path;
 
 use indexmap::IndexMap;
@@ -172,19 +171,7 @@ impl RefFile {
             path: p.clone(),
             source,
         };
-        let mut raw = Vec::new();
-        std::fs::File::open(path)
-            .and_then(|mut f| f.read_to_end(&mut raw))
-            .map_err(io)?;
-        let text = if raw.starts_with(&[0x1f, 0x8b]) {
-            let mut s = Vec::new();
-            flate2::read::GzDecoder::new(raw.as_slice())
-                .read_to_end(&mut s)
-                .map_err(io)?;
-            s
-        } else {
-            raw
-        };
+        let text = super::read_maybe_gzip(path).map_err(io)?;
         let f: RefFile = serde_json::from_slice(&text).map_err(|e| ReferenceError::Format {
             path: p.clone(),
             msg: e.to_string(),
