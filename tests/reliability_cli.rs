@@ -399,11 +399,18 @@ fn replay_tolerance_is_a_finite_number_at_least_zero() {
 
 #[test]
 fn export_mjcf_defaults_to_the_envs_robot() {
+    // Printed to stdout, the scene's mesh files are not written into the working directory.
+    let cwd = std::env::temp_dir().join(format!("mjskill-export-cwd-{}", std::process::id()));
+    std::fs::create_dir_all(&cwd).unwrap();
     let o = mjskill()
+        .current_dir(&cwd)
         .args(["export-mjcf", "--env", "PickCubeSO100-v1"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read_dir(&cwd).unwrap().count(), 0);
+    assert!(stderr(&o).contains("use -o FILE.xml"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&cwd).unwrap();
     let xml = String::from_utf8_lossy(&o.stdout);
     assert!(
         xml.contains("<mujoco") && xml.contains("Jaw"),

@@ -696,16 +696,26 @@ fn export_mjcf(
             mjskill::scene_mjcf(id, robot)?
         }
     };
-    if !mjcf.assets.is_empty() {
-        // Meshes live in MuJoCo's in-memory VFS; write them next to the XML so the file loads.
-        let dir = output
-            .as_ref()
-            .and_then(|p| p.parent().map(|d| d.to_path_buf()))
-            .unwrap_or_else(|| PathBuf::from("."));
-        for (name, bytes) in &mjcf.assets {
-            std::fs::write(dir.join(name), bytes)
-                .map_err(|e| format!("cannot write asset {name}: {e}"))?;
+    // Meshes and textures live in MuJoCo's in-memory VFS; with -o they are written next to the
+    // XML so the file loads. Printed to stdout, the XML comes alone: nothing is written into
+    // the working directory unasked.
+    match (&output, mjcf.assets.is_empty()) {
+        (Some(path), false) => {
+            let dir = path
+                .parent()
+                .map(|d| d.to_path_buf())
+                .unwrap_or_else(|| PathBuf::from("."));
+            for (name, bytes) in &mjcf.assets {
+                std::fs::write(dir.join(name), bytes)
+                    .map_err(|e| format!("cannot write asset {name}: {e}"))?;
+            }
         }
+        (None, false) => eprintln!(
+            "note: the scene references {} mesh and texture files, not written when the XML \
+             goes to stdout; use -o FILE.xml to write them next to it",
+            mjcf.assets.len()
+        ),
+        _ => {}
     }
     write_output(output, &mjcf.xml)
 }
