@@ -292,7 +292,7 @@ const GL_LINEAR: i32 = 0x2601;
 /// bilinear sampling of the full-resolution image (the context must be current). This is
 /// closer to ManiSkill's renders, whose textures look sharper at a distance (the RGB
 /// difference to ManiSkill's frames falls from 13.8 to 13.5), and cheaper for the software
-/// rasteriser (docs/rendering.md: the 512×512 frame draws about a fifth faster).
+/// rasteriser (the 512×512 frame draws about a quarter faster; docs/observations.md).
 fn bilinear_textures(e: &EglDisplay, con: &sys::mjrContext) -> Result<(), RenderError> {
     let missing = |f: &str| RenderError::Unavailable(format!("OpenGL lacks {f}"));
     let bind = e
@@ -303,13 +303,17 @@ fn bilinear_textures(e: &EglDisplay, con: &sys::mjrContext) -> Result<(), Render
         .egl
         .get_proc_address("glTexParameteri")
         .ok_or_else(|| missing("glTexParameteri"))?;
+    type Bind = extern "system" fn(u32, u32);
+    type Param = extern "system" fn(u32, u32, i32);
     // SAFETY: both are OpenGL 1.1 entry points with these C signatures
     // (`void glBindTexture(GLenum, GLuint)`, `void glTexParameteri(GLenum, GLenum, GLint)`);
     // EGL returned them for the current context.
-    let (bind, param): (
-        extern "system" fn(u32, u32),
-        extern "system" fn(u32, u32, i32),
-    ) = unsafe { (std::mem::transmute(bind), std::mem::transmute(param)) };
+    let (bind, param) = unsafe {
+        (
+            std::mem::transmute::<extern "system" fn(), Bind>(bind),
+            std::mem::transmute::<extern "system" fn(), Param>(param),
+        )
+    };
     let n = (con.ntexture.max(0) as usize).min(con.texture.len());
     for i in 0..n {
         if con.textureType[i] == sys::mjtTexture__mjTEXTURE_2D as c_int {
