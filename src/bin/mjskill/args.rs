@@ -84,36 +84,6 @@ pub fn scale(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn ranges_name_the_valid_values() {
-        assert_eq!(seed("4294967295"), Ok(4294967295));
-        assert_eq!(seed("-1").unwrap_err(), "-1 is not in 0..=4294967295");
-        assert_eq!(
-            seed("18446744073709551615").unwrap_err(),
-            "18446744073709551615 is not in 0..=4294967295"
-        );
-        assert!(seed("1e12").unwrap_err().contains("not an integer"));
-        assert_eq!(episodes("0").unwrap_err(), "0 is not in 1..=4294967296");
-        assert_eq!(episodes("4294967296"), Ok(4294967296));
-        assert!(bench_steps("1000000000000")
-            .unwrap_err()
-            .contains("1..=1000000"));
-        assert!(tolerance("nan").unwrap_err().contains("finite"));
-        assert!(tolerance("-1").is_err() && tolerance("inf").is_err());
-        assert_eq!(tolerance("0"), Ok(0.0));
-        assert!(scale("1e308").unwrap_err().contains("--scale"));
-        assert!(scale("0").unwrap_err().contains("got 0"));
-        assert_eq!(max_error_mm("0.5"), Ok(0.5));
-        assert!(max_error_mm("0").unwrap_err().contains("0.001..=1000"));
-        assert!(max_error_mm("nan").unwrap_err().contains("--max-error"));
-        assert!(max_error_mm("x").unwrap_err().contains("not a number"));
-    }
-}
-
 /// `convert-visuals --max-triangles`: 12..=1000000.
 pub fn max_triangles(s: &str) -> Result<usize, String> {
     ranged(s, 12, 1_000_000).map(|v| v as usize)
@@ -156,4 +126,34 @@ pub fn named_rgba(s: &str) -> Result<(String, [f32; 4]), String> {
         return Err(format!("{s:?} is not NAME=R,G,B,A (four numbers)"));
     }
     Ok((name.to_string(), [v[0], v[1], v[2], v[3]]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_name_the_valid_values() {
+        assert_eq!(seed("4294967295"), Ok(4294967295));
+        assert_eq!(seed("-1").unwrap_err(), "-1 is not in 0..=4294967295");
+        assert_eq!(
+            seed("18446744073709551615").unwrap_err(),
+            "18446744073709551615 is not in 0..=4294967295"
+        );
+        assert!(seed("1e12").unwrap_err().contains("not an integer"));
+        assert_eq!(episodes("0").unwrap_err(), "0 is not in 1..=4294967296");
+        assert_eq!(episodes("4294967296"), Ok(4294967296));
+        assert!(bench_steps("1000000000000")
+            .unwrap_err()
+            .contains("1..=1000000"));
+        assert!(tolerance("nan").unwrap_err().contains("finite"));
+        assert!(tolerance("-1").is_err() && tolerance("inf").is_err());
+        assert_eq!(tolerance("0"), Ok(0.0));
+        assert!(scale("1e308").unwrap_err().contains("--scale"));
+        assert!(scale("0").unwrap_err().contains("got 0"));
+        assert_eq!(max_error_mm("0.5"), Ok(0.5));
+        assert!(max_error_mm("0").unwrap_err().contains("0.001..=1000"));
+        assert!(max_error_mm("nan").unwrap_err().contains("--max-error"));
+        assert!(max_error_mm("x").unwrap_err().contains("not a number"));
+    }
 }
