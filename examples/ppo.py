@@ -100,6 +100,8 @@ def parse_args(argv=None):
     p.add_argument("--total-timesteps", type=int, default=d["total_timesteps"])
     p.add_argument("--max-minutes", type=float, default=None,
                    help="stop after this much wall time (the policy is saved)")
+    p.add_argument("--stop-at-success", type=float, default=None,
+                   help="stop once an evaluation's success rate reaches this (e.g. 0.9)")
     p.add_argument("--learning-rate", type=float, default=d["learning_rate"])
     p.add_argument("--anneal-lr", action="store_true")
     p.add_argument("--gamma", type=float, default=d["gamma"])
@@ -279,6 +281,10 @@ def main(argv=None):
             if best is None or eval_s >= best:
                 best = eval_s
                 save("best", eval_s)
+            if args.stop_at_success is not None and eval_s >= args.stop_at_success:
+                print(f"eval success {eval_s:.3f} reached --stop-at-success "
+                      f"{args.stop_at_success}", flush=True)
+                break
         if args.anneal_lr:
             opt.param_groups[0]["lr"] = (1.0 - (it - 1.0) / iterations) * args.learning_rate
         ended_success, ended_return = [], []

@@ -88,15 +88,15 @@ const EXPECTED: &[Expected] = &[
         file: "motionplanning__PlaceSphere-v1__panda",
         episodes: 10,
         maniskill_successes: 3,
-        mjskill_successes: 7,
+        mjskill_successes: 5,
         same_outcome: 6,
         steps: 1179,
-        steps_all_flags_agree: 1049,
+        steps_all_flags_agree: 1147,
         flags: &[
             ("is_obj_grasped", 1179),
             ("is_obj_on_bin", 1179),
-            ("is_obj_static", 1049),
-            ("success", 1166),
+            ("is_obj_static", 1147),
+            ("success", 1164),
         ],
     },
     Expected {
@@ -207,16 +207,16 @@ const EXPECTED: &[Expected] = &[
     Expected {
         file: "solver__PlaceSphere-v1__fetch",
         episodes: 10,
-        maniskill_successes: 8,
+        maniskill_successes: 9,
         mjskill_successes: 10,
-        same_outcome: 8,
+        same_outcome: 9,
         steps: 500,
-        steps_all_flags_agree: 450,
+        steps_all_flags_agree: 439,
         flags: &[
             ("is_obj_grasped", 500),
-            ("is_obj_on_bin", 493),
-            ("is_obj_static", 457),
-            ("success", 474),
+            ("is_obj_on_bin", 496),
+            ("is_obj_static", 443),
+            ("success", 472),
         ],
     },
     Expected {
@@ -226,12 +226,12 @@ const EXPECTED: &[Expected] = &[
         mjskill_successes: 10,
         same_outcome: 10,
         steps: 500,
-        steps_all_flags_agree: 468,
+        steps_all_flags_agree: 458,
         flags: &[
             ("is_obj_grasped", 500),
-            ("is_obj_on_bin", 499),
-            ("is_obj_static", 469),
-            ("success", 481),
+            ("is_obj_on_bin", 497),
+            ("is_obj_static", 461),
+            ("success", 482),
         ],
     },
     Expected {
@@ -490,4 +490,41 @@ fn the_outcomes_command_prints_the_agreement() {
         "{err}"
     );
     std::fs::remove_dir_all(&empty).unwrap();
+}
+
+/// PhysX resists a twist about the pinch axis (the Panda's finger material has
+/// `patch_radius` 0.1): ManiSkill carries the sphere of its own PlaceSphere demos turning at
+/// about 0.03 rad/s. Without torsional friction at the fingers mjskill's sphere picked up
+/// 1–3 rad/s about the pinch axis at the closing step and kept it until the release, where
+/// it turned into rolling in the bin.
+#[test]
+fn placesphere_sphere_does_not_spin_in_the_grasp() {
+    let p = data_dir().join("motionplanning__PlaceSphere-v1__panda.json.gz");
+    let f = OutcomeFile::open(&p).unwrap_or_else(|e| panic!("{e}"));
+    let config = mjskill::EnvConfig {
+        robot: Some(f.robot.clone()),
+        control_mode: Some(f.control_mode.clone()),
+        ..Default::default()
+    };
+    let mut env = mjskill::make(&f.env_id, config).unwrap();
+    for e in f.episodes.iter().take(3) {
+        env.reset(Some(e.seed));
+        let grasped = e.flags["is_obj_grasped"].as_bytes();
+        let mut held = 0;
+        for (t, a) in e.actions.iter().enumerate() {
+            env.step(a).unwrap();
+            // ManiSkill's grasped steps after the first five (the closing transient).
+            if grasped[t] == b'1' && t >= 5 && grasped[t - 5] == b'1' {
+                let s = env.get_state_dict().actors["sphere"];
+                let w = (s[10] * s[10] + s[11] * s[11] + s[12] * s[12]).sqrt();
+                assert!(
+                    w < 0.2,
+                    "seed {}: step {t}: held sphere turns at {w} rad/s",
+                    e.seed
+                );
+                held += 1;
+            }
+        }
+        assert!(held > 30, "seed {}: {held} held steps", e.seed);
+    }
 }

@@ -288,6 +288,10 @@ pub struct Scene {
     timestep: f64,
     /// Mesh and texture assets already added: (source file, scale) → asset name.
     added: std::collections::HashMap<String, String>,
+    /// The robot's finger links with their own material friction (PhysX value), as
+    /// [`Scene::add_robot`] added them: the links [`Scene::add_finger_pairs`] pairs with an
+    /// object.
+    fingers: Vec<(String, f64)>,
 }
 
 impl Scene {
@@ -346,6 +350,7 @@ impl Scene {
             assets: Vec::new(),
             timestep,
             added: std::collections::HashMap::new(),
+            fingers: Vec::new(),
         }
     }
 
@@ -399,6 +404,7 @@ impl Scene {
         }
         let root_body = self.link_body(robot, robot.root, opts, mesh_bytes, &opts.base)?;
         self.worldbody().push(root_body);
+        self.fingers.extend(opts.material_friction.iter().cloned());
 
         // Contact exclusions: every URDF parent–child pair (PhysX never collides a link with its
         // parent; MuJoCo's own parent filter skips bodies welded to the world, such as a fixed
@@ -721,6 +727,47 @@ impl Scene {
         })
     }
 
+    /// Explicit contact pairs between every collision geom of the robot's finger links (those
+    /// with their own material friction) and the geom `object`: condim 4 with the combined
+    /// friction μ = (finger material + 0.3)/2 and torsional friction μ·`patch_radius` (PhysX's
+    /// torsional patch friction, torque ≤ μ·r·N), with the default `solref`, `solimp` and
+    /// margin. MuJoCo skips the dynamic contacts of body pairs that have explicit pairs, so
+    /// these replace the fingers' condim-3 contacts with that object only (other objects keep
+    /// them). Does nothing for a robot without such fingers.
+    pub fn add_finger_pairs(&mut self, object: &str, patch_radius: f64) {
+        let mut geoms = Vec::new();
+        for (link, mu) in &self.fingers {
+            if let Some(body) = find_body(&self.root, link) {
+                for g in body.children.iter().filter(|c| c.name == "geom") {
+                    let name = g.attrs.iter().find(|(k, _)| k == "name").map(|(_, v)| v);
+                    if let Some(n) = name.filter(|n| n.starts_with(&format!("{link}_collision"))) {
+                        geoms.push((n.clone(), (mu + DEFAULT_FRICTION) / 2.0));
+                    }
+                }
+            }
+        }
+        let solref = stiff_solref(self.timestep);
+        for (geom, mu) in geoms {
+            let friction = [
+                mu,
+                mu,
+                mu * patch_radius,
+                TORSIONAL_ROLLING[1],
+                TORSIONAL_ROLLING[1],
+            ];
+            self.section("contact").push(
+                Element::new("pair")
+                    .attr("geom1", geom)
+                    .attr("geom2", object)
+                    .attr("condim", 4)
+                    .attr_nums("friction", &friction)
+                    .attr_nums("solref", &solref)
+                    .attr_nums("solimp", &CONTACT_SOLIMP)
+                    .attr("margin", num(CONTACT_MARGIN)),
+            );
+        }
+    }
+
     /// Finishes the document.
     pub fn finish(self) -> Mjcf {
         Mjcf {
@@ -728,6 +775,14 @@ impl Scene {
             assets: self.assets,
         }
     }
+}
+
+/// The body element named `name` anywhere below `e`.
+fn find_body<'a>(e: &'a Element, name: &str) -> Option<&'a Element> {
+    if e.name == "body" && e.attrs.iter().any(|(k, v)| k == "name" && v == name) {
+        return Some(e);
+    }
+    e.children.iter().find_map(|c| find_body(c, name))
 }
 
 /// Name of the k-th collision geom of a link.

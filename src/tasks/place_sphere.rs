@@ -31,6 +31,10 @@ const ON_BIN_Z: f64 = 0.005;
 /// `is_obj_static` thresholds: linear (m/s) and angular (rad/s).
 const STATIC_LIN: f64 = 1e-2;
 const STATIC_ANG: f64 = 0.5;
+/// PhysX torsional patch radius of the Panda's and Fetch's finger material (m; ManiSkill's
+/// `patch_radius` = `min_patch_radius` = 0.1): without it the sphere spins freely about the
+/// pinch axis in mjskill's grasp (docs/outcome-physics.md).
+pub const FINGER_PATCH_RADIUS: f64 = 0.1;
 /// The `ungrasp` term when the sphere is not grasped.
 const UNGRASP_FREE: f64 = 16.0;
 
@@ -103,6 +107,7 @@ impl Task for PlaceSphere {
     // ---- scene -------------------------------------------------------------------------
     fn build(&self, scene: &mut Scene) {
         scene.add_sphere("sphere", RADIUS, SPHERE_RGBA, [0.0, 0.0, RADIUS]);
+        scene.add_finger_pairs("sphere", FINGER_PATCH_RADIUS);
         scene.add_kinematic_boxes("bin", &bin_boxes(), BIN_RGBA);
         add_cameras(scene, self.cameras());
     }
