@@ -253,18 +253,20 @@ fn images_match_maniskills_renders_at_the_measured_figures() {
     }
     let all = Summary::of(&scores);
     println!("{}", serde_json::to_string_pretty(&all).unwrap());
-    // Measured with the converted visual meshes on these 11 states (2026-11-25: mean IoU
-    // 0.952, pixel accuracy 0.9985, depth median 0 mm, RGB mean abs diff 13.3), with a small
-    // margin. With the old box visuals the figures were 0.616, 0.955 and (RGB) about 80.
+    // Measured on these 11 states (2026-11-25, docs/observations.md): mean IoU 0.969, lowest
+    // image 0.906, pixel accuracy 0.9987, depth median 0 mm, RGB mean abs diff 13.0; with a
+    // margin for other Mesa versions. Before the xArm6's knuckle and the SO100's meshes were
+    // fixed: 0.952, lowest 0.843; with the old box visuals 0.616, 0.955 and (RGB) about 80.
     assert_eq!(
         all.images, 17,
         "base cameras plus Fetch's two robot cameras"
     );
     assert!(all.depth_median_mm <= 1.0, "{all:?}");
     assert!(all.depth_median_mm_max <= 1.0, "{all:?}");
-    assert!(all.seg_pixel_accuracy >= 0.99, "{all:?}");
-    assert!(all.seg_miou >= 0.93, "{all:?}");
-    assert!(all.rgb_mae <= 16.0, "{all:?}");
+    assert!(all.seg_pixel_accuracy >= 0.995, "{all:?}");
+    assert!(all.seg_miou >= 0.95, "{all:?}");
+    assert!(all.seg_miou_min >= 0.88, "{all:?}");
+    assert!(all.rgb_mae <= 15.0, "{all:?}");
     for s in &scores {
         let (id, robot) = s.pair.split_once("__").unwrap();
         let e = env(id, robot, ObsMode::State);

@@ -35,7 +35,7 @@ pub const TABLE_MODEL: &str = "scene/table.urdf";
 pub const GROUND_TEXTURE: &str = "scene/grid.png";
 /// Colour the floor texture is multiplied by.
 pub const GROUND_RGBA: Rgba = [1.0, 1.0, 1.0, 1.0];
-/// Ambient light (MuJoCo's headlight ambient). ManiSkill's ambient is 0.3 in linear light,
+/// Ambient light (the first directional light's ambient term). ManiSkill's ambient is 0.3 in linear light,
 /// ≈ 0.55 after its sRGB output encoding; MuJoCo's fixed-function lighting works on display
 /// values, so the intensities were fitted to ManiSkill's frames (docs/rendering.md).
 pub const AMBIENT: f64 = 0.55;
@@ -73,9 +73,12 @@ impl Scene {
             Translation3::new(TABLE_POS[0], TABLE_POS[1], TABLE_POS[2] + TABLE_HALF[2]),
             table_rot,
         );
-        for (name, dir, diffuse) in [
-            ("dir1", [1.0, 1.0, -1.0], LIGHT_DIFFUSE[0]),
-            ("dir2", [0.0, 0.0, -1.0], LIGHT_DIFFUSE[1]),
+        // The ambient light rides on the first directional light: OpenGL adds a light's
+        // ambient term whatever its direction, so this is the headlight's ambient without a
+        // third light to evaluate at every vertex (the headlight is off).
+        for (name, dir, diffuse, ambient) in [
+            ("dir1", [1.0, 1.0, -1.0], LIGHT_DIFFUSE[0], AMBIENT),
+            ("dir2", [0.0, 0.0, -1.0], LIGHT_DIFFUSE[1], 0.0),
         ] {
             self.worldbody().push(
                 Element::new("light")
@@ -85,7 +88,8 @@ impl Scene {
                     .attr_nums("pos", &[-dir[0], -dir[1], 2.0])
                     .attr_nums("dir", &dir)
                     .attr_nums("diffuse", &[diffuse; 3])
-                    .attr_nums("specular", &[LIGHT_SPECULAR; 3]),
+                    .attr_nums("specular", &[LIGHT_SPECULAR; 3])
+                    .attr_nums("ambient", &[ambient; 3]),
             );
         }
         // The table model, drawn where ManiSkill draws it (its visual is turned a further
@@ -172,7 +176,8 @@ impl Scene {
         let vis = self.section("visual");
         vis.push(
             Element::new("headlight")
-                .attr_nums("ambient", &[AMBIENT; 3])
+                .attr("active", 0)
+                .attr_nums("ambient", &[0.0; 3])
                 .attr_nums("diffuse", &[0.0, 0.0, 0.0])
                 .attr_nums("specular", &[0.0, 0.0, 0.0]),
         );

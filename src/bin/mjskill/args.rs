@@ -89,6 +89,19 @@ pub fn max_triangles(s: &str) -> Result<usize, String> {
     ranged(s, 12, 1_000_000).map(|v| v as usize)
 }
 
+/// `convert-visuals --max-error` (millimetres): a finite number in 0.001..=1000.
+pub fn max_error_mm(s: &str) -> Result<f32, String> {
+    let v: f64 = s.trim().parse().map_err(|_| {
+        format!("{s:?} is not a number; valid: --max-error in millimetres, 0.001..=1000")
+    })?;
+    if !(0.001..=1000.0).contains(&v) {
+        return Err(format!(
+            "{v} is not in 0.001..=1000 (--max-error, millimetres)"
+        ));
+    }
+    Ok(v as f32)
+}
+
 /// `convert-visuals --texture-size`: 1..=8192.
 pub fn texture_size(s: &str) -> Result<u32, String> {
     ranged(s, 1, 8192).map(|v| v as u32)
@@ -138,5 +151,9 @@ mod tests {
         assert_eq!(tolerance("0"), Ok(0.0));
         assert!(scale("1e308").unwrap_err().contains("--scale"));
         assert!(scale("0").unwrap_err().contains("got 0"));
+        assert_eq!(max_error_mm("0.5"), Ok(0.5));
+        assert!(max_error_mm("0").unwrap_err().contains("0.001..=1000"));
+        assert!(max_error_mm("nan").unwrap_err().contains("--max-error"));
+        assert!(max_error_mm("x").unwrap_err().contains("not a number"));
     }
 }

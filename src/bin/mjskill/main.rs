@@ -184,6 +184,11 @@ pub enum Command {
         /// Triangle budget per mesh file (12..=1000000).
         #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
         max_triangles: usize,
+        /// Largest distance in millimetres that simplification may move a mesh's surface
+        /// (0.001..=1000); meshes keep more triangles than --max-triangles where this needs it.
+        /// Default: up to 2 % of each mesh's extent (8 % where the budget needs it).
+        #[arg(long, value_parser = args::max_error_mm, allow_hyphen_values = true)]
+        max_error: Option<f32>,
         /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
         /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
         #[arg(long = "material", value_parser = args::named_rgba)]
@@ -477,12 +482,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
             out_dir,
             name,
             max_triangles,
+            max_error,
             texture_size,
             materials,
         } => {
             let opts = meshes::visual::Options {
                 materials,
                 max_triangles,
+                max_error: max_error.map(|e| e / 1000.0),
                 texture_size,
             };
             let source = match (urdf, mesh, texture) {

@@ -364,7 +364,7 @@ struct DaeSource {
 
 /// Reads a COLLADA file: the geometries instanced by the visual scene's nodes, with their
 /// transforms, the `<unit>` scale and the bound materials (diffuse colour or texture image,
-/// read relative to `dir`). `Y_UP` files are turned to Z up as ROS tools load them.
+/// read relative to `dir`). The `<up_axis>` is ignored, as ManiSkill's renderer ignores it.
 pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, MeshError> {
     let text = std::str::from_utf8(bytes).map_err(|_| malformed(name, "not UTF-8"))?;
     let doc = roxmltree::Document::parse(text).map_err(|e| malformed(name, format!("XML: {e}")))?;
@@ -379,22 +379,11 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
         .and_then(|n| n.attribute("meter"))
         .and_then(|m| m.parse::<f32>().ok())
         .unwrap_or(1.0);
-    let y_up = root
-        .descendants()
-        .find(|n| n.tag_name().name() == "up_axis")
-        .and_then(|n| n.text())
-        .is_some_and(|t| t.trim() == "Y_UP");
-    let mut top = Matrix4::new_scaling(unit);
-    if y_up {
-        // Y up → Z up: x stays, y → z, z → −y.
-        let r = Matrix4::new(
-            1.0, 0.0, 0.0, 0.0, //
-            0.0, 0.0, -1.0, 0.0, //
-            0.0, 1.0, 0.0, 0.0, //
-            0.0, 0.0, 0.0, 1.0,
-        );
-        top = r * top;
-    }
+    // The `<up_axis>` is ignored, as SAPIEN (ManiSkill's renderer, assimp with
+    // `IMPORT_COLLADA_IGNORE_UP_DIRECTION`) ignores it: the vertices are taken in the link
+    // frame as written. Robotiq's outer knuckle says `Y_UP`; turning it to Z up put the
+    // knuckle where ManiSkill draws none (segmentation IoU 0).
+    let top = Matrix4::new_scaling(unit);
     let id_of = |url: &str| url.trim_start_matches('#').to_string();
 
     // Material id → (name, colour, texture image file).
@@ -718,6 +707,17 @@ mod tests {
         assert_eq!(m.triangles(), 3);
         let p = &m.parts[0].positions;
         // Millimetres → metres, translated 1 m up.
+        assert_eq!(p[0], [0.0, 0.0, 1.0]);
+        assert_eq!(p[1], [1.0, 0.0, 1.0]);
+        assert_eq!(p[5], [0.0, 0.0, 2.0]);
+    }
+
+    #[test]
+    fn collada_up_axis_is_ignored_as_by_maniskills_renderer() {
+        let y_up = DAE.replace("Z_UP", "Y_UP");
+        let m = read_dae(y_up.as_bytes(), "t.dae", Path::new(".")).unwrap();
+        let p = &m.parts[0].positions;
+        // The same vertices as the Z_UP file: not turned from Y up to Z up.
         assert_eq!(p[0], [0.0, 0.0, 1.0]);
         assert_eq!(p[1], [1.0, 0.0, 1.0]);
         assert_eq!(p[5], [0.0, 0.0, 2.0]);

@@ -37,6 +37,9 @@ pub struct Options {
     pub materials: Vec<(String, [f32; 4])>,
     /// Triangle budget per mesh file.
     pub max_triangles: usize,
+    /// Largest distance (metres) simplification may move the surface; it overrides the
+    /// budget. None: up to 2 % of each mesh's extent (8 % where the budget needs it).
+    pub max_error: Option<f32>,
     /// Largest texture side; larger textures are box-filtered down by powers of two.
     pub texture_size: u32,
 }
@@ -63,9 +66,12 @@ fn linear_to_srgb(x: f32) -> f32 {
     }
 }
 
-/// Welds exact duplicates, simplifies to `target` triangles (attribute seams kept by
-/// meshoptimizer) and compacts the vertices.
-pub fn simplify(part: &Part, target: usize) -> Part {
+/// Welds exact duplicates, simplifies towards `target` triangles (attribute seams kept by
+/// meshoptimizer) and compacts the vertices. With `max_error` (metres), simplification never
+/// moves the surface further than that and keeps more triangles than `target` where the
+/// bound requires it; without, it may move it by up to 2 % of the mesh's extent, and by up
+/// to 8 % (collapsing across texture seams) where the budget cannot be met otherwise.
+pub fn simplify(part: &Part, target: usize, max_error: Option<f32>) -> Part {
     #[derive(Clone, Copy, Default)]
     #[repr(C)]
     struct V([f32; 8]);
@@ -85,29 +91,19 @@ pub fn simplify(part: &Part, target: usize) -> Part {
     let indices = meshopt::remap_index_buffer(Some(&part.indices), unique, &remap);
     let verts = meshopt::remap_vertex_buffer(&verts, unique, &remap);
     let positions: Vec<[f32; 3]> = verts.iter().map(|v| [v.0[0], v.0[1], v.0[2]]).collect();
-    let mut indices = if indices.len() / 3 > target {
-        meshopt::simplify_decoder(
-            &indices,
-            &positions,
-            target * 3,
-            0.02,
-            meshopt::SimplifyOptions::None,
-            None,
-        )
-    } else {
-        indices
+    use meshopt::SimplifyOptions as O;
+    let (first, second) = match max_error {
+        Some(e) => ((e, O::ErrorAbsolute), (e, O::ErrorAbsolute | O::Permissive)),
+        None => ((0.02, O::None), (0.08, O::Permissive)),
     };
-    if indices.len() / 3 > target {
-        // Still over budget at that error (texture seams hold it back): allow larger errors
-        // and collapses across seams.
-        indices = meshopt::simplify_decoder(
-            &indices,
-            &positions,
-            target * 3,
-            0.08,
-            meshopt::SimplifyOptions::Permissive,
-            None,
-        );
+    let mut indices = indices;
+    for (error, options) in [first, second] {
+        // The second pass only when the first is still over budget (texture seams held it
+        // back): it may collapse across seams.
+        if indices.len() / 3 > target {
+            indices =
+                meshopt::simplify_decoder(&indices, &positions, target * 3, error, options, None);
+        }
     }
     let indices = meshopt::optimize_vertex_cache(&indices, verts.len());
     let mut indices = indices;
@@ -425,7 +421,7 @@ pub fn convert_mesh(
         let budget = ((opts.max_triangles as f64 * tris as f64 / total as f64).ceil() as usize)
             .max(12)
             .min(tris);
-        let simple = simplify(p, budget);
+        let simple = simplify(p, budget, opts.max_error);
         let (obj, written) = obj_text(&simple);
         let name = format!("{stem}_{k}");
         if written < 2 {
@@ -868,9 +864,16 @@ mod tests {
                 p.indices.extend([a, b, a + 1, a + 1, b, b + 1]);
             }
         }
-        let s = simplify(&p, 500);
+        let s = simplify(&p, 500, None);
         assert!(s.indices.len() / 3 <= 500, "{}", s.indices.len() / 3);
         assert!(s.indices.len() / 3 >= 100);
+        // A tight bound keeps more triangles than the budget, with every vertex on the sphere.
+        let fine = simplify(&p, 500, Some(0.001));
+        assert!(fine.indices.len() / 3 > 1000, "{}", fine.indices.len() / 3);
+        for v in &fine.positions {
+            let r = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            assert!((r - 1.0).abs() < 1e-5, "{r}");
+        }
     }
 
     #[test]
