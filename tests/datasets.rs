@@ -65,8 +65,8 @@ const EXPECTED: [Expected; 4] = [
         "PlaceSphere-v1/trajectory.h5",
         [
             (false, true, false, None),
-            (true, false, true, None),
-            (false, true, false, None),
+            (true, true, true, None),
+            (false, false, false, None),
         ],
     ),
     (

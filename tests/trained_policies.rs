@@ -10,7 +10,10 @@ use mjskill::solvers::PolicyFile;
 
 /// (file, env id, success rate of `mjskill eval --policy FILE --episodes 100 --seed 10000`
 /// measured when the file was shipped).
-const SHIPPED: &[(&str, &str, f64)] = &[("PickCube-v1__panda.onnx", "PickCube-v1", 0.97)];
+const SHIPPED: &[(&str, &str, f64)] = &[
+    ("PickCube-v1__panda.onnx", "PickCube-v1", 0.97),
+    ("PlaceSphere-v1__panda.onnx", "PlaceSphere-v1", 0.93),
+];
 
 /// Episodes the test runs (seeds 10000..10040, the first of the 100 measured).
 const EPISODES: usize = 40;
