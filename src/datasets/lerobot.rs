@@ -739,7 +739,7 @@ pub fn write(path: &Path, dir: &Path, video: Option<bool>) -> Result<ExportSumma
     write_with_limits(path, dir, video, &Limits::default())
 }
 
-/// [`write`], splitting data, video and meta/episodes files by `limits`.
+/// [`write()`], splitting data, video and meta/episodes files by `limits`.
 pub fn write_with_limits(
     path: &Path,
     dir: &Path,
