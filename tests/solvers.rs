@@ -192,3 +192,66 @@ fn widowxai_solver_holds_the_cube_with_a_light_grip() {
         }
     }
 }
+
+/// The SO100 solver (docs/outcome-physics.md) keeps its jaw target closed for 8 steps before
+/// the cube leaves the table, and eases the squeeze once the cube is at the goal: the end of
+/// every episode holds the cube (grasped, success) with less jaw force than the carry.
+#[test]
+fn so100_solver_closes_8_steps_before_the_lift_and_eases_its_grip_at_the_goal() {
+    use mjskill::solvers::make_policy;
+    let mut env = eval::make_env("PickCubeSO100-v1", EnvConfig::default(), "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    let force = |env: &mjskill::Env| {
+        env.finger_forces()
+            .iter()
+            .map(|f| f.iter().map(|x| x * x).sum::<f64>().sqrt())
+            .fold(f64::INFINITY, f64::min)
+    };
+    for seed in 0..4 {
+        let mut step = 0usize;
+        let mut closed_at = None;
+        let mut lifted_at = None;
+        let mut carry_force = 0.0f64;
+        let mut z0 = None;
+        let r = eval::run_episode(
+            &mut env,
+            policy.as_mut(),
+            Some(seed),
+            &mut action,
+            |env, action, _, _, _| {
+                let z = env.obs_part("extra/obj_pose").unwrap()[2];
+                let z0 = *z0.get_or_insert(z);
+                if action[5] <= -0.8 && closed_at.is_none() {
+                    closed_at = Some(step);
+                }
+                if z > z0 + 0.002 && lifted_at.is_none() {
+                    lifted_at = Some(step);
+                }
+                if action[5] <= -0.8 && lifted_at.is_some() {
+                    carry_force = carry_force.max(force(env));
+                }
+                step += 1;
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert!(r.success_at_end, "seed {seed}: {r:?}");
+        let (closed, lifted) = (closed_at.unwrap(), lifted_at.unwrap());
+        assert!(
+            lifted >= closed + 8,
+            "seed {seed}: closed at {closed}, lifted at {lifted}"
+        );
+        assert!(
+            action[5] > -0.8,
+            "seed {seed}: jaw target {} at the end",
+            action[5]
+        );
+        assert!(env.info().flag("is_grasped"), "seed {seed}");
+        let end = force(&env);
+        assert!(
+            end < 0.8 * carry_force,
+            "seed {seed}: end {end} N, carry {carry_force} N"
+        );
+    }
+}

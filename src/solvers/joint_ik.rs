@@ -14,7 +14,9 @@
 //! Phases (checked in order with fall-through, as §7.1): 0 above the cube (open), 1 down to the
 //! cube (open), 2 close for a few steps, 3 carry: the grasp point goes to
 //! `goal + (grasp point − cube)`, so that the cube centre, not the grasp point, lands on the
-//! goal. Every step the IK target moves at most [`MAX_STEP`] from the current grasp point.
+//! goal; once it is within [`AT_GOAL_TOL`] of that target the gripper takes the robot's
+//! `at_goal` targets (the SO100 eases its squeeze there). Every step the IK target moves at most
+//! [`MAX_STEP`] from the current grasp point.
 //! Positions are read from MuJoCo before the step; nothing is allocated per step.
 use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
 
@@ -41,6 +43,9 @@ const ITERS: (usize, usize) = (30, 10);
 const FD: f64 = 1e-6;
 /// Steps after which the descent gives up on [`DESCEND_TOL`] and closes anyway.
 const DESCEND_MAX_STEPS: usize = 12;
+/// Distance (m) of the grasp point from its carry target within which the gripper takes the
+/// robot's `at_goal` targets.
+pub const AT_GOAL_TOL: f64 = 0.01;
 
 /// What the solver needs to know about a robot.
 #[derive(Debug, Clone, Copy)]
@@ -59,6 +64,9 @@ pub struct JointIkRobot {
     pub open: &'static [(usize, f32)],
     /// (action index, value) pairs that close it.
     pub close: &'static [(usize, f32)],
+    /// (action index, value) pairs that replace `close` once the cube is at the goal (within
+    /// [`AT_GOAL_TOL`]); empty to keep `close`.
+    pub at_goal: &'static [(usize, f32)],
     /// Height of the approach point above the cube centre (m).
     pub approach_height: f64,
     /// Height of the grasp point above the cube centre when closing (m).
@@ -67,8 +75,19 @@ pub struct JointIkRobot {
     pub hold: usize,
 }
 
+/// SO100 jaw target (rad) once the cube is at the goal: a lighter squeeze than the −0.8 of the
+/// grasp and carry. In ManiSkill the −0.8 squeeze wedges the 25 mm cube between the jaws: the
+/// arm drives stall up to 0.04 rad off their targets while PhysX reports 0.1–0.3 rad/s of arm
+/// velocity on an arm that does not move, so `is_robot_static` (0.2 rad/s) fails in about a
+/// third of the held episodes. At −0.785 the cube stays grasped in both simulators and the
+/// reported velocity stays near 0.1 rad/s (docs/outcome-physics.md).
+pub const SO100_AT_GOAL_GRIP: f32 = -0.785;
+
 /// SO100: the grasp point sits between the jaw tips on Fixed_Jaw (the jaw points along its
-/// local −y and closes along x); gripper joint 0 = open, −0.8 = closed (absolute rad).
+/// local −y and closes along x); gripper joint 0 = open, −0.8 = closed (absolute rad). The jaw
+/// closes for 8 steps before the lift: PhysX's jaw, whose collision hulls are thinner than
+/// mjskill's fitted boxes, reaches a tilted cube about two steps later than mjskill's, and a
+/// lift after 6 steps left the cube behind in ManiSkill (4 of 20 replays).
 pub const SO100: JointIkRobot = JointIkRobot {
     link: "Fixed_Jaw",
     point: [-0.0075, -0.092, 0.0],
@@ -77,9 +96,10 @@ pub const SO100: JointIkRobot = JointIkRobot {
     n_arm: 5,
     open: &[(5, 0.0)],
     close: &[(5, -0.8)],
+    at_goal: &[(5, SO100_AT_GOAL_GRIP)],
     approach_height: 0.04,
     grasp_height: 0.006,
-    hold: 6,
+    hold: 8,
 };
 
 /// Carriage target (m) the WidowX AI closes to on PickCube's 36 mm cube (carriages at 18 mm):
@@ -103,6 +123,7 @@ pub const WIDOWXAI: JointIkRobot = JointIkRobot {
     n_arm: 6,
     open: &[(6, 0.044), (7, 1.0)],
     close: &[(6, WIDOWXAI_GRIP), (7, 2.0 * WIDOWXAI_GRIP / 0.044 - 1.0)],
+    at_goal: &[],
     approach_height: 0.05,
     grasp_height: 0.0,
     hold: 4,
@@ -246,11 +267,11 @@ impl JointIkPickCube {
         }
     }
 
-    fn gripper(&self, action: &mut [f32], close: bool) {
-        let set = if close {
-            self.robot.close
-        } else {
-            self.robot.open
+    fn gripper(&self, action: &mut [f32], close: bool, at_goal: bool) {
+        let set = match (close, at_goal) {
+            (false, _) => self.robot.open,
+            (true, true) if !self.robot.at_goal.is_empty() => self.robot.at_goal,
+            (true, _) => self.robot.close,
         };
         for &(i, v) in set {
             action[i] = v;
@@ -316,6 +337,7 @@ impl Policy for JointIkPickCube {
         for (a, q) in action.iter_mut().zip(&self.q_ik).take(r.n_arm) {
             *a = *q as f32;
         }
-        self.gripper(action, close);
+        let at_goal = self.phases.phase >= 3 && (target - p).norm() < AT_GOAL_TOL;
+        self.gripper(action, close, at_goal);
     }
 }
