@@ -35,6 +35,12 @@ Seeds 5000 and above are held out: do not record them.
 
 `--trim FULL_DIR --keep N --out DIR` copies the first N episodes of every file (no ManiSkill
 needed); the repository's tests/data/outcomes holds such copies of a 50-episode recording.
+
+`--perturb SIGMA --files DIR` measures ManiSkill against itself (docs/outcome-physics.md): every
+episode of every `pd_joint_pos` outcome file in DIR is replayed twice in freshly made envs, as
+recorded and with N(0, SIGMA) rad added to the arm joints' targets of every step (seeded), and
+one JSON line per file counts the episodes whose final success flips. It bounds the agreement
+any simulator that is not PhysX bit for bit can reach on those action sequences.
 """
 
 import argparse
@@ -76,6 +82,9 @@ DEMO_PAIRS = [
 
 # Envs whose robot is fixed by the env id (passing robot_uids again is a TypeError).
 FIXED_ROBOT = {"PickCubeSO100-v1", "PickCubeWidowXAI-v1"}
+
+# Arm joints at the front of each robot's pd_joint_pos action (the rest is gripper), for --perturb.
+ARM_JOINTS = {"panda": 7, "xarm6_robotiq": 6, "so100": 5, "widowxai": 6}
 
 
 def f32_text(x):
@@ -303,6 +312,34 @@ def trim(a):
               reuse)
 
 
+def perturb(a):
+    """ManiSkill against itself: final-success flips under N(0, --perturb) arm-target noise."""
+    rng = np.random.default_rng(0)
+    for name in sorted(os.listdir(a.files)):
+        if not name.endswith(".json.gz"):
+            continue
+        with gzip.open(os.path.join(a.files, name)) as f:
+            d = json.load(f)
+        n_arm = ARM_JOINTS.get(d["robot"])
+        if d["control_mode"] != "pd_joint_pos" or n_arm is None:
+            print(f"{name}: skipped (perturbs pd_joint_pos files of {sorted(ARM_JOINTS)})",
+                  file=sys.stderr)
+            continue
+        replayed = perturbed = flips = 0
+        for e in d["episodes"]:
+            actions = np.asarray(e["actions"], dtype=np.float32)
+            noisy = actions.copy()
+            noisy[:, :n_arm] += rng.normal(0.0, a.perturb, noisy[:, :n_arm].shape)
+            _, base, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"], actions)
+            _, pert, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"], noisy)
+            replayed += base
+            perturbed += pert
+            flips += base != pert
+        print(json.dumps({"file": name, "sigma_rad": a.perturb, "episodes": len(d["episodes"]),
+                          "replayed_successes": replayed, "perturbed_successes": perturbed,
+                          "final_success_flips": flips}), flush=True)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--mjskill", default="target/release/mjskill")
@@ -318,9 +355,16 @@ def main():
     p.add_argument("--trim", metavar="DIR",
                    help="copy the first --keep episodes of the outcome files in DIR to --out")
     p.add_argument("--keep", type=int, default=10)
+    p.add_argument("--perturb", type=float, metavar="SIGMA",
+                   help="replay the pd_joint_pos files in --files with N(0, SIGMA) rad on the arm "
+                        "targets and count final-success flips (ManiSkill against itself)")
+    p.add_argument("--files", default="tests/data/outcomes", help="outcome files for --perturb")
     a = p.parse_args()
     if a.trim:
         trim(a)
+        return
+    if a.perturb is not None:
+        perturb(a)
         return
     last = max(a.solver_seed + a.episodes, a.episodes) - 1
     if last >= HELD_OUT_SEED:
