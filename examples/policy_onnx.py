@@ -4,6 +4,12 @@ and the metadata `mjskill eval --policy` reads (docs/training.md).
 Needs only numpy and the `onnx` package (no torch): examples/ppo.py passes its trained weights,
 examples/make_test_policy.py seeded random ones.
 
+As a script it hides observation entries from an existing policy file: the graph then acts as
+if those entries were 0, whatever they hold (examples/ppo.py trains that way from the start;
+docs/training.md):
+
+    python examples/policy_onnx.py hide IN.onnx OUT.onnx --obs 16,17
+
 The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
 clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
 last); output ``action`` (float32, [batch, act_dim]), the mean action.
@@ -123,3 +129,62 @@ def save_weights_json(path, layers, obs_mean, obs_std, obs_clip):
             },
             f,
         )
+
+
+def hide_obs(src, dst, indices, note):
+    """Writes ``src`` as ``dst`` with the observation entries ``indices`` hidden: their rows of
+    the first layer become zero and their contribution at observation 0 (after normalisation
+    and clipping) moves into the first bias, so the new graph gives, for any observation, the
+    action the old one gives with those entries set to 0. Records ``hidden_obs`` and the
+    ``note`` (appended to ``derived``) in the metadata. Returns the ModelProto."""
+    import onnx
+    from onnx import numpy_helper
+
+    model = onnx.load(str(src))
+    graph = model.graph
+    init = {t.name: t for t in graph.initializer}
+    names = {"obs_mean", "obs_std", "w0", "b0"}
+    if not names <= set(init):
+        raise ValueError(f"{src} is not an mjskill MLP policy file (needs {sorted(names)})")
+    get = lambda n: numpy_helper.to_array(init[n]).astype(np.float64)  # noqa: E731
+    mean, std, w0, b0 = get("obs_mean"), get("obs_std"), get("w0"), get("b0")
+    idx = sorted(set(int(i) for i in indices))
+    bad = [i for i in idx if not 0 <= i < mean.shape[0]]
+    if bad:
+        raise ValueError(f"observation indices {bad} out of range 0..{mean.shape[0] - 1}")
+    x0 = (0.0 - mean[idx]) / std[idx]
+    if "obs_clip_hi" in init:
+        x0 = np.clip(x0, get("obs_clip_lo"), get("obs_clip_hi"))
+    b0 = b0 + x0 @ w0[idx]
+    w0[idx] = 0.0
+    for name, value in (("w0", w0), ("b0", b0)):
+        init[name].CopyFrom(numpy_helper.from_array(value.astype(np.float32), name))
+    props = {p.key: p.value for p in model.metadata_props}
+    old = [int(i) for i in props.get("hidden_obs", "").split(",") if i]
+    props["hidden_obs"] = ",".join(str(i) for i in sorted(set(old + idx)))
+    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, props)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(dst))
+    return model
+
+
+def main(argv=None):
+    import argparse
+
+    p = argparse.ArgumentParser(description="Edits mjskill policy files.")
+    sub = p.add_subparsers(dest="command", required=True)
+    h = sub.add_parser("hide", help="hide observation entries (the graph reads them as 0)")
+    h.add_argument("src")
+    h.add_argument("dst")
+    h.add_argument("--obs", required=True, help="comma-separated flat observation indices")
+    h.add_argument("--note", default=None, help="text for the `derived` metadata")
+    a = p.parse_args(argv)
+    idx = [int(i) for i in a.obs.split(",")]
+    note = a.note or f"observation entries {a.obs} hidden by examples/policy_onnx.py hide"
+    hide_obs(a.src, a.dst, idx, note)
+
+
+if __name__ == "__main__":
+    main()

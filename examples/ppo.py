@@ -21,7 +21,12 @@ at every episode end. Differences, all for the native env or the ONNX file:
   contains (--no-obs-norm for ManiSkill's raw observations);
 * evaluation runs --num-eval-envs episodes on fixed seeds with the mean action; an episode
   ends at success (mjskill's env always resets at termination), so eval success is
-  ManiSkill's ``success_once``.
+  ManiSkill's ``success_once``;
+* the actor does not see the gripper joints' velocities (``--gripper-qvel observe`` to show
+  them): while a gripper pinches an object, PhysX reports a solver residual there (the Panda's
+  fingers: 0.02-0.4 m/s, standing still), where mjskill reports the fingers' motion (about
+  0), so a policy that reads them behaves differently in ManiSkill
+  (docs/outcome-physics.md). The exported graph has zero weights on those inputs.
 
 Logs ``log.csv`` in the run directory every iteration: iteration, env_steps, wall_time,
 sim_time (seconds in env.reset/step), learner_time (policy inference during rollouts, GAE and
@@ -118,6 +123,9 @@ def parse_args(argv=None):
     p.add_argument("--reward-scale", type=float, default=1.0)
     p.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256])
     p.add_argument("--no-obs-norm", action="store_true")
+    p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
+                   help="hide the gripper joints' velocities from the actor (default) or "
+                        "observe them (ManiSkill's script)")
     p.add_argument("--eval-freq", type=int, default=d["eval_freq"],
                    help="evaluate every N iterations (and at the first and last)")
     p.add_argument("--num-eval-envs", type=int, default=d["num_eval_envs"])
@@ -185,7 +193,16 @@ def main(argv=None):
         nn.init.constant_(lin.bias, 0.0)
         return nn.Sequential(*layers, lin)
 
-    actor = mlp(act_dim, 0.01 * np.sqrt(2))
+    # The actor's inputs: the normalised observation with the hidden entries zeroed.
+    hidden = list(envs.unwrapped.gripper_qvel_obs) if args.gripper_qvel == "hide" else []
+    actor_keep = torch.ones(obs_dim)
+    actor_keep[hidden] = 0.0
+
+    class Hide(nn.Module):
+        def forward(self, x):
+            return x * actor_keep
+
+    actor = nn.Sequential(Hide(), *mlp(act_dim, 0.01 * np.sqrt(2)))
     critic = mlp(1, 1.0)
     logstd = nn.Parameter(torch.full((1, act_dim), -0.5))
     params = list(actor.parameters()) + list(critic.parameters()) + [logstd]
@@ -203,6 +220,7 @@ def main(argv=None):
         for m in actor:
             if isinstance(m, nn.Linear):
                 layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()))
+        layers[0][0][hidden] = 0.0  # the actor multiplies these inputs by zero
         mean = np.zeros(obs_dim) if args.no_obs_norm else rms.mean
         std = np.ones(obs_dim) if args.no_obs_norm else rms.std()
         meta = {
@@ -215,6 +233,7 @@ def main(argv=None):
             "env_steps": str(global_step),
             "eval_success": "" if eval_success is None else f"{eval_success:.4f}",
             "mjskill_version": mjskill.__version__,
+            "hidden_obs": ",".join(str(i) for i in hidden),
         }
         path = os.path.join(out, f"{tag}.onnx")
         write_mlp_policy(path, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0)

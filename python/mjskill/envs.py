@@ -116,6 +116,15 @@ def _check_depth_dtype(depth_dtype: Any) -> None:
         )
 
 
+def _gripper_qvel_obs(spec: dict[str, Any]) -> tuple[int, ...]:
+    """Indices into the flat state observation of the gripper joints' ``agent/qvel`` entries
+    (empty when the observation has no ``agent/qvel``)."""
+    start = next((a for name, a, _ in spec["obs_layout"] if name == "agent/qvel"), None)
+    if start is None or spec["obs_mode"] not in ("state", "state_dict"):
+        return ()
+    return tuple(start + k for k in spec["gripper_joints"])
+
+
 class _Layout:
     """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
 
@@ -229,6 +238,9 @@ class MjskillEnv(gym.Env):
         self.segmentation_id_map = dict(spec["segmentation_id_map"])
         self._layout = _Layout(spec, depth_dtype)
         self.observation_space = self._layout.space
+        #: Flat-state indices of the gripper joints' velocities (``agent/qvel``), which PhysX
+        #: reports as a solver residual while a gripper pinches (docs/outcome-physics.md).
+        self.gripper_qvel_obs = _gripper_qvel_obs(spec)
         lo, hi = spec["action_low"], spec["action_high"]
         self.action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
 
@@ -417,6 +429,7 @@ class MjskillVectorEnv(VectorEnv):
         self.depth_dtype = depth_dtype
         self.segmentation_id_map = dict(spec["segmentation_id_map"])
         self._layout = _Layout(spec, depth_dtype)
+        self.gripper_qvel_obs = _gripper_qvel_obs(spec)
         lo, hi = spec["action_low"], spec["action_high"]
         self.single_observation_space = self._layout.space
         self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)

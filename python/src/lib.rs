@@ -214,6 +214,7 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
         layout.append((name.as_str(), r.start, r.end))?;
     }
     d.set_item("obs_layout", layout)?;
+    d.set_item("gripper_joints", env.gripper_joints())?;
     let cams = PyList::empty(py);
     if cfg.obs_mode.is_visual() && !cfg.obs_mode.is_point_cloud() {
         for name in env.sensor_names() {

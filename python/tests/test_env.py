@@ -172,3 +172,23 @@ def test_async_vector_env_of_gym_make_envs_matches_the_native_one():
     finally:
         asy.close()
         nat.close()
+
+
+@pytest.mark.parametrize(
+    "robot,expected",
+    [("panda", (16, 17)), ("so100", (11,)), ("xarm6_robotiq", tuple(range(18, 24)))],
+)
+def test_gripper_qvel_obs_are_the_gripper_joints_velocities(robot, expected):
+    env = gym.make(ENV, robot_uids=robot, obs_mode="state")
+    vec = gym.make_vec(ENV, robot_uids=robot, num_envs=2, vectorization_mode="vector_entry_point")
+    assert env.unwrapped.gripper_qvel_obs == expected == vec.unwrapped.gripper_qvel_obs
+    # A gripper action (the last entry) from rest moves them.
+    moved = 0.0
+    for sign in (-1.0, 1.0):
+        env.reset(seed=0)
+        act = np.zeros(env.action_space.shape, np.float32)
+        act[-1] = sign
+        obs, *_ = env.step(act)
+        moved = max(moved, np.abs(obs[list(expected)]).max())
+    assert moved > 1e-3
+    assert gym.make(ENV, obs_mode="rgb").unwrapped.gripper_qvel_obs == ()

@@ -299,6 +299,37 @@ impl Env {
         self.sim.robot.joints.qpos(&self.sim.data, &mut q);
         q
     }
+    /// Indices (ManiSkill qpos/qvel order) of the gripper's joints: every joint below the link
+    /// that carries the robot's gripper joints (the fingers, and the mimic carriage or the
+    /// linkage they move). While a gripper pinches an object, PhysX reports a solver residual
+    /// as their velocity, not their motion (docs/outcome-physics.md); `examples/ppo.py` hides
+    /// these entries of `agent/qvel` from the policies it trains.
+    pub fn gripper_joints(&self) -> Vec<usize> {
+        let model = self.model();
+        let (parent, dof_body) = (model.body_parentid(), model.dof_bodyid());
+        let joints = &self.sim.robot.joints;
+        let carriers: Vec<usize> = (0..joints.names.len())
+            .filter(|&k| {
+                self.sim
+                    .spec
+                    .gripper_joints
+                    .contains(&joints.names[k].as_str())
+            })
+            .map(|k| parent[dof_body[joints.dof_adr[k]] as usize] as usize)
+            .collect();
+        let below = |mut b: usize| {
+            while b != 0 {
+                b = parent[b] as usize;
+                if carriers.contains(&b) {
+                    return true;
+                }
+            }
+            false
+        };
+        (0..joints.names.len())
+            .filter(|&k| below(dof_body[joints.dof_adr[k]] as usize))
+            .collect()
+    }
     /// Resolved robot ids.
     pub(crate) fn robot(&self) -> &RobotIds {
         &self.sim.robot
