@@ -4,6 +4,7 @@ wall time, one PNG per log (or one for several logs, overlaid, with --out).
     pip install matplotlib
     python examples/plot_training.py runs/PickCube-v1__panda__pd_joint_delta_pos__1/log.csv
     python examples/plot_training.py runs/*/log.csv --out curves.png
+    python examples/plot_training.py a/log.csv b/log.csv --labels joint ee --out both.png
 
 Each figure has four panels: success rate (train: episodes that ended in the iteration; eval:
 fixed seeds, mean action) and mean episode return (train and eval), each against env steps
@@ -36,7 +37,7 @@ def label_of(path):
     return os.path.basename(os.path.dirname(os.path.abspath(path))) or path
 
 
-def plot(paths, out):
+def plot(paths, out, labels=None):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -44,10 +45,10 @@ def plot(paths, out):
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 8))
     notes = []
-    for path in paths:
+    for k, path in enumerate(paths):
         c = read_log(path)
         c["wall_min"] = [None if w is None else w / 60.0 for w in c["wall_time"]]
-        name = label_of(path)
+        name = labels[k] if labels else label_of(path)
         for row, (metric, what) in enumerate((("success", "success rate"),
                                               ("return", "mean return"))):
             for col, (x, xlabel) in enumerate((("env_steps", "env steps"),
@@ -79,9 +80,12 @@ def main():
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="+", help="log.csv files of examples/ppo.py")
     p.add_argument("--out", help="one PNG for all logs (default: curves.png next to each log)")
+    p.add_argument("--labels", nargs="+", help="legend names of the logs (default: run directories)")
     a = p.parse_args()
+    if a.labels and len(a.labels) != len(a.logs):
+        p.error(f"--labels has {len(a.labels)} names for {len(a.logs)} logs")
     if a.out:
-        plot(a.logs, a.out)
+        plot(a.logs, a.out, a.labels)
     else:
         for path in a.logs:
             plot([path], os.path.join(os.path.dirname(os.path.abspath(path)), "curves.png"))

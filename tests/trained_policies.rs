@@ -8,11 +8,27 @@ use std::process::Command;
 
 use mjskill::solvers::PolicyFile;
 
-/// (file, env id, success rate of `mjskill eval --policy FILE --episodes 100 --seed 10000`
-/// measured when the file was shipped).
-const SHIPPED: &[(&str, &str, f64)] = &[
-    ("PickCube-v1__panda.onnx", "PickCube-v1", 0.95),
-    ("PlaceSphere-v1__panda.onnx", "PlaceSphere-v1", 0.93),
+/// (file, env id, control mode, success rate of `mjskill eval --policy FILE --episodes 100
+/// --seed 10000` measured when the file was shipped).
+const SHIPPED: &[(&str, &str, &str, f64)] = &[
+    (
+        "PickCube-v1__panda.onnx",
+        "PickCube-v1",
+        "pd_joint_delta_pos",
+        0.95,
+    ),
+    (
+        "PlaceSphere-v1__panda.onnx",
+        "PlaceSphere-v1",
+        "pd_joint_delta_pos",
+        0.93,
+    ),
+    (
+        "PokeCube-v1__panda.onnx",
+        "PokeCube-v1",
+        "pd_ee_delta_pose",
+        0.92,
+    ),
 ];
 
 /// Episodes the test runs (seeds 10000..10040, the first of the 100 measured).
@@ -36,12 +52,12 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
     let mut listed: Vec<String> = SHIPPED.iter().map(|s| s.0.to_string()).collect();
     listed.sort();
     assert_eq!(files, listed);
-    for &(file, env_id, _) in SHIPPED {
+    for &(file, env_id, mode, _) in SHIPPED {
         let p = PolicyFile::load(dir().join(file)).unwrap();
         let m = p.meta();
         assert_eq!(m.env_id, env_id, "{file}");
         assert_eq!(m.robot_uids, "panda", "{file}");
-        assert_eq!(m.control_mode, "pd_joint_delta_pos", "{file}");
+        assert_eq!(m.control_mode, mode, "{file}");
         assert_eq!(m.obs_mode, "state", "{file}");
         assert!(
             m.training_command
@@ -58,7 +74,7 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
 
 #[test]
 fn shipped_policies_solve_their_tasks_in_mjskill() {
-    for &(file, env_id, rate) in SHIPPED {
+    for &(file, env_id, _, rate) in SHIPPED {
         let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
             .args([
                 "eval",

@@ -94,6 +94,108 @@ fn autoreset_happens_on_the_step_after_truncation() {
 }
 
 #[test]
+fn without_autoreset_ended_envs_keep_stepping_as_single_envs_do() {
+    let mut v = VecEnv::new("PickCube-v1", short(), 2, 2).unwrap();
+    assert!(v.autoreset_enabled());
+    v.set_autoreset(false);
+    assert!(!v.autoreset_enabled());
+    v.reset(Some(7));
+    let mut single = make("PickCube-v1", short()).unwrap();
+    single.reset(Some(8)); // mirrors env 1
+                           // Past the 6-step limit: truncated stays set, nothing resets, the actions are applied.
+    for k in 0..9 {
+        let a = actions(2, 8, k);
+        v.step(&a).unwrap();
+        let s = single.step(&a[8..]).unwrap();
+        assert_eq!(v.truncated()[1], k >= 5, "step {k}");
+        assert!(!v.autoreset()[0] && !v.autoreset()[1], "step {k}");
+        assert_eq!(v.obs_of(1).unwrap(), s.obs, "step {k}");
+        assert_eq!(v.rewards()[1], s.reward, "step {k}");
+    }
+    // Turned back on, the ended envs reset on the next step as usual.
+    v.set_autoreset(true);
+    v.step(&actions(2, 8, 20)).unwrap();
+    v.step(&actions(2, 8, 21)).unwrap();
+    assert!(v.autoreset()[0] && v.autoreset()[1]);
+    single.reset(None);
+    assert_eq!(v.obs_of(1).unwrap(), single.obs());
+}
+
+#[test]
+fn reset_envs_resets_the_masked_envs_and_leaves_the_others_untouched() {
+    let mut v = VecEnv::new("PickCube-v1", short(), 3, 2).unwrap();
+    let mut twin = VecEnv::new("PickCube-v1", short(), 3, 1).unwrap();
+    v.set_autoreset(false);
+    twin.set_autoreset(false);
+    v.reset(Some(30));
+    twin.reset(Some(30));
+    for k in 0..3 {
+        v.step(&actions(3, 8, k)).unwrap();
+        twin.step(&actions(3, 8, k)).unwrap();
+    }
+    let info_len = v.info().len() / 3;
+    // Env 1 restarts with seed 500 + 1, as a full reset(Some(500)) would seed it.
+    v.reset_envs(&[false, true, false], Some(500)).unwrap();
+    let mut single = make("PickCube-v1", short()).unwrap();
+    single.reset(Some(501));
+    assert_eq!(v.obs_of(1).unwrap(), single.obs());
+    assert_eq!(v.rewards()[1], 0.0);
+    assert!(!v.truncated()[1] && !v.terminated()[1]);
+    for i in [0, 2] {
+        assert_eq!(v.obs_of(i).unwrap(), twin.obs_of(i).unwrap(), "env {i}");
+        assert_eq!(v.rewards()[i], twin.rewards()[i], "env {i}");
+        assert_eq!(
+            &v.info()[i * info_len..(i + 1) * info_len],
+            &twin.info()[i * info_len..(i + 1) * info_len],
+            "env {i}"
+        );
+    }
+    // The untouched envs go on with their episodes; the reset one with its new episode.
+    for k in 3..5 {
+        let a = actions(3, 8, k);
+        v.step(&a).unwrap();
+        twin.step(&a).unwrap();
+        let s = single.step(&a[8..16]).unwrap();
+        assert_eq!(v.obs_of(1).unwrap(), s.obs, "step {k}");
+        for i in [0, 2] {
+            assert_eq!(
+                v.obs_of(i).unwrap(),
+                twin.obs_of(i).unwrap(),
+                "env {i} step {k}"
+            );
+        }
+    }
+    // An unseeded partial reset continues env 0's own random streams, like a single env's.
+    let mut single0 = make("PickCube-v1", short()).unwrap();
+    single0.reset(Some(30));
+    single0.reset(None);
+    v.reset_envs(&[true, false, false], None).unwrap();
+    assert_eq!(v.obs_of(0).unwrap(), single0.obs());
+}
+
+#[test]
+fn reset_envs_rejects_a_bad_mask_or_seed_and_resets_nothing() {
+    let mut v = VecEnv::new("PickCube-v1", short(), 2, 1).unwrap();
+    v.reset(Some(3));
+    v.step(&actions(2, 8, 0)).unwrap();
+    let before = v.obs().to_vec();
+    let e = v.reset_envs(&[true], None).unwrap_err().to_string();
+    assert!(e.contains("1 values") && e.contains("(2)"), "{e}");
+    let e = v
+        .reset_envs(&[false, true], Some(u32::MAX as u64))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("4294967296"), "{e}");
+    assert_eq!(v.obs(), before.as_slice());
+    // The last env's seed must fit: s + 1 for env 1, s alone when only env 0 resets.
+    assert!(v.reset_envs(&[true, false], Some(u32::MAX as u64)).is_ok());
+    // An empty mask resets nothing.
+    let now = v.obs().to_vec();
+    v.reset_envs(&[false, false], Some(9)).unwrap();
+    assert_eq!(v.obs(), now.as_slice());
+}
+
+#[test]
 fn bad_actions_are_errors_and_the_vec_env_stays_usable() {
     let mut v = VecEnv::new("PickCube-v1", EnvConfig::default(), 2, 2).unwrap();
     let e = v.step(&[0.0; 15]).unwrap_err().to_string();

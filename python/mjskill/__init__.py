@@ -1,7 +1,9 @@
 """mjskill: ManiSkill3's tabletop tasks on MuJoCo 2.2 as gymnasium envs.
 
 ``import mjskill`` registers every env as ``mjskill/<EnvId>`` (e.g. ``mjskill/PickCube-v1``)
-with gymnasium: ``gym.make`` gives a :class:`MjskillEnv`, ``gym.make_vec(...,
+with gymnasium: ``gym.make`` gives a :class:`MjskillEnv` (with ``num_envs=N > 1``
+ManiSkill's batched env, :class:`MjskillBatchedEnv`, which :class:`ManiSkillVectorEnv`
+wraps), ``gym.make_vec(...,
 vectorization_mode="vector_entry_point", num_envs=N, num_threads=T)`` the native
 :class:`MjskillVectorEnv`. :mod:`mjskill.ray` (extra ``mjskill[ray]``) shards rollouts by
 seed range across Ray workers.
@@ -12,9 +14,18 @@ from __future__ import annotations
 import gymnasium as gym
 
 from . import _native
+from .batched import ManiSkillVectorEnv, MjskillBatchedEnv
 from .envs import MjskillEnv, MjskillVectorEnv, make_env, make_vector_env
 
-__all__ = ["MjskillEnv", "MjskillVectorEnv", "make_env", "make_vector_env", "registered"]
+__all__ = [
+    "ManiSkillVectorEnv",
+    "MjskillBatchedEnv",
+    "MjskillEnv",
+    "MjskillVectorEnv",
+    "make_env",
+    "make_vector_env",
+    "registered",
+]
 __version__ = _native.__version__
 
 
@@ -39,6 +50,10 @@ def _register() -> None:
             # of s alone. gymnasium's flag for that is `nondeterministic`.
             nondeterministic=True,
             kwargs={"env_id": env_id},
+            # gym.make(..., num_envs=N > 1) gives the batched env, whose array rewards and
+            # flags gymnasium's PassiveEnvChecker would warn about (ManiSkill registers its
+            # envs the same way); make_env puts the checker around a single env itself.
+            disable_env_checker=True,
         )
 
 

@@ -467,28 +467,37 @@ class MjskillVectorEnv(VectorEnv):
         """Envs that reset during the last step (their action was ignored)."""
         return self._native.autoreset()
 
-def make_env(num_envs: int = 1, **kwargs) -> MjskillEnv:
-    """``gym.make`` entry point: the env's own episode limit is lifted, because gymnasium's
-    ``TimeLimit`` (``max_episode_steps``, default 50) truncates, as in ManiSkill.
+def make_env(num_envs: int = 1, **kwargs):
+    """``gym.make`` entry point.
 
-    ``num_envs`` (ManiSkill's ``gym.make(..., num_envs=N)``): 1 is one env; more is an error
-    naming ``gym.make_vec``, because gymnasium 1.x's ``make`` only returns a
-    ``gymnasium.Env`` (it checks the type, then wraps it in ``TimeLimit``, whose scalar
-    truncation would end every env at once), so the native vector env cannot come from it.
+    ``num_envs=1`` (the default): one :class:`MjskillEnv` in gymnasium's
+    ``PassiveEnvChecker`` (the ids are registered with the checker off, for the batched env);
+    its own episode limit is lifted, because gymnasium's ``TimeLimit`` (``max_episode_steps``,
+    default 50) truncates, as in ManiSkill. ``num_envs > 1`` (ManiSkill's ``gym.make(...,
+    num_envs=N)``): the batched :class:`mjskill.batched.MjskillBatchedEnv`, which truncates
+    each env itself (it disarms gymnasium's ``TimeLimit``). ManiSkill's ``sim_backend`` and
+    ``reconfiguration_freq`` keywords are accepted and checked (mjskill simulates with MuJoCo
+    on the CPU; its scenes have nothing to reconfigure).
     """
+    from .batched import MjskillBatchedEnv, check_reconfiguration_freq, check_sim_backend
+
     if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
         raise TypeError(f"num_envs must be an int, not {type(num_envs).__name__} ({num_envs!r})")
-    if num_envs != 1:
+    if num_envs < 1:
+        raise ValueError(f"num_envs {num_envs} is out of range: 1..={_native.MAX_NUM_ENVS}")
+    if num_envs > 1:
+        return MjskillBatchedEnv(num_envs=int(num_envs), **kwargs)
+    check_sim_backend(kwargs.pop("sim_backend", "auto"))
+    check_reconfiguration_freq(kwargs.pop("reconfiguration_freq", None))
+    batched_only = sorted({"num_threads", "array_backend"} & set(kwargs))
+    if batched_only:
         env_id = kwargs.get("env_id", "PickCube-v1")
         raise ValueError(
-            f"gym.make('mjskill/{env_id}', num_envs={num_envs}): gymnasium's make returns one "
-            "gymnasium.Env (it checks the type and wraps it in TimeLimit), so it cannot return "
-            f"a vector env; use gym.make_vec('mjskill/{env_id}', num_envs={num_envs}, ...) with "
-            "the same keywords: it returns the native MjskillVectorEnv (the ids' vector entry "
-            "point), as ManiSkillVectorEnv wraps ManiSkill's batched env"
+            f"{', '.join(batched_only)} apply to the batched env (num_envs > 1); "
+            f"gym.make('mjskill/{env_id}', num_envs=1) is one MjskillEnv (numpy values)"
         )
     kwargs.setdefault("max_episode_steps", _UNLIMITED)
-    return MjskillEnv(**kwargs)
+    return gym.wrappers.PassiveEnvChecker(MjskillEnv(**kwargs))
 
 
 def make_vector_env(**kwargs) -> MjskillVectorEnv:

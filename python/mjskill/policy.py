@@ -27,11 +27,13 @@ _STATE_MODES = ("state", "state_dict")
 
 
 def _space_of(env: Any) -> tuple[gym.spaces.Box, gym.spaces.Space, Any]:
-    """(single action space, single observation space, the unwrapped env) of an env or a
-    vector env."""
+    """(single action space, single observation space, the unwrapped env) of an env, a vector
+    env or a batched env (``gym.make(..., num_envs=N)``, whose wrappers do not forward
+    ``single_action_space``)."""
     base = getattr(env, "unwrapped", env)
-    if hasattr(env, "single_action_space"):
-        return env.single_action_space, env.single_observation_space, base
+    for e in (env, base):
+        if hasattr(e, "single_action_space"):
+            return e.single_action_space, e.single_observation_space, base
     return env.action_space, env.observation_space, base
 
 

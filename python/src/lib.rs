@@ -564,7 +564,7 @@ impl PyVecEnv {
     #[new]
     #[pyo3(signature = (env_id, num_envs, num_threads=None, robot_uids=None, obs_mode="state",
         control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-        robot_init_qpos_noise=0.02, sim_freq=None))]
+        robot_init_qpos_noise=0.02, sim_freq=None, autoreset=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -578,6 +578,7 @@ impl PyVecEnv {
         max_episode_steps: Option<&Bound<'_, PyAny>>,
         robot_init_qpos_noise: f64,
         sim_freq: Option<&Bound<'_, PyAny>>,
+        autoreset: bool,
     ) -> PyResult<Self> {
         let num_envs = count_arg(
             num_envs,
@@ -603,9 +604,10 @@ impl PyVecEnv {
             robot_init_qpos_noise,
             sim_freq,
         )?;
-        let vec = py
+        let mut vec = py
             .detach(|| VecEnv::new(env_id, cfg, num_envs, num_threads))
             .map_err(value_err)?;
+        vec.set_autoreset(autoreset);
         let keys = vec.info_keys().iter().map(|k| (*k, is_flag(k))).collect();
         let masks = PyArray1::from_vec(py, vec![true; num_envs]);
         let kwargs = PyDict::new(py);
@@ -647,6 +649,31 @@ impl PyVecEnv {
         py.detach(|| st.vec.try_reset(seed).map(|_| ()))
             .map_err(value_err)?;
         Ok((self.obs(py, &st.vec)?, self.info(py, &st.vec)?))
+    }
+
+    /// Resets the envs where `mask` (`[N]` bool) is set (env i with `seed + i`, or
+    /// unseeded); the others keep their state: `(obs [N × D], info)` of every env.
+    #[pyo3(signature = (mask, seed=None))]
+    fn reset_envs<'py>(
+        &self,
+        py: Python<'py>,
+        mask: PyReadonlyArray1<'py, bool>,
+        seed: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let seed = seed_arg(seed, "seed")?;
+        let mask: Vec<bool> = mask.as_array().iter().copied().collect();
+        let mut g = self.lock(py)?;
+        let st = &mut *g;
+        py.detach(|| st.vec.reset_envs(&mask, seed).map(|_| ()))
+            .map_err(value_err)?;
+        Ok((self.obs(py, &st.vec)?, self.info(py, &st.vec)?))
+    }
+
+    /// Whether an env whose episode ended resets on the next step (gymnasium's next-step
+    /// autoreset; off for ManiSkill-style batched envs, which `reset_envs` resets).
+    #[getter]
+    fn get_autoreset_enabled(&self, py: Python<'_>) -> PyResult<bool> {
+        Ok(self.lock(py)?.vec.autoreset_enabled())
     }
 
     /// Steps every env with its row of `actions` (`[N × A]` float32):

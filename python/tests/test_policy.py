@@ -1,5 +1,4 @@
-"""Policy files in Python (mjskill.policy.OnnxPolicy, onnxruntime) and ManiSkill's
-``gym.make(..., num_envs=N)``.
+"""Policy files in Python (mjskill.policy.OnnxPolicy, onnxruntime).
 
 The policy tests need ``onnx`` (to make the file, examples/make_test_policy.py) and
 ``onnxruntime``; without them they are skipped, except in CI (``CI`` set), where .ci/setup
@@ -148,15 +147,15 @@ def test_onnx_policy_runs_a_vector_env(tmp_path, dims):
     v.step(a)
 
 
-def test_gym_make_num_envs_names_make_vec():
-    # One env is one env, as gym.make gives it.
-    env = gym.make(ENV, num_envs=1)
-    assert isinstance(env.unwrapped, mjskill.MjskillEnv)
-    with pytest.raises(ValueError, match=r"gym.make_vec\('mjskill/PickCube-v1', num_envs=4"):
-        gym.make(ENV, num_envs=4)
-    with pytest.raises(TypeError, match="num_envs must be an int"):
-        gym.make(ENV, num_envs="4")
-    # What the error points to: the native vector env with the same keywords.
-    v = gym.make_vec(ENV, num_envs=4, robot_uids="panda", control_mode="pd_ee_delta_pos")
-    assert isinstance(v, mjskill.MjskillVectorEnv) and v.num_envs == 4
-    assert v.action_space.shape == (4, 4)
+def test_onnx_policy_runs_the_batched_env(tmp_path, dims):
+    # gym.make(..., num_envs=N), ManiSkill's batched env (python/tests/test_batched.py).
+    _need("onnxruntime")
+    from mjskill.policy import OnnxPolicy
+
+    policy = OnnxPolicy(make_policy(tmp_path, "batched.onnx", *dims))
+    env = policy.make_env(num_envs=3, array_backend="numpy")
+    OnnxPolicy(policy.path, env=env)  # the wrapped batched env is checked per env
+    obs, _ = env.reset(seed=0)
+    a = policy(obs)
+    assert a.shape == (3, dims[1])
+    env.step(a)

@@ -131,6 +131,14 @@ pub enum EnvError {
         /// Action dimension of each env.
         act_dim: usize,
     },
+    /// [`VecEnv::reset_envs`](super::VecEnv::reset_envs) mask of the wrong length.
+    #[error("VecEnv reset mask has {got} values, expected one per env ({num_envs})")]
+    VecMaskLength {
+        /// Given length.
+        got: usize,
+        /// Envs.
+        num_envs: usize,
+    },
     /// Rendering is unavailable or failed (the message names what to install).
     #[error(transparent)]
     Render(#[from] RenderError),

@@ -15,6 +15,13 @@
 //! [`VecEnv::autoreset`] marks those envs. So the final observation of an episode is simply
 //! the observation returned with its terminated/truncated flag.
 //!
+//! **Manual resets (ManiSkill's batched env).** With [`VecEnv::set_autoreset`]`(false)` no env
+//! resets by itself: an env whose episode ended keeps stepping, as a single [`Env`] (and
+//! ManiSkill's batched env) does — `elapsed_steps` keeps counting and `truncated` stays true —
+//! until the caller resets it. [`VecEnv::reset_envs`] resets a chosen subset (ManiSkill's
+//! `reset(options={"env_idx": ...})`) and leaves every other env's state and buffers as they
+//! were.
+//!
 //! **Camera images.** In the visual obs modes (`rgb`, `depth`, `segmentation`, their `+`
 //! combinations, `rgbd`, `pointcloud`) every env renders its
 //! sensor cameras (the task's sensor camera, then the robot's mounted ones, e.g. Fetch's
@@ -59,6 +66,8 @@ pub const MAX_NUM_ENVS: usize = 16_384;
 const CMD_STEP: u64 = 0;
 const CMD_RESET: u64 = 1;
 const CMD_QUIT: u64 = 2;
+/// Reset the envs whose `reset_mask` cell is set; the others are untouched.
+const CMD_RESET_SOME: u64 = 4;
 /// Test-only: workers other than the caller's panic.
 #[cfg(test)]
 const CMD_TEST_PANIC: u64 = 3;
@@ -195,6 +204,10 @@ struct Shared {
     has_seed: AtomicBool,
     /// Workers that finished the current command.
     done: AtomicUsize,
+    /// Whether an ended env resets on the next step ([`VecEnv::set_autoreset`]).
+    autoreset_on: AtomicBool,
+    /// The envs a `CMD_RESET_SOME` resets.
+    reset_mask: Vec<AtomicBool>,
     actions: Vec<AtomicU32>,
     obs: Vec<AtomicU32>,
     rewards: Vec<AtomicU32>,
@@ -275,7 +288,12 @@ impl Worker {
         }
         for i in 0..self.envs.len() {
             let g = self.first + i;
-            if command == CMD_RESET {
+            let reset_this = command == CMD_RESET
+                || (command == CMD_RESET_SOME && sh.reset_mask[g].load(Ordering::Relaxed));
+            if command == CMD_RESET_SOME && !reset_this {
+                continue;
+            }
+            if reset_this {
                 let seed = sh
                     .has_seed
                     .load(Ordering::Relaxed)
@@ -286,7 +304,7 @@ impl Worker {
                 self.write(sh, i, &self.envs[i], 0.0, false, false);
                 continue;
             }
-            if self.needs_reset[i] {
+            if self.needs_reset[i] && sh.autoreset_on.load(Ordering::Relaxed) {
                 self.envs[i].reset(None);
                 self.needs_reset[i] = false;
                 sh.autoreset[g].store(true, Ordering::Relaxed);
@@ -306,7 +324,7 @@ impl Worker {
                 Ok(s) => (s.reward, s.terminated, s.truncated),
                 Err(_) => (f32::NAN, false, true),
             };
-            self.needs_reset[i] = term || trunc;
+            self.needs_reset[i] = (term || trunc) && sh.autoreset_on.load(Ordering::Relaxed);
             self.write(sh, i, &self.envs[i], reward, term, trunc);
         }
     }
@@ -389,6 +407,8 @@ impl VecEnv {
             seed: AtomicU64::new(0),
             has_seed: AtomicBool::new(false),
             done: AtomicUsize::new(0),
+            autoreset_on: AtomicBool::new(true),
+            reset_mask: flags(num_envs),
             actions: cells32(num_envs * act_dim),
             obs: cells32(num_envs * obs_dim),
             rewards: cells32(num_envs),
@@ -597,8 +617,51 @@ impl VecEnv {
         &self.obs
     }
 
-    /// Steps every env with its row of `actions` (`[N × action_dim]`, row-major); envs whose
-    /// episode ended on the previous step reset instead (see the module documentation).
+    /// Resets the envs `i` with `mask[i]` (env i with seed `s + i`, as [`VecEnv::reset`] seeds
+    /// it, or unseeded) and returns every env's observations; the other envs keep their state,
+    /// observations, rewards, flags and info. A mask of the wrong length is
+    /// [`EnvError::VecMaskLength`] and seeds that leave the 32-bit range are
+    /// [`EnvError::BadSeed`], with nothing reset.
+    pub fn reset_envs(&mut self, mask: &[bool], seed: Option<u64>) -> Result<&[f32], EnvError> {
+        if mask.len() != self.num_envs {
+            return Err(EnvError::VecMaskLength {
+                got: mask.len(),
+                num_envs: self.num_envs,
+            });
+        }
+        if let (Some(s), Some(last)) = (seed, mask.iter().rposition(|&m| m)) {
+            let top = s as u128 + last as u128;
+            if top > super::checks::MAX_SEED as u128 {
+                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+            }
+        }
+        for (cell, &m) in self.shared.reset_mask.iter().zip(mask) {
+            cell.store(m, Ordering::Relaxed);
+        }
+        self.shared
+            .has_seed
+            .store(seed.is_some(), Ordering::Relaxed);
+        self.shared.seed.store(seed.unwrap_or(0), Ordering::Relaxed);
+        self.dispatch(CMD_RESET_SOME);
+        Ok(&self.obs)
+    }
+
+    /// Turns the next-step autoreset on (the default, gymnasium's mode) or off (ManiSkill's
+    /// batched env: ended envs keep stepping until [`VecEnv::reset_envs`] or
+    /// [`VecEnv::reset`] resets them). Turning it off drops resets still pending from the
+    /// last step.
+    pub fn set_autoreset(&mut self, on: bool) {
+        self.shared.autoreset_on.store(on, Ordering::Relaxed);
+    }
+
+    /// Whether ended envs reset on the next step ([`VecEnv::set_autoreset`]).
+    pub fn autoreset_enabled(&self) -> bool {
+        self.shared.autoreset_on.load(Ordering::Relaxed)
+    }
+
+    /// Steps every env with its row of `actions` (`[N × action_dim]`, row-major); with
+    /// autoreset on (the default), envs whose episode ended on the previous step reset instead
+    /// (see the module documentation).
     pub fn step(&mut self, actions: &[f32]) -> Result<(), EnvError> {
         if actions.len() != self.num_envs * self.act_dim {
             return Err(EnvError::VecActionLength {

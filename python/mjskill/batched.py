@@ -1,0 +1,446 @@
+"""``gym.make("mjskill/<EnvId>", num_envs=N)``: N envs as one batched ``gymnasium.Env``, with
+ManiSkill's conventions, so that a ManiSkill training script ports by changing the env id.
+
+ManiSkill's ``gym.make(env_id, num_envs=N)`` returns its batched ``BaseEnv``: observations,
+rewards and flags carry a leading ``[N]`` dimension (torch tensors), an env whose episode
+ended keeps stepping until the caller resets it (``reset(options={"env_idx": idx})`` resets
+a subset), truncation is per env (``elapsed_steps >= max_episode_steps``), and
+``ManiSkillVectorEnv`` wraps it to add autoreset. :class:`MjskillBatchedEnv` is that, over
+the native vector env with its next-step autoreset switched off.
+
+gymnasium's ``make`` wraps every env in ``TimeLimit``, whose scalar ``truncated = True`` would
+end all N episodes at once. ManiSkill registers an extra wrapper that removes it, but a
+registration with additional wrappers makes ``gym.make_vec`` refuse the ids' vector entry
+point (the native vector env), so mjskill disarms it instead: on every ``reset`` the batched
+env looks for the ``TimeLimit`` wrappers around it on the call stack, takes their
+``max_episode_steps`` (``gym.make``'s, default the registered 50) as its own per-env limit
+and sets their step counter so far back that they never fire. gymnasium's
+``PassiveEnvChecker`` (which expects scalar rewards and flags) is not applied to the batched
+env (the ids are registered with the checker off and the single env adds it itself).
+``num_envs=1`` stays the single :class:`~mjskill.MjskillEnv`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import weakref
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector.utils import batch_space
+
+from . import _native
+from .envs import _Layout, _as_actions, _check_depth_dtype, _check_seed
+
+ARRAY_BACKENDS = ["torch", "numpy"]
+"""What the batched env returns: torch tensors on the CPU (ManiSkill's convention, the
+default) or numpy arrays."""
+
+SIM_BACKENDS = ["auto", "cpu", "gpu", "physx_cpu", "physx_cuda", "cuda"]
+"""ManiSkill's ``sim_backend`` values, accepted so that ManiSkill scripts run unchanged; mjskill
+simulates with MuJoCo on CPU threads whichever is given."""
+
+RESET_OPTIONS = ["env_idx", "reconfigure"]
+"""ManiSkill's ``reset`` options the batched env takes."""
+
+UNLIMITED = 2**32 - 1
+"""Episode length without a time limit."""
+
+_MAX_WRAPPER_DEPTH = 32
+"""How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
+"""ManiSkill's ``reset`` options the batched env takes."""
+
+
+def check_sim_backend(sim_backend: Any) -> None:
+    if sim_backend not in SIM_BACKENDS:
+        raise ValueError(
+            f"unknown sim_backend {sim_backend!r}; valid: {', '.join(SIM_BACKENDS)} (ManiSkill's "
+            "names; mjskill always simulates with MuJoCo on CPU threads)"
+        )
+
+
+def check_reconfiguration_freq(freq: Any) -> int:
+    """ManiSkill's ``reconfiguration_freq`` (None = 0). mjskill's scenes have fixed assets, so
+    there is nothing to reconfigure; the value is kept as ``env.reconfiguration_freq``."""
+    if freq is None:
+        return 0
+    if isinstance(freq, bool) or not isinstance(freq, (int, np.integer)) or freq < 0:
+        raise ValueError(
+            f"reconfiguration_freq must be None or an int >= 0, got {freq!r} (mjskill's scenes "
+            "have fixed assets: nothing is reconfigured)"
+        )
+    return int(freq)
+
+
+class MjskillBatchedEnv(gym.Env):
+    """N mjskill envs as one batched ``gymnasium.Env`` with ManiSkill's conventions.
+
+    ``gym.make("mjskill/PickCube-v1", num_envs=N, ...)`` builds one (same keywords as the
+    single env, plus ``num_threads``, default all cores, and ``array_backend``). Values have a
+    leading ``[N]`` dimension: observations ``[N, D]`` float32 (visual modes: ``Dict`` of
+    ``[N, ...]``), rewards ``[N]`` float32, ``terminated`` (success) and ``truncated``
+    (``elapsed_steps >= max_episode_steps``) ``[N]`` bool, ``info[key]`` ``[N]`` plus
+    ``info["elapsed_steps"]``. They are torch tensors on the CPU (``array_backend="torch"``, as
+    ManiSkill; needs torch) or numpy arrays (``array_backend="numpy"``). Actions may be either.
+
+    As ManiSkill's batched env, it does not reset by itself: an env whose episode ended keeps
+    stepping (``elapsed_steps`` counts on, ``truncated`` stays true) until
+    ``reset(options={"env_idx": idx})`` resets it — which is what ManiSkill's
+    ``ManiSkillVectorEnv`` (and :class:`mjskill.ManiSkillVectorEnv`) do on every end.
+    ``reset(seed=s)`` seeds env i with ``s + i`` (a partial reset seeds the envs it resets
+    the same way), so env i's episode is the single env's with seed ``s + i``.
+    """
+
+    def __init__(
+        self,
+        env_id: str = "PickCube-v1",
+        num_envs: int = 2,
+        num_threads: int | None = None,
+        robot_uids: str | None = None,
+        obs_mode: str = "state",
+        control_mode: str | None = None,
+        reward_mode: str = "normalized_dense",
+        render_mode: str | None = None,
+        max_episode_steps: int | None = None,
+        robot_init_qpos_noise: float = 0.02,
+        sim_freq: int = 100,
+        depth_dtype: str = "float32",
+        array_backend: str = "torch",
+        sim_backend: str = "auto",
+        reconfiguration_freq: int | None = None,
+    ):
+        _check_depth_dtype(depth_dtype)
+        check_sim_backend(sim_backend)
+        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq)
+        if array_backend not in ARRAY_BACKENDS:
+            raise ValueError(
+                f"unknown array_backend {array_backend!r}; valid: {', '.join(ARRAY_BACKENDS)}"
+            )
+        if render_mode is not None and render_mode != "rgb_array":
+            raise ValueError(
+                f"unknown render_mode {render_mode!r}; valid render modes: rgb_array (or None)"
+            )
+        for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
+            if not 1 <= v <= _native.MAX_NUM_ENVS:
+                raise ValueError(f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS}")
+        self._torch = None
+        if array_backend == "torch":
+            try:
+                import torch
+            except ImportError as e:
+                raise ImportError(
+                    f"gym.make('mjskill/{env_id}', num_envs={num_envs}) returns torch tensors, as "
+                    "ManiSkill's batched env does, and needs torch (pip install torch); pass "
+                    "array_backend='numpy' for numpy arrays, or use gym.make_vec for gymnasium's "
+                    "VectorEnv"
+                ) from e
+            self._torch = torch
+            self.device = torch.device("cpu")
+        else:
+            self.device = None
+        self.array_backend = array_backend
+        self.sim_backend = sim_backend
+        self._kwargs = dict(
+            env_id=env_id,
+            robot_uids=robot_uids,
+            obs_mode=obs_mode,
+            control_mode=control_mode,
+            reward_mode=reward_mode,
+            robot_init_qpos_noise=robot_init_qpos_noise,
+            sim_freq=sim_freq,
+        )
+        # The static description (layout, bounds, default episode length) from one env.
+        spec = _native.Env(max_episode_steps=max_episode_steps, **self._kwargs).spec()
+        threads = num_threads if num_threads is not None else (os.cpu_count() or 1)
+        # The native envs never truncate (the limit is applied here) and never reset by
+        # themselves: ManiSkill's batched env keeps stepping an ended episode.
+        self._native = _native.VecEnv(
+            num_envs=int(num_envs),
+            num_threads=int(min(threads, num_envs)),
+            max_episode_steps=UNLIMITED,
+            autoreset=False,
+            **self._kwargs,
+        )
+        self.num_envs = int(num_envs)
+        self.num_threads = self._native.num_threads
+        self.render_mode = render_mode
+        self.metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+        self.env_id = spec["env_id"]
+        self.robot_uids = spec["robot_uids"]
+        self.control_mode = spec["control_mode"]
+        self.obs_mode = spec["obs_mode"]
+        self.reward_mode = spec["reward_mode"]
+        self.max_episode_steps = int(spec["max_episode_steps"])
+        self.depth_dtype = depth_dtype
+        self.segmentation_id_map = dict(spec["segmentation_id_map"])
+        self._layout = _Layout(spec, depth_dtype)
+        lo, hi = spec["action_low"], spec["action_high"]
+        self.single_observation_space = self._layout.space
+        self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._elapsed = np.zeros(self.num_envs, np.int64)
+        self._time_limits: weakref.WeakSet = weakref.WeakSet()
+
+    # -- conversions -----------------------------------------------------------------------
+    def _out(self, x: Any) -> Any:
+        """A numpy value (or a dict of them) in the env's array backend."""
+        if isinstance(x, dict):
+            return {k: self._out(v) for k, v in x.items()}
+        if self._torch is None or not isinstance(x, np.ndarray) or x.dtype == object:
+            return x
+        return self._torch.from_numpy(np.ascontiguousarray(x))
+
+    def _info(self, native_info: dict) -> dict:
+        # ManiSkill's info has no gymnasium "_key" masks; MuJoCo warnings keep theirs.
+        info = {k: v for k, v in native_info.items() if not k.startswith("_") or k == "_warnings"}
+        info["elapsed_steps"] = self._elapsed.astype(np.int32)
+        return self._out(info)
+
+    def _index_mask(self, env_idx: Any) -> np.ndarray:
+        idx = env_idx
+        if hasattr(idx, "detach"):
+            idx = idx.detach().cpu().numpy()
+        idx = np.asarray(idx)
+        mask = np.zeros(self.num_envs, bool)
+        if idx.dtype == bool:
+            if idx.shape != (self.num_envs,):
+                raise ValueError(
+                    f"env_idx is a boolean mask of shape {idx.shape}, expected ({self.num_envs},)"
+                )
+            return idx.copy()
+        if idx.dtype.kind not in "iu":
+            raise TypeError(f"env_idx must hold env indices (ints), got dtype {idx.dtype}")
+        idx = idx.reshape(-1)
+        bad = idx[(idx < 0) | (idx >= self.num_envs)]
+        if bad.size:
+            raise ValueError(
+                f"env_idx {int(bad[0])} is out of range: the envs are 0..{self.num_envs - 1}"
+            )
+        mask[idx] = True
+        return mask
+
+    # -- gymnasium API ---------------------------------------------------------------------
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        """Resets every env, or with ``options={"env_idx": idx}`` (indices or an ``[N]`` bool
+        mask, numpy or torch) only those; env i gets seed ``seed + i``. Returns the
+        observations and info of all N envs."""
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(
+                f"unsupported reset options {unknown}; valid: {', '.join(RESET_OPTIONS)} "
+                "(reconfigure has no effect: mjskill's scenes have fixed assets)"
+            )
+        if isinstance(seed, (list, tuple)):
+            seeds = [_check_seed(s) for s in seed]
+            if len(seeds) != self.num_envs or any(s != seeds[0] + i for i, s in enumerate(seeds)):
+                raise ValueError(
+                    f"seed list {list(seed)} is not supported: env i is seeded with s + i, so "
+                    f"give one int s or the list [s, s+1, ..., s+{self.num_envs - 1}]"
+                )
+            seed = seeds[0]
+        seed = _check_seed(seed)
+        if seed is not None:
+            self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
+        self._disarm_time_limits()
+        if options.get("env_idx") is None:
+            obs, info = self._native.reset(seed)
+            self._elapsed[:] = 0
+        else:
+            mask = self._index_mask(options["env_idx"])
+            obs, info = self._native.reset_envs(mask, seed)
+            self._elapsed[mask] = 0
+        info = self._info(info)
+        info["reconfigure"] = False
+        return self._out(self._layout.batch(obs, self._native)), info
+
+    def _disarm_time_limits(self) -> None:
+        """Finds gymnasium ``TimeLimit`` wrappers of this env among the callers of ``reset``
+        (``gym.make`` puts one outside it; ``TimeLimit.reset`` zeroes its counter and then calls
+        in here), takes the smallest limit as the per-env ``max_episode_steps`` and moves their
+        counters back by 2**62 steps, so their scalar ``truncated = True`` never fires."""
+        frame = sys._getframe(2)
+        for _ in range(_MAX_WRAPPER_DEPTH):
+            if frame is None:
+                break
+            w = frame.f_locals.get("self")
+            if isinstance(w, gym.wrappers.TimeLimit) and w.unwrapped is self:
+                self._time_limits.add(w)
+            frame = frame.f_back
+        if self._time_limits:
+            self.max_episode_steps = min(int(w._max_episode_steps) for w in self._time_limits)
+            for w in self._time_limits:
+                w._elapsed_steps = -(2**62)
+
+    def step(self, action):
+        if hasattr(action, "detach"):
+            action = action.detach().cpu().numpy()
+        a = _as_actions(action, 2)
+        obs, reward, terminated, _, info = self._native.step(a)
+        self._elapsed += 1
+        truncated = self._elapsed >= self.max_episode_steps
+        return (
+            self._out(self._layout.batch(obs, self._native)),
+            self._out(reward),
+            self._out(terminated),
+            self._out(truncated),
+            self._info(info),
+        )
+
+    def render(self):
+        raise RuntimeError(
+            "the batched env renders no human-camera frames; render with a single env "
+            f"(gym.make('mjskill/{self.env_id}', render_mode='rgb_array')), or use a visual "
+            "obs_mode for the sensor cameras' images of every env"
+        )
+
+    # -- ManiSkill-style attributes --------------------------------------------------------
+    @property
+    def elapsed_steps(self):
+        """Steps of each env's current episode, ``[N]`` int32."""
+        return self._out(self._elapsed.astype(np.int32))
+
+    @property
+    def gpu_sim_enabled(self) -> bool:
+        return False
+
+
+def _copy(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _copy(v) for k, v in x.items()}
+    if hasattr(x, "clone"):
+        return x.clone()
+    return x.copy() if isinstance(x, np.ndarray) else x
+
+
+class ManiSkillVectorEnv(gym.vector.VectorEnv):
+    """ManiSkill's ``ManiSkillVectorEnv`` conventions over a batched env (``gym.make(id,
+    num_envs=N)``), for scripts written against ManiSkill: ``from mjskill import
+    ManiSkillVectorEnv`` replaces ``from mani_skill.vector.wrappers.gymnasium import
+    ManiSkillVectorEnv`` (ManiSkill's own class wraps :class:`MjskillBatchedEnv` as well).
+
+    ``auto_reset`` (default on): gymnasium's *same-step* autoreset — the envs that ended
+    (``terminated | truncated``; with ``ignore_terminations`` only ``truncated``) are reset
+    within the step, the returned observation is the new episode's first, and
+    ``info["final_observation"]`` / ``info["final_info"]`` hold the ended step's observation
+    and info, with the mask ``info["_final_info"]``. ``record_metrics`` adds
+    ``info["episode"]``: ``success_once``, ``return``, ``episode_len``, ``reward`` (return per
+    step) and, with ``ignore_terminations``, ``success_at_end``. Works with either array
+    backend; ``env`` may also be an env id, made with ``num_envs`` and ``**kwargs``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env | str,
+        num_envs: int | None = None,
+        auto_reset: bool = True,
+        ignore_terminations: bool = False,
+        record_metrics: bool = False,
+        **kwargs: Any,
+    ):
+        if isinstance(env, str):
+            env = gym.make(env, num_envs=num_envs if num_envs is not None else 1, **kwargs)
+        base = env.unwrapped
+        if not isinstance(base, MjskillBatchedEnv):
+            raise TypeError(
+                "ManiSkillVectorEnv wraps the batched env of gym.make('mjskill/<EnvId>', "
+                f"num_envs=N) with N > 1, not {type(base).__name__}"
+            )
+        if num_envs is not None and num_envs != base.num_envs:
+            raise ValueError(f"num_envs {num_envs} differs from the env's {base.num_envs}")
+        self._env = env
+        self.num_envs = base.num_envs
+        self.auto_reset = auto_reset
+        self.ignore_terminations = ignore_terminations
+        self.record_metrics = record_metrics
+        self.spec = env.spec
+        self.single_observation_space = base.single_observation_space
+        self.single_action_space = base.single_action_space
+        self.observation_space = base.observation_space
+        self.action_space = base.action_space
+        self.metadata = dict(base.metadata, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+        self.render_mode = base.render_mode
+        n = self.num_envs
+        self._success_once = np.zeros(n, bool)
+        self._returns = np.zeros(n, np.float32)
+
+    @property
+    def base_env(self) -> MjskillBatchedEnv:
+        return self._env.unwrapped
+
+    @property
+    def unwrapped(self):
+        return self.base_env
+
+    @property
+    def device(self):
+        return self.base_env.device
+
+    def _np(self, x: Any) -> np.ndarray:
+        if hasattr(x, "detach"):
+            return x.detach().cpu().numpy()
+        return np.asarray(x)
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        obs, info = self._env.reset(seed=seed, options=options)
+        if options is not None and options.get("env_idx") is not None:
+            mask = self.base_env._index_mask(options["env_idx"])
+        else:
+            mask = np.ones(self.num_envs, bool)
+        self._success_once[mask] = False
+        self._returns[mask] = 0.0
+        return obs, info
+
+    def step(self, actions):
+        obs, rew, terminated, truncated, info = self._env.step(actions)
+        out = self.base_env._out
+        term = self._np(terminated).copy()
+        trunc = self._np(truncated)
+        if self.record_metrics:
+            self._returns += self._np(rew)
+            self._success_once |= self._np(info["success"])
+            length = self._np(self.base_env.elapsed_steps)
+            episode = {
+                "success_once": self._success_once.copy(),
+                "return": self._returns.copy(),
+                "episode_len": length.copy(),
+                "reward": self._returns / np.maximum(length, 1),
+            }
+            if self.ignore_terminations:
+                episode["success_at_end"] = self._np(info["success"]).copy()
+            info["episode"] = out(episode)
+        if self.ignore_terminations:
+            term[:] = False
+            terminated = out(term)
+        done = term | trunc
+        if self.auto_reset and done.any():
+            final_obs, final_info = _copy(obs), _copy(info)
+            obs, info = self.reset(options={"env_idx": np.flatnonzero(done)})
+            info["final_observation"] = final_obs
+            info["final_info"] = final_info
+            mask = out(done)
+            info["_final_info"] = mask
+            info["_final_observation"] = mask
+            info["_elapsed_steps"] = mask
+        return obs, rew, terminated, truncated, info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._env.close()
+
+    def call(self, name: str, *args: Any, **kwargs: Any):
+        attr = getattr(self.base_env, name)
+        return attr(*args, **kwargs) if callable(attr) else attr
+
+    def get_attr(self, name: str):
+        return getattr(self.base_env, name)
+
+    def render(self):
+        return self.base_env.render()
