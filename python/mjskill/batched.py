@@ -29,11 +29,10 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
 from . import _native
-from .envs import _Layout, _as_actions, _check_depth_dtype, _check_seed
+from .envs import _as_actions, _check_count, _check_depth_dtype, _check_seed, _describe
 
 ARRAY_BACKENDS = ["torch", "numpy"]
 """What the batched env returns: torch tensors on the CPU (ManiSkill's convention, the
@@ -51,7 +50,6 @@ UNLIMITED = 2**32 - 1
 
 _MAX_WRAPPER_DEPTH = 32
 """How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
-"""ManiSkill's ``reset`` options the batched env takes."""
 
 
 def check_sim_backend(sim_backend: Any) -> None:
@@ -123,13 +121,9 @@ class MjskillBatchedEnv(gym.Env):
             raise ValueError(
                 f"unknown render_mode {render_mode!r}; valid render modes: rgb_array (or None)"
             )
-        for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
-            if v is None:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-                raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
-            if not 1 <= v <= _native.MAX_NUM_ENVS:
-                raise ValueError(f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS}")
+        _check_count("num_envs", num_envs)
+        if num_threads is not None:
+            _check_count("num_threads", num_threads)
         self._torch = None
         if array_backend == "torch":
             try:
@@ -172,18 +166,9 @@ class MjskillBatchedEnv(gym.Env):
         self.num_threads = self._native.num_threads
         self.render_mode = render_mode
         self.metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
-        self.env_id = spec["env_id"]
-        self.robot_uids = spec["robot_uids"]
-        self.control_mode = spec["control_mode"]
-        self.obs_mode = spec["obs_mode"]
-        self.reward_mode = spec["reward_mode"]
         self.max_episode_steps = int(spec["max_episode_steps"])
-        self.depth_dtype = depth_dtype
-        self.segmentation_id_map = dict(spec["segmentation_id_map"])
-        self._layout = _Layout(spec, depth_dtype)
-        lo, hi = spec["action_low"], spec["action_high"]
+        self.single_action_space = _describe(self, spec, depth_dtype)
         self.single_observation_space = self._layout.space
-        self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._elapsed = np.zeros(self.num_envs, np.int64)

@@ -125,6 +125,36 @@ def _gripper_qvel_obs(spec: dict[str, Any]) -> tuple[int, ...]:
     return tuple(start + k for k in spec["gripper_joints"])
 
 
+def _check_count(name: str, v: Any) -> None:
+    """``num_envs`` or ``num_threads``: an int in 1..=MAX_NUM_ENVS."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
+    if not 1 <= v <= _native.MAX_NUM_ENVS:
+        raise ValueError(
+            f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS} (each env owns its MuJoCo "
+            "model and data; more threads than envs are clamped)"
+        )
+
+
+def _describe(env: Any, spec: dict[str, Any], depth_dtype: str) -> spaces.Box:
+    """Sets what every mjskill env class tells about itself from the native ``spec`` (ids,
+    modes, segmentation ids, observation layout, the gripper velocities' indices) and returns
+    the action space of one env."""
+    env.env_id = spec["env_id"]
+    env.robot_uids = spec["robot_uids"]
+    env.control_mode = spec["control_mode"]
+    env.obs_mode = spec["obs_mode"]
+    env.reward_mode = spec["reward_mode"]
+    env.depth_dtype = depth_dtype
+    env.segmentation_id_map = dict(spec["segmentation_id_map"])
+    env._layout = _Layout(spec, depth_dtype)
+    #: Flat-state indices of the gripper joints' velocities (``agent/qvel``), which PhysX
+    #: reports as a solver residual while a gripper pinches (docs/outcome-physics.md).
+    env.gripper_qvel_obs = _gripper_qvel_obs(spec)
+    lo, hi = spec["action_low"], spec["action_high"]
+    return spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
+
+
 class _Layout:
     """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
 
@@ -228,21 +258,8 @@ class MjskillEnv(gym.Env):
         )
         self._native = _native.Env(**self._kwargs)
         self.render_mode = render_mode
-        spec = self._native.spec()
-        self.env_id = spec["env_id"]
-        self.robot_uids = spec["robot_uids"]
-        self.control_mode = spec["control_mode"]
-        self.obs_mode = spec["obs_mode"]
-        self.reward_mode = spec["reward_mode"]
-        self.depth_dtype = depth_dtype
-        self.segmentation_id_map = dict(spec["segmentation_id_map"])
-        self._layout = _Layout(spec, depth_dtype)
+        self.action_space = _describe(self, self._native.spec(), depth_dtype)
         self.observation_space = self._layout.space
-        #: Flat-state indices of the gripper joints' velocities (``agent/qvel``), which PhysX
-        #: reports as a solver residual while a gripper pinches (docs/outcome-physics.md).
-        self.gripper_qvel_obs = _gripper_qvel_obs(spec)
-        lo, hi = spec["action_low"], spec["action_high"]
-        self.action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
 
     # -- gymnasium API ---------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -395,14 +412,8 @@ class MjskillVectorEnv(VectorEnv):
                 "no human frames; its sensor images come with the visual obs modes); "
                 "valid render modes: None"
             )
-        for name, v in (("num_envs", num_envs), ("num_threads", num_threads)):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-                raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
-            if not 1 <= v <= _native.MAX_NUM_ENVS:
-                raise ValueError(
-                    f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS} (each env owns "
-                    "its MuJoCo model and data; more threads than envs are clamped)"
-                )
+        _check_count("num_envs", num_envs)
+        _check_count("num_threads", num_threads)
         self._kwargs = dict(
             env_id=env_id,
             robot_uids=robot_uids,
@@ -421,18 +432,9 @@ class MjskillVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.num_threads = self._native.num_threads
         self.render_mode = None
-        self.env_id = spec["env_id"]
-        self.robot_uids = spec["robot_uids"]
-        self.control_mode = spec["control_mode"]
-        self.obs_mode = spec["obs_mode"]
         self.max_episode_steps = spec["max_episode_steps"]
-        self.depth_dtype = depth_dtype
-        self.segmentation_id_map = dict(spec["segmentation_id_map"])
-        self._layout = _Layout(spec, depth_dtype)
-        self.gripper_qvel_obs = _gripper_qvel_obs(spec)
-        lo, hi = spec["action_low"], spec["action_high"]
+        self.single_action_space = _describe(self, spec, depth_dtype)
         self.single_observation_space = self._layout.space
-        self.single_action_space = spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 
@@ -481,10 +483,7 @@ def make_env(num_envs: int = 1, **kwargs):
     """
     from .batched import MjskillBatchedEnv, check_reconfiguration_freq, check_sim_backend
 
-    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-        raise TypeError(f"num_envs must be an int, not {type(num_envs).__name__} ({num_envs!r})")
-    if num_envs < 1:
-        raise ValueError(f"num_envs {num_envs} is out of range: 1..={_native.MAX_NUM_ENVS}")
+    _check_count("num_envs", num_envs)
     if num_envs > 1:
         return MjskillBatchedEnv(num_envs=int(num_envs), **kwargs)
     check_sim_backend(kwargs.pop("sim_backend", "auto"))
