@@ -139,7 +139,21 @@ def parse_args(argv=None):
     p.add_argument("--num-eval-envs", type=int, default=d["num_eval_envs"])
     p.add_argument("--eval-seed", type=int, default=2**31,
                    help="seed of the first evaluation episode (the same seeds every time)")
+    p.add_argument("--clock", choices=("wall", "thread"), default="wall",
+                   help="what the log's time columns measure: wall time, or this thread's CPU "
+                        "time (time.thread_time), which waiting for other processes does not "
+                        "count: with --num-threads 1 --torch-threads 1 every computation runs "
+                        "on this thread, so it measures the run's cost on a busy machine")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>__<robot>__<seed>)")
+    p.add_argument("--rollout", choices=["native", "torch"], default="native",
+                   help="native: the actor runs inside the vector env's threads, T steps per "
+                        "call, log-probs and values in one batched pass afterwards (default); "
+                        "torch: one env step and one torch forward per step (the only way "
+                        "with --simulator maniskill)")
+    p.add_argument("--ray-workers", type=int, default=0,
+                   help="step the training envs on N Ray actors (mjskill.ray.RayVectorEnv, "
+                        "--num-threads threads each; RAY_ADDRESS for a cluster) and learn "
+                        "here; 0: local. Same seed and env count give the same weights")
     p.add_argument("--simulator", choices=["mjskill", "maniskill"], default="mjskill",
                    help="maniskill: train on the real ManiSkill 3's CPU simulation instead (needs "
                         "mani_skill; one PhysX env per vector slot, stepped in this process) to "
@@ -198,6 +212,7 @@ class RunningMeanStd:
 
 def main(argv=None):
     args = parse_args(argv)
+    clock = time.perf_counter if args.clock == "wall" else time.thread_time
     import torch
     import torch.nn as nn
     from torch.distributions.normal import Normal
@@ -205,6 +220,11 @@ def main(argv=None):
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
     torch.set_num_threads(args.torch_threads)
+    native = args.rollout == "native"
+    if args.simulator == "maniskill" and (native or args.ray_workers):
+        sys.exit("--simulator maniskill steps one env per slot: use --rollout torch, no --ray-workers")
+    if args.ray_workers and not native:
+        sys.exit("--ray-workers runs native rollouts: leave --rollout at native")
     if args.simulator == "maniskill":
         envs = maniskill_vec_env(args.env_id, args.num_envs, args.robot, args.control_mode)
         eval_envs = maniskill_vec_env(args.env_id, args.num_eval_envs, args.robot,
@@ -215,12 +235,18 @@ def main(argv=None):
         import mjskill  # noqa: F401  (registers the envs)
 
         gid = f"mjskill/{args.env_id}"
-        kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state",
-                  num_threads=args.num_threads)
-        envs = gym.make_vec(gid, num_envs=args.num_envs, **kw)
-        eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, **kw)
-        robot, mode = envs.unwrapped.robot_uids, envs.unwrapped.control_mode
-        max_steps = envs.unwrapped.max_episode_steps
+        kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state")
+        if args.ray_workers:
+            from mjskill.ray import RayVectorEnv
+
+            envs = RayVectorEnv(args.env_id, args.num_envs, args.ray_workers,
+                                num_threads=args.num_threads, **kw)
+        else:
+            envs = gym.make_vec(gid, num_envs=args.num_envs, num_threads=args.num_threads, **kw)
+        eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
+                                 **kw)
+        base = eval_envs.unwrapped
+        robot, mode, max_steps = base.robot_uids, base.control_mode, base.max_episode_steps
         version = mjskill.__version__
     sim_tag = "" if args.simulator == "mjskill" else f"__{args.simulator}"
     out = args.out or os.path.join("runs",
@@ -246,7 +272,8 @@ def main(argv=None):
         return nn.Sequential(*layers, lin)
 
     # The actor's inputs: the normalised observation with the hidden entries zeroed.
-    hidden = list(envs.unwrapped.gripper_qvel_obs) if args.gripper_qvel == "hide" else []
+    grip = envs.gripper_qvel_obs if args.simulator == "maniskill" else base.gripper_qvel_obs
+    hidden = list(grip) if args.gripper_qvel == "hide" else []
     actor_keep = torch.ones(obs_dim)
     actor_keep[hidden] = 0.0
 
@@ -267,14 +294,23 @@ def main(argv=None):
         x = (o - rms.mean) / rms.std()
         return torch.as_tensor(np.clip(x, -10.0, 10.0), dtype=torch.float32)
 
-    def save(tag, eval_success):
-        layers = []
-        for m in actor:
-            if isinstance(m, nn.Linear):
-                layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy()))
-        layers[0][0][hidden] = 0.0  # the actor multiplies these inputs by zero
+    def policy_params():
+        """The actor as mjskill.GaussianMlp's arguments: weights (inputs x outputs, the hidden
+        inputs' rows zeroed, as the actor multiplies them by zero), observation statistics,
+        the sampling std and the noise seed."""
+        layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
+                  for m in actor if isinstance(m, nn.Linear)]
+        layers[0][0][hidden] = 0.0
         mean = np.zeros(obs_dim) if args.no_obs_norm else rms.mean
         std = np.ones(obs_dim) if args.no_obs_norm else rms.std()
+        return dict(layers=layers, obs_mean=np.asarray(mean, np.float64),
+                    obs_std=np.asarray(std, np.float64),
+                    obs_clip=None if args.no_obs_norm else 10.0,
+                    std=logstd.detach().exp().numpy().reshape(-1).copy(), seed=args.seed)
+
+    def save(tag, eval_success):
+        p = policy_params()
+        layers, mean, std = p["layers"], p["obs_mean"], p["obs_std"]
         meta = {
             "env_id": args.env_id,
             "robot_uids": robot,
@@ -329,25 +365,48 @@ def main(argv=None):
     log = open(os.path.join(out, "log.csv"), "w", newline="")
     writer = csv.writer(log)
     writer.writerow(["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
-                     "train_success", "train_return", "eval_success", "eval_return"])
+                     "train_success", "train_return", "eval_success", "eval_return",
+                     "infer_time", "gae_time", "update_time", "eval_time"])
     print(f"{args.env_id} {robot} {mode}: obs {obs_dim}, act {act_dim}; {N} envs x {T} steps, "
-          f"{iterations} iterations -> {out}", flush=True)
+          f"{iterations} iterations, {'native' if native else 'torch'} rollouts"
+          f"{f' on {args.ray_workers} Ray workers' if args.ray_workers else ''} -> {out}",
+          flush=True)
 
-    t_start = time.perf_counter()
-    sim_time = learner_time = 0.0
+    # Seconds in: the vector env (sim_time; native rollouts include the actor's forward
+    # passes on the env threads), the rollout's torch forward passes (infer_time), GAE and the
+    # observation statistics (gae_time), the update (update_time), evaluations (eval_time).
+    t_start = clock()
+    sim_time = infer_time = gae_time = update_time = eval_time = 0.0
     global_step = 0
-    t0 = time.perf_counter()
-    next_obs, _ = envs.reset(seed=args.seed)
-    sim_time += time.perf_counter() - t0
+    t0 = clock()
+    if args.ray_workers:
+        next_obs = envs.reset(seed=args.seed)
+    else:
+        next_obs, _ = envs.reset(seed=args.seed)
+    sim_time += clock() - t0
+    if native:
+        buf = envs.rollout_buffers(T)
+        if args.ray_workers:
+            collect = envs.rollout
+        else:
+            from mjskill import GaussianMlp
+
+            def collect(params, first_step, buffers):
+                return envs.rollout(GaussianMlp(**params), first_step, buffers)
     prev_done = np.zeros(N, bool)
     ep_ret = np.zeros(N)
     best = None
+    it = 0
     for it in range(1, iterations + 1):
         if it % args.eval_freq == 1 or args.eval_freq == 1:
+            t0 = clock()
             eval_s, eval_r = evaluate()
+            eval_time += clock() - t0
             # An evaluation row: the policy after `global_step` env steps.
-            writer.writerow([it - 1, global_step, f"{time.perf_counter() - t_start:.3f}",
-                             f"{sim_time:.3f}", f"{learner_time:.3f}", "", "", eval_s, eval_r])
+            writer.writerow([it - 1, global_step, f"{clock() - t_start:.3f}",
+                             f"{sim_time:.3f}", f"{infer_time + gae_time + update_time:.3f}",
+                             "", "", eval_s, eval_r, f"{infer_time:.3f}", f"{gae_time:.3f}",
+                             f"{update_time:.3f}", f"{eval_time:.3f}"])
             print(f"eval after {global_step} steps: success {eval_s:.3f} return {eval_r:.2f}",
                   flush=True)
             save("policy", eval_s)
@@ -360,38 +419,69 @@ def main(argv=None):
                 break
         if args.anneal_lr:
             opt.param_groups[0]["lr"] = (1.0 - (it - 1.0) / iterations) * args.learning_rate
-        ended_success, ended_return = [], []
         # -- rollout ------------------------------------------------------------------------
-        for t in range(T):
-            t0 = time.perf_counter()
-            b_obs[t] = next_obs
+        if native:
+            # T steps in one call, the actor evaluated on the env threads; the log-probs and
+            # values of the same observations in one batched pass (with the statistics the
+            # rollout normalised by).
+            t0 = clock()
+            next_obs = collect(policy_params(), (it - 1) * T, buf)
+            t1 = clock()
             with torch.no_grad():
-                x = norm(next_obs)
+                x = norm(buf["obs"].reshape(-1, obs_dim))
                 mean = actor(x)
                 dist = Normal(mean, logstd.exp().expand_as(mean))
-                a = dist.sample()
-                b_logp[t] = dist.log_prob(a).sum(1)
-                b_val[t] = critic(x).view(-1)
-            b_act[t] = a
-            act = torch.clamp(a, low, high).numpy()
-            t1 = time.perf_counter()
-            next_obs, r, term, trunc, _ = envs.step(act)
-            t2 = time.perf_counter()
-            sim_time += t2 - t1
-            learner_time += t1 - t0
-            valid = ~prev_done  # an env that ended on the last step resets now
-            done = (term | trunc) & valid
-            b_rew[t] = torch.as_tensor(r * args.reward_scale, dtype=torch.float32)
-            b_done[t] = torch.as_tensor(done, dtype=torch.float32)
-            b_valid[t] = torch.as_tensor(valid, dtype=torch.float32)
-            ep_ret += np.where(valid, r, 0.0)
-            for i in np.flatnonzero(done):
-                ended_success.append(bool(term[i]))
-                ended_return.append(ep_ret[i])
-                ep_ret[i] = 0.0
-            prev_done = done
-            global_step += N
-        t0 = time.perf_counter()
+                b_act = torch.as_tensor(buf["actions"]).reshape(T, N, act_dim).clone()
+                b_logp = dist.log_prob(b_act.reshape(-1, act_dim)).sum(1).view(T, N)
+                b_val = critic(x).view(T, N)
+            b_obs = buf["obs"]
+            sim_time += t1 - t0
+            infer_time += clock() - t1
+            valid = ~buf["autoreset"]
+            done = (buf["terminated"] | buf["truncated"]) & valid
+            b_rew = torch.as_tensor(buf["rewards"] * args.reward_scale, dtype=torch.float32)
+            b_done = torch.as_tensor(done, dtype=torch.float32)
+            b_valid = torch.as_tensor(valid, dtype=torch.float32)
+            ended_success, ended_return = [], []
+            for t in range(T):
+                ep_ret += np.where(valid[t], buf["rewards"][t], 0.0)
+                for i in np.flatnonzero(done[t]):
+                    ended_success.append(bool(buf["terminated"][t, i]))
+                    ended_return.append(ep_ret[i])
+                    ep_ret[i] = 0.0
+            global_step += T * N
+        else:
+            ended_success, ended_return = [], []
+            for t in range(T):
+                t0 = clock()
+                b_obs[t] = next_obs
+                with torch.no_grad():
+                    x = norm(next_obs)
+                    mean = actor(x)
+                    dist = Normal(mean, logstd.exp().expand_as(mean))
+                    a = dist.sample()
+                    b_logp[t] = dist.log_prob(a).sum(1)
+                    b_val[t] = critic(x).view(-1)
+                b_act[t] = a
+                act = torch.clamp(a, low, high).numpy()
+                t1 = clock()
+                next_obs, r, term, trunc, _ = envs.step(act)
+                t2 = clock()
+                sim_time += t2 - t1
+                infer_time += t1 - t0
+                valid = ~prev_done  # an env that ended on the last step resets now
+                done = (term | trunc) & valid
+                b_rew[t] = torch.as_tensor(r * args.reward_scale, dtype=torch.float32)
+                b_done[t] = torch.as_tensor(done, dtype=torch.float32)
+                b_valid[t] = torch.as_tensor(valid, dtype=torch.float32)
+                ep_ret += np.where(valid, r, 0.0)
+                for i in np.flatnonzero(done):
+                    ended_success.append(bool(term[i]))
+                    ended_return.append(ep_ret[i])
+                    ep_ret[i] = 0.0
+                prev_done = done
+                global_step += N
+        t0 = clock()
         if not args.no_obs_norm:
             rms.update(b_obs.reshape(-1, obs_dim)[b_valid.numpy().reshape(-1) > 0])
         # -- GAE: the value after step t is V(obs[t+1]), the final observation at an end -----
@@ -416,6 +506,8 @@ def main(argv=None):
                     adv[t] = last
                 adv[t] *= b_valid[t]
             returns = adv + b_val
+        t1 = clock()
+        gae_time += t1 - t0
         # -- update -------------------------------------------------------------------------
         keep = b_valid.reshape(-1) > 0
         f_obs = norm(b_obs.reshape(-1, obs_dim))[keep]
@@ -455,22 +547,29 @@ def main(argv=None):
                 opt.step()
             if stop:
                 break
-        learner_time += time.perf_counter() - t0
-        wall = time.perf_counter() - t_start
+        update_time += clock() - t1
+        learner_time = infer_time + gae_time + update_time
+        wall = clock() - t_start
         ts = float(np.mean(ended_success)) if ended_success else ""
         tr = float(np.mean(ended_return)) if ended_return else ""
         writer.writerow([it, global_step, f"{wall:.3f}", f"{sim_time:.3f}", f"{learner_time:.3f}",
-                         ts, tr, "", ""])
+                         ts, tr, "", "", f"{infer_time:.3f}", f"{gae_time:.3f}",
+                         f"{update_time:.3f}", f"{eval_time:.3f}"])
         log.flush()
         print(f"it {it}/{iterations} steps {global_step} wall {wall:.0f}s "
-              f"(sim {sim_time:.0f}s, learner {learner_time:.0f}s) "
+              f"(sim {sim_time:.0f}s, infer {infer_time:.0f}s, gae {gae_time:.0f}s, "
+              f"update {update_time:.0f}s, eval {eval_time:.0f}s) "
               f"{global_step / wall:.0f} steps/s train success "
               f"{ts if ts == '' else round(ts, 3)}", flush=True)
         if args.max_minutes is not None and wall > 60 * args.max_minutes:
             break
+    t0 = clock()
     eval_s, eval_r = evaluate()
-    writer.writerow([it, global_step, f"{time.perf_counter() - t_start:.3f}", f"{sim_time:.3f}",
-                     f"{learner_time:.3f}", "", "", eval_s, eval_r])
+    eval_time += clock() - t0
+    writer.writerow([it, global_step, f"{clock() - t_start:.3f}", f"{sim_time:.3f}",
+                     f"{infer_time + gae_time + update_time:.3f}", "", "", eval_s, eval_r,
+                     f"{infer_time:.3f}", f"{gae_time:.3f}", f"{update_time:.3f}",
+                     f"{eval_time:.3f}"])
     log.close()
     path = save("policy", eval_s)
     if best is None or eval_s >= best:

@@ -59,8 +59,8 @@ pub use env::vec::MAX_NUM_ENVS;
 pub use env::{
     default_robot, depth_to_mm, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage,
     DriveTargets, Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, PointCloud,
-    RewardMode, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv, CONTROL_FREQ,
-    DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
+    RewardMode, RolloutBuffers, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv,
+    VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use mjcf::urdf::RobotError as UrdfError;
 pub use mjcf::{Mjcf, SceneError};

@@ -6,7 +6,8 @@ ManiSkill's batched env, :class:`MjskillBatchedEnv`, which :class:`ManiSkillVect
 wraps), ``gym.make_vec(...,
 vectorization_mode="vector_entry_point", num_envs=N, num_threads=T)`` the native
 :class:`MjskillVectorEnv`. :mod:`mjskill.ray` (extra ``mjskill[ray]``) shards rollouts by
-seed range across Ray workers.
+seed range across Ray workers. :class:`GaussianMlp` is PPO's actor evaluated inside the native
+vector env's threads (:meth:`MjskillVectorEnv.rollout`).
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ from __future__ import annotations
 import gymnasium as gym
 
 from . import _native
+from ._native import GaussianMlp
 from .batched import ManiSkillVectorEnv, MjskillBatchedEnv
 from .envs import MjskillEnv, MjskillVectorEnv, make_env, make_vector_env
 
 __all__ = [
+    "GaussianMlp",
     "ManiSkillVectorEnv",
     "MjskillBatchedEnv",
     "MjskillEnv",

@@ -469,6 +469,44 @@ class MjskillVectorEnv(VectorEnv):
         """Envs that reset during the last step (their action was ignored)."""
         return self._native.autoreset()
 
+    def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
+        """Buffers for :meth:`rollout` of ``steps`` steps: ``obs`` ``[T, N, obs_dim]`` and
+        ``actions`` ``[T, N, act_dim]`` float32, ``rewards`` ``[T, N]`` float32,
+        ``terminated``, ``truncated`` and ``autoreset`` ``[T, N]`` bool."""
+        if self._layout.dict_obs:
+            raise ValueError(
+                f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"
+            )
+        t, n = int(steps), self.num_envs
+        obs_dim = self.single_observation_space.shape[0]
+        act_dim = self.single_action_space.shape[0]
+        return dict(
+            obs=np.zeros((t, n, obs_dim), np.float32),
+            actions=np.zeros((t, n, act_dim), np.float32),
+            rewards=np.zeros((t, n), np.float32),
+            terminated=np.zeros((t, n), bool),
+            truncated=np.zeros((t, n), bool),
+            autoreset=np.zeros((t, n), bool),
+        )
+
+    def rollout(self, policy, first_step: int, buffers: dict[str, np.ndarray]) -> np.ndarray:
+        """Runs T steps (the buffers' length, :meth:`rollout_buffers`) in one call, with
+        ``policy`` (a :class:`mjskill.GaussianMlp`) evaluated on the env threads: before each
+        step, env i's raw action is the policy's for its current observation, and the env
+        steps with it clipped to the action space (or autoresets, as :meth:`step` does).
+        Step t is the policy's step ``first_step + t`` (the key of its sampling noise, with
+        the env's index). The buffers receive each step's observation before the step, raw
+        action (0 where the env reset instead), reward and flags. Returns the observations
+        after the last step. The results do not depend on ``num_threads``."""
+        if self._layout.dict_obs:
+            raise ValueError(
+                f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"
+            )
+        b = buffers
+        _, obs = _native.rollout(self._native, policy, int(first_step), b["obs"], b["actions"],
+                                 b["rewards"], b["terminated"], b["truncated"], b["autoreset"])
+        return obs
+
 def make_env(num_envs: int = 1, **kwargs):
     """``gym.make`` entry point.
 

@@ -10,6 +10,12 @@ policy: the built-in ``"random"`` policy draws episode ``s``'s actions from
 ``numpy.random.default_rng(s)``, and a callable policy maps each observation row to an
 action row.
 
+:class:`RayVectorEnv` is for training: one vector env of ``num_envs`` envs whose contiguous
+shares step on Ray actors, each a native :class:`~mjskill.MjskillVectorEnv`, with PPO's actor
+evaluated on the actors' threads (:meth:`RayVectorEnv.rollout`). Env ``i`` is seeded and
+sampled as env ``i`` of one :class:`~mjskill.MjskillVectorEnv` of ``num_envs`` envs, so its
+rollouts are bit for bit those of the local vector env (``examples/ppo.py --ray-workers N``).
+
 Runs against a local Ray (``ray.init(num_cpus=2)``) or unchanged against a cluster
 (``address="ray://..."`` or ``RAY_ADDRESS``). Command line::
 
@@ -186,6 +192,109 @@ def rollout(
         for s, f in jobs
     ]
     return merge(ray.get(refs))
+
+
+def shares(num_envs: int, workers: int) -> list[tuple[int, int]]:
+    """``(first env, envs)`` of ``workers`` contiguous, near-equal shares of ``num_envs`` envs
+    (the first ``num_envs % workers`` shares take one env more)."""
+    if not 1 <= workers <= num_envs:
+        raise ValueError(f"workers {workers} is out of range: 1..={num_envs} (num_envs)")
+    q, r = divmod(num_envs, workers)
+    out, first = [], 0
+    for k in range(workers):
+        n = q + (k < r)
+        out.append((first, n))
+        first += n
+    return out
+
+
+class _RolloutActor:
+    """One share of a :class:`RayVectorEnv`: envs ``first..first + n`` of the whole."""
+
+    def __init__(self, env_id: str, first: int, n: int, num_threads: int, env_kwargs: dict):
+        self.first = first
+        self.vec = MjskillVectorEnv(env_id, num_envs=n, num_threads=num_threads, **env_kwargs)
+        self.buffers: dict[str, np.ndarray] = {}
+
+    def spaces(self):
+        v = self.vec
+        return v.single_observation_space, v.single_action_space, v.max_episode_steps, {
+            k: getattr(v, k) for k in ("robot_uids", "control_mode", "gripper_qvel_obs")
+        }
+
+    def reset(self, seed: int | None) -> np.ndarray:
+        return self.vec.reset(seed=None if seed is None else seed + self.first)[0]
+
+    def rollout(self, policy: dict, first_step: int, steps: int):
+        from . import GaussianMlp
+
+        if not self.buffers or self.buffers["rewards"].shape[0] != steps:
+            self.buffers = self.vec.rollout_buffers(steps)
+        mlp = GaussianMlp(**policy, env_offset=self.first)
+        return self.buffers, self.vec.rollout(mlp, first_step, self.buffers)
+
+
+class RayVectorEnv:
+    """``num_envs`` envs of ``env_id`` in contiguous shares on ``workers`` Ray actors (each
+    reserving ``num_threads`` CPUs and stepping its share on that many threads), for
+    training: :meth:`reset` and :meth:`rollout` give bit for bit what one
+    :class:`~mjskill.MjskillVectorEnv` of ``num_envs`` envs gives (env ``i`` is seeded with
+    ``seed + i`` and samples its actions from its own stream, whichever actor holds it).
+    Ray is initialised with ``address`` (default: ``RAY_ADDRESS`` or a local Ray) unless it
+    already is; the actors go wherever the cluster has CPUs."""
+
+    def __init__(self, env_id: str, num_envs: int, workers: int, num_threads: int = 1,
+                 address: str | None = None, **env_kwargs: Any):
+        import ray
+
+        if not ray.is_initialized():
+            ray.init(address=address)
+        self.num_envs = int(num_envs)
+        self.shares = shares(self.num_envs, int(workers))
+        actor = ray.remote(num_cpus=num_threads)(_RolloutActor)
+        self._actors = [actor.remote(env_id, f, n, num_threads, env_kwargs)
+                        for f, n in self.shares]
+        obs_space, act_space, steps, attrs = ray.get(self._actors[0].spaces.remote())
+        self.single_observation_space, self.single_action_space = obs_space, act_space
+        self.max_episode_steps = steps
+        for k, v in attrs.items():
+            setattr(self, k, v)
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Resets every env (env ``i`` with ``seed + i``); the observations ``[N, obs_dim]``."""
+        import ray
+
+        return np.concatenate(ray.get([a.reset.remote(seed) for a in self._actors]))
+
+    def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
+        """As :meth:`mjskill.MjskillVectorEnv.rollout_buffers`, for all ``num_envs`` envs."""
+        t, n = int(steps), self.num_envs
+        od, ad = self.single_observation_space.shape[0], self.single_action_space.shape[0]
+        return dict(obs=np.zeros((t, n, od), np.float32), actions=np.zeros((t, n, ad), np.float32),
+                    rewards=np.zeros((t, n), np.float32), terminated=np.zeros((t, n), bool),
+                    truncated=np.zeros((t, n), bool), autoreset=np.zeros((t, n), bool))
+
+    def rollout(self, policy: dict, first_step: int, buffers: dict[str, np.ndarray]) -> np.ndarray:
+        """:meth:`mjskill.MjskillVectorEnv.rollout` on every share at once. ``policy`` holds
+        :class:`~mjskill.GaussianMlp`'s keyword arguments (``layers``, ``obs_mean``,
+        ``obs_std``, ``obs_clip``, ``std``, ``seed``); each actor builds it with its share's
+        ``env_offset``. Fills ``buffers`` and returns the observations after the last step."""
+        import ray
+
+        steps = buffers["rewards"].shape[0]
+        ref = ray.put(policy)
+        parts = ray.get([a.rollout.remote(ref, int(first_step), steps) for a in self._actors])
+        for key, dst in buffers.items():
+            np.concatenate([p[0][key] for p in parts], axis=1, out=dst)
+        return np.concatenate([p[1] for p in parts])
+
+    def close(self) -> None:
+        """Ends the actors."""
+        import ray
+
+        for a in self._actors:
+            ray.kill(a)
+        self._actors = []
 
 
 def main(argv: Sequence[str] | None = None) -> int:

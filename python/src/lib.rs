@@ -31,6 +31,8 @@ use pyo3::types::{PyDict, PyList};
 
 use mjskill::mujoco::Warnings;
 
+mod rollout;
+
 /// A Rust env error as a Python `ValueError` with the same message.
 fn value_err(e: EnvError) -> PyErr {
     match e {
@@ -961,6 +963,8 @@ fn control_modes(env_id: &str, robot_uids: &str) -> PyResult<Vec<&'static str>> 
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyEnv>()?;
     m.add_class::<PyVecEnv>()?;
+    m.add_class::<rollout::PyGaussianMlp>()?;
+    m.add_function(wrap_pyfunction!(rollout::rollout, m)?)?;
     m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;

@@ -139,6 +139,29 @@ pub enum EnvError {
         /// Envs.
         num_envs: usize,
     },
+    /// A [`VecEnv::rollout`](super::VecEnv::rollout) buffer of the wrong length.
+    #[error(
+        "rollout buffer {buffer} has {got} values, expected {expected} (T steps × num_envs, \
+         × obs_dim for obs and × act_dim for actions)"
+    )]
+    RolloutBuffer {
+        /// The buffer's name.
+        buffer: &'static str,
+        /// Its length.
+        got: usize,
+        /// The length that fits the rewards' T steps.
+        expected: usize,
+    },
+    /// A rollout's policy gave a NaN or infinite action.
+    #[error("the policy's action for env {env} at step {step} is {value}, not finite")]
+    PolicyActionNotFinite {
+        /// Global env index.
+        env: usize,
+        /// The policy's step.
+        step: u64,
+        /// The first non-finite action component.
+        value: f32,
+    },
     /// Rendering is unavailable or failed (the message names what to install).
     #[error(transparent)]
     Render(#[from] RenderError),

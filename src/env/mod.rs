@@ -22,7 +22,7 @@ pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::{depth_to_mm, CameraImage, PointCloud};
 pub use state_dict::{ActionPart, DriveTargets, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
-pub use vec::VecEnv;
+pub use vec::{RolloutBuffers, VecEnv, VecPolicy};
 
 use std::sync::Arc;
 

@@ -12,6 +12,7 @@ pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
+pub mod mlp;
 pub mod onnx;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
@@ -22,6 +23,7 @@ pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
+pub use mlp::{GaussianMlp, MlpError};
 pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};

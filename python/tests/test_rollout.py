@@ -1,0 +1,139 @@
+"""Native rollouts: PPO's actor (mjskill.GaussianMlp) evaluated on the vector env's threads,
+T steps per call (MjskillVectorEnv.rollout), and the same rollouts sharded over Ray actors
+(mjskill.ray.RayVectorEnv), bit for bit; examples/ppo.py's training on both."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mjskill
+from mjskill import GaussianMlp, MjskillVectorEnv
+
+REPO = Path(__file__).resolve().parents[2]
+KW = dict(max_episode_steps=6)
+
+
+def params(obs_dim, act_dim, seed=0, hidden=16):
+    """GaussianMlp keyword arguments with seeded weights (numpy only)."""
+    r = np.random.default_rng(seed)
+    layers = [
+        (r.normal(0, 0.4, (obs_dim, hidden)).astype(np.float32),
+         r.normal(0, 0.1, hidden).astype(np.float32)),
+        (r.normal(0, 1.5, (hidden, act_dim)).astype(np.float32),
+         r.normal(0, 0.1, act_dim).astype(np.float32)),
+    ]
+    return dict(layers=layers, obs_mean=r.normal(0, 0.1, obs_dim),
+                obs_std=r.uniform(0.5, 2.0, obs_dim), obs_clip=10.0,
+                std=np.full(act_dim, 0.3, np.float32), seed=7)
+
+
+def rollout(vec, p, steps, first_step=0, env_offset=0):
+    buf = vec.rollout_buffers(steps)
+    last = vec.rollout(GaussianMlp(**p, env_offset=env_offset), first_step, buf)
+    return buf, last
+
+
+def test_rollout_steps_with_the_clipped_sampled_actions():
+    n, t = 3, 8
+    vec = MjskillVectorEnv("PickCube-v1", num_envs=n, num_threads=2, **KW)
+    ref = MjskillVectorEnv("PickCube-v1", num_envs=n, num_threads=1, **KW)
+    obs_dim = vec.single_observation_space.shape[0]
+    act_dim = vec.single_action_space.shape[0]
+    p = params(obs_dim, act_dim)
+    vec.reset(seed=3)
+    obs, _ = ref.reset(seed=3)
+    buf, last = rollout(vec, p, t)
+    mean_policy = GaussianMlp(**{k: v for k, v in p.items() if k not in ("std", "seed")})
+    low, high = vec.single_action_space.low, vec.single_action_space.high
+    for s in range(t):
+        np.testing.assert_array_equal(buf["obs"][s], obs)
+        raw = buf["actions"][s]
+        stepping = ~buf["autoreset"][s]
+        noise = (raw - mean_policy.mean(obs))[stepping]
+        assert 0.05 < noise.std() < 0.6, "sampled with std 0.3 around the mean"
+        obs, r, term, trunc, _ = ref.step(np.clip(raw, low, high))
+        np.testing.assert_array_equal(buf["rewards"][s], r)
+        np.testing.assert_array_equal(buf["terminated"][s], term)
+        np.testing.assert_array_equal(buf["truncated"][s], trunc)
+        np.testing.assert_array_equal(buf["autoreset"][s], ref.autoreset)
+    np.testing.assert_array_equal(last, obs)
+    assert buf["autoreset"][6:].all() and not buf["autoreset"][:6].any(), "6-step episodes"
+    assert (np.abs(buf["actions"]) > 1).any(), "some raw actions leave the bounds"
+
+
+def test_rollout_rejects_bad_buffers_and_policies():
+    vec = MjskillVectorEnv("PickCube-v1", num_envs=2, **KW)
+    obs_dim = vec.single_observation_space.shape[0]
+    act_dim = vec.single_action_space.shape[0]
+    buf = vec.rollout_buffers(3)
+    buf["actions"] = buf["actions"][:, :1]
+    with pytest.raises(ValueError, match="rollout buffer actions has 24 values, expected 48"):
+        vec.rollout(GaussianMlp(**params(obs_dim, act_dim)), 0, buf)
+    with pytest.raises(ValueError, match="maps 5 observations to 8 actions"):
+        vec.rollout(GaussianMlp(**params(5, act_dim)), 0, vec.rollout_buffers(3))
+    bad = params(obs_dim, act_dim)
+    bad["obs_std"][4] = 0.0
+    with pytest.raises(ValueError, match=r"obs_std\[4\] = 0"):
+        GaussianMlp(**bad)
+    visual = MjskillVectorEnv("PickCube-v1", num_envs=1, obs_mode="rgb", **KW)
+    with pytest.raises(ValueError, match="flat observations"):
+        visual.rollout_buffers(2)
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def test_ray_shards_roll_out_bit_for_bit_as_one_vector_env(local_ray):
+    from mjskill.ray import RayVectorEnv
+
+    n, t = 5, 7  # uneven shares: 3 + 2 envs
+    local = MjskillVectorEnv("PickCube-v1", num_envs=n, num_threads=2, **KW)
+    remote = RayVectorEnv("PickCube-v1", n, workers=2, **KW)
+    assert remote.shares == [(0, 3), (3, 2)]
+    obs_dim = local.single_observation_space.shape[0]
+    act_dim = local.single_action_space.shape[0]
+    np.testing.assert_array_equal(remote.reset(seed=9), local.reset(seed=9)[0])
+    for it in range(2):
+        p = params(obs_dim, act_dim, seed=it)
+        a, last_a = rollout(local, p, t, first_step=it * t)
+        b = remote.rollout_buffers(t)
+        last_b = remote.rollout(p, it * t, b)
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+        np.testing.assert_array_equal(last_a, last_b)
+    remote.close()
+
+
+def ppo(tmp_path, name, *extra):
+    out = tmp_path / name
+    cmd = [sys.executable, str(REPO / "examples" / "ppo.py"), "--env-id", "PickCube-v1",
+           "--num-envs", "6", "--num-steps", "8", "--num-minibatches", "2",
+           "--total-timesteps", "96", "--num-eval-envs", "2", "--eval-freq", "100",
+           "--num-threads", "1", "--torch-threads", "1", "--hidden", "32", "32",
+           "--out", str(out), *extra]
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}  # a local Ray
+    subprocess.run(cmd, check=True, env=env, capture_output=True, timeout=600)
+    return out
+
+
+def test_ppo_learns_the_same_weights_with_ray_workers(tmp_path):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("ray")
+    local = torch.load(ppo(tmp_path, "local") / "policy.pt", weights_only=False)
+    remote = torch.load(ppo(tmp_path, "ray", "--ray-workers", "2") / "policy.pt",
+                        weights_only=False)
+    for part in ("actor", "critic"):
+        for key, value in local[part].items():
+            assert torch.equal(value, remote[part][key]), f"{part}.{key}"
+    assert torch.equal(local["logstd"], remote["logstd"])
+    np.testing.assert_array_equal(local["obs_mean"], remote["obs_mean"])
+    assert mjskill.__version__
