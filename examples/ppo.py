@@ -28,15 +28,28 @@ at every episode end. Differences, all for the native env or the ONNX file:
   0), so a policy that reads them behaves differently in ManiSkill
   (docs/outcome-physics.md). The exported graph has zero weights on those inputs.
 
+Rollouts are native by default (``--rollout native``): the vector env runs the T steps of an
+iteration in one call, with the actor evaluated on its threads (``mjskill.GaussianMlp``: the
+same network in f32, actions sampled from a per-env random stream), and the log-probs and
+values of the stored observations come from one batched torch pass afterwards.
+``--rollout torch`` is the one-step-per-call loop with torch sampling (the only way with
+``--simulator maniskill``). ``--ray-workers N`` steps the training envs on N Ray actors
+(``mjskill.ray.RayVectorEnv``, on the local machine or the cluster of ``RAY_ADDRESS``) and
+learns here; with the same seed and env count it learns the same weights as the local run.
+
 ``--simulator maniskill`` trains the same learner on the real ManiSkill 3's CPU simulation (one
 PhysX env per slot in this process, about 100-400 steps/s per core), to compare the two
 simulators' learning curves at equal steps; it needs mani_skill, not mjskill.
 
 Logs ``log.csv`` in the run directory every iteration: iteration, env_steps, wall_time,
-sim_time (seconds in env.reset/step), learner_time (policy inference during rollouts, GAE and
-the update; wall time also counts evaluations), train_success and train_return (episodes that
-ended during the iteration); evaluations are rows of their own (train columns empty) with
-eval_success and eval_return of the policy after env_steps steps.
+sim_time (seconds in the vector env's reset/step/rollout; native rollouts include the actor's
+forward passes on the env threads), learner_time (infer + gae + update), train_success and
+train_return (episodes that ended during the iteration); evaluations are rows of their own
+(train columns empty) with eval_success and eval_return of the policy after env_steps steps;
+then infer_time (the rollout's torch forward passes), gae_time (GAE and the observation
+statistics), update_time and eval_time. ``--clock thread`` makes the time columns this
+thread's CPU time, a measure of cost that other processes on a busy machine do not inflate
+(with --num-threads 1 --torch-threads 1 all the work runs on this thread).
 """
 
 from __future__ import annotations

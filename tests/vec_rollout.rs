@@ -337,3 +337,16 @@ fn the_mean_is_the_mlp_computed_in_f64_within_f32_rounding() {
         }
     }
 }
+
+#[test]
+fn the_rational_tanh_is_within_5e7_of_the_exact_one() {
+    let mut worst = 0.0f64;
+    for i in -200_000..=200_000 {
+        let x = i as f32 * 1e-4; // -20..20, through the saturated tails
+        let err = (mjskill::solvers::mlp::tanh(x) as f64 - (x as f64).tanh()).abs();
+        worst = worst.max(err);
+    }
+    assert!(worst < 5e-7, "largest error {worst:e}");
+    assert_eq!(mjskill::solvers::mlp::tanh(f32::INFINITY), 1.0);
+    assert_eq!(mjskill::solvers::mlp::tanh(-1e-5), -1e-5);
+}
