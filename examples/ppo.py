@@ -28,12 +28,11 @@ at every episode end. Differences, all for the native env or the ONNX file:
   0), so a policy that reads them behaves differently in ManiSkill
   (docs/outcome-physics.md). The exported graph has zero weights on those inputs.
 
-Rollouts are native by default (``--rollout native``): the vector env runs the T steps of an
-iteration in one call, with the actor evaluated on its threads (``mjskill.GaussianMlp``: the
-same network in f32, actions sampled from a per-env random stream), and the log-probs and
-values of the stored observations come from one batched torch pass afterwards.
-``--rollout torch`` is the one-step-per-call loop with torch sampling (the only way with
-``--simulator maniskill``). ``--ray-workers N`` steps the training envs on N Ray actors
+With ``--rollout native`` the vector env runs the T steps of an iteration in one call, with
+the actor evaluated on its threads (``mjskill.GaussianMlp``: the same network in f32, actions
+sampled from a per-env random stream), and the log-probs and values of the stored observations
+come from one batched torch pass afterwards. ``--rollout torch`` (the default without Ray) is
+the one-step-per-call loop with torch sampling (the only way with ``--simulator maniskill``). ``--ray-workers N`` steps the training envs on N Ray actors
 (``mjskill.ray.RayVectorEnv``, on the local machine or the cluster of ``RAY_ADDRESS``) and
 learns here; with the same seed and env count it learns the same weights as the local run.
 
@@ -158,11 +157,12 @@ def parse_args(argv=None):
                         "count: with --num-threads 1 --torch-threads 1 every computation runs "
                         "on this thread, so it measures the run's cost on a busy machine")
     p.add_argument("--out", default=None, help="run directory (default runs/<env>__<robot>__<seed>)")
-    p.add_argument("--rollout", choices=["native", "torch"], default="native",
+    p.add_argument("--rollout", choices=["native", "torch"], default=None,
                    help="native: the actor runs inside the vector env's threads, T steps per "
-                        "call, log-probs and values in one batched pass afterwards (default); "
-                        "torch: one env step and one torch forward per step (the only way "
-                        "with --simulator maniskill)")
+                        "call, log-probs and values in one batched pass afterwards (the "
+                        "default with --ray-workers); torch: one env step and one torch "
+                        "forward per step (the default otherwise, and the only way with "
+                        "--simulator maniskill)")
     p.add_argument("--ray-workers", type=int, default=0,
                    help="step the training envs on N Ray actors (mjskill.ray.RayVectorEnv, "
                         "--num-threads threads each; RAY_ADDRESS for a cluster) and learn "
@@ -233,6 +233,8 @@ def main(argv=None):
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
     torch.set_num_threads(args.torch_threads)
+    if args.rollout is None:
+        args.rollout = "native" if args.ray_workers else "torch"
     native = args.rollout == "native"
     if args.simulator == "maniskill" and (native or args.ray_workers):
         sys.exit("--simulator maniskill steps one env per slot: use --rollout torch, no --ray-workers")

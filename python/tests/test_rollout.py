@@ -125,7 +125,7 @@ def ppo(tmp_path, name, *extra):
            "--num-envs", "6", "--num-steps", "8", "--num-minibatches", "2",
            "--total-timesteps", "96", "--num-eval-envs", "2", "--eval-freq", "100",
            "--num-threads", "1", "--torch-threads", "1", "--hidden", "32", "32",
-           "--out", str(out), *extra]
+           "--rollout", "native", "--out", str(out), *extra]
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}  # a local Ray
     subprocess.run(cmd, check=True, env=env, capture_output=True, timeout=600)
     return out
