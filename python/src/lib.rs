@@ -22,12 +22,12 @@ use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
 use mjskill::VecEnv;
-use mjskill::{Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, SimConfig};
+use mjskill::{Env, EnvConfig, EnvError, EnvState, ObsMode, RewardMode};
 use numpy::ndarray::ArrayView2;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
-use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBool, PyDict, PyList};
 
 use mjskill::mujoco::Warnings;
 
@@ -94,19 +94,63 @@ fn int_arg(
     }
 }
 
-/// A seed argument (`None` or `0..=MAX_SEED`; the message is [`EnvError::BadSeed`]'s).
+/// A seed argument (`None` or `0..=MAX_SEED`): an out-of-range seed is a `ValueError`
+/// `"{name} {value} is out of range: seeds are 32-bit, 0..=4294967295"` (the message of
+/// [`EnvError::BadSeed`]), anything but an int (a bool included) a `TypeError`. The one check
+/// of seeds for Python: the classes call it and the Python wrappers through [`check_seed`].
 fn seed_arg(seed: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<u64>> {
-    seed.filter(|s| !s.is_none())
-        .map(|s| {
-            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
-            int_arg(s, name, 0, mjskill::MAX_SEED as i128, &valid).map(|v| v as u64)
-        })
-        .transpose()
+    let Some(s) = seed.filter(|s| !s.is_none()) else {
+        return Ok(None);
+    };
+    not_a_bool(s, name, "an int or None")?;
+    let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
+    int_arg(s, name, 0, mjskill::MAX_SEED as i128, &valid)
+        .map_err(|e| type_error_naming(s, name, "an int or None", e))
+        .map(|v| Some(v as u64))
 }
 
-/// A count argument in `1..=max` (`num_envs`, `num_threads`).
-fn count_arg(value: &Bound<'_, PyAny>, name: &str, max: usize, what: &str) -> PyResult<usize> {
-    int_arg(value, name, 1, max as i128, &format!("1..={max} ({what})")).map(|v| v as usize)
+/// A `TypeError` `"{name} must be {what}, not {type} ({repr})"` for a bool (Python's bools
+/// are ints, but a flag given for a number is a mistake).
+fn not_a_bool(value: &Bound<'_, PyAny>, name: &str, what: &str) -> PyResult<()> {
+    if value.is_instance_of::<PyBool>() {
+        return Err(type_error(value, name, what));
+    }
+    Ok(())
+}
+
+/// `"{name} must be {what}, not {type} ({repr})"` as a `TypeError`.
+fn type_error(value: &Bound<'_, PyAny>, name: &str, what: &str) -> PyErr {
+    let ty = value
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "object".into());
+    let repr = value
+        .repr()
+        .map(|r| r.to_string())
+        .unwrap_or_else(|_| "?".into());
+    PyTypeError::new_err(format!("{name} must be {what}, not {ty} ({repr})"))
+}
+
+/// `e` as [`type_error`]'s message when it is a `TypeError` (the value is no int).
+fn type_error_naming(value: &Bound<'_, PyAny>, name: &str, what: &str, e: PyErr) -> PyErr {
+    if e.is_instance_of::<PyTypeError>(value.py()) {
+        type_error(value, name, what)
+    } else {
+        e
+    }
+}
+
+/// A count argument in `1..=MAX_NUM_ENVS` (`num_envs`, `num_threads`).
+fn count_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    not_a_bool(value, name, "an int")?;
+    let valid = format!(
+        "1..={} (each env owns its MuJoCo model and data; more threads than envs are clamped)",
+        mjskill::MAX_NUM_ENVS
+    );
+    int_arg(value, name, 1, mjskill::MAX_NUM_ENVS as i128, &valid)
+        .map_err(|e| type_error_naming(value, name, "an int", e))
+        .map(|v| v as usize)
 }
 
 /// `{"BadQacc": 1, ...}`: the MuJoCo warnings that fired (kind names as
@@ -123,60 +167,104 @@ fn warnings_dict<'py>(py: Python<'py>, w: &Warnings) -> PyResult<Option<Bound<'p
     Ok(Some(d))
 }
 
-/// Whether an info key holds a boolean (stored as 0/1 on the Rust side): ManiSkill's
-/// `success`, `fail` and `is_*` keys.
-fn is_flag(key: &str) -> bool {
-    key == "success" || key == "fail" || key.starts_with("is_")
+/// ManiSkill's env keyword arguments, the one declaration for `Env`, `VecEnv` and
+/// `record_episodes` (which take them as `**kwargs`) and for the Python classes (which read
+/// them, with their defaults, as `ENV_KWARGS`).
+const ENV_KWARGS: [&str; 7] = [
+    "robot_uids",
+    "obs_mode",
+    "control_mode",
+    "reward_mode",
+    "max_episode_steps",
+    "robot_init_qpos_noise",
+    "sim_freq",
+];
+
+/// Episode length that means "no limit" (`max_episode_steps` of envs whose time limit is
+/// applied outside the native env): the largest one.
+const UNLIMITED_EPISODE_STEPS: u32 = u32::MAX;
+
+/// `{name: default}` of [`ENV_KWARGS`], the defaults being [`EnvConfig::default`]'s
+/// (`max_episode_steps` None: the env's registered length).
+fn env_kwargs_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let c = EnvConfig::default();
+    let d = PyDict::new(py);
+    d.set_item(ENV_KWARGS[0], c.robot)?;
+    d.set_item(ENV_KWARGS[1], c.obs_mode.name())?;
+    d.set_item(ENV_KWARGS[2], c.control_mode)?;
+    d.set_item(ENV_KWARGS[3], c.reward_mode.name())?;
+    d.set_item(ENV_KWARGS[4], c.max_episode_steps)?;
+    d.set_item(ENV_KWARGS[5], c.robot_init_qpos_noise)?;
+    d.set_item(ENV_KWARGS[6], c.sim.sim_freq)?;
+    Ok(d)
 }
 
-/// The [`EnvConfig`] for ManiSkill's keyword arguments (`max_episode_steps` and `sim_freq`
-/// as Python ints: `None` is no limit and the default 100 Hz).
-fn config(
-    robot_uids: Option<String>,
-    obs_mode: &str,
-    control_mode: Option<String>,
-    reward_mode: &str,
-    max_episode_steps: Option<&Bound<'_, PyAny>>,
-    robot_init_qpos_noise: f64,
-    sim_freq: Option<&Bound<'_, PyAny>>,
-) -> PyResult<EnvConfig> {
-    let max_episode_steps = max_episode_steps
-        .filter(|m| !m.is_none())
-        .map(|m| {
-            let valid = format!("an episode needs at least one step (1..={})", u32::MAX);
-            int_arg(m, "max_episode_steps", 1, u32::MAX as i128, &valid).map(|v| v as u32)
-        })
-        .transpose()?;
-    let sim_freq = match sim_freq.filter(|f| !f.is_none()) {
-        None => SimConfig::DEFAULT_SIM_FREQ,
-        Some(f) => {
-            let valid = format!(
-                "use a multiple of the control frequency {c} Hz between {c} and 100000 (e.g. \
-                 100, 200, 500)",
-                c = mjskill::CONTROL_FREQ
-            );
-            // Beyond u32 here; within it, SimConfig's own check names the valid rates.
-            int_arg(f, "sim_freq", 0, u32::MAX as i128, &valid)? as u32
-        }
+/// `value` extracted as `T`; a wrong type is a `TypeError` naming the argument.
+fn extract_arg<'py, T: FromPyObject<'py>>(value: &Bound<'py, PyAny>, name: &str) -> PyResult<T> {
+    value
+        .extract::<T>()
+        .map_err(|e| PyTypeError::new_err(format!("argument '{name}': {}", e.value(value.py()))))
+}
+
+/// The [`EnvConfig`] for ManiSkill's keyword arguments ([`ENV_KWARGS`]; `None` or absent is
+/// the default; `max_episode_steps` and `sim_freq` as Python ints, range-checked). Any other
+/// keyword is a `TypeError` naming `callee`, as Python's own for an unexpected keyword.
+fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResult<EnvConfig> {
+    let mut cfg = EnvConfig::default();
+    let Some(kwargs) = kwargs else {
+        return Ok(cfg);
     };
-    Ok(EnvConfig {
-        robot: robot_uids,
-        obs_mode: ObsMode::parse(obs_mode).map_err(value_err)?,
-        reward_mode: RewardMode::parse(reward_mode).map_err(value_err)?,
-        control_mode,
-        robot_init_qpos_noise,
-        max_episode_steps,
-        sim: SimConfig { sim_freq },
-    })
+    for (key, value) in kwargs.iter() {
+        let key: String = key.extract()?;
+        if value.is_none() && key != "obs_mode" && key != "reward_mode" {
+            continue;
+        }
+        match key.as_str() {
+            "robot_uids" => cfg.robot = Some(extract_arg(&value, &key)?),
+            "obs_mode" => {
+                let mode: String = extract_arg(&value, &key)?;
+                cfg.obs_mode = ObsMode::parse(&mode).map_err(value_err)?;
+            }
+            "control_mode" => cfg.control_mode = Some(extract_arg(&value, &key)?),
+            "reward_mode" => {
+                let mode: String = extract_arg(&value, &key)?;
+                cfg.reward_mode = RewardMode::parse(&mode).map_err(value_err)?;
+            }
+            "max_episode_steps" => {
+                let max = UNLIMITED_EPISODE_STEPS;
+                let valid = format!("an episode needs at least one step (1..={max})");
+                let steps = int_arg(&value, &key, 1, max as i128, &valid)?;
+                cfg.max_episode_steps = Some(steps as u32);
+            }
+            "robot_init_qpos_noise" => cfg.robot_init_qpos_noise = extract_arg(&value, &key)?,
+            "sim_freq" => {
+                let valid = format!(
+                    "use a multiple of the control frequency {c} Hz between {c} and 100000 \
+                     (e.g. 100, 200, 500)",
+                    c = mjskill::CONTROL_FREQ
+                );
+                // Beyond u32 here; within it, SimConfig's own check names the valid rates.
+                cfg.sim.sim_freq = int_arg(&value, &key, 0, u32::MAX as i128, &valid)? as u32;
+            }
+            _ => {
+                return Err(PyTypeError::new_err(format!(
+                    "{callee}() got an unexpected keyword argument '{key}' (valid: {})",
+                    ENV_KWARGS.join(", ")
+                )))
+            }
+        }
+    }
+    Ok(cfg)
 }
 
 /// The single-env info dict: `elapsed_steps`, the task keys (flags as `bool`) and, on
 /// reset, `reconfigure`.
-fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
+fn info_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+    let info = env.info();
     let d = PyDict::new(py);
     d.set_item("elapsed_steps", info.elapsed_steps)?;
     for (k, v) in info.keys.iter().zip(&info.values) {
-        if is_flag(k) {
+        if env.info_is_flag(k) {
             d.set_item(*k, *v != 0.0)?;
         } else {
             d.set_item(*k, *v)?;
@@ -233,7 +321,12 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("cameras", cams)?;
     d.set_item("point_count", env.point_cloud().map(|p| p.len))?;
     d.set_item("segmentation_id_map", env.segmentation_id_map())?;
-    let keys: Vec<(&str, bool)> = env.info().keys.iter().map(|k| (*k, is_flag(k))).collect();
+    let keys: Vec<(&str, bool)> = env
+        .info()
+        .keys
+        .iter()
+        .map(|k| (*k, env.info_is_flag(k)))
+        .collect();
     d.set_item("info_keys", keys)?;
     d.set_item("render_size", env.render_size())?;
     Ok(d)
@@ -318,32 +411,11 @@ impl PyEnv {
 
 #[pymethods]
 impl PyEnv {
-    /// Builds `env_id` with ManiSkill's keyword arguments.
+    /// Builds `env_id` with ManiSkill's keyword arguments (`ENV_KWARGS`).
     #[new]
-    #[pyo3(signature = (env_id, robot_uids=None, obs_mode="state", control_mode=None,
-        reward_mode="normalized_dense", max_episode_steps=None, robot_init_qpos_noise=0.02,
-        sim_freq=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        py: Python<'_>,
-        env_id: &str,
-        robot_uids: Option<String>,
-        obs_mode: &str,
-        control_mode: Option<String>,
-        reward_mode: &str,
-        max_episode_steps: Option<&Bound<'_, PyAny>>,
-        robot_init_qpos_noise: f64,
-        sim_freq: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<Self> {
-        let cfg = config(
-            robot_uids,
-            obs_mode,
-            control_mode,
-            reward_mode,
-            max_episode_steps,
-            robot_init_qpos_noise,
-            sim_freq,
-        )?;
+    #[pyo3(signature = (env_id, **kwargs))]
+    fn new(py: Python<'_>, env_id: &str, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let cfg = config(kwargs, "Env")?;
         let env = py
             .detach(|| mjskill::make(env_id, cfg))
             .map_err(value_err)?;
@@ -370,10 +442,7 @@ impl PyEnv {
         let env = &mut *g;
         py.detach(|| env.try_reset(seed).map(|_| ()))
             .map_err(value_err)?;
-        Ok((
-            PyArray1::from_slice(py, env.obs()),
-            info_dict(py, env.info())?,
-        ))
+        Ok((PyArray1::from_slice(py, env.obs()), info_dict(py, env)?))
     }
 
     /// One step: `(obs, reward, terminated, truncated, info)`.
@@ -412,7 +481,7 @@ impl PyEnv {
             reward,
             terminated,
             truncated,
-            info_dict(py, env.info())?,
+            info_dict(py, env)?,
         ))
     }
 
@@ -423,7 +492,7 @@ impl PyEnv {
 
     /// The current info dict.
     fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        info_dict(py, self.lock(py)?.info())
+        info_dict(py, &*self.lock(py)?)
     }
 
     /// The sensor images of the current state (visual obs modes; else empty); depth in
@@ -562,53 +631,30 @@ impl PyVecEnv {
     /// `num_envs` and `num_threads` are in `1..=MAX_NUM_ENVS` (more threads than envs are
     /// clamped to `num_envs`).
     #[new]
-    #[pyo3(signature = (env_id, num_envs, num_threads=None, robot_uids=None, obs_mode="state",
-        control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-        robot_init_qpos_noise=0.02, sim_freq=None, autoreset=true))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (env_id, num_envs, num_threads=None, autoreset=true, **kwargs))]
     fn new(
         py: Python<'_>,
         env_id: &str,
         num_envs: &Bound<'_, PyAny>,
         num_threads: Option<&Bound<'_, PyAny>>,
-        robot_uids: Option<String>,
-        obs_mode: &str,
-        control_mode: Option<String>,
-        reward_mode: &str,
-        max_episode_steps: Option<&Bound<'_, PyAny>>,
-        robot_init_qpos_noise: f64,
-        sim_freq: Option<&Bound<'_, PyAny>>,
         autoreset: bool,
+        kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let num_envs = count_arg(
-            num_envs,
-            "num_envs",
-            mjskill::MAX_NUM_ENVS,
-            "each env owns its MuJoCo model and data",
-        )?;
+        let num_envs = count_arg(num_envs, "num_envs")?;
         let num_threads = match num_threads.filter(|t| !t.is_none()) {
             None => 1,
-            Some(t) => count_arg(
-                t,
-                "num_threads",
-                mjskill::MAX_NUM_ENVS,
-                "the caller's thread counts; more than num_envs are clamped to num_envs",
-            )?,
+            Some(t) => count_arg(t, "num_threads")?,
         };
-        let cfg = config(
-            robot_uids,
-            obs_mode,
-            control_mode,
-            reward_mode,
-            max_episode_steps,
-            robot_init_qpos_noise,
-            sim_freq,
-        )?;
+        let cfg = config(kwargs, "VecEnv")?;
         let mut vec = py
             .detach(|| VecEnv::new(env_id, cfg, num_envs, num_threads))
             .map_err(value_err)?;
         vec.set_autoreset(autoreset);
-        let keys = vec.info_keys().iter().map(|k| (*k, is_flag(k))).collect();
+        let keys = vec
+            .info_keys()
+            .iter()
+            .map(|k| (*k, vec.info_is_flag(k)))
+            .collect();
         let masks = PyArray1::from_vec(py, vec![true; num_envs]);
         let kwargs = PyDict::new(py);
         kwargs.set_item("write", false)?;
@@ -788,37 +834,21 @@ impl PyVecEnv {
 /// rollout` records. Returns each episode's `(return, success)`. The file is written under a
 /// temporary name and renamed into place only when complete, so a failure leaves nothing.
 #[pyfunction]
-#[pyo3(signature = (path, env_id, seeds, actions, robot_uids=None, obs_mode="state",
-    control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-    robot_init_qpos_noise=0.02, sim_freq=None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (path, env_id, seeds, actions, **kwargs))]
 fn record_episodes(
     py: Python<'_>,
     path: PathBuf,
     env_id: &str,
     seeds: Vec<Bound<'_, PyAny>>,
     actions: Vec<PyReadonlyArray2<'_, f32>>,
-    robot_uids: Option<String>,
-    obs_mode: &str,
-    control_mode: Option<String>,
-    reward_mode: &str,
-    max_episode_steps: Option<&Bound<'_, PyAny>>,
-    robot_init_qpos_noise: f64,
-    sim_freq: Option<&Bound<'_, PyAny>>,
+    kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Vec<(f64, bool)>> {
     let seeds = seeds
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
-            int_arg(
-                s,
-                &format!("seeds[{k}]"),
-                0,
-                mjskill::MAX_SEED as i128,
-                &valid,
-            )
-            .map(|v| v as u64)
+            let name = format!("seeds[{k}]");
+            seed_arg(Some(s), &name)?.ok_or_else(|| type_error(s, &name, "an int"))
         })
         .collect::<PyResult<Vec<u64>>>()?;
     if seeds.len() != actions.len() {
@@ -828,15 +858,7 @@ fn record_episodes(
             actions.len()
         )));
     }
-    let cfg = config(
-        robot_uids,
-        obs_mode,
-        control_mode,
-        reward_mode,
-        max_episode_steps,
-        robot_init_qpos_noise,
-        sim_freq,
-    )?;
+    let cfg = config(kwargs, "record_episodes")?;
     let episodes: Vec<Vec<f32>> = actions
         .iter()
         .map(|a| a.as_array().iter().copied().collect())
@@ -956,6 +978,21 @@ fn control_modes(env_id: &str, robot_uids: &str) -> PyResult<Vec<&'static str>> 
         })
 }
 
+/// Checks a seed argument for the Python classes: `None` or an int in `0..=MAX_SEED`
+/// (returned as a Python int), else the `ValueError` or `TypeError` the native classes raise.
+#[pyfunction]
+#[pyo3(signature = (seed, name="seed"))]
+fn check_seed(seed: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<u64>> {
+    seed_arg(Some(seed), name)
+}
+
+/// Checks a count argument for the Python classes (`num_envs`, `num_threads`): an int in
+/// `1..=MAX_NUM_ENVS`, else the `ValueError` or `TypeError` the native `VecEnv` raises.
+#[pyfunction]
+fn check_count(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    count_arg(value, name)
+}
+
 /// The `mjskill._native` module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -964,6 +1001,12 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;
+    m.add_function(wrap_pyfunction!(check_seed, m)?)?;
+    m.add_function(wrap_pyfunction!(check_count, m)?)?;
+    m.add("ENV_KWARGS", env_kwargs_defaults(m.py())?)?;
+    m.add("MAX_SEED", mjskill::MAX_SEED)?;
+    m.add("CONTROL_FREQ", mjskill::CONTROL_FREQ)?;
+    m.add("UNLIMITED_EPISODE_STEPS", UNLIMITED_EPISODE_STEPS)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_NUM_ENVS", mjskill::MAX_NUM_ENVS)?;
     Ok(())

@@ -79,7 +79,7 @@ pub enum EnvError {
     #[error("cannot set state: {0}")]
     BadState(String),
     /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
-    #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
+    #[error("seed {0} is out of range: seeds are 32-bit, 0..={max}", max = super::checks::MAX_SEED)]
     BadSeed(u64),
     /// An unknown robot uid, or the robot's scene could not be built.
     #[error(transparent)]

@@ -337,6 +337,8 @@ pub struct VecEnv {
     obs_dim: usize,
     act_dim: usize,
     keys: &'static [&'static str],
+    /// Whether each of `keys` is a flag ([`Env::info_is_flag`]).
+    key_is_flag: Vec<bool>,
     shared: Arc<Shared>,
     /// The envs stepped by the calling thread.
     local: Worker,
@@ -393,6 +395,7 @@ impl VecEnv {
         let act_dim = first.action_space().shape[0];
         let keys = first.info().keys;
         let nkeys = keys.len();
+        let key_is_flag = keys.iter().map(|k| first.info_is_flag(k)).collect();
         let single_action_space = first.action_space().clone();
         let single_observation_space = first.observation_space().clone();
         let images = ImageLayout::of(first);
@@ -498,6 +501,7 @@ impl VecEnv {
             obs_dim,
             act_dim,
             keys,
+            key_is_flag,
             shared,
             local,
             threads: thread_handles,
@@ -730,6 +734,13 @@ impl VecEnv {
     /// Task info keys (columns of [`VecEnv::info`]).
     pub fn info_keys(&self) -> &'static [&'static str] {
         self.keys
+    }
+    /// Whether info key `key` is a boolean flag (0 or 1), as [`Env::info_is_flag`].
+    pub fn info_is_flag(&self, key: &str) -> bool {
+        self.keys
+            .iter()
+            .position(|k| *k == key)
+            .is_some_and(|i| self.key_is_flag[i])
     }
     /// Task info values, `[N × keys]` row-major (booleans as 0/1).
     pub fn info(&self) -> &[f64] {
