@@ -360,8 +360,7 @@ fn names<T>(v: &[(&str, T)]) -> String {
     v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
-/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
-pub const CONTROL_FREQ: u32 = 20;
+pub use crate::mjcf::CONTROL_FREQ;
 
 /// Physics settings (ManiSkill's `sim_config`): how many physics steps simulate one 20 Hz
 /// control step. A higher `sim_freq` is slower and closer to the continuous-time dynamics.

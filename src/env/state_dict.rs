@@ -517,6 +517,37 @@ impl Env {
     /// supplies the targets of the action that led to the state.
     pub fn set_state_dict(&mut self, sd: &StateDict) -> Result<(), EnvError> {
         // Validate everything before touching the simulation.
+        self.check_state_dict_actors(sd)?;
+        let art = self.check_state_dict_robot(sd)?;
+        let n = self.sim.qpos.len();
+        // Write the state.
+        self.write_state_dict_actors(sd);
+        self.sim
+            .robot
+            .joints
+            .set_qpos(&mut self.sim.data, &art[13..13 + n]);
+        let qv = self.sim.data.qvel_mut();
+        for (&a, &v) in self.sim.robot.joints.dof_adr.iter().zip(&art[13 + n..]) {
+            qv[a] = v;
+        }
+        self.sim.controller.set_targets_from_state(
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
+            &sd.controller,
+        );
+        if let Some(d) = &sd.drive {
+            for k in 0..n {
+                self.sim.drives.set_joint_target(k, d.qpos[k], d.qvel[k]);
+            }
+        }
+        self.sim.data.qacc_warmstart_mut().fill(0.0);
+        self.refresh_after_state_change();
+        Ok(())
+    }
+
+    /// The errors of [`Env::set_state_dict`] about the dict's actors.
+    fn check_state_dict_actors(&self, sd: &StateDict) -> Result<(), EnvError> {
         for name in sd.actors.keys() {
             if !self.actors.iter().any(|a| a.name == name) {
                 return Err(EnvError::BadState(format!(
@@ -543,6 +574,12 @@ impl Env {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The errors of [`Env::set_state_dict`] about the robot (articulation, controller and
+    /// drive entries); returns the articulation's values.
+    fn check_state_dict_robot<'a>(&self, sd: &'a StateDict) -> Result<&'a [f64], EnvError> {
         let uid = self.sim.spec.uid();
         if let Some(other) = sd.articulations.keys().find(|k| k.as_str() != uid) {
             return Err(EnvError::BadState(format!(
@@ -626,8 +663,11 @@ impl Env {
                 check_values(key, v, MAX_TARGET_VALUE)?;
             }
         }
+        Ok(art.as_slice())
+    }
 
-        // Write the state.
+    /// Writes the actors' poses and velocities of a checked state dict.
+    fn write_state_dict_actors(&mut self, sd: &StateDict) {
         for a in &self.actors {
             let s = &sd.actors[a.name];
             match a.body {
@@ -655,28 +695,6 @@ impl Env {
                 ActorBody::Fixed(_) => {}
             }
         }
-        self.sim
-            .robot
-            .joints
-            .set_qpos(&mut self.sim.data, &art[13..13 + n]);
-        let qv = self.sim.data.qvel_mut();
-        for (&a, &v) in self.sim.robot.joints.dof_adr.iter().zip(&art[13 + n..]) {
-            qv[a] = v;
-        }
-        self.sim.controller.set_targets_from_state(
-            &self.sim.robot.joints,
-            &self.sim.data,
-            &mut self.sim.drives,
-            &sd.controller,
-        );
-        if let Some(d) = &sd.drive {
-            for k in 0..n {
-                self.sim.drives.set_joint_target(k, d.qpos[k], d.qvel[k]);
-            }
-        }
-        self.sim.data.qacc_warmstart_mut().fill(0.0);
-        self.refresh_after_state_change();
-        Ok(())
     }
 
     /// Recomputes everything derived from the simulation state (forward dynamics, contacts,

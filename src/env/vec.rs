@@ -368,6 +368,53 @@ pub struct VecEnv {
     xyzw: Vec<f32>,
 }
 
+/// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
+/// `sh` (spinning, then parked), runs the epoch's command on its envs and counts itself done,
+/// until the command is [`CMD_QUIT`].
+fn spawn_worker(
+    k: usize,
+    mut w: Worker,
+    sh: Arc<Shared>,
+) -> Result<JoinHandle<()>, EnvError> {
+    std::thread::Builder::new()
+        .name(format!("mjskill-vecenv-{k}"))
+        .spawn(move || {
+        let mut seen = 0u64;
+        loop {
+            let mut spins = 0u32;
+            let epoch = loop {
+                let e = sh.epoch.load(Ordering::Acquire);
+                if e != seen {
+                    break e;
+                }
+                if spins < SPINS {
+                    spins += 1;
+                    std::hint::spin_loop();
+                } else {
+                    std::thread::park();
+                }
+            };
+            seen = epoch;
+            let command = sh.command.load(Ordering::Relaxed);
+            if command == CMD_QUIT {
+                break;
+            }
+            // A panic in an env (a bug, or a GL driver failing mid-run) must not
+            // leave the caller waiting for `done` forever: it is caught here and
+            // re-raised on the caller's thread, as a single env's panic would be.
+            if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
+            {
+                if let Ok(mut slot) = sh.panic_payload.lock() {
+                    slot.get_or_insert(payload);
+                }
+                sh.panicked.store(true, Ordering::Release);
+            }
+            sh.done.fetch_add(1, Ordering::Release);
+        }
+        })
+        .map_err(|e| EnvError::WorkerThread(e.to_string()))
+}
+
 impl VecEnv {
     /// Builds `num_envs` envs of `env_id` with `config`, spread over `threads` threads (the
     /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
@@ -454,45 +501,8 @@ impl VecEnv {
         let local = workers.next().expect("at least one share");
         let mut handles = Vec::new();
         let mut thread_handles = Vec::new();
-        for (k, mut w) in workers.enumerate() {
-            let sh = shared.clone();
-            let h = std::thread::Builder::new()
-                .name(format!("mjskill-vecenv-{}", k + 1))
-                .spawn(move || {
-                    let mut seen = 0u64;
-                    loop {
-                        let mut spins = 0u32;
-                        let epoch = loop {
-                            let e = sh.epoch.load(Ordering::Acquire);
-                            if e != seen {
-                                break e;
-                            }
-                            if spins < SPINS {
-                                spins += 1;
-                                std::hint::spin_loop();
-                            } else {
-                                std::thread::park();
-                            }
-                        };
-                        seen = epoch;
-                        let command = sh.command.load(Ordering::Relaxed);
-                        if command == CMD_QUIT {
-                            break;
-                        }
-                        // A panic in an env (a bug, or a GL driver failing mid-run) must not
-                        // leave the caller waiting for `done` forever: it is caught here and
-                        // re-raised on the caller's thread, as a single env's panic would be.
-                        if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
-                        {
-                            if let Ok(mut slot) = sh.panic_payload.lock() {
-                                slot.get_or_insert(payload);
-                            }
-                            sh.panicked.store(true, Ordering::Release);
-                        }
-                        sh.done.fetch_add(1, Ordering::Release);
-                    }
-                })
-                .map_err(|e| EnvError::WorkerThread(e.to_string()))?;
+        for (k, w) in workers.enumerate() {
+            let h = spawn_worker(k + 1, w, shared.clone())?;
             thread_handles.push(h.thread().clone());
             handles.push(h);
         }

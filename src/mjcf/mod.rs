@@ -70,8 +70,10 @@ pub enum SceneError {
 /// Default physics timestep in seconds, ManiSkill's (the env's `SimConfig` may choose
 /// another).
 pub const TIMESTEP: f64 = 0.01;
-/// Control period of one env step (ManiSkill: 20 Hz).
-pub const CONTROL_DT: f64 = 0.05;
+/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
+pub const CONTROL_FREQ: u32 = 20;
+/// Control period of one env step in seconds, `1 / CONTROL_FREQ` (0.05).
+pub const CONTROL_DT: f64 = 1.0 / CONTROL_FREQ as f64;
 /// Standard gravity used by ManiSkill.
 pub const GRAVITY: f64 = 9.81;
 /// ManiSkill's default material friction (static = dynamic).
@@ -788,4 +790,13 @@ fn find_body<'a>(e: &'a Element, name: &str) -> Option<&'a Element> {
 /// Name of the k-th collision geom of a link.
 pub fn collision_geom_name(link: &str, k: usize) -> String {
     format!("{link}_collision{k}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn control_dt_is_the_literal_period_of_control_freq() {
+        // Derived from CONTROL_FREQ, bitwise the 0.05 every timestep was computed from.
+        assert_eq!(super::CONTROL_DT.to_bits(), 0.05f64.to_bits());
+    }
 }

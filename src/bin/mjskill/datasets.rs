@@ -28,12 +28,17 @@ pub fn import_maniskill(
 }
 
 /// `export --format lerobot`'s file size limits (None: LeRobot's default).
+#[derive(clap::Args)]
 pub struct LimitArgs {
-    /// `--chunks-size`.
+    /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
+    #[arg(long)]
     pub chunks_size: Option<usize>,
-    /// `--data-files-size-in-mb`.
+    /// --format lerobot: size limit of data and meta/episodes parquet files in MB
+    /// (default 100); an episode that would reach it starts the next file.
+    #[arg(long)]
     pub data_files_size_in_mb: Option<f64>,
-    /// `--video-files-size-in-mb`.
+    /// --format lerobot: size limit of video files in MB (default 200).
+    #[arg(long)]
     pub video_files_size_in_mb: Option<f64>,
 }
 
