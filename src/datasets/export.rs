@@ -408,32 +408,32 @@ fn trajectory_kwargs(
     out_mode: &str,
     convert: Option<&str>,
 ) -> (Map<String, Value>, Map<String, Value>) {
-let mut env_kwargs = Map::new();
-env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
-env_kwargs.insert("control_mode".into(), json!(out_mode));
-env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
-env_kwargs.insert("robot_uids".into(), json!(m.robot));
-env_kwargs.insert("render_mode".into(), Value::Null);
-env_kwargs.insert("num_envs".into(), json!(1));
-let mut extra = Map::new();
-extra.insert("source_type".into(), json!("mjskill"));
-extra.insert(
-    "source_desc".into(),
-    json!(match convert {
-        None => format!(
-            "exported by mjskill {} from {}",
-            env!("CARGO_PKG_VERSION"),
-            path.display()
-        ),
-        Some(c) => format!(
-            "exported by mjskill {} from {}; actions converted from {} to {c} (the joint \
+    let mut env_kwargs = Map::new();
+    env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
+    env_kwargs.insert("control_mode".into(), json!(out_mode));
+    env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
+    env_kwargs.insert("robot_uids".into(), json!(m.robot));
+    env_kwargs.insert("render_mode".into(), Value::Null);
+    env_kwargs.insert("num_envs".into(), json!(1));
+    let mut extra = Map::new();
+    extra.insert("source_type".into(), json!("mjskill"));
+    extra.insert(
+        "source_desc".into(),
+        json!(match convert {
+            None => format!(
+                "exported by mjskill {} from {}",
+                env!("CARGO_PKG_VERSION"),
+                path.display()
+            ),
+            Some(c) => format!(
+                "exported by mjskill {} from {}; actions converted from {} to {c} (the joint \
              targets mjskill's controller set)",
-            env!("CARGO_PKG_VERSION"),
-            path.display(),
-            m.control_mode
-        ),
-    }),
-);
+                env!("CARGO_PKG_VERSION"),
+                path.display(),
+                m.control_mode
+            ),
+        }),
+    );
     (env_kwargs, extra)
 }
 

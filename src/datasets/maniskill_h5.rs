@@ -77,15 +77,16 @@ impl EpisodeInfo {
     pub fn checked_seed(&self) -> Result<u64, SeedError> {
         let id = self.episode_id;
         let max = crate::env::checks::MAX_SEED;
-        let kw = match self.reset_kwargs.get("seed") {
-            None | Some(Value::Null) => None,
-            Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {
-                SeedError::BadResetSeed {
-                    episode: id,
-                    value: v.to_string(),
-                }
-            })?),
-        };
+        let kw =
+            match self.reset_kwargs.get("seed") {
+                None | Some(Value::Null) => None,
+                Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {
+                    SeedError::BadResetSeed {
+                        episode: id,
+                        value: v.to_string(),
+                    }
+                })?),
+            };
         if let Some(s) = self.episode_seed.filter(|s| *s > max) {
             return Err(SeedError::BadEpisodeSeed {
                 episode: id,

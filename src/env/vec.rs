@@ -371,46 +371,41 @@ pub struct VecEnv {
 /// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
 /// `sh` (spinning, then parked), runs the epoch's command on its envs and counts itself done,
 /// until the command is [`CMD_QUIT`].
-fn spawn_worker(
-    k: usize,
-    mut w: Worker,
-    sh: Arc<Shared>,
-) -> Result<JoinHandle<()>, EnvError> {
+fn spawn_worker(k: usize, mut w: Worker, sh: Arc<Shared>) -> Result<JoinHandle<()>, EnvError> {
     std::thread::Builder::new()
         .name(format!("mjskill-vecenv-{k}"))
         .spawn(move || {
-        let mut seen = 0u64;
-        loop {
-            let mut spins = 0u32;
-            let epoch = loop {
-                let e = sh.epoch.load(Ordering::Acquire);
-                if e != seen {
-                    break e;
+            let mut seen = 0u64;
+            loop {
+                let mut spins = 0u32;
+                let epoch = loop {
+                    let e = sh.epoch.load(Ordering::Acquire);
+                    if e != seen {
+                        break e;
+                    }
+                    if spins < SPINS {
+                        spins += 1;
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::park();
+                    }
+                };
+                seen = epoch;
+                let command = sh.command.load(Ordering::Relaxed);
+                if command == CMD_QUIT {
+                    break;
                 }
-                if spins < SPINS {
-                    spins += 1;
-                    std::hint::spin_loop();
-                } else {
-                    std::thread::park();
+                // A panic in an env (a bug, or a GL driver failing mid-run) must not
+                // leave the caller waiting for `done` forever: it is caught here and
+                // re-raised on the caller's thread, as a single env's panic would be.
+                if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command))) {
+                    if let Ok(mut slot) = sh.panic_payload.lock() {
+                        slot.get_or_insert(payload);
+                    }
+                    sh.panicked.store(true, Ordering::Release);
                 }
-            };
-            seen = epoch;
-            let command = sh.command.load(Ordering::Relaxed);
-            if command == CMD_QUIT {
-                break;
+                sh.done.fetch_add(1, Ordering::Release);
             }
-            // A panic in an env (a bug, or a GL driver failing mid-run) must not
-            // leave the caller waiting for `done` forever: it is caught here and
-            // re-raised on the caller's thread, as a single env's panic would be.
-            if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
-            {
-                if let Ok(mut slot) = sh.panic_payload.lock() {
-                    slot.get_or_insert(payload);
-                }
-                sh.panicked.store(true, Ordering::Release);
-            }
-            sh.done.fetch_add(1, Ordering::Release);
-        }
         })
         .map_err(|e| EnvError::WorkerThread(e.to_string()))
 }

@@ -267,12 +267,14 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, NpyError> {
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse().map_err(|_| NpyError::BadShape(shape_s.to_string())))
+        .map(|s| {
+            s.parse()
+                .map_err(|_| NpyError::BadShape(shape_s.to_string()))
+        })
         .collect::<Result<_, NpyError>>()?;
     let n: usize = shape.iter().product();
     let take = |size: usize| -> Result<&[u8], NpyError> {
-        body.get(..n * size)
-            .ok_or(NpyError::ShortData { n, size })
+        body.get(..n * size).ok_or(NpyError::ShortData { n, size })
     };
     let data = match descr {
         "|u1" | "<u1" => NpyData::U8(take(1)?.to_vec()),
@@ -310,9 +312,7 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, NpyError> {
             let chars: usize = d[2..]
                 .parse()
                 .map_err(|_| NpyError::BadDtype(d.to_string()))?;
-            let raw = body
-                .get(..4 * chars)
-                .ok_or(NpyError::ShortString(chars))?;
+            let raw = body.get(..4 * chars).ok_or(NpyError::ShortString(chars))?;
             let s: String = raw
                 .chunks_exact(4)
                 .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
@@ -321,9 +321,7 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, NpyError> {
                 .collect();
             NpyData::Str(s)
         }
-        d => {
-            return Err(NpyError::UnsupportedDtype(d.to_string()))
-        }
+        d => return Err(NpyError::UnsupportedDtype(d.to_string())),
     };
     Ok(NpyArray { shape, data })
 }

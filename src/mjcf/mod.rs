@@ -13,7 +13,9 @@
 //!   material (finger pads, μ = 2.0) get the PhysX *average* with the default, because
 //!   MuJoCo combines by *max* and every partner of a finger has μ = 0.3.
 pub mod props;
-pub mod urdf;
+/// The robot description the writer reads (defined with the controllers, which share it).
+pub use crate::controllers::desc as urdf;
+pub use crate::controllers::desc::{actuator_name, Drive};
 pub mod xml;
 
 use nalgebra::Isometry3;
@@ -137,19 +139,6 @@ impl Mjcf {
     }
 }
 
-/// A PD drive on one joint (docs/controllers.md §5).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Drive {
-    /// Joint name.
-    pub joint: String,
-    /// Stiffness (N/m or N·m/rad).
-    pub kp: f64,
-    /// Damping.
-    pub kd: f64,
-    /// Force limit (N or N·m).
-    pub force_limit: f64,
-}
-
 /// A ball-joint loop closure between two links (MuJoCo `<equality><connect>`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Connect {
@@ -238,11 +227,6 @@ impl Default for RobotOptions {
             firm_contact: Vec::new(),
         }
     }
-}
-
-/// Name of the actuator that drives `joint`.
-pub fn actuator_name(joint: &str) -> String {
-    format!("drive_{joint}")
 }
 
 // Collision bits (contype = conaffinity for every geom): 1 = general, 2 = ground,

@@ -363,7 +363,9 @@ impl Scan<'_> {
                     return Err(bad(self, "a second header record".into()));
                 }
                 self.header = true;
-                let Record::Header(h) = parse(opcode, body).map_err(|d| bad(self, d.to_string()))? else {
+                let Record::Header(h) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
+                else {
                     return Err(bad(self, "header record does not parse".into()));
                 };
                 on(
@@ -375,7 +377,9 @@ impl Scan<'_> {
                 )
             }
             (Section::Data, op::METADATA) => {
-                let Record::Metadata(m) = parse(opcode, body).map_err(|d| bad(self, d.to_string()))? else {
+                let Record::Metadata(m) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
+                else {
                     return Err(bad(self, "metadata record does not parse".into()));
                 };
                 on(
@@ -392,7 +396,8 @@ impl Scan<'_> {
             }
             (Section::Data, op::CHUNK) => self.chunk(body, on),
             (Section::Data, op::MESSAGE_INDEX) => {
-                let Record::MessageIndex(ix) = parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
+                let Record::MessageIndex(ix) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
                 else {
                     return Err(bad(self, "message index does not parse".into()));
                 };
@@ -500,7 +505,8 @@ impl Scan<'_> {
         let ordinal = self.chunks;
         self.chunks += 1;
         let bad = |s: &Self, d: String| s.corrupt(offset, format!("chunk {ordinal}: {d}"));
-        let Record::Chunk { header, data } = parse(op::CHUNK, body).map_err(|d| bad(self, d.to_string()))?
+        let Record::Chunk { header, data } =
+            parse(op::CHUNK, body).map_err(|d| bad(self, d.to_string()))?
         else {
             return Err(bad(self, "does not parse".into()));
         };

@@ -93,6 +93,46 @@ use crate::robots::{GraspDef, RobotIds, RobotSpec};
 /// Threshold of `agent.is_static` as every task calls it (rad/s or m/s).
 pub const ROBOT_STATIC_THRESHOLD: f64 = 0.2;
 
+/// Scale of ManiSkill's distance shaping `1 − tanh(5·d)` in every task's dense reward.
+pub const REWARD_SCALE: f64 = 5.0;
+
+/// ManiSkill's shaped closeness `1 − tanh(REWARD_SCALE·d)` of a distance (or speed) `d ≥ 0`:
+/// 1 at 0, towards 0 far away.
+#[inline]
+pub fn closeness(d: f64) -> f64 {
+    1.0 - (REWARD_SCALE * d).tanh()
+}
+
+/// Vertical field of view of the tasks' sensor camera `base_camera` (90°).
+pub const SENSOR_FOVY: f64 = std::f64::consts::FRAC_PI_2;
+/// Vertical field of view of the tasks' human camera `render_camera` (1 rad).
+pub const HUMAN_FOVY: f64 = 1.0;
+
+/// The two cameras of ManiSkill's tabletop tasks, each `look_at(eye, target)`: the sensor
+/// camera `base_camera` (128×128, [`SENSOR_FOVY`]) and the human camera `render_camera`
+/// (512×512, [`HUMAN_FOVY`]).
+pub fn tabletop_cameras(
+    sensor: ([f64; 3], [f64; 3]),
+    human: ([f64; 3], [f64; 3]),
+) -> (CameraDef, CameraDef) {
+    (
+        CameraDef {
+            name: "base_camera",
+            eye: sensor.0,
+            target: sensor.1,
+            fovy: SENSOR_FOVY,
+            size: (128, 128),
+        },
+        CameraDef {
+            name: "render_camera",
+            eye: human.0,
+            target: human.1,
+            fovy: HUMAN_FOVY,
+            size: (512, 512),
+        },
+    )
+}
+
 /// A camera defined like ManiSkill's `look_at(eye, target)` with a vertical field of view.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraDef {

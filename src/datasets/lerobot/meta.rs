@@ -58,7 +58,9 @@ pub(super) fn write_episodes(
         Field::new("dataset_to_index", DataType::Int64, false),
     ];
     let ints = |f: &dyn Fn(usize) -> usize| -> ArrayRef {
-        Arc::new(Int64Array::from((0..n).map(|k| f(k) as i64).collect::<Vec<_>>()))
+        Arc::new(Int64Array::from(
+            (0..n).map(|k| f(k) as i64).collect::<Vec<_>>(),
+        ))
     };
     let mut ep_cols: Vec<ArrayRef> = vec![
         ints(&|k| k),

@@ -19,7 +19,10 @@ pub(super) fn names(prefix: &str, n: usize) -> Vec<String> {
 }
 
 /// `values` as a fixed-size list column of `dim` float32 per row.
-pub(super) fn fixed_list(values: Vec<f32>, dim: usize) -> Result<ArrayRef, arrow_schema::ArrowError> {
+pub(super) fn fixed_list(
+    values: Vec<f32>,
+    dim: usize,
+) -> Result<ArrayRef, arrow_schema::ArrowError> {
     Ok(Arc::new(FixedSizeListArray::try_new(
         Arc::new(Field::new_list_field(DataType::Float32, false)),
         dim as i32,
@@ -29,7 +32,11 @@ pub(super) fn fixed_list(values: Vec<f32>, dim: usize) -> Result<ArrayRef, arrow
 }
 
 /// Writes `batch` as one parquet file `out` (`final_path` in errors: where it ends up).
-pub(super) fn write_parquet(out: &Path, final_path: &Path, batch: &RecordBatch) -> Result<(), DatasetError> {
+pub(super) fn write_parquet(
+    out: &Path,
+    final_path: &Path,
+    batch: &RecordBatch,
+) -> Result<(), DatasetError> {
     use parquet::arrow::ArrowWriter;
     use parquet::basic::Compression;
     use parquet::file::properties::WriterProperties;

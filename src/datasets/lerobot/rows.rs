@@ -89,7 +89,11 @@ impl Rows {
 
     /// info.json's `features` of the row columns, with the observation's and the action's
     /// component names.
-    pub(super) fn features(&self, obs_names: Vec<String>, act_names: Vec<String>) -> Map<String, Value> {
+    pub(super) fn features(
+        &self,
+        obs_names: Vec<String>,
+        act_names: Vec<String>,
+    ) -> Map<String, Value> {
         let scalar = |dtype: &str| json!({"dtype": dtype, "shape": [1], "names": null});
         let mut features = Map::new();
         if self.obs_dim > 0 {

@@ -120,9 +120,12 @@ impl Video {
             Arc::new(Int64Array::from(v))
         };
         let time = |f: &dyn Fn(&VideoPlace) -> f64| -> ArrayRef {
-            Arc::new(Float64Array::from(self.places.iter().map(f).collect::<Vec<_>>()))
+            Arc::new(Float64Array::from(
+                self.places.iter().map(f).collect::<Vec<_>>(),
+            ))
         };
-        let field = |name: &str, ty: DataType| Field::new(format!("videos/{key}/{name}"), ty, false);
+        let field =
+            |name: &str, ty: DataType| Field::new(format!("videos/{key}/{name}"), ty, false);
         vec![
             (field("chunk_index", DataType::Int64), index(&|p| p.0 .0)),
             (field("file_index", DataType::Int64), index(&|p| p.0 .1)),
@@ -166,7 +169,13 @@ pub(super) fn write_video(
     let (w, h) = size.ok_or_else(|| verr(format!("camera {} has no frame", cam.name)))?;
     let (groups, places) = split_files(&units, &ends, limits);
     for (at, range) in groups {
-        mux_file(tmp, dir, &chunk_file(prefix, at, "mp4"), &units[range], (w, h))?;
+        mux_file(
+            tmp,
+            dir,
+            &chunk_file(prefix, at, "mp4"),
+            &units[range],
+            (w, h),
+        )?;
     }
     Ok(Video {
         width: w,
@@ -203,13 +212,17 @@ fn access_units(
         }
         for (t, f) in frames[..rows].iter().enumerate() {
             if cam.format == "png" {
-                let at = |e: &dyn std::fmt::Display| verr(format!("episode {} frame {t}: {e}", ep.index));
+                let at = |e: &dyn std::fmt::Display| {
+                    verr(format!("episode {} frame {t}: {e}", ep.index))
+                };
                 let (rgb, w, h) = decode_png(f, &at)?;
                 let enc = match &mut encoder {
                     Some(enc) => enc,
                     None => {
                         size = Some((w, h));
-                        encoder.insert(H264Encoder::new(w, h, VIDEO_FPS).map_err(|e| verr(e.to_string()))?)
+                        encoder.insert(
+                            H264Encoder::new(w, h, VIDEO_FPS).map_err(|e| verr(e.to_string()))?,
+                        )
                     }
                 };
                 let mut unit = Vec::new();

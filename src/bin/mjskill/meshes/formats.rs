@@ -487,7 +487,16 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     out.materials.len() - 1
                 });
                 let position = (pos, *pos_off);
-                let part = fan_part(prims, &inputs, position, &sources, &m, material, texture.is_some(), name)?;
+                let part = fan_part(
+                    prims,
+                    &inputs,
+                    position,
+                    &sources,
+                    &m,
+                    material,
+                    texture.is_some(),
+                    name,
+                )?;
                 if !part.indices.is_empty() {
                     out.parts.push(part);
                 }

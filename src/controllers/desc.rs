@@ -1,5 +1,6 @@
-//! Reading a robot: URDF (with urdf-rs) and SRDF (the "Default" collision exclusions) into a
-//! [`RobotDesc`] that the MJCF writer and the kinematics code share.
+//! The robot description: a robot read from URDF (with urdf-rs) and SRDF (the "Default"
+//! collision exclusions) into a [`RobotDesc`], and its joints' PD [`Drive`]s. The controllers
+//! (kinematics, drives) and the MJCF writer, which consumes it, share it.
 //!
 //! Loader rules follow ManiSkill/SAPIEN (docs/robots.md §1.1): joint order is breadth-first over
 //! the kinematic tree with siblings in URDF declaration order; `continuous` joints are
@@ -145,6 +146,24 @@ pub struct RobotDesc {
     pub root: usize,
     /// SRDF `<disable_collisions reason="Default">` pairs (link names).
     pub disabled_pairs: Vec<(String, String)>,
+}
+
+/// A PD drive on one joint (docs/controllers.md §5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drive {
+    /// Joint name.
+    pub joint: String,
+    /// Stiffness (N/m or N·m/rad).
+    pub kp: f64,
+    /// Damping.
+    pub kd: f64,
+    /// Force limit (N or N·m).
+    pub force_limit: f64,
+}
+
+/// Name of the actuator that drives `joint`.
+pub fn actuator_name(joint: &str) -> String {
+    format!("drive_{joint}")
 }
 
 /// URDF roll-pitch-yaw (fixed axes x, y, z) plus translation as an isometry.
