@@ -25,7 +25,7 @@ pub mod pd_joint_vel;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::mujoco::Data;
+use crate::mujoco::{Data, Pose};
 use crate::obs::ObsWriter;
 use desc::{Drive, RobotDesc};
 pub use drive::Drives;
@@ -314,14 +314,12 @@ pub trait PartController {
     fn save(&self, out: &mut Vec<f64>) {
         let c = self.core();
         out.extend(c.target_q.iter().map(|&x| x as f64));
-        let t = c.target_pose.translation.vector;
-        let q = c.target_pose.rotation;
-        out.extend_from_slice(&[t.x, t.y, t.z, q.w, q.i, q.j, q.k]);
+        out.extend_from_slice(&Pose::from_isometry(&c.target_pose).to_array());
     }
 
     /// Number of values [`PartController::save`] writes.
     fn save_len(&self) -> usize {
-        self.core().target_q.len() + 7
+        self.core().target_q.len() + Pose::LEN
     }
 
     /// Restores what [`PartController::save`] wrote; returns the number of values read.
@@ -332,12 +330,10 @@ pub trait PartController {
             *t = s[k] as f32;
             k += 1;
         }
-        let v = &s[k..k + 7];
-        c.target_pose = Isometry3::from_parts(
-            Translation3::new(v[0], v[1], v[2]),
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(v[3], v[4], v[5], v[6])),
-        );
-        k + 7
+        let mut v = [0.0; Pose::LEN];
+        v.copy_from_slice(&s[k..k + Pose::LEN]);
+        c.target_pose = Pose::from_array(v).isometry();
+        k + Pose::LEN
     }
 }
 

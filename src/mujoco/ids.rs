@@ -13,7 +13,9 @@ macro_rules! typed_ids {
     ($($(#[$doc:meta])* $name:ident;)*) => {
         $(
             $(#[$doc])*
-            #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+            ///
+            /// The default is index 0 (for the world body: a placeholder until resolved).
+            #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
             pub struct $name(usize);
 
             impl $name {
@@ -107,6 +109,20 @@ impl Pose {
     pub fn isometry(&self) -> Isometry3<f64> {
         let [x, y, z] = self.pos;
         Isometry3::from_parts(Translation3::new(x, y, z), self.rotation())
+    }
+
+    /// The orientation renormalised to unit length, for poses from outside mjskill's own
+    /// state (ManiSkill's float32 state dicts, reference files) and where a rotation must be
+    /// exactly unit (the solvers' targets).
+    pub fn rotation_renormalized(&self) -> UnitQuaternion<f64> {
+        let [w, x, y, z] = self.quat;
+        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z))
+    }
+
+    /// The pose as an isometry with [`Pose::rotation_renormalized`]'s quaternion.
+    pub fn isometry_renormalized(&self) -> Isometry3<f64> {
+        let [x, y, z] = self.pos;
+        Isometry3::from_parts(Translation3::new(x, y, z), self.rotation_renormalized())
     }
 }
 

@@ -9,7 +9,7 @@ use super::{
     tabletop_cameras, yaw_quat_f32, CameraDef, InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::{uniform_scaled, TorchGenerator};
 use crate::robots::RobotId;
 
@@ -109,9 +109,9 @@ pub struct PickCube {
     cfg: PickCubeConfig,
     /// The robot (the dense reward's static term depends on it).
     robot: RobotId,
-    cube: usize,
+    cube: BodyId,
     cube_qadr: usize,
-    goal: usize,
+    goal: BodyId,
 }
 
 impl PickCube {
@@ -120,9 +120,9 @@ impl PickCube {
         PickCube {
             cfg: config_for(robot),
             robot,
-            cube: 0,
+            cube: BodyId::default(),
             cube_qadr: 0,
-            goal: 0,
+            goal: BodyId::default(),
         }
     }
 
@@ -169,7 +169,7 @@ impl Task for PickCube {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.cube
     }
 

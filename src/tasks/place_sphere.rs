@@ -6,7 +6,7 @@ use super::{
     tabletop_cameras, CameraDef, InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §3) ---------------------------------------------------------------
@@ -71,9 +71,9 @@ pub fn bin_boxes() -> [([f64; 3], [f64; 3]); 5] {
 /// PlaceSphere-v1.
 #[derive(Debug, Clone, Default)]
 pub struct PlaceSphere {
-    sphere: usize,
+    sphere: BodyId,
     sphere_qadr: usize,
-    bin: usize,
+    bin: BodyId,
 }
 
 impl PlaceSphere {
@@ -119,7 +119,7 @@ impl Task for PlaceSphere {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.sphere
     }
 

@@ -25,7 +25,7 @@ use super::{
 };
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §2) ---------------------------------------------------------------
@@ -107,11 +107,11 @@ pub fn yaw_xyz(q: [f64; 4]) -> f64 {
 /// PokeCube-v1.
 #[derive(Debug, Clone, Default)]
 pub struct PokeCube {
-    cube: usize,
+    cube: BodyId,
     cube_qadr: usize,
-    peg: usize,
+    peg: BodyId,
     peg_qadr: usize,
-    goal: usize,
+    goal: BodyId,
 }
 
 impl PokeCube {
@@ -177,7 +177,7 @@ impl Task for PokeCube {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.peg
     }
 
