@@ -5,10 +5,10 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use super::ik::Chain;
-use crate::mujoco::Pose;
 use super::{
     clip_scale, euler_xyz, standardize, Drives, JointMap, PartController, PartCore, Target,
 };
+use crate::mujoco::Pose;
 
 /// Configuration of an end-effector part.
 #[derive(Debug, Clone, PartialEq)]

@@ -29,9 +29,9 @@ use rand::{Rng, SeedableRng};
 
 use crate::controllers::ControllerError;
 use crate::env::Env;
+use crate::mujoco::BodyId;
 use crate::mujoco::MjError;
 use crate::robots::{RobotError, RobotId};
-use crate::mujoco::BodyId;
 
 /// Why a policy could not be built for an env.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -18,8 +18,8 @@ use nalgebra::Vector3;
 use super::body_id;
 use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
-use crate::tasks::poke_cube::peg_head;
 use crate::mujoco::BodyId;
+use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
 const GRASP_OFFSET_X: f64 = -0.08;

@@ -294,7 +294,12 @@ pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 }
 
 /// The grasp check of docs/robots.md §1.3 from the finger forces and the fingers' y axes.
-pub fn is_grasping(g: &GraspDef, data: &Data, fingers: [BodyId; 2], forces: &[[f64; 3]; 2]) -> bool {
+pub fn is_grasping(
+    g: &GraspDef,
+    data: &Data,
+    fingers: [BodyId; 2],
+    forces: &[[f64; 3]; 2],
+) -> bool {
     let mut ok = true;
     for (k, (&body, sign)) in fingers.iter().zip([g.finger1.1, g.finger2.1]).enumerate() {
         let f = Vector3::from(forces[k]);
