@@ -23,7 +23,7 @@ pub mod pd_joint_pos;
 pub mod pd_joint_pos_vel;
 pub mod pd_joint_vel;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use crate::mujoco::{Data, Pose};
 use crate::obs::ObsWriter;

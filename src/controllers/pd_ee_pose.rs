@@ -2,7 +2,7 @@
 //! `agents/controllers/pd_ee_pose.py`): the `pd_ee_delta_pos`, `pd_ee_delta_pose`,
 //! `pd_ee_target_delta_pos`, `pd_ee_target_delta_pose` and `pd_ee_pose` modes. The EE target
 //! pose goes through damped-least-squares IK ([`Chain`]) to joint position targets.
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 
 use super::ik::Chain;
 use super::{

@@ -9,7 +9,7 @@ use serde::Serialize;
 use crate::{args, CliError};
 
 /// What `compare-images` does (its command-line arguments).
-#[derive(clap::Args)]
+#[derive(Debug, clap::Args)]
 pub struct CompareArgs {
     /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
     /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;

@@ -28,7 +28,7 @@ pub fn import_maniskill(
 }
 
 /// `export --format lerobot`'s file size limits (None: LeRobot's default).
-#[derive(clap::Args)]
+#[derive(Debug, clap::Args)]
 pub struct LimitArgs {
     /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
     #[arg(long)]

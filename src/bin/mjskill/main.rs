@@ -543,8 +543,8 @@ fn bench_command(
 }
 
 /// The arguments of `mjskill convert-visuals`.
-#[derive(clap::Args)]
-struct ConvertVisualsArgs {
+#[derive(Debug, clap::Args)]
+pub struct ConvertVisualsArgs {
     /// Upstream URDF whose mesh visuals to convert (paths relative to it).
     #[arg(long, conflicts_with_all = ["mesh", "texture"])]
     urdf: Option<PathBuf>,

@@ -366,8 +366,6 @@ struct DaeSource {
 struct Dae<'a, 'i> {
     /// Elements by `id`.
     by_id: HashMap<&'a str, roxmltree::Node<'a, 'i>>,
-    /// The file's name (in errors).
-    name: &'a str,
     /// The file's directory (texture images are relative to it).
     dir: &'a Path,
 }
@@ -393,7 +391,6 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
             .descendants()
             .filter_map(|n| n.attribute("id").map(|id| (id, n)))
             .collect(),
-        name,
         dir,
     };
     let unit = root
@@ -552,11 +549,6 @@ impl Dae<'_, '_> {
                 .descendants()
                 .find(|n| n.tag_name().name() == "newparam" && n.attribute("sid") == Some(sid))
         };
-        let text_of = |n: roxmltree::Node, tag: &str| {
-            n.descendants()
-                .find(|c| c.tag_name().name() == tag)
-                .and_then(|c| c.text())
-        };
         let mut image_id = t.to_string();
         if let Some(src) = param(t).and_then(|sampler| text_of(sampler, "source")) {
             if let Some(init) = param(src.trim()).and_then(|surface| text_of(surface, "init_from"))
@@ -569,6 +561,13 @@ impl Dae<'_, '_> {
             .and_then(|img| text_of(*img, "init_from"))
             .map(|f| self.dir.join(f.trim().trim_start_matches("file://")))
     }
+}
+
+/// The text of `n`'s first descendant `<tag>`.
+fn text_of<'a>(n: roxmltree::Node<'a, '_>, tag: &str) -> Option<&'a str> {
+    n.descendants()
+        .find(|c| c.tag_name().name() == tag)
+        .and_then(|c| c.text())
 }
 
 /// A node's transform: `parent` times its `<matrix>`, `<translate>`, `<scale>` and `<rotate>`
