@@ -326,7 +326,7 @@ fn obs_names(m: &crate::record::Meta, obs_dim: usize) -> Vec<String> {
 
 /// The action's component names (`<part>_<i>` of the controller's parts; `action_<i>` when
 /// they do not cover the action).
-fn act_names(env: &crate::Env, act_dim: usize) -> Vec<String> {
+fn act_names(env: &crate::env::Env, act_dim: usize) -> Vec<String> {
     let mut act_names = Vec::new();
     for p in env.action_parts() {
         act_names.extend(names(p.name, p.range.len()));
