@@ -199,11 +199,23 @@ fn env_kwargs_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// `value` extracted as `T`; a wrong type is a `TypeError` naming the argument.
-fn extract_arg<'py, T: FromPyObject<'py>>(value: &Bound<'py, PyAny>, name: &str) -> PyResult<T> {
+/// A wrong-typed argument as a `TypeError` naming it (`e`: the extraction's error).
+fn arg_type_error(value: &Bound<'_, PyAny>, name: &str, e: PyErr) -> PyErr {
+    PyTypeError::new_err(format!("argument '{name}': {}", e.value(value.py())))
+}
+
+/// A string argument; anything else is a `TypeError` naming it.
+fn str_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<String> {
     value
-        .extract::<T>()
-        .map_err(|e| PyTypeError::new_err(format!("argument '{name}': {}", e.value(value.py()))))
+        .extract::<String>()
+        .map_err(|e| arg_type_error(value, name, e.into()))
+}
+
+/// A float argument (ints accepted); anything else is a `TypeError` naming it.
+fn f64_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
+    value
+        .extract::<f64>()
+        .map_err(|e| arg_type_error(value, name, e.into()))
 }
 
 /// The [`EnvConfig`] for ManiSkill's keyword arguments ([`ENV_KWARGS`]; `None` or absent is
@@ -220,14 +232,14 @@ fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResult<EnvConfi
             continue;
         }
         match key.as_str() {
-            "robot_uids" => cfg.robot = Some(extract_arg(&value, &key)?),
+            "robot_uids" => cfg.robot = Some(str_arg(&value, &key)?),
             "obs_mode" => {
-                let mode: String = extract_arg(&value, &key)?;
+                let mode = str_arg(&value, &key)?;
                 cfg.obs_mode = ObsMode::parse(&mode).map_err(value_err)?;
             }
-            "control_mode" => cfg.control_mode = Some(extract_arg(&value, &key)?),
+            "control_mode" => cfg.control_mode = Some(str_arg(&value, &key)?),
             "reward_mode" => {
-                let mode: String = extract_arg(&value, &key)?;
+                let mode = str_arg(&value, &key)?;
                 cfg.reward_mode = RewardMode::parse(&mode).map_err(value_err)?;
             }
             "max_episode_steps" => {
@@ -236,7 +248,7 @@ fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResult<EnvConfi
                 let steps = int_arg(&value, &key, 1, max as i128, &valid)?;
                 cfg.max_episode_steps = Some(steps as u32);
             }
-            "robot_init_qpos_noise" => cfg.robot_init_qpos_noise = extract_arg(&value, &key)?,
+            "robot_init_qpos_noise" => cfg.robot_init_qpos_noise = f64_arg(&value, &key)?,
             "sim_freq" => {
                 let valid = format!(
                     "use a multiple of the control frequency {c} Hz between {c} and 100000 \
