@@ -208,14 +208,14 @@ fn arg_type_error(value: &Bound<'_, PyAny>, name: &str, e: PyErr) -> PyErr {
 fn str_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<String> {
     value
         .extract::<String>()
-        .map_err(|e| arg_type_error(value, name, e.into()))
+        .map_err(|e| arg_type_error(value, name, e))
 }
 
 /// A float argument (ints accepted); anything else is a `TypeError` naming it.
 fn f64_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
     value
         .extract::<f64>()
-        .map_err(|e| arg_type_error(value, name, e.into()))
+        .map_err(|e| arg_type_error(value, name, e))
 }
 
 /// The [`EnvConfig`] for ManiSkill's keyword arguments ([`ENV_KWARGS`]; `None` or absent is

@@ -185,6 +185,9 @@ pub(super) fn write_video(
     })
 }
 
+/// A camera's H.264 access units, and the frame size when it is known before decoding.
+type AccessUnits = (Vec<Vec<u8>>, Option<(usize, usize)>);
+
 /// The access units of a camera's frames, episode after episode (the frame after each
 /// episode's last step left out), and the frame size when PNG frames were re-encoded (whose
 /// image statistics are added to `stats` on the way).
@@ -193,7 +196,7 @@ fn access_units(
     episodes: &[&EpisodeRec],
     stats: &mut [ImageStats],
     verr: &dyn Fn(String) -> DatasetError,
-) -> Result<(Vec<Vec<u8>>, Option<(usize, usize)>), DatasetError> {
+) -> Result<AccessUnits, DatasetError> {
     let mut units: Vec<Vec<u8>> = Vec::new();
     let mut size: Option<(usize, usize)> = None;
     let mut encoder: Option<H264Encoder> = None;
