@@ -17,6 +17,8 @@
 //! bare `OverflowError`.
 #![warn(missing_docs)]
 
+mod policy;
+
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
@@ -964,6 +966,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;
+    m.add_function(wrap_pyfunction!(policy::check_policy_file, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_NUM_ENVS", mjskill::MAX_NUM_ENVS)?;
     Ok(())

@@ -81,6 +81,18 @@ pub fn export(
                     msg: "--control-mode applies to --format maniskill only".into(),
                 });
             }
+            if std::fs::symlink_metadata(&output).is_ok_and(|m| m.file_type().is_symlink()) {
+                let target = std::fs::canonicalize(&output)
+                    .map_or_else(|_| "a missing target".into(), |t| t.display().to_string());
+                return Err(DatasetError::Invalid {
+                    msg: format!(
+                        "-o {} is a symbolic link to {target}; the dataset is written to a \
+                         temporary directory and renamed into place, which cannot go through \
+                         a link: give the directory itself or a new name",
+                        output.display()
+                    ),
+                });
+            }
             let d = mjskill::datasets::lerobot::Limits::default();
             let limits = mjskill::datasets::lerobot::Limits {
                 chunks_size: limits.chunks_size.unwrap_or(d.chunks_size),

@@ -366,15 +366,16 @@ pub enum Command {
         /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
         #[arg(long)]
         control_mode: Option<String>,
-        /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
-        #[arg(long)]
+        /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000;
+        /// 1..=4294967295).
+        #[arg(long, value_parser = args::chunks_size, allow_hyphen_values = true)]
         chunks_size: Option<usize>,
         /// --format lerobot: size limit of data and meta/episodes parquet files in MB
         /// (default 100); an episode that would reach it starts the next file.
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         data_files_size_in_mb: Option<f64>,
         /// --format lerobot: size limit of video files in MB (default 200).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         video_files_size_in_mb: Option<f64>,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
@@ -769,7 +770,7 @@ fn fit_primitives(
             })
         }
     };
-    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
+    let bytes = mjskill::files::read(mesh)?;
     let mut tris = mesh_fit::read_triangles(&bytes, &mesh.display().to_string())?;
     mesh_fit::scale_triangles(&mut tris, scale)?;
     let pts = mesh_fit::surface_points(&tris, crop.as_ref())?;
