@@ -435,7 +435,7 @@ mod tests {
         // A deflated member that expands to 4 kB from a few bytes: fine under the limit,
         // refused over it (its declared size first, then what it really expands to).
         let z = zip_of(&[("a.npy", big.clone())], true);
-        assert!(z.len() < 200);
+        assert!(z.len() < 400, "{}", z.len());
         assert!(parse_npz(&z, Path::new("bomb.npz"), 5000).is_ok());
         let e = err(&z, 4000);
         assert!(
