@@ -63,7 +63,7 @@ pub enum EvalError {
         /// Its reset seed.
         seed: u64,
         /// The env's error.
-        source: EnvError,
+        source: Box<EnvError>,
     },
 }
 
@@ -78,7 +78,7 @@ impl EvalError {
                 policy: policy.name(),
                 episode,
                 seed,
-                source,
+                source: Box::new(source),
             },
             e => e,
         }

@@ -190,7 +190,7 @@ pub fn check_typed(model: &TypedModel) -> Result<(), String> {
                 ));
             };
             let n = shape.iter().try_fold(1u64, |n, &d| n.checked_mul(d as u64));
-            if !n.is_some_and(|n| n <= MAX_TENSOR_ELEMENTS) {
+            if n.is_none_or(|n| n > MAX_TENSOR_ELEMENTS) {
                 return Err(format!(
                     "{} computes a tensor of shape {shape:?}, beyond the limit of \
                      {MAX_TENSOR_ELEMENTS} elements per tensor (docs/limits.md)",
