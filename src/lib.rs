@@ -39,6 +39,7 @@
 pub(crate) mod controllers;
 pub mod datasets;
 pub(crate) mod env;
+pub mod files;
 pub mod maniskill;
 pub(crate) mod mjcf;
 pub(crate) mod models;

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 /// The layers, lowest first. A module may only use modules of a strictly lower layer.
 const LAYERS: &[&[&str]] = &[
-    &["rng", "models", "obs"],
+    &["rng", "models", "obs", "files"],
     &["mujoco"],
     // The controllers own the robot description (URDF, drives) that the MJCF writer consumes.
     &["controllers"],

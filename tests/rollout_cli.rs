@@ -102,7 +102,13 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
 /// `signal` and checks what survives.
 fn kill_mid_run(signal: &str, name: &str) {
     let out = tmp(name);
-    let mut child = mjskill()
+    // A process started in the background by a script inherits SIGINT ignored, and a command
+    // line program rightly keeps it so (the shell asked for it); the test runs the rollout
+    // with the default disposition, as from a terminal (`env` then execs it, same pid).
+    let mut cmd = Command::new("env");
+    cmd.arg("--default-signal=INT")
+        .arg(env!("CARGO_BIN_EXE_mjskill"));
+    let mut child = cmd
         .args(["rollout", "--episodes", "500", "--out"])
         .arg(&out)
         .stdout(Stdio::null())

@@ -17,6 +17,8 @@
 //! bare `OverflowError`.
 #![warn(missing_docs)]
 
+mod policy;
+
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
@@ -836,6 +838,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_SEED", mjskill::MAX_SEED)?;
     m.add("CONTROL_FREQ", mjskill::CONTROL_FREQ)?;
     m.add("UNLIMITED_EPISODE_STEPS", UNLIMITED_EPISODE_STEPS)?;
+    m.add_function(wrap_pyfunction!(policy::check_policy_file, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_NUM_ENVS", mjskill::MAX_NUM_ENVS)?;
     Ok(())

@@ -18,10 +18,13 @@ pub const MAX_EPISODE_STEPS: u32 = 50;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EnvError {
     /// Unknown env id.
-    #[error("unknown env id {0:?}; valid env ids: {1}")]
+    #[error("unknown env id {id:?}; valid env ids: {1}", id = crate::files::short(.0))]
     UnknownEnv(String, String),
     /// Robot not supported by this env.
-    #[error("robot {robot:?} is not supported by {env}; supported robots: {valid}")]
+    #[error(
+        "robot {r:?} is not supported by {env}; supported robots: {valid}",
+        r = crate::files::short(.robot)
+    )]
     UnsupportedRobot {
         /// Env id.
         env: String,
@@ -31,7 +34,11 @@ pub enum EnvError {
         valid: String,
     },
     /// Unknown obs or reward mode.
-    #[error("unknown {what} {got:?}; valid {}s: {valid}", what.replace('_', " "))]
+    #[error(
+        "unknown {what} {g:?}; valid {}s: {valid}",
+        what.replace('_', " "),
+        g = crate::files::short(.got)
+    )]
     UnknownMode {
         /// What was being parsed (`obs_mode`, `reward_mode`).
         what: &'static str,
@@ -42,8 +49,10 @@ pub enum EnvError {
     },
     /// A `+` obs mode with a part that is not a camera texture.
     #[error(
-        "unknown obs mode part {part:?} in {mode:?}; the parts of a + obs mode are camera \
-         textures: {valid} (e.g. rgb+depth+segmentation)"
+        "unknown obs mode part {p:?} in {m:?}; the parts of a + obs mode are camera \
+         textures: {valid} (e.g. rgb+depth+segmentation)",
+        p = crate::files::short(.part),
+        m = crate::files::short(.mode)
     )]
     UnknownObsModePart {
         /// The bad part.

@@ -37,6 +37,7 @@
 //! records and chunks limited to [`MAX_RECORD`], and tell a file cut short (read up to the
 //! cut) from a damaged one ([`RecordError::Corrupt`], naming the byte offset and chunk).
 
+mod guard;
 pub mod image;
 mod num;
 mod reader;
@@ -462,9 +463,10 @@ struct Open {
 /// Typical use: [`Recorder::reset`] (or `env.reset` + [`Recorder::begin_episode`]), then
 /// [`Recorder::step`] (or `get_state` + `env.step` + [`Recorder::record_step`]) until the
 /// episode is over, then [`Recorder::end_episode`]; finally [`Recorder::finish`]. Dropping a
-/// recorder without `finish` still writes the summary (errors are then ignored).
+/// recorder without `finish` still writes the summary (errors are then ignored), except while
+/// the thread panics: the file then reads as cut short, as after a kill.
 pub struct Recorder {
-    writer: mcap::Writer<BufWriter<File>>,
+    writer: mcap::Writer<BufWriter<guard::UnwindGuard>>,
     file: File,
     path: PathBuf,
     ch: Channels,
@@ -537,7 +539,9 @@ impl Recorder {
             // Buffer each chunk in memory and write it whole: the file never holds a
             // half-written chunk whose lengths are yet to be patched.
             .disable_seeking(true);
-        let mut writer = opts.create(BufWriter::new(file)).map_err(mcap_err)?;
+        let mut writer = opts
+            .create(BufWriter::new(guard::UnwindGuard(file)))
+            .map_err(mcap_err)?;
         let meta = Meta::of(env);
         writer
             .write_metadata(&Metadata {

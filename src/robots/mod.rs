@@ -24,7 +24,7 @@ use crate::rng::NumpyRandomState;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RobotError {
     /// An unknown robot uid.
-    #[error("unknown robot {uid:?}; valid robots: {valid}")]
+    #[error("unknown robot {u:?}; valid robots: {valid}", u = crate::files::short(.uid))]
     UnknownRobot {
         /// The requested uid.
         uid: String,
@@ -32,7 +32,10 @@ pub enum RobotError {
         valid: String,
     },
     /// A control mode this robot does not have (or no control mode at all).
-    #[error("unknown control mode {mode:?} for robot {robot}; valid modes: {valid}")]
+    #[error(
+        "unknown control mode {m:?} for robot {robot}; valid modes: {valid}",
+        m = crate::files::short(.mode)
+    )]
     UnknownControlMode {
         /// The requested mode.
         mode: String,

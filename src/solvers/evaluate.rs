@@ -53,6 +53,36 @@ pub enum EvalError {
     /// The policy could not be built for the env.
     #[error(transparent)]
     Policy(#[from] SolverError),
+    /// The policy gave an action the env refuses (NaN or infinite entries).
+    #[error("policy {policy} gave a bad action in episode {episode} (seed {seed}): {source}")]
+    BadAction {
+        /// The policy's name or file.
+        policy: String,
+        /// The episode (0 is the first).
+        episode: u64,
+        /// Its reset seed.
+        seed: u64,
+        /// The env's error.
+        source: Box<EnvError>,
+    },
+}
+
+impl EvalError {
+    /// This error, for an episode of `policy`: an action the env refused becomes
+    /// [`EvalError::BadAction`] naming the policy, the episode and its seed.
+    pub fn in_episode(self, policy: &PolicySpec, episode: u64, seed: u64) -> EvalError {
+        match self {
+            EvalError::Env(
+                source @ (EnvError::ActionNotFinite { .. } | EnvError::ActionLength { .. }),
+            ) => EvalError::BadAction {
+                policy: policy.name(),
+                episode,
+                seed,
+                source: Box::new(source),
+            },
+            e => e,
+        }
+    }
 }
 
 impl From<PolicyFileError> for EvalError {
@@ -129,7 +159,13 @@ impl PolicySpec {
             PolicySpec::File(f) => {
                 let mut config = config;
                 f.configure(Some(env_id), &mut config, true)?;
-                Ok(make(env_id, config)?)
+                make(env_id, config).map_err(|e| {
+                    PolicyFileError::Env {
+                        path: f.path().to_path_buf(),
+                        reason: e.to_string(),
+                    }
+                    .into()
+                })
             }
         }
     }
@@ -308,7 +344,8 @@ pub fn evaluate_spec(
             Some(seed + k),
             &mut action,
             |_, _, _, _, _| Ok(()),
-        )?;
+        )
+        .map_err(|e| e.in_episode(policy, k, seed + k))?;
         successes += r.success_once as usize;
         at_end += r.success_at_end as usize;
         returns += r.ret;

@@ -13,6 +13,7 @@ pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
 pub mod onnx;
+pub(crate) mod onnx_guard;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;

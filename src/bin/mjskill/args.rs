@@ -27,6 +27,11 @@ pub fn episodes(s: &str) -> Result<usize, String> {
     ranged(s, 1, MAX_SEED + 1).map(|v| v as usize)
 }
 
+/// `export --chunks-size`: 1..=4294967295.
+pub fn chunks_size(s: &str) -> Result<usize, String> {
+    ranged(s, 1, u32::MAX as u64).map(|v| v as usize)
+}
+
 /// `bench --steps`: 1..=[`super::bench::MAX_STEPS`].
 pub fn bench_steps(s: &str) -> Result<usize, String> {
     ranged(s, 1, super::bench::MAX_STEPS as u64).map(|v| v as usize)
@@ -155,5 +160,9 @@ mod tests {
         assert!(max_error_mm("0").unwrap_err().contains("0.001..=1000"));
         assert!(max_error_mm("nan").unwrap_err().contains("--max-error"));
         assert!(max_error_mm("x").unwrap_err().contains("not a number"));
+        assert_eq!(
+            chunks_size("-1").unwrap_err(),
+            "-1 is not in 1..=4294967295"
+        );
     }
 }

@@ -30,15 +30,16 @@ pub fn import_maniskill(
 /// `export --format lerobot`'s file size limits (None: LeRobot's default).
 #[derive(Debug, clap::Args)]
 pub struct LimitArgs {
-    /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
-    #[arg(long)]
+    /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000;
+    /// 1..=4294967295).
+    #[arg(long, value_parser = crate::args::chunks_size, allow_hyphen_values = true)]
     pub chunks_size: Option<usize>,
     /// --format lerobot: size limit of data and meta/episodes parquet files in MB
     /// (default 100); an episode that would reach it starts the next file.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub data_files_size_in_mb: Option<f64>,
     /// --format lerobot: size limit of video files in MB (default 200).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub video_files_size_in_mb: Option<f64>,
 }
 
@@ -84,6 +85,18 @@ pub fn export(
             if control_mode.is_some() {
                 return Err(DatasetError::Invalid {
                     msg: "--control-mode applies to --format maniskill only".into(),
+                });
+            }
+            if std::fs::symlink_metadata(&output).is_ok_and(|m| m.file_type().is_symlink()) {
+                let target = std::fs::canonicalize(&output)
+                    .map_or_else(|_| "a missing target".into(), |t| t.display().to_string());
+                return Err(DatasetError::Invalid {
+                    msg: format!(
+                        "-o {} is a symbolic link to {target}; the dataset is written to a \
+                         temporary directory and renamed into place, which cannot go through \
+                         a link: give the directory itself or a new name",
+                        output.display()
+                    ),
                 });
             }
             let d = mjskill::datasets::lerobot::Limits::default();

@@ -769,7 +769,7 @@ fn fit_primitives(
             })
         }
     };
-    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
+    let bytes = mjskill::files::read(mesh)?;
     let mut tris = mesh_fit::read_triangles(&bytes, &mesh.display().to_string())?;
     mesh_fit::scale_triangles(&mut tris, scale)?;
     let pts = mesh_fit::surface_points(&tris, crop.as_ref())?;

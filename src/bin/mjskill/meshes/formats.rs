@@ -118,7 +118,7 @@ fn malformed(name: &str, reason: impl Into<String>) -> MeshError {
 /// part, with material `rgba`). Textures of COLLADA files are read relative to the file.
 pub fn read_visual(path: &Path, rgba: [f32; 4]) -> Result<SourceMesh, MeshError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| malformed(&name, format!("cannot read: {e}")))?;
+    let bytes = mjskill::files::read(path).map_err(|e| malformed(&name, e.reason()))?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -306,8 +306,7 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
 /// Reads a PNG file into RGBA.
 pub fn read_png(path: &Path) -> Result<Image, MeshError> {
     let name = path.display().to_string();
-    let file =
-        std::fs::File::open(path).map_err(|e| malformed(&name, format!("cannot open: {e}")))?;
+    let file = mjskill::files::open_regular(path).map_err(|e| malformed(&name, e.reason()))?;
     let mut dec = png::Decoder::new(std::io::BufReader::new(file));
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = dec

@@ -505,6 +505,13 @@ pub fn visual_elements(
         .collect()
 }
 
+/// A text file (URDF, MJCF) by the rule of every input file ([`mjskill::files`]).
+fn read_text(path: &Path) -> Result<String, MeshError> {
+    let bytes = mjskill::files::read(path).map_err(|e| MeshError::Invalid(e.to_string()))?;
+    String::from_utf8(bytes)
+        .map_err(|_| MeshError::Invalid(format!("cannot read {}: not UTF-8 text", path.display())))
+}
+
 /// Converts every mesh `<visual>` of the URDF at `src` (paths relative to it) into
 /// `out_dir`; returns per link its new `<visual>` elements, with file names prefixed by
 /// `prefix`. Primitive visuals are kept as they are, with their colour. Prints a line per
@@ -517,8 +524,7 @@ pub fn convert_urdf(
     log: &mut Vec<String>,
 ) -> Result<Vec<(String, Vec<String>)>, MeshError> {
     let name = src.display().to_string();
-    let text = std::fs::read_to_string(src)
-        .map_err(|e| MeshError::Invalid(format!("cannot read {name}: {e}")))?;
+    let text = read_text(src)?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| MeshError::Malformed {
         name: name.clone(),
         reason: e.to_string(),
@@ -737,9 +743,7 @@ pub fn run(
             let visuals = convert_urdf(&urdf, out_dir, &prefix, &opts, &mut log)?;
             match into {
                 Some(model) => {
-                    let text = std::fs::read_to_string(&model).map_err(|e| {
-                        MeshError::Invalid(format!("cannot read {}: {e}", model.display()))
-                    })?;
+                    let text = read_text(&model)?;
                     let new = splice_visuals(&text, &visuals)
                         .map_err(|e| MeshError::Invalid(format!("{}: {e}", model.display())))?;
                     write(&model, new.as_bytes())?;
