@@ -70,13 +70,15 @@ _F32_MAX = float(np.finfo(np.float32).max)
 
 def _as_actions(action: Any, ndim: int) -> np.ndarray:
     """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
-    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``,
+    already is one); a non-numeric or boolean action is a ``TypeError``, a wrong rank a ``ValueError``,
     and a finite value beyond float32's range (which the cast would turn into infinity) a
     ``ValueError`` naming the value given."""
     a = action if isinstance(action, np.ndarray) else np.asarray(action)
-    if a.dtype.kind not in "biuf":
+    if a.dtype.kind not in "iuf":
+        # Booleans too: True/False are not joint targets, and taking them as 1/0 would hide
+        # a mask passed where actions belong.
         raise TypeError(
-            f"actions must be numeric (float32 preferred), got dtype {a.dtype} from "
+            f"actions must be numeric: floats or ints (float32 preferred), got dtype {a.dtype} from "
             f"{type(action).__name__}"
         )
     if a.ndim != ndim:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import sys
 import weakref
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -204,6 +205,12 @@ class MjskillBatchedEnv(gym.Env):
         """Resets every env, or with ``options={"env_idx": idx}`` (indices or an ``[N]`` bool
         mask, numpy or torch) only those; env i gets seed ``seed + i``. Returns the
         observations and info of all N envs."""
+        native = self._live()
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(
+                f"options must be a dict such as {{'env_idx': [0, 2]}} (or None), got "
+                f"{type(options).__name__}"
+            )
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
@@ -224,15 +231,15 @@ class MjskillBatchedEnv(gym.Env):
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
         self._disarm_time_limits()
         if options.get("env_idx") is None:
-            obs, info = self._native.reset(seed)
+            obs, info = native.reset(seed)
             self._elapsed[:] = 0
         else:
             mask = self._index_mask(options["env_idx"])
-            obs, info = self._native.reset_envs(mask, seed)
+            obs, info = native.reset_envs(mask, seed)
             self._elapsed[mask] = 0
         info = self._info(info)
         info["reconfigure"] = False
-        return self._out(self._layout.batch(obs, self._native)), info
+        return self._out(self._layout.batch(obs, native)), info
 
     def _disarm_time_limits(self) -> None:
         """Finds gymnasium ``TimeLimit`` wrappers of this env among the callers of ``reset``
@@ -253,14 +260,15 @@ class MjskillBatchedEnv(gym.Env):
                 w._elapsed_steps = -(2**62)
 
     def step(self, action):
+        native = self._live()
         if hasattr(action, "detach"):
             action = action.detach().cpu().numpy()
         a = _as_actions(action, 2)
-        obs, reward, terminated, _, info = self._native.step(a)
+        obs, reward, terminated, _, info = native.step(a)
         self._elapsed += 1
         truncated = self._elapsed >= self.max_episode_steps
         return (
-            self._out(self._layout.batch(obs, self._native)),
+            self._out(self._layout.batch(obs, native)),
             self._out(reward),
             self._out(terminated),
             self._out(truncated),
@@ -270,9 +278,23 @@ class MjskillBatchedEnv(gym.Env):
     def render(self):
         raise RuntimeError(
             "the batched env renders no human-camera frames; render with a single env "
-            f"(gym.make('mjskill/{self.env_id}', render_mode='rgb_array')), or use a visual "
-            "obs_mode for the sensor cameras' images of every env"
+            f"(gym.make('mjskill/{self._kwargs['env_id']}', render_mode='rgb_array')), or use a "
+            "visual obs_mode for the sensor cameras' images of every env"
         )
+
+    def close(self) -> None:
+        """Frees the N envs (each owns its MuJoCo model and data). Closing again does
+        nothing; ``reset`` and ``step`` after it raise ``RuntimeError``."""
+        self._native = None
+
+    def _live(self) -> Any:
+        """The native envs, or a ``RuntimeError`` once the env is closed."""
+        if self._native is None:
+            raise RuntimeError(
+                f"this batched mjskill/{self._kwargs['env_id']} env (num_envs={self.num_envs}) "
+                "is closed; make a new one with gym.make"
+            )
+        return self._native
 
     # -- ManiSkill-style attributes --------------------------------------------------------
     @property

@@ -83,6 +83,22 @@ pub enum EnvError {
         /// Value.
         value: f32,
     },
+    /// NaN or infinite entry of [`VecEnv::step`](super::VecEnv::step)'s actions: `index`
+    /// into the `[N × action_dim]` batch, which is component `component` of env `env`.
+    #[error(
+        "action[{index}] = {value} (env {env}, action component {component}) is not finite; \
+         actions must not contain NaN or infinity"
+    )]
+    VecActionNotFinite {
+        /// Index into the batch of actions.
+        index: usize,
+        /// The env of that entry.
+        env: usize,
+        /// The action component (of the env's action) of that entry.
+        component: usize,
+        /// Value.
+        value: f32,
+    },
     /// A state from another env, of the wrong size, or with a bad value (the message names
     /// the field).
     #[error("cannot set state: {0}")]
@@ -124,6 +140,24 @@ pub enum EnvError {
         max = super::vec::MAX_NUM_ENVS
     )]
     TooManyEnvs(usize),
+    /// A [`VecEnv`](super::VecEnv) whose envs would not fit in the memory available
+    /// (`MemAvailable` of `/proc/meminfo`), refused before they are made.
+    #[error(
+        "num_envs {num_envs} would need about {} MB ({} KB per env: its MuJoCo model and data, \
+         images and buffers), more than the {} MB of memory available (MemAvailable in \
+         /proc/meminfo); use fewer envs",
+        (*num_envs as u64).saturating_mul(*per_env_bytes) >> 20,
+        per_env_bytes >> 10,
+        available_bytes >> 20
+    )]
+    EnvsExceedMemory {
+        /// Envs asked for.
+        num_envs: usize,
+        /// Estimated memory of one env (bytes).
+        per_env_bytes: u64,
+        /// Memory available (bytes).
+        available_bytes: u64,
+    },
     /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
     #[error("cannot start a VecEnv worker thread: {0}")]
     WorkerThread(String),

@@ -128,14 +128,17 @@ pub struct Mjcf {
 }
 
 impl Mjcf {
-    /// Compiles the document with MuJoCo.
+    /// Compiles the document with MuJoCo; its `mjData` stack is sized by
+    /// [`Model::shrink_stack`] (about 0.4 MB instead of the compiler's 4 MB per env).
     pub fn compile(&self) -> MjResult<Model> {
         let assets: Vec<(&str, &[u8])> = self
             .assets
             .iter()
             .map(|(n, b)| (n.as_str(), b.as_slice()))
             .collect();
-        Model::from_xml_string(&self.xml, &assets)
+        let mut model = Model::from_xml_string(&self.xml, &assets)?;
+        model.shrink_stack();
+        Ok(model)
     }
 }
 

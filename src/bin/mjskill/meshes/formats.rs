@@ -107,6 +107,33 @@ impl SourceMesh {
     }
 }
 
+/// Most triangles one visual mesh file may expand to (all its node instances together).
+/// Robot visual meshes have at most a few hundred thousand; a file that expands to more (a
+/// glTF node shared by many parents, a COLLADA geometry instanced by many nodes) is refused
+/// before its vertices are made.
+pub const MAX_SOURCE_TRIANGLES: usize = 2_000_000;
+/// Most vertices one visual mesh file may expand to (see [`MAX_SOURCE_TRIANGLES`]).
+pub const MAX_SOURCE_VERTICES: usize = 3 * MAX_SOURCE_TRIANGLES;
+/// Most glTF node instances a file may expand to: a node that is the child of several
+/// parents is expanded once per parent, so a small file can describe exponentially many.
+pub const MAX_NODE_INSTANCES: usize = 100_000;
+
+/// Errors when `triangles` or `vertices` read so far exceed [`MAX_SOURCE_TRIANGLES`] or
+/// [`MAX_SOURCE_VERTICES`].
+fn check_budget(name: &str, triangles: usize, vertices: usize) -> Result<(), MeshError> {
+    if triangles > MAX_SOURCE_TRIANGLES || vertices > MAX_SOURCE_VERTICES {
+        return Err(malformed(
+            name,
+            format!(
+                "the mesh expands to more than {MAX_SOURCE_TRIANGLES} triangles or \
+                 {MAX_SOURCE_VERTICES} vertices (every instance counted), the most a visual \
+                 mesh may have"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn malformed(name: &str, reason: impl Into<String>) -> MeshError {
     MeshError::Malformed {
         name: name.to_string(),
@@ -129,6 +156,7 @@ pub fn read_visual(path: &Path, rgba: [f32; 4]) -> Result<SourceMesh, MeshError>
         "dae" => read_dae(&bytes, &name, path.parent().unwrap_or(Path::new("."))),
         "stl" | "obj" => {
             let tris = read_triangles(&bytes, &name)?;
+            check_budget(&name, tris.len(), 3 * tris.len())?;
             let mut part = Part::default();
             for t in tris {
                 for v in t {
@@ -213,13 +241,55 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| malformed(name, "glTF file has no scene"))?;
-    let mut stack: Vec<(gltf::Node, Matrix4<f32>)> =
-        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
-    while let Some((node, parent)) = stack.pop() {
+    // Depth first; `on_path[i]`: node i is an ancestor of the nodes on the stack above its
+    // `Leave`, so meeting it again as a child is a cycle. A node shared by several parents
+    // (a DAG) is expanded once per parent, which [`MAX_NODE_INSTANCES`] bounds.
+    enum Visit<'a> {
+        Enter(gltf::Node<'a>, Matrix4<f32>),
+        Leave(usize),
+    }
+    let mut on_path = vec![false; doc.nodes().count()];
+    let mut stack: Vec<Visit> = scene
+        .nodes()
+        .map(|n| Visit::Enter(n, Matrix4::identity()))
+        .collect();
+    let (mut instances, mut triangles, mut vertices) = (0usize, 0usize, 0usize);
+    while let Some(visit) = stack.pop() {
+        let (node, parent) = match visit {
+            Visit::Enter(node, parent) => (node, parent),
+            Visit::Leave(i) => {
+                on_path[i] = false;
+                continue;
+            }
+        };
+        instances += 1;
+        if instances > MAX_NODE_INSTANCES {
+            return Err(malformed(
+                name,
+                format!(
+                    "glTF nodes expand to more than {MAX_NODE_INSTANCES} node instances \
+                     (children shared by several parents are expanded once per parent)"
+                ),
+            ));
+        }
+        on_path[node.index()] = true;
+        stack.push(Visit::Leave(node.index()));
         let local = Matrix4::from(node.transform().matrix());
         let world = parent * local;
         for child in node.children() {
-            stack.push((child, world));
+            if on_path[child.index()] {
+                return Err(malformed(
+                    name,
+                    format!(
+                        "glTF node {} ({:?}) is its own ancestor (a cycle in the node graph, \
+                         reached from node {})",
+                        child.index(),
+                        child.name().unwrap_or(""),
+                        node.index()
+                    ),
+                ));
+            }
+            stack.push(Visit::Enter(child, world));
         }
         let Some(mesh) = node.mesh() else { continue };
         let normal_m: Matrix3<f32> = world
@@ -236,6 +306,10 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
             let Some(pos) = reader.read_positions() else {
                 continue;
             };
+            // Checked before anything is read: instances multiply the file's own sizes.
+            vertices += pos.len();
+            triangles += prim.indices().map_or(pos.len(), |a| a.count()) / 3;
+            check_budget(name, triangles, vertices)?;
             let positions: Vec<[f32; 3]> = pos
                 .map(|p| {
                     let q = world.transform_point(&Point3::from(p));
@@ -244,7 +318,9 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
                 .collect();
             let normals = reader.read_normals().map(|it| {
                 it.map(|n| {
-                    let m = (normal_m * Vector3::from(n)).normalize();
+                    let m = (normal_m * Vector3::from(n))
+                        .try_normalize(1e-12)
+                        .unwrap_or(Vector3::z());
                     [m.x, m.y, m.z]
                 })
                 .collect::<Vec<_>>()
@@ -303,11 +379,40 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
     Ok(out)
 }
 
-/// Reads a PNG file into RGBA.
+/// Largest side of a PNG texture read (pixels, as its header declares it).
+pub const MAX_TEXTURE_SIDE: u32 = 16_384;
+/// Most pixels of a PNG texture read, as its header declares them: 8192 × 8192 (256 MiB as
+/// RGBA). The header is checked before anything is decoded, so a file declaring more (or a
+/// small file that would decompress to more) is refused without allocating it.
+pub const MAX_TEXTURE_PIXELS: u64 = 8192 * 8192;
+
+/// Reads a PNG file into RGBA. Its declared size must be within [`MAX_TEXTURE_SIDE`] a side
+/// and [`MAX_TEXTURE_PIXELS`] in all.
 pub fn read_png(path: &Path) -> Result<Image, MeshError> {
+    read_png_within(path, MAX_TEXTURE_SIDE, MAX_TEXTURE_PIXELS)
+}
+
+/// [`read_png`] with the limits given.
+fn read_png_within(path: &Path, max_side: u32, max_pixels: u64) -> Result<Image, MeshError> {
     let name = path.display().to_string();
     let file = mjskill::files::open_regular(path).map_err(|e| malformed(&name, e.reason()))?;
-    let mut dec = png::Decoder::new(std::io::BufReader::new(file));
+    // The decoder's own allocations (row buffers, metadata) stay within a few rows of the
+    // largest accepted image; the output buffer is sized from the checked header.
+    let limits = png::Limits { bytes: 64 << 20 };
+    let mut dec = png::Decoder::new_with_limits(std::io::BufReader::new(file), limits);
+    let header = dec
+        .read_header_info()
+        .map_err(|e| malformed(&name, format!("PNG: {e}")))?;
+    let (w, h) = (header.width, header.height);
+    if w > max_side || h > max_side || u64::from(w) * u64::from(h) > max_pixels {
+        return Err(malformed(
+            &name,
+            format!(
+                "PNG declares {w} x {h} pixels; textures may have at most {max_side} pixels a \
+                 side and {max_pixels} pixels in all"
+            ),
+        ));
+    }
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = dec
         .read_info()
@@ -404,6 +509,8 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
     // knuckle where ManiSkill draws none (segmentation IoU 0).
     let top = Matrix4::new_scaling(unit);
     let mut out = SourceMesh::default();
+    // (triangles, vertices) made so far, for [`check_budget`].
+    let mut expanded = (0usize, 0usize);
     let mut mat_slots: HashMap<String, usize> = HashMap::new();
     let mut textures: HashMap<PathBuf, Image> = HashMap::new();
     let scene = root
@@ -492,6 +599,7 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     material,
                     texture.is_some(),
                     name,
+                    &mut expanded,
                 )?;
                 if !part.indices.is_empty() {
                     out.parts.push(part);
@@ -687,6 +795,7 @@ fn fan_part(
     material: usize,
     textured: bool,
     name: &str,
+    expanded: &mut (usize, usize),
 ) -> Result<Part, MeshError> {
     let stride = *stride;
     let find = |sem: &str| inputs.iter().find(|(s, _, _)| s == sem);
@@ -718,12 +827,17 @@ fn fan_part(
         let a = k * s.stride;
         s.data.get(a..a + n).map(|v| v.to_vec())
     };
-    let mut cursor = 0;
+    let mut cursor = 0usize;
     for &n in &counts {
-        if n < 3 || (cursor + n) * stride > p.len() {
-            cursor += n;
+        if n < 3 || cursor.saturating_add(n).saturating_mul(stride) > p.len() {
+            cursor = cursor.saturating_add(n);
             continue;
         }
+        // Checked before the polygon's vertices are made: many nodes may instance one large
+        // geometry.
+        expanded.0 += n - 2;
+        expanded.1 += n;
+        check_budget(name, expanded.0, expanded.1)?;
         let base = part.positions.len() as u32;
         for v in 0..n {
             let at = (cursor + v) * stride;
