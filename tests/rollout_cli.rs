@@ -1,5 +1,6 @@
 //! The recording command line: rollout, info, replay and durability under kill (reference
 //! trajectories: tests/reference.rs).
+#![cfg(feature = "cli")]
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};

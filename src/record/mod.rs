@@ -43,6 +43,7 @@ mod reader;
 pub mod replay;
 mod scan;
 mod schema;
+#[cfg(feature = "video")]
 pub mod video;
 
 pub use reader::{
@@ -481,9 +482,11 @@ pub struct Recorder {
 
 /// A camera's video channel, its encoder (made at the first frame) and reused buffers.
 #[derive(Debug)]
+#[cfg_attr(not(feature = "video"), allow(dead_code))]
 struct Video {
     channel: u16,
     frame_id: String,
+    #[cfg(feature = "video")]
     encoder: Option<video::H264Encoder>,
     /// The next frame starts an episode: encode it as a keyframe (IDR with SPS/PPS), so
     /// every episode decodes on its own.
@@ -600,8 +603,19 @@ impl Recorder {
 
     /// Adds the `/<frame_id>/video` channel (`foxglove.CompressedVideo`, H.264) for the
     /// frames of the camera `frame_id` (the human camera's is [`TOPIC_RENDER_VIDEO`]);
-    /// returns the camera's index for [`Recorder::record_camera_frame`]. Idempotent.
+    /// returns the camera's index for [`Recorder::record_camera_frame`]. Idempotent. Video
+    /// needs the crate's `video` feature (a default one); without it this refuses, naming it.
     pub fn enable_video(&mut self, frame_id: &str) -> Result<usize, RecordError> {
+        if !cfg!(feature = "video") {
+            return Err(RecordError::Refused {
+                path: self.path.clone(),
+                what: format!(
+                    "H.264 video of camera {frame_id}: it needs mjskill's `video` feature, \
+                     which this build leaves out (build with the default features, or add \
+                     `--features video`)"
+                ),
+            });
+        }
         if let Some(i) = self.videos.iter().position(|v| v.frame_id == frame_id) {
             return Ok(i);
         }
@@ -618,6 +632,7 @@ impl Recorder {
         self.videos.push(Video {
             channel,
             frame_id: frame_id.to_string(),
+            #[cfg(feature = "video")]
             encoder: None,
             keyframe: true,
             h264: Vec::new(),
@@ -655,7 +670,6 @@ impl Recorder {
         width: usize,
         height: usize,
     ) -> Result<(), RecordError> {
-        use base64::Engine;
         if camera >= self.videos.len() {
             return Err(RecordError::Usage {
                 path: self.path.clone(),
@@ -667,7 +681,29 @@ impl Recorder {
         }
         let mut v = self.videos.swap_remove(camera);
         let ns = self.last_ns.unwrap_or(0);
-        let r = (|| {
+        let r = self.encode_frame(&mut v, ns, rgb, width, height);
+        if r.is_ok() {
+            v.frames += 1;
+            v.keyframe = false;
+        }
+        self.videos.push(v);
+        let last = self.videos.len() - 1;
+        self.videos.swap(camera, last);
+        r
+    }
+
+    /// Encodes one frame of camera `v` and writes it, stamped `ns`.
+    #[cfg(feature = "video")]
+    fn encode_frame(
+        &mut self,
+        v: &mut Video,
+        ns: u64,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+    ) -> Result<(), RecordError> {
+        use base64::Engine;
+        {
             let bad = |e: video::VideoError| RecordError::Refused {
                 path: self.path.clone(),
                 what: format!("a frame of camera {}: {e}", v.frame_id),
@@ -693,15 +729,27 @@ impl Recorder {
                 format: "h264",
             };
             self.write_json(v.channel, ns, &msg)
-        })();
-        if r.is_ok() {
-            v.frames += 1;
-            v.keyframe = false;
         }
-        self.videos.push(v);
-        let last = self.videos.len() - 1;
-        self.videos.swap(camera, last);
-        r
+    }
+
+    /// Without the `video` feature no camera is enabled ([`Recorder::enable_video`] refuses),
+    /// so no frame reaches this.
+    #[cfg(not(feature = "video"))]
+    fn encode_frame(
+        &mut self,
+        v: &mut Video,
+        _ns: u64,
+        _rgb: &[u8],
+        _width: usize,
+        _height: usize,
+    ) -> Result<(), RecordError> {
+        Err(RecordError::Refused {
+            path: self.path.clone(),
+            what: format!(
+                "a frame of camera {}: H.264 video needs mjskill's `video` feature",
+                v.frame_id
+            ),
+        })
     }
 
     /// Adds a JSON channel of the caller's own (a `jsonschema` schema named `schema_name`,
