@@ -7,7 +7,6 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
-#[path = "../mjskill/meshes/mod.rs"]
 mod meshes;
 
 /// The command line's errors, printed with their `Display` text.
