@@ -374,29 +374,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::ExportMjcf { robot, env, output } => {
             export_mjcf(robot.as_deref(), env.as_deref(), output)
         }
-        Command::Bench {
-            target,
-            steps,
-            envs,
-            threads,
-            obs_mode,
-            render,
-        } => {
-            let cores = std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1);
-            let vec = match (envs, threads) {
-                (None, None) => None,
-                (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
-            };
-            let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
-                ..target.config()
-            };
-            let report = bench::run(target.env_id(), config, steps, vec, render)?;
-            out!("{}", serde_json::to_string(&report)?);
-            Ok(())
-        }
+        cmd @ Command::Bench { .. } => bench_command(cmd),
+        cmd @ (Command::ImportManiskill { .. } | Command::Export { .. }) => datasets_command(cmd),
         Command::Eval {
             target,
             policy,
@@ -472,65 +451,6 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 .into())
             }
         }
-        Command::ImportManiskill {
-            h5,
-            json,
-            out,
-            by,
-            sim_freq,
-        } => {
-            #[cfg(not(feature = "datasets"))]
-            return Err(missing_feature(
-                "import-maniskill",
-                "datasets",
-                (h5, json, out, by, sim_freq),
-            ));
-            #[cfg(feature = "datasets")]
-            {
-                let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
-                out!("{}", serde_json::to_string(&r)?);
-                Ok(())
-            }
-        }
-        Command::Export {
-            file,
-            format,
-            output,
-            json,
-            video,
-            control_mode,
-            chunks_size,
-            data_files_size_in_mb,
-            video_files_size_in_mb,
-        } => {
-            #[cfg(not(feature = "datasets"))]
-            return Err(missing_feature(
-                "export",
-                "datasets",
-                (
-                    (file, format, output, json, video, control_mode),
-                    (chunks_size, data_files_size_in_mb, video_files_size_in_mb),
-                ),
-            ));
-            #[cfg(feature = "datasets")]
-            {
-                let r = datasets::export(
-                    &file,
-                    &format,
-                    output,
-                    json.as_deref(),
-                    video,
-                    control_mode.as_deref(),
-                    datasets::LimitArgs {
-                        chunks_size,
-                        data_files_size_in_mb,
-                        video_files_size_in_mb,
-                    },
-                )?;
-                out!("{}", serde_json::to_string(&r)?);
-                Ok(())
-            }
-        }
         Command::Render {
             target,
             seed,
@@ -587,15 +507,92 @@ fn run(cli: Cli) -> Result<(), CliError> {
     }
 }
 
-/// The error of a command this build leaves out: it names the cargo feature that adds it.
-/// `_args` takes the command's parsed arguments, which such a build does not use.
+/// `mjskill bench`.
+fn bench_command(cmd: Command) -> Result<(), CliError> {
+    let Command::Bench {
+        target,
+        steps,
+        envs,
+        threads,
+        obs_mode,
+        render,
+    } = cmd
+    else {
+        unreachable!("called for bench")
+    };
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let vec = match (envs, threads) {
+        (None, None) => None,
+        (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
+    };
+    let config = mjskill::EnvConfig {
+        obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+        ..target.config()
+    };
+    let report = bench::run(target.env_id(), config, steps, vec, render)?;
+    out!("{}", serde_json::to_string(&report)?);
+    Ok(())
+}
+
+/// `mjskill import-maniskill` and `mjskill export`.
+#[cfg(feature = "datasets")]
+fn datasets_command(cmd: Command) -> Result<(), CliError> {
+    match cmd {
+        Command::ImportManiskill {
+            h5,
+            json,
+            out,
+            by,
+            sim_freq,
+        } => {
+            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
+            out!("{}", serde_json::to_string(&r)?);
+        }
+        Command::Export {
+            file,
+            format,
+            output,
+            json,
+            video,
+            control_mode,
+            chunks_size,
+            data_files_size_in_mb,
+            video_files_size_in_mb,
+        } => {
+            let r = datasets::export(
+                &file,
+                &format,
+                output,
+                json.as_deref(),
+                video,
+                control_mode.as_deref(),
+                datasets::LimitArgs {
+                    chunks_size,
+                    data_files_size_in_mb,
+                    video_files_size_in_mb,
+                },
+            )?;
+            out!("{}", serde_json::to_string(&r)?);
+        }
+        _ => unreachable!("called for import-maniskill and export"),
+    }
+    Ok(())
+}
+
+/// Without the `datasets` feature, `import-maniskill` and `export` are an error naming it.
 #[cfg(not(feature = "datasets"))]
-fn missing_feature<T>(command: &str, feature: &str, _args: T) -> CliError {
-    format!(
-        "`mjskill {command}` needs mjskill's `{feature}` feature, which this build leaves out \
-         (build with the default features, or add `--features {feature}`)"
+fn datasets_command(cmd: Command) -> Result<(), CliError> {
+    let command = match cmd {
+        Command::ImportManiskill { .. } => "import-maniskill",
+        _ => "export",
+    };
+    Err(format!(
+        "`mjskill {command}` needs mjskill's `datasets` feature, which this build leaves out \
+         (build with the default features, or add `--features datasets`)"
     )
-    .into()
+    .into())
 }
 
 fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), CliError> {
