@@ -25,9 +25,10 @@ pub(super) struct Video {
 
 impl Recorder {
     /// Adds the `/<frame_id>/video` channel (`foxglove.CompressedVideo`, H.264) for the
-    /// frames of the camera `frame_id` (the human camera's is [`TOPIC_RENDER_VIDEO`](super::TOPIC_RENDER_VIDEO));
-    /// returns the camera's index for [`Recorder::record_camera_frame`]. Idempotent. Video
-    /// needs the crate's `video` feature (a default one); without it this refuses, naming it.
+    /// frames of the camera `frame_id` (the human camera's is
+    /// [`TOPIC_RENDER_VIDEO`](super::TOPIC_RENDER_VIDEO)); returns the camera's index for
+    /// [`Recorder::record_camera_frame`]. Idempotent. Video needs the crate's `video` feature
+    /// (a default one); without it this refuses, naming it.
     pub fn enable_video(&mut self, frame_id: &str) -> Result<usize, RecordError> {
         if !cfg!(feature = "video") {
             return Err(RecordError::Refused {
