@@ -54,6 +54,7 @@ pub(crate) mod tasks;
 #[cfg(test)]
 mod tests;
 
+pub use controllers::desc::RobotError as UrdfError;
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::vec::MAX_NUM_ENVS;
@@ -63,7 +64,6 @@ pub use env::{
     RewardMode, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv, CONTROL_FREQ,
     DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use mjcf::urdf::RobotError as UrdfError;
 pub use mjcf::{Mjcf, SceneError};
 pub use models::ModelFileError;
 pub use mujoco::render::{RenderError, RenderOptions, Segmentation};

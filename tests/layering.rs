@@ -1,4 +1,4 @@
-//! The module graph runs one way: FFI → `mujoco` → `mjcf` → `controllers` → `robots` →
+//! The module graph runs one way: FFI → `mujoco` → `controllers` → `mjcf` → `robots` →
 //! `tasks` → `env` → `record` → (`maniskill`, `solvers`) → `datasets`, with the leaves
 //! `rng` (ManiSkill's RNG emulation), `models` (the embedded robot files) and `obs` (the
 //! observation writer) below everything, and the crate's internal cross-layer tests
@@ -16,8 +16,9 @@ use std::path::{Path, PathBuf};
 const LAYERS: &[&[&str]] = &[
     &["rng", "models", "obs"],
     &["mujoco"],
-    &["mjcf"],
+    // The controllers own the robot description (URDF, drives) that the MJCF writer consumes.
     &["controllers"],
+    &["mjcf"],
     &["robots"],
     &["tasks"],
     &["env"],

@@ -79,7 +79,7 @@ pub enum EnvError {
     #[error("cannot set state: {0}")]
     BadState(String),
     /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
-    #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
+    #[error("seed {0} is out of range: seeds are 32-bit, 0..={max}", max = super::checks::MAX_SEED)]
     BadSeed(u64),
     /// An unknown robot uid, or the robot's scene could not be built.
     #[error(transparent)]
@@ -360,8 +360,7 @@ fn names<T>(v: &[(&str, T)]) -> String {
     v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
-/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
-pub const CONTROL_FREQ: u32 = 20;
+pub use crate::mjcf::CONTROL_FREQ;
 
 /// Physics settings (ManiSkill's `sim_config`): how many physics steps simulate one 20 Hz
 /// control step. A higher `sim_freq` is slower and closer to the continuous-time dynamics.

@@ -337,6 +337,8 @@ pub struct VecEnv {
     obs_dim: usize,
     act_dim: usize,
     keys: &'static [&'static str],
+    /// Whether each of `keys` is a flag ([`Env::info_is_flag`]).
+    key_is_flag: Vec<bool>,
     shared: Arc<Shared>,
     /// The envs stepped by the calling thread.
     local: Worker,
@@ -366,6 +368,48 @@ pub struct VecEnv {
     xyzw: Vec<f32>,
 }
 
+/// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
+/// `sh` (spinning, then parked), runs the epoch's command on its envs and counts itself done,
+/// until the command is [`CMD_QUIT`].
+fn spawn_worker(k: usize, mut w: Worker, sh: Arc<Shared>) -> Result<JoinHandle<()>, EnvError> {
+    std::thread::Builder::new()
+        .name(format!("mjskill-vecenv-{k}"))
+        .spawn(move || {
+            let mut seen = 0u64;
+            loop {
+                let mut spins = 0u32;
+                let epoch = loop {
+                    let e = sh.epoch.load(Ordering::Acquire);
+                    if e != seen {
+                        break e;
+                    }
+                    if spins < SPINS {
+                        spins += 1;
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::park();
+                    }
+                };
+                seen = epoch;
+                let command = sh.command.load(Ordering::Relaxed);
+                if command == CMD_QUIT {
+                    break;
+                }
+                // A panic in an env (a bug, or a GL driver failing mid-run) must not
+                // leave the caller waiting for `done` forever: it is caught here and
+                // re-raised on the caller's thread, as a single env's panic would be.
+                if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command))) {
+                    if let Ok(mut slot) = sh.panic_payload.lock() {
+                        slot.get_or_insert(payload);
+                    }
+                    sh.panicked.store(true, Ordering::Release);
+                }
+                sh.done.fetch_add(1, Ordering::Release);
+            }
+        })
+        .map_err(|e| EnvError::WorkerThread(e.to_string()))
+}
+
 impl VecEnv {
     /// Builds `num_envs` envs of `env_id` with `config`, spread over `threads` threads (the
     /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
@@ -393,6 +437,7 @@ impl VecEnv {
         let act_dim = first.action_space().shape[0];
         let keys = first.info().keys;
         let nkeys = keys.len();
+        let key_is_flag = keys.iter().map(|k| first.info_is_flag(k)).collect();
         let single_action_space = first.action_space().clone();
         let single_observation_space = first.observation_space().clone();
         let images = ImageLayout::of(first);
@@ -451,45 +496,8 @@ impl VecEnv {
         let local = workers.next().expect("at least one share");
         let mut handles = Vec::new();
         let mut thread_handles = Vec::new();
-        for (k, mut w) in workers.enumerate() {
-            let sh = shared.clone();
-            let h = std::thread::Builder::new()
-                .name(format!("mjskill-vecenv-{}", k + 1))
-                .spawn(move || {
-                    let mut seen = 0u64;
-                    loop {
-                        let mut spins = 0u32;
-                        let epoch = loop {
-                            let e = sh.epoch.load(Ordering::Acquire);
-                            if e != seen {
-                                break e;
-                            }
-                            if spins < SPINS {
-                                spins += 1;
-                                std::hint::spin_loop();
-                            } else {
-                                std::thread::park();
-                            }
-                        };
-                        seen = epoch;
-                        let command = sh.command.load(Ordering::Relaxed);
-                        if command == CMD_QUIT {
-                            break;
-                        }
-                        // A panic in an env (a bug, or a GL driver failing mid-run) must not
-                        // leave the caller waiting for `done` forever: it is caught here and
-                        // re-raised on the caller's thread, as a single env's panic would be.
-                        if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
-                        {
-                            if let Ok(mut slot) = sh.panic_payload.lock() {
-                                slot.get_or_insert(payload);
-                            }
-                            sh.panicked.store(true, Ordering::Release);
-                        }
-                        sh.done.fetch_add(1, Ordering::Release);
-                    }
-                })
-                .map_err(|e| EnvError::WorkerThread(e.to_string()))?;
+        for (k, w) in workers.enumerate() {
+            let h = spawn_worker(k + 1, w, shared.clone())?;
             thread_handles.push(h.thread().clone());
             handles.push(h);
         }
@@ -498,6 +506,7 @@ impl VecEnv {
             obs_dim,
             act_dim,
             keys,
+            key_is_flag,
             shared,
             local,
             threads: thread_handles,
@@ -730,6 +739,13 @@ impl VecEnv {
     /// Task info keys (columns of [`VecEnv::info`]).
     pub fn info_keys(&self) -> &'static [&'static str] {
         self.keys
+    }
+    /// Whether info key `key` is a boolean flag (0 or 1), as [`Env::info_is_flag`].
+    pub fn info_is_flag(&self, key: &str) -> bool {
+        self.keys
+            .iter()
+            .position(|k| *k == key)
+            .is_some_and(|i| self.key_is_flag[i])
     }
     /// Task info values, `[N × keys]` row-major (booleans as 0/1).
     pub fn info(&self) -> &[f64] {

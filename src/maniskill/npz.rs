@@ -170,7 +170,7 @@ fn parse_npz(b: &[u8]) -> Result<BTreeMap<String, NpyArray>, ParseError> {
             }
         };
         let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        let arr = parse_npy(&data).map_err(|m| ParseError::Npy(key.clone(), m))?;
+        let arr = parse_npy(&data).map_err(|e| ParseError::Npy(key.clone(), e.to_string()))?;
         out.insert(key, arr);
     }
     Ok(out)
@@ -196,37 +196,85 @@ fn header_value<'a>(h: &'a str, key: &str) -> Option<&'a str> {
     Some(rest.trim())
 }
 
+/// Why one `.npy` array does not parse (the message of [`NpzError::Npy`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum NpyError {
+    /// No `.npy` magic.
+    #[error("not a .npy array")]
+    NotNpy,
+    /// The header is cut short.
+    #[error("truncated header")]
+    TruncatedHeader,
+    /// A format version other than 1 to 3.
+    #[error(".npy version {0} is not supported")]
+    Version(u8),
+    /// The header is not UTF-8.
+    #[error("header is not text")]
+    HeaderNotText,
+    /// A header key is missing.
+    #[error("no {0}")]
+    Missing(&'static str),
+    /// A Fortran-order array.
+    #[error("Fortran-order arrays are not supported")]
+    FortranOrder,
+    /// The shape does not parse.
+    #[error("bad shape {0}")]
+    BadShape(String),
+    /// The data is shorter than the shape says.
+    #[error("{n} values of {size} bytes do not fit the data")]
+    ShortData {
+        /// Values.
+        n: usize,
+        /// Bytes per value.
+        size: usize,
+    },
+    /// A unicode dtype whose length does not parse.
+    #[error("bad dtype {0}")]
+    BadDtype(String),
+    /// A string longer than the data.
+    #[error("{0} characters do not fit the data")]
+    ShortString(usize),
+    /// A dtype this reader does not handle.
+    #[error("dtype {0} is not supported (u1, i2, i4, i8, f4, f8, 0-d unicode)")]
+    UnsupportedDtype(String),
+}
+
 /// Parses one `.npy` file.
-fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
+fn parse_npy(b: &[u8]) -> Result<NpyArray, NpyError> {
     if !b.starts_with(b"\x93NUMPY") || b.len() < 10 {
-        return Err("not a .npy array".into());
+        return Err(NpyError::NotNpy);
     }
     let (hlen, hstart) = match b[6] {
-        1 => (u16_at(b, 8).ok_or("truncated header")?, 10),
-        2 | 3 => (u32_at(b, 8).ok_or("truncated header")?, 12),
-        v => return Err(format!(".npy version {v} is not supported")),
+        1 => (u16_at(b, 8).ok_or(NpyError::TruncatedHeader)?, 10),
+        2 | 3 => (u32_at(b, 8).ok_or(NpyError::TruncatedHeader)?, 12),
+        v => return Err(NpyError::Version(v)),
     };
-    let h = std::str::from_utf8(b.get(hstart..hstart + hlen).ok_or("truncated header")?)
-        .map_err(|_| "header is not text")?;
+    let h = std::str::from_utf8(
+        b.get(hstart..hstart + hlen)
+            .ok_or(NpyError::TruncatedHeader)?,
+    )
+    .map_err(|_| NpyError::HeaderNotText)?;
     let body = &b[hstart + hlen..];
     let descr = header_value(h, "descr")
-        .ok_or("no descr")?
+        .ok_or(NpyError::Missing("descr"))?
         .trim_matches(|c| c == '\'' || c == '"');
     if header_value(h, "fortran_order") == Some("True") {
-        return Err("Fortran-order arrays are not supported".into());
+        return Err(NpyError::FortranOrder);
     }
-    let shape_s = header_value(h, "shape").ok_or("no shape")?;
+    let shape_s = header_value(h, "shape").ok_or(NpyError::Missing("shape"))?;
     let shape: Vec<usize> = shape_s
         .trim_matches(|c| c == '(' || c == ')')
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse().map_err(|_| format!("bad shape {shape_s}")))
-        .collect::<Result<_, String>>()?;
+        .map(|s| {
+            s.parse()
+                .map_err(|_| NpyError::BadShape(shape_s.to_string()))
+        })
+        .collect::<Result<_, NpyError>>()?;
     let n: usize = shape.iter().product();
-    let take = |size: usize| -> Result<&[u8], String> {
-        body.get(..n * size)
-            .ok_or_else(|| format!("{n} values of {size} bytes do not fit the data"))
+    let take = |size: usize| -> Result<&[u8], NpyError> {
+        body.get(..n * size).ok_or(NpyError::ShortData { n, size })
     };
     let data = match descr {
         "|u1" | "<u1" => NpyData::U8(take(1)?.to_vec()),
@@ -261,10 +309,10 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
                 .collect(),
         ),
         d if d.starts_with("<U") && shape.is_empty() => {
-            let chars: usize = d[2..].parse().map_err(|_| format!("bad dtype {d}"))?;
-            let raw = body
-                .get(..4 * chars)
-                .ok_or_else(|| format!("{chars} characters do not fit the data"))?;
+            let chars: usize = d[2..]
+                .parse()
+                .map_err(|_| NpyError::BadDtype(d.to_string()))?;
+            let raw = body.get(..4 * chars).ok_or(NpyError::ShortString(chars))?;
             let s: String = raw
                 .chunks_exact(4)
                 .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
@@ -273,11 +321,7 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
                 .collect();
             NpyData::Str(s)
         }
-        d => {
-            return Err(format!(
-                "dtype {d} is not supported (u1, i2, i4, i8, f4, f8, 0-d unicode)"
-            ))
-        }
+        d => return Err(NpyError::UnsupportedDtype(d.to_string())),
     };
     Ok(NpyArray { shape, data })
 }

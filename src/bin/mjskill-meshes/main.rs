@@ -170,46 +170,7 @@ enum Command {
     /// PNG textures that MuJoCo 2.2 draws (docs/rendering.md). Exactly one of --urdf (every
     /// mesh visual of an upstream URDF), --mesh (one mesh, e.g. the table) or --texture (a
     /// PNG re-encoded and downsampled).
-    ConvertVisuals {
-        /// Upstream URDF whose mesh visuals to convert (paths relative to it).
-        #[arg(long, conflicts_with_all = ["mesh", "texture"])]
-        urdf: Option<PathBuf>,
-        /// With --urdf: the model URDF whose links' `<visual>` elements are replaced by the
-        /// converted ones (its directory must contain --out-dir). Without it they are printed.
-        #[arg(long, requires = "urdf")]
-        into: Option<PathBuf>,
-        /// One mesh file to convert; writes <out-dir>/<name>.urdf, a one-link URDF with its
-        /// visuals.
-        #[arg(long, conflicts_with = "texture")]
-        mesh: Option<PathBuf>,
-        /// With --mesh: uniform scale baked into the vertices (positive, up to 1e6).
-        #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
-        scale: f64,
-        /// A PNG texture to re-encode as <out-dir>/<name>.png.
-        #[arg(long)]
-        texture: Option<PathBuf>,
-        /// Output directory (created if missing).
-        #[arg(long)]
-        out_dir: PathBuf,
-        /// File stem for --mesh and --texture.
-        #[arg(long, default_value = "visual")]
-        name: String,
-        /// Triangle budget per mesh file (12..=1000000).
-        #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
-        max_triangles: usize,
-        /// Largest distance in millimetres that simplification may move a mesh's surface
-        /// (0.001..=1000); meshes keep more triangles than --max-triangles where this needs it.
-        /// Default: up to 2 % of each mesh's extent (8 % where the budget needs it).
-        #[arg(long, value_parser = args::max_error_mm, allow_hyphen_values = true)]
-        max_error: Option<f32>,
-        /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
-        /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
-        #[arg(long = "material", value_parser = args::named_rgba)]
-        materials: Vec<(String, [f32; 4])>,
-        /// Largest texture side in pixels (1..=8192; halved until it fits).
-        #[arg(long, default_value_t = meshes::visual::DEFAULT_TEXTURE_SIZE, value_parser = args::texture_size, allow_hyphen_values = true)]
-        texture_size: u32,
-    },
+    ConvertVisuals(ConvertVisualsArgs),
 }
 
 fn main() {
@@ -230,7 +191,57 @@ fn run(cli: Cli) -> Result<(), CliError> {
             crop,
             scale,
         } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref(), scale),
-        Command::ConvertVisuals {
+        Command::ConvertVisuals(args) => args.run(),
+    }
+}
+
+/// The arguments of `mjskill convert-visuals`.
+#[derive(Debug, clap::Args)]
+struct ConvertVisualsArgs {
+    /// Upstream URDF whose mesh visuals to convert (paths relative to it).
+    #[arg(long, conflicts_with_all = ["mesh", "texture"])]
+    urdf: Option<PathBuf>,
+    /// With --urdf: the model URDF whose links' `<visual>` elements are replaced by the
+    /// converted ones (its directory must contain --out-dir). Without it they are printed.
+    #[arg(long, requires = "urdf")]
+    into: Option<PathBuf>,
+    /// One mesh file to convert; writes <out-dir>/<name>.urdf, a one-link URDF with its
+    /// visuals.
+    #[arg(long, conflicts_with = "texture")]
+    mesh: Option<PathBuf>,
+    /// With --mesh: uniform scale baked into the vertices (positive, up to 1e6).
+    #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
+    scale: f64,
+    /// A PNG texture to re-encode as <out-dir>/<name>.png.
+    #[arg(long)]
+    texture: Option<PathBuf>,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    out_dir: PathBuf,
+    /// File stem for --mesh and --texture.
+    #[arg(long, default_value = "visual")]
+    name: String,
+    /// Triangle budget per mesh file (12..=1000000).
+    #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
+    max_triangles: usize,
+    /// Largest distance in millimetres that simplification may move a mesh's surface
+    /// (0.001..=1000); meshes keep more triangles than --max-triangles where this needs it.
+    /// Default: up to 2 % of each mesh's extent (8 % where the budget needs it).
+    #[arg(long, value_parser = args::max_error_mm, allow_hyphen_values = true)]
+    max_error: Option<f32>,
+    /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
+    /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
+    #[arg(long = "material", value_parser = args::named_rgba)]
+    materials: Vec<(String, [f32; 4])>,
+    /// Largest texture side in pixels (1..=8192; halved until it fits).
+    #[arg(long, default_value_t = meshes::visual::DEFAULT_TEXTURE_SIZE, value_parser = args::texture_size, allow_hyphen_values = true)]
+    texture_size: u32,
+}
+
+impl ConvertVisualsArgs {
+    /// Converts exactly one source (`--urdf`, `--mesh` or `--texture`) into `--out-dir`.
+    fn run(self) -> Result<(), CliError> {
+        let ConvertVisualsArgs {
             urdf,
             into,
             mesh,
@@ -240,30 +251,29 @@ fn run(cli: Cli) -> Result<(), CliError> {
             name,
             max_triangles,
             max_error,
-            texture_size,
             materials,
-        } => {
-            let opts = meshes::visual::Options {
-                materials,
-                max_triangles,
-                max_error: max_error.map(|e| e / 1000.0),
-                texture_size,
-            };
-            let source = match (urdf, mesh, texture) {
-                (Some(u), None, None) => meshes::visual::Source::Urdf { urdf: u, into },
-                (None, Some(m), None) => meshes::visual::Source::Mesh { mesh: m, scale },
-                (None, None, Some(t)) => meshes::visual::Source::Texture(t),
-                _ => {
-                    return Err(
-                        "convert-visuals needs exactly one of --urdf, --mesh or --texture".into(),
-                    )
-                }
-            };
-            for line in meshes::visual::run(source, &out_dir, &name, opts)? {
-                out!("{line}");
+            texture_size,
+        } = self;
+        let opts = meshes::visual::Options {
+            materials,
+            max_triangles,
+            max_error: max_error.map(|e| e / 1000.0),
+            texture_size,
+        };
+        let source = match (urdf, mesh, texture) {
+            (Some(u), None, None) => meshes::visual::Source::Urdf { urdf: u, into },
+            (None, Some(m), None) => meshes::visual::Source::Mesh { mesh: m, scale },
+            (None, None, Some(t)) => meshes::visual::Source::Texture(t),
+            _ => {
+                return Err(
+                    "convert-visuals needs exactly one of --urdf, --mesh or --texture".into(),
+                )
             }
-            Ok(())
+        };
+        for line in meshes::visual::run(source, &out_dir, &name, opts)? {
+            out!("{line}");
         }
+        Ok(())
     }
 }
 

@@ -1,12 +1,19 @@
-//! `mjskill import-maniskill` and `mjskill export`.
+//! `mjskill import-maniskill` and `mjskill export` (their flags always; running them needs
+//! the `datasets` feature).
+#[cfg(feature = "datasets")]
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "datasets")]
 use mjskill::datasets::export::{self, Format};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::import::{self, ImportArgs, ImportReport, ReplayBy};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::DatasetError;
+#[cfg(feature = "datasets")]
 use mjskill::SimConfig;
 
 /// Runs `import-maniskill`.
+#[cfg(feature = "datasets")]
 pub fn import_maniskill(
     h5: &Path,
     json: Option<&Path>,
@@ -28,16 +35,22 @@ pub fn import_maniskill(
 }
 
 /// `export --format lerobot`'s file size limits (None: LeRobot's default).
+#[derive(Debug, clap::Args)]
 pub struct LimitArgs {
-    /// `--chunks-size`.
+    /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
+    #[arg(long)]
     pub chunks_size: Option<usize>,
-    /// `--data-files-size-in-mb`.
+    /// --format lerobot: size limit of data and meta/episodes parquet files in MB
+    /// (default 100); an episode that would reach it starts the next file.
+    #[arg(long)]
     pub data_files_size_in_mb: Option<f64>,
-    /// `--video-files-size-in-mb`.
+    /// --format lerobot: size limit of video files in MB (default 200).
+    #[arg(long)]
     pub video_files_size_in_mb: Option<f64>,
 }
 
 /// Runs `export`.
+#[cfg(feature = "datasets")]
 pub fn export(
     file: &Path,
     format: &str,

@@ -2,7 +2,7 @@
 //! modules are the binary's own: argument parsing, output files, and the commands that are
 //! not library API (bench, plots). The mesh-authoring tools are the `mjskill-meshes` binary.
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Parser, Subcommand};
 
@@ -32,7 +32,6 @@ pub(crate) type CliError = Box<dyn std::error::Error + Send + Sync>;
 mod args;
 mod bench;
 mod compare_images;
-#[cfg(feature = "datasets")]
 mod datasets;
 mod fidelity;
 mod info_dir;
@@ -298,16 +297,9 @@ pub enum Command {
         /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
         #[arg(long)]
         control_mode: Option<String>,
-        /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
-        #[arg(long)]
-        chunks_size: Option<usize>,
-        /// --format lerobot: size limit of data and meta/episodes parquet files in MB
-        /// (default 100); an episode that would reach it starts the next file.
-        #[arg(long)]
-        data_files_size_in_mb: Option<f64>,
-        /// --format lerobot: size limit of video files in MB (default 200).
-        #[arg(long)]
-        video_files_size_in_mb: Option<f64>,
+        // --format lerobot: how files are split.
+        #[command(flatten)]
+        limits: datasets::LimitArgs,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -315,25 +307,7 @@ pub enum Command {
     /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
     /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
     /// (mm), mean absolute colour difference. See docs/observations.md.
-    CompareImages {
-        /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
-        /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
-        /// `state_json`, `control_mode`).
-        reference: PathBuf,
-        /// Only this `<env>__<robot>` directory (repeatable).
-        #[arg(long = "pair")]
-        pairs: Vec<String>,
-        /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
-        /// above, segmentation below).
-        #[arg(long)]
-        panels: Option<PathBuf>,
-        /// At most this many states per pair (1..=1000000).
-        #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
-        limit: Option<usize>,
-        /// Include every state's per-camera scores (and per-id IoU).
-        #[arg(long)]
-        per_state: bool,
-    },
+    CompareImages(compare_images::CompareArgs),
     /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
     /// prints a JSON summary.
     Render {
@@ -374,8 +348,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::ExportMjcf { robot, env, output } => {
             export_mjcf(robot.as_deref(), env.as_deref(), output)
         }
-        cmd @ Command::Bench { .. } => bench_command(cmd),
-        cmd @ (Command::ImportManiskill { .. } | Command::Export { .. }) => datasets_command(cmd),
+        Command::Bench {
+            target,
+            steps,
+            envs,
+            threads,
+            obs_mode,
+            render,
+        } => bench_command(target, steps, envs, threads, &obs_mode, render),
         Command::Eval {
             target,
             policy,
@@ -399,31 +379,15 @@ fn run(cli: Cli) -> Result<(), CliError> {
             video,
             cameras,
             no_frame,
-        } => {
-            use std::io::IsTerminal;
-            let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
-                reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
-                ..target.config()
-            };
-            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
-            let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
-            let args = rollout::RolloutArgs {
-                env,
-                config,
-                policy,
-                episodes,
-                seed,
-                out,
-                progress: std::io::stderr().is_terminal(),
-                video,
-                cameras,
-                frame: !no_frame,
-            };
-            let summary = rollout::rollout(&args)?;
-            out!("{}", serde_json::to_string(&summary)?);
-            Ok(())
-        }
+        } => rollout_command(
+            target,
+            (obs_mode, reward_mode),
+            &policy,
+            episodes,
+            seed,
+            out,
+            (video, cameras, !no_frame),
+        ),
         Command::Info { file, salvage } if file.is_dir() => {
             let s = info_dir::info_dir(&file, salvage)?;
             out!("{}", serde_json::to_string(&s)?);
@@ -438,19 +402,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             file,
             tolerance,
             salvage,
-        } => {
-            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
-            out!("{}", serde_json::to_string(&r)?);
-            if r.ok {
-                Ok(())
-            } else {
-                Err(format!(
-                    "{}: replay deviates beyond the tolerance {tolerance}",
-                    file.display()
-                )
-                .into())
-            }
-        }
+        } => replay_command(&file, tolerance, salvage),
+        cmd @ (Command::ImportManiskill { .. } | Command::Export { .. }) => datasets_command(cmd),
         Command::Render {
             target,
             seed,
@@ -461,21 +414,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
-        Command::CompareImages {
-            reference,
-            pairs,
-            panels,
-            limit,
-            per_state,
-        } => {
-            let r = compare_images::run(&compare_images::CompareArgs {
-                reference,
-                pairs,
-                panels,
-                limit,
-                per_state,
-            })?;
-            out!("{}", serde_json::to_string(&r)?);
+        Command::CompareImages(args) => {
+            out!("{}", serde_json::to_string(&compare_images::run(&args)?)?);
             Ok(())
         }
         Command::Fidelity {
@@ -507,19 +447,15 @@ fn run(cli: Cli) -> Result<(), CliError> {
     }
 }
 
-/// `mjskill bench`.
-fn bench_command(cmd: Command) -> Result<(), CliError> {
-    let Command::Bench {
-        target,
-        steps,
-        envs,
-        threads,
-        obs_mode,
-        render,
-    } = cmd
-    else {
-        unreachable!("called for bench")
-    };
+/// `mjskill bench`: times the env (a VecEnv with `--envs`/`--threads`) and prints the report.
+fn bench_command(
+    target: EnvArgs,
+    steps: usize,
+    envs: Option<usize>,
+    threads: Option<usize>,
+    obs_mode: &str,
+    render: Option<usize>,
+) -> Result<(), CliError> {
     let cores = std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1);
@@ -528,12 +464,64 @@ fn bench_command(cmd: Command) -> Result<(), CliError> {
         (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
     };
     let config = mjskill::EnvConfig {
-        obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
+        obs_mode: mjskill::ObsMode::parse(obs_mode)?,
         ..target.config()
     };
     let report = bench::run(target.env_id(), config, steps, vec, render)?;
     out!("{}", serde_json::to_string(&report)?);
     Ok(())
+}
+
+/// `mjskill rollout`: records `episodes` episodes of `policy` from `seed` on into `out`, with
+/// `--obs-mode` and `--reward-mode`, and `--video`, `--camera`s and whether to frame the video.
+fn rollout_command(
+    target: EnvArgs,
+    (obs_mode, reward_mode): (Option<String>, String),
+    policy: &str,
+    episodes: usize,
+    seed: u64,
+    out: PathBuf,
+    (video, cameras, frame): (bool, Vec<String>, bool),
+) -> Result<(), CliError> {
+    use std::io::IsTerminal;
+    let config = mjskill::EnvConfig {
+        obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
+        reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
+        ..target.config()
+    };
+    let policy = mjskill::solvers::PolicySpec::parse(policy)?;
+    let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
+    let args = rollout::RolloutArgs {
+        env,
+        config,
+        policy,
+        episodes,
+        seed,
+        out,
+        progress: std::io::stderr().is_terminal(),
+        video,
+        cameras,
+        frame,
+    };
+    let summary = rollout::rollout(&args)?;
+    out!("{}", serde_json::to_string(&summary)?);
+    Ok(())
+}
+
+/// `mjskill replay`: re-simulates a recording and prints the report; an error when it
+/// deviates beyond `tolerance`.
+fn replay_command(file: &Path, tolerance: f64, salvage: bool) -> Result<(), CliError> {
+    let r = mjskill::record::replay::replay(file, tolerance, salvage)?;
+    out!("{}", serde_json::to_string(&r)?);
+    if r.ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: replay deviates beyond the tolerance {tolerance}",
+            file.display()
+        )
+        .into())
+    }
 }
 
 /// `mjskill import-maniskill` and `mjskill export`.
@@ -557,9 +545,7 @@ fn datasets_command(cmd: Command) -> Result<(), CliError> {
             json,
             video,
             control_mode,
-            chunks_size,
-            data_files_size_in_mb,
-            video_files_size_in_mb,
+            limits,
         } => {
             let r = datasets::export(
                 &file,
@@ -568,11 +554,7 @@ fn datasets_command(cmd: Command) -> Result<(), CliError> {
                 json.as_deref(),
                 video,
                 control_mode.as_deref(),
-                datasets::LimitArgs {
-                    chunks_size,
-                    data_files_size_in_mb,
-                    video_files_size_in_mb,
-                },
+                limits,
             )?;
             out!("{}", serde_json::to_string(&r)?);
         }
