@@ -37,6 +37,7 @@
 #![warn(missing_docs)]
 
 pub(crate) mod controllers;
+#[cfg(feature = "datasets")]
 pub mod datasets;
 pub(crate) mod env;
 pub mod files;

@@ -1,5 +1,6 @@
 //! The recording command line: rollout, info, replay and durability under kill (reference
 //! trajectories: tests/reference.rs).
+#![cfg(feature = "cli")]
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -193,5 +194,41 @@ fn bench_replays_the_envs_trajectory_bitwise_with_cloned_drives() {
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(json(&o.stdout)["replay_identical"], true, "{robot}");
+    }
+}
+
+/// A build without a feature (the quick start's: `--no-default-features --features cli`) still
+/// parses every command and flag, and what needs a left-out feature stops at once with an
+/// error naming the feature, writing nothing.
+#[test]
+fn left_out_features_are_named_errors() {
+    let out = tmp("feature.mcap");
+    let mut cases: Vec<(Vec<String>, &str)> = Vec::new();
+    if !cfg!(feature = "datasets") {
+        for args in [
+            vec!["export", "x.mcap", "--format", "lerobot", "-o", "ds"],
+            vec!["import-maniskill", "trajectory.h5", "--out", "demos.mcap"],
+        ] {
+            cases.push((args.into_iter().map(String::from).collect(), "datasets"));
+        }
+    }
+    if !cfg!(feature = "onnx") {
+        let args = ["eval", "--policy", "policy.onnx", "--episodes", "1"];
+        cases.push((args.into_iter().map(String::from).collect(), "onnx"));
+    }
+    if !cfg!(feature = "video") {
+        let mut args: Vec<String> = ["rollout", "--episodes", "1", "--video", "--out"]
+            .into_iter()
+            .map(String::from)
+            .collect();
+        args.push(out.display().to_string());
+        cases.push((args, "video"));
+    }
+    for (args, feature) in &cases {
+        let o = mjskill().args(args).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(&format!("`{feature}` feature")), "{args:?}: {e}");
+        assert!(!out.exists(), "{args:?} left {}", out.display());
     }
 }

@@ -331,6 +331,7 @@ pub(crate) fn compressed_video() -> Value {
 /// A `foxglove.CompressedImage` (or, with the same fields, `foxglove.CompressedVideo`)
 /// message with base64 `data`.
 #[derive(serde::Serialize, serde::Deserialize)]
+#[cfg_attr(not(feature = "video"), allow(dead_code))]
 pub(crate) struct CompressedImageMsg<'a> {
     pub(crate) timestamp: Value,
     pub(crate) frame_id: &'a str,

@@ -12,6 +12,7 @@ pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
+#[cfg(feature = "onnx")]
 pub mod onnx;
 pub(crate) mod onnx_guard;
 pub(crate) mod pick_cube;
@@ -23,6 +24,7 @@ pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
+#[cfg(feature = "onnx")]
 pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -78,8 +80,18 @@ pub enum SolverError {
     #[error(transparent)]
     Mujoco(#[from] MjError),
     /// A policy file could not be loaded, fitted to the env or run.
+    #[cfg(feature = "onnx")]
     #[error(transparent)]
     PolicyFile(#[from] PolicyFileError),
+    /// A policy file given to an mjskill built without its `onnx` feature.
+    #[error(
+        "{path}: policy files need mjskill's `onnx` feature, which this build leaves out \
+         (build with the default features, or add `--features onnx`)"
+    )]
+    PolicyFilesDisabled {
+        /// The policy file's path.
+        path: String,
+    },
 }
 
 /// The policy names `rollout` and `eval` accept.

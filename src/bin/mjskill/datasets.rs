@@ -1,12 +1,19 @@
-//! `mjskill import-maniskill` and `mjskill export`.
+//! `mjskill import-maniskill` and `mjskill export` (their flags always; running them needs
+//! the `datasets` feature).
+#[cfg(feature = "datasets")]
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "datasets")]
 use mjskill::datasets::export::{self, Format};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::import::{self, ImportArgs, ImportReport, ReplayBy};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::DatasetError;
+#[cfg(feature = "datasets")]
 use mjskill::SimConfig;
 
 /// Runs `import-maniskill`.
+#[cfg(feature = "datasets")]
 pub fn import_maniskill(
     h5: &Path,
     json: Option<&Path>,
@@ -44,6 +51,7 @@ pub struct LimitArgs {
 }
 
 /// Runs `export`.
+#[cfg(feature = "datasets")]
 pub fn export(
     file: &Path,
     format: &str,

@@ -120,6 +120,14 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, CliE
 /// under `out`, and a run killed later keeps its finished episodes there.
 pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     check_seed_range(a.seed, a.episodes as u64)?;
+    if (a.video || !a.cameras.is_empty()) && !cfg!(feature = "video") {
+        return Err(
+            "--video and --camera record H.264 video, which needs mjskill's `video` \
+                    feature; this build leaves it out (build with the default features, or \
+                    add `--features video`)"
+                .into(),
+        );
+    }
     let mut env = a.policy.make_env(&a.env, a.config.clone())?;
     let mut policy = a.policy.make_policy(&env, a.seed)?;
     let frame_png = check_frame_path(&a.out, a.frame)?;
