@@ -1,4 +1,4 @@
-//! `cargo bench`: criterion timings of the hot paths — `Env::step` for every registered
+//! `cargo bench -p mjskill-benches`: criterion timings of the hot paths — `Env::step` for every registered
 //! (env, robot) pair, `reset`, a step with a 128×128 camera observation, the 512×512 human
 //! render, and the threaded `VecEnv`. `mjskill bench` reports the same figures as JSON and
 //! compares them with raw MuJoCo; this is the statistically careful version.

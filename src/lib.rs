@@ -37,8 +37,10 @@
 #![warn(missing_docs)]
 
 pub(crate) mod controllers;
+#[cfg(feature = "datasets")]
 pub mod datasets;
 pub(crate) mod env;
+pub mod files;
 pub mod maniskill;
 pub(crate) mod mjcf;
 pub(crate) mod models;
@@ -53,6 +55,7 @@ pub(crate) mod tasks;
 #[cfg(test)]
 mod tests;
 
+pub use controllers::desc::RobotError as UrdfError;
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::vec::MAX_NUM_ENVS;
@@ -62,7 +65,6 @@ pub use env::{
     RewardMode, RolloutBuffers, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv,
     VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
-pub use mjcf::urdf::RobotError as UrdfError;
 pub use mjcf::{Mjcf, SceneError};
 pub use models::ModelFileError;
 pub use mujoco::render::{RenderError, RenderOptions, Segmentation};

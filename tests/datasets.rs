@@ -5,6 +5,7 @@
 //!
 //! The Python checks use the venv `.ci/setup` creates (`.ci/venv`); without it they print a
 //! note and pass, unless `MJSKILL_REQUIRE_PYTHON` is set (`.ci/run` sets it).
+#![cfg(all(feature = "datasets", feature = "cli"))]
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

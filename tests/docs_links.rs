@@ -404,8 +404,8 @@ fn readme_keeps_the_quick_start_and_stays_short() {
     let readme = fs::read_to_string(root().join("README.md")).expect("README.md");
     // CI and users run these two lines as they are; .ci/run runs the second.
     for command in [
-        "bash .ci/setup && cargo run --release -- rollout",
-        "bash .ci/setup && cargo test --release --workspace && bash .ci/python-tests",
+        "bash .ci/setup && cargo run --release --no-default-features --features cli -- rollout",
+        "bash .ci/setup && cargo test --release --no-default-features --features cli && bash .ci/python-tests",
     ] {
         assert!(
             readme.lines().any(|l| l == command),
@@ -415,8 +415,10 @@ fn readme_keeps_the_quick_start_and_stays_short() {
     let ci = fs::read_to_string(root().join(".ci/run")).expect(".ci/run");
     for part in [
         "bash .ci/setup",
+        "cargo test --release --no-default-features --features cli",
         "cargo test --release --workspace",
         "bash .ci/python-tests",
+        "cargo tree -p mjskill --no-default-features",
     ] {
         assert!(ci.contains(part), ".ci/run no longer runs `{part}`");
     }

@@ -1,5 +1,6 @@
 //! The command line's scene export (`export-mjcf`, checked by Debian's independent
 //! `mujoco-compile` and by mjskill's MuJoCo) and mesh fitting (`fit-primitives`), per robot.
+#![cfg(feature = "cli")]
 mod common;
 
 use mjskill::mujoco::ObjType;
@@ -46,6 +47,7 @@ fn widowxai_export_mjcf_writes_a_scene_mujoco_compiles() {
     assert!(m.id(ObjType::Body, "cube").is_some());
 }
 
+#[cfg(feature = "mesh-tools")]
 #[test]
 fn fit_primitives_scales_millimetre_meshes() {
     // A 10 mm cube as an ASCII STL (12 triangles), as the Robotiq meshes are in millimetres.
@@ -83,7 +85,7 @@ fn fit_primitives_scales_millimetre_meshes() {
     let path = std::env::temp_dir().join(format!("mjskill-mm-cube-{}.stl", std::process::id()));
     std::fs::write(&path, stl).unwrap();
     let run = |scale: &str| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
+        std::process::Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"))
             .args([
                 "fit-primitives",
                 "--shape",

@@ -1,5 +1,6 @@
 //! `mjskill fidelity`: per-step deviations from a ManiSkill reference file or from a recording
 //! replayed with other physics settings; `--resync`, `--control-mode`, `--plot` and bad input.
+#![cfg(feature = "cli")]
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -1,4 +1,5 @@
 //! `mjskill info DIR`: a directory of recording shards read as one dataset.
+#![cfg(feature = "cli")]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

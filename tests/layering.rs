@@ -1,4 +1,4 @@
-//! The module graph runs one way: FFI → `mujoco` → `mjcf` → `controllers` → `robots` →
+//! The module graph runs one way: FFI → `mujoco` → `controllers` → `mjcf` → `robots` →
 //! `tasks` → `env` → `record` → (`maniskill`, `solvers`) → `datasets`, with the leaves
 //! `rng` (ManiSkill's RNG emulation), `models` (the embedded robot files) and `obs` (the
 //! observation writer) below everything, and the crate's internal cross-layer tests
@@ -14,10 +14,11 @@ use std::path::{Path, PathBuf};
 
 /// The layers, lowest first. A module may only use modules of a strictly lower layer.
 const LAYERS: &[&[&str]] = &[
-    &["rng", "models", "obs"],
+    &["rng", "models", "obs", "files"],
     &["mujoco"],
-    &["mjcf"],
+    // The controllers own the robot description (URDF, drives) that the MJCF writer consumes.
     &["controllers"],
+    &["mjcf"],
     &["robots"],
     &["tasks"],
     &["env"],

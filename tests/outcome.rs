@@ -13,6 +13,7 @@
 //! measured when the files were recorded. When the physics changes, re-measure and update
 //! the table: `cargo test --release --test outcome -- --nocapture` prints the measured
 //! figures in its form (and `mjskill outcomes tests/data/outcomes --table` as Markdown).
+#![cfg(feature = "cli")]
 use std::path::{Path, PathBuf};
 
 use mjskill::maniskill::outcome::{files, measure, OutcomeFile, PairAgreement};

@@ -7,6 +7,7 @@
 //! The files are made at test time by `examples/make_test_policy.py` (numpy and `onnx`) in the
 //! venv `.ci/setup` creates (`.ci/venv`). Without it the tests print a note and pass, unless
 //! `MJSKILL_REQUIRE_PYTHON` is set (`.ci/run` sets it).
+#![cfg(all(feature = "onnx", feature = "cli"))]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -337,6 +337,22 @@ fn finished_episodes_survive_a_kill() {
 }
 
 #[test]
+fn a_recorder_dropped_by_a_panic_never_claims_completeness() {
+    let path = tmp("panicked.mcap");
+    let r = std::panic::catch_unwind(|| {
+        let mut env = env();
+        let mut rec = Recorder::create(&path, &env).unwrap();
+        record_episodes(&mut rec, &mut env, 0, 2, 4, true);
+        record_episodes(&mut rec, &mut env, 2, 1, 3, false);
+        panic!("a bug in the middle of episode 3");
+    });
+    assert!(r.is_err());
+    let r = record::read(&path).unwrap();
+    assert!(!r.complete);
+    assert_eq!(r.finished().count(), 2);
+}
+
+#[test]
 fn truncated_files_never_panic() {
     let path = tmp("full.mcap");
     let mut env = env();

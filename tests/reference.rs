@@ -4,6 +4,7 @@
 //!
 //! Regenerate them all (after an intended change of behaviour) with
 //! `cargo test --release --test reference -- --ignored`.
+#![cfg(feature = "cli")]
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

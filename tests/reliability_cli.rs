@@ -2,6 +2,7 @@
 //! outputs that never clobber or cut the recording, clashing rollouts reported, seeds and
 //! counts bounded with messages naming the flag and the range, and `fit-primitives` bounded
 //! in time on bad meshes.
+#![cfg(feature = "cli")]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -299,30 +300,6 @@ fn huge_counts_are_range_errors_at_once() {
         (&["bench", "--threads", "0"], "--threads"),
         (&["bench", "--threads", "-2"], "--threads"),
         (&["bench", "--render", "-1"], "--render"),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--parts", "1000"],
-            "--parts",
-        ),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--parts", "0"],
-            "--parts",
-        ),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--parts", "-3"],
-            "--parts",
-        ),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--segments", "0"],
-            "--segments",
-        ),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--scale", "-1"],
-            "--scale",
-        ),
-        (
-            &["fit-primitives", "--mesh", "x.stl", "--scale", "1e308"],
-            "--scale",
-        ),
         (&["replay", "x.mcap", "--tolerance", "nan"], "--tolerance"),
         (&["replay", "x.mcap", "--tolerance", "-1"], "--tolerance"),
         (&["replay", "x.mcap", "--tolerance", "inf"], "--tolerance"),
@@ -351,6 +328,57 @@ fn huge_counts_are_range_errors_at_once() {
     assert!(stderr(&o).contains("1..=4294967296"), "{}", stderr(&o));
     let o = mjskill().args(["bench", "--envs", "0"]).output().unwrap();
     assert!(stderr(&o).contains("1..=256"), "{}", stderr(&o));
+}
+
+#[cfg(feature = "mesh-tools")]
+fn meshes() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"))
+}
+
+#[cfg(feature = "mesh-tools")]
+#[test]
+fn mesh_tool_counts_are_range_errors_at_once() {
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--parts", "1000"],
+            "--parts",
+        ),
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--parts", "0"],
+            "--parts",
+        ),
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--parts", "-3"],
+            "--parts",
+        ),
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--segments", "0"],
+            "--segments",
+        ),
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--scale", "-1"],
+            "--scale",
+        ),
+        (
+            &["fit-primitives", "--mesh", "x.stl", "--scale", "1e308"],
+            "--scale",
+        ),
+    ];
+    for (args, flag) in cases {
+        let o = run_within(
+            {
+                let mut c = meshes();
+                c.args(*args);
+                c
+            },
+            10,
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(flag), "{args:?}: {e}");
+        assert!(!e.contains("unexpected argument"), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+    }
 }
 
 #[test]
@@ -425,6 +453,7 @@ fn export_mjcf_defaults_to_the_envs_robot() {
 }
 
 /// An ASCII STL of the given triangles.
+#[cfg(feature = "mesh-tools")]
 fn stl(tris: &[[[f64; 3]; 3]]) -> String {
     let mut s = String::from("solid t\n");
     for t in tris {
@@ -437,12 +466,13 @@ fn stl(tris: &[[[f64; 3]; 3]]) -> String {
     s + "endsolid t\n"
 }
 
+#[cfg(feature = "mesh-tools")]
 fn fit(d: &Path, name: &str, mesh: &[u8], args: &[&str], secs: u64) -> Output {
     let p = d.join(name);
     std::fs::write(&p, mesh).unwrap();
     run_within(
         {
-            let mut c = mjskill();
+            let mut c = meshes();
             c.args(["fit-primitives", "--mesh"]).arg(&p).args(args);
             c
         },
@@ -450,6 +480,7 @@ fn fit(d: &Path, name: &str, mesh: &[u8], args: &[&str], secs: u64) -> Output {
     )
 }
 
+#[cfg(feature = "mesh-tools")]
 #[test]
 fn fit_primitives_rejects_bad_meshes_and_stays_bounded() {
     let d = dir("fit");

@@ -1,5 +1,6 @@
 //! Headless rendering: sensor images in the rgb/depth/rgbd obs modes and the human render,
 //! checked against projections computed independently from the camera pose and intrinsics.
+#![cfg(feature = "cli")]
 
 use mjskill::mujoco::ObjType;
 use mjskill::{make, Env, EnvConfig, ObsMode};
@@ -278,6 +279,7 @@ fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
     (info.width as usize, info.height as usize, buf)
 }
 
+#[cfg(feature = "video")]
 /// Decodes an H.264 stream (Annex B access units, in order) with OpenH264's decoder.
 fn decode_h264(units: &[Vec<u8>]) -> Vec<(usize, usize, Vec<u8>)> {
     use openh264::formats::YUVSource;
@@ -294,6 +296,7 @@ fn decode_h264(units: &[Vec<u8>]) -> Vec<(usize, usize, Vec<u8>)> {
     out
 }
 
+#[cfg(feature = "video")]
 /// Peak signal-to-noise ratio of two RGB images (dB).
 fn psnr(a: &[u8], b: &[u8]) -> f64 {
     let mse = a
@@ -305,6 +308,7 @@ fn psnr(a: &[u8], b: &[u8]) -> f64 {
     10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()
 }
 
+#[cfg(feature = "video")]
 #[test]
 fn recorded_video_frames_decode_to_the_rendered_images() {
     use base64::Engine;
@@ -439,6 +443,7 @@ fn render_command_writes_the_human_and_sensor_frames() {
     );
 }
 
+#[cfg(feature = "video")]
 #[test]
 fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
     let out = tmp("roll.mcap");

@@ -1,5 +1,6 @@
 //! The recording command line: rollout, info, replay and durability under kill (reference
 //! trajectories: tests/reference.rs).
+#![cfg(feature = "cli")]
 
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -102,7 +103,13 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
 /// `signal` and checks what survives.
 fn kill_mid_run(signal: &str, name: &str) {
     let out = tmp(name);
-    let mut child = mjskill()
+    // A process started in the background by a script inherits SIGINT ignored, and a command
+    // line program rightly keeps it so (the shell asked for it); the test runs the rollout
+    // with the default disposition, as from a terminal (`env` then execs it, same pid).
+    let mut cmd = Command::new("env");
+    cmd.arg("--default-signal=INT")
+        .arg(env!("CARGO_BIN_EXE_mjskill"));
+    let mut child = cmd
         .args(["rollout", "--episodes", "500", "--out"])
         .arg(&out)
         .stdout(Stdio::null())
@@ -187,5 +194,41 @@ fn bench_replays_the_envs_trajectory_bitwise_with_cloned_drives() {
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(json(&o.stdout)["replay_identical"], true, "{robot}");
+    }
+}
+
+/// A build without a feature (the quick start's: `--no-default-features --features cli`) still
+/// parses every command and flag, and what needs a left-out feature stops at once with an
+/// error naming the feature, writing nothing.
+#[test]
+fn left_out_features_are_named_errors() {
+    let out = tmp("feature.mcap");
+    let mut cases: Vec<(Vec<String>, &str)> = Vec::new();
+    if !cfg!(feature = "datasets") {
+        for args in [
+            vec!["export", "x.mcap", "--format", "lerobot", "-o", "ds"],
+            vec!["import-maniskill", "trajectory.h5", "--out", "demos.mcap"],
+        ] {
+            cases.push((args.into_iter().map(String::from).collect(), "datasets"));
+        }
+    }
+    if !cfg!(feature = "onnx") {
+        let args = ["eval", "--policy", "policy.onnx", "--episodes", "1"];
+        cases.push((args.into_iter().map(String::from).collect(), "onnx"));
+    }
+    if !cfg!(feature = "video") {
+        let mut args: Vec<String> = ["rollout", "--episodes", "1", "--video", "--out"]
+            .into_iter()
+            .map(String::from)
+            .collect();
+        args.push(out.display().to_string());
+        cases.push((args, "video"));
+    }
+    for (args, feature) in &cases {
+        let o = mjskill().args(args).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(&format!("`{feature}` feature")), "{args:?}: {e}");
+        assert!(!out.exists(), "{args:?} left {}", out.display());
     }
 }

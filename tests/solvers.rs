@@ -255,3 +255,14 @@ fn so100_solver_closes_8_steps_before_the_lift_and_eases_its_grip_at_the_goal() 
         );
     }
 }
+
+/// Without the `onnx` feature a policy file is an error naming the feature.
+#[cfg(not(feature = "onnx"))]
+#[test]
+fn policy_files_without_the_onnx_feature_name_it() {
+    let e = eval::PolicySpec::parse("policy.onnx").unwrap_err();
+    assert!(e.to_string().contains("`onnx` feature"), "{e}");
+    assert!(e.to_string().contains("policy.onnx"), "{e}");
+    // Built-in names still parse.
+    assert!(eval::PolicySpec::parse("solver").is_ok());
+}

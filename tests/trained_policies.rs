@@ -3,6 +3,7 @@
 //! it), and each still solves its task in mjskill at about the rate measured when it was
 //! shipped, through `mjskill eval --policy` as a user runs it. A change to the physics, a
 //! controller or an observation that breaks a policy trained here fails here.
+#![cfg(all(feature = "onnx", feature = "cli"))]
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

@@ -209,6 +209,18 @@ fn bad_actions_are_errors_and_the_vec_env_stays_usable() {
 }
 
 #[test]
+fn a_non_finite_action_names_its_env_and_component() {
+    let mut v = VecEnv::new("PickCube-v1", EnvConfig::default(), 4, 1).unwrap();
+    let mut a = vec![0.0f32; 32];
+    a[3 * 8 + 5] = f32::NAN;
+    let e = v.step(&a).unwrap_err().to_string();
+    assert!(
+        e.contains("action[29] = NaN (env 3, action component 5) is not finite"),
+        "{e}"
+    );
+}
+
+#[test]
 fn mujoco_warnings_of_each_env_are_reported_and_cleared_by_reset() {
     // Absolute joint targets 100× beyond the action space at one 0.05 s substep diverge.
     let cfg = EnvConfig {

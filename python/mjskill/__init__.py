@@ -17,7 +17,8 @@ import gymnasium as gym
 from . import _native
 from ._native import GaussianMlp
 from .batched import ManiSkillVectorEnv, MjskillBatchedEnv
-from .envs import MjskillEnv, MjskillVectorEnv, make_env, make_vector_env
+from .entry_points import make_env, make_vector_env
+from .envs import MjskillEnv, MjskillVectorEnv
 
 __all__ = [
     "GaussianMlp",
@@ -44,8 +45,8 @@ def _register() -> None:
             continue
         gym.register(
             id=gid,
-            entry_point="mjskill.envs:make_env",
-            vector_entry_point="mjskill.envs:make_vector_env",
+            entry_point="mjskill.entry_points:make_env",
+            vector_entry_point="mjskill.entry_points:make_vector_env",
             max_episode_steps=max_steps,
             # Seeded resets and steps are deterministic, but an unseeded reset draws the
             # placement from the env's own "global torch generator", which a seeded reset

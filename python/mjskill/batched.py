@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import sys
 import weakref
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -32,45 +33,44 @@ import numpy as np
 from gymnasium.vector.utils import batch_space
 
 from . import _native
-from .envs import _as_actions, _check_count, _check_depth_dtype, _check_seed, _describe
+from ._common import (
+    DEFAULT_QPOS_NOISE,
+    DEFAULT_SIM_FREQ,
+    RENDER_FPS,
+    RENDER_MODES,
+    SIM_BACKENDS,
+    UNLIMITED,
+    _as_actions,
+    _check_count,
+    _check_depth_dtype,
+    _check_render_mode,
+    _check_seed,
+    _describe,
+    check_reconfiguration_freq,
+    check_sim_backend,
+    env_kwargs,
+)
+
+__all__ = [
+    "ARRAY_BACKENDS",
+    "RESET_OPTIONS",
+    "SIM_BACKENDS",
+    "UNLIMITED",
+    "ManiSkillVectorEnv",
+    "MjskillBatchedEnv",
+    "check_reconfiguration_freq",
+    "check_sim_backend",
+]
 
 ARRAY_BACKENDS = ["torch", "numpy"]
 """What the batched env returns: torch tensors on the CPU (ManiSkill's convention, the
 default) or numpy arrays."""
 
-SIM_BACKENDS = ["auto", "cpu", "gpu", "physx_cpu", "physx_cuda", "cuda"]
-"""ManiSkill's ``sim_backend`` values, accepted so that ManiSkill scripts run unchanged; mjskill
-simulates with MuJoCo on CPU threads whichever is given."""
-
 RESET_OPTIONS = ["env_idx", "reconfigure"]
 """ManiSkill's ``reset`` options the batched env takes."""
 
-UNLIMITED = 2**32 - 1
-"""Episode length without a time limit."""
-
 _MAX_WRAPPER_DEPTH = 32
 """How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
-
-
-def check_sim_backend(sim_backend: Any) -> None:
-    if sim_backend not in SIM_BACKENDS:
-        raise ValueError(
-            f"unknown sim_backend {sim_backend!r}; valid: {', '.join(SIM_BACKENDS)} (ManiSkill's "
-            "names; mjskill always simulates with MuJoCo on CPU threads)"
-        )
-
-
-def check_reconfiguration_freq(freq: Any) -> int:
-    """ManiSkill's ``reconfiguration_freq`` (None = 0). mjskill's scenes have fixed assets, so
-    there is nothing to reconfigure; the value is kept as ``env.reconfiguration_freq``."""
-    if freq is None:
-        return 0
-    if isinstance(freq, bool) or not isinstance(freq, (int, np.integer)) or freq < 0:
-        raise ValueError(
-            f"reconfiguration_freq must be None or an int >= 0, got {freq!r} (mjskill's scenes "
-            "have fixed assets: nothing is reconfigured)"
-        )
-    return int(freq)
 
 
 class MjskillBatchedEnv(gym.Env):
@@ -103,8 +103,8 @@ class MjskillBatchedEnv(gym.Env):
         reward_mode: str = "normalized_dense",
         render_mode: str | None = None,
         max_episode_steps: int | None = None,
-        robot_init_qpos_noise: float = 0.02,
-        sim_freq: int = 100,
+        robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
+        sim_freq: int = DEFAULT_SIM_FREQ,
         depth_dtype: str = "float32",
         array_backend: str = "torch",
         sim_backend: str = "auto",
@@ -117,13 +117,10 @@ class MjskillBatchedEnv(gym.Env):
             raise ValueError(
                 f"unknown array_backend {array_backend!r}; valid: {', '.join(ARRAY_BACKENDS)}"
             )
-        if render_mode is not None and render_mode != "rgb_array":
-            raise ValueError(
-                f"unknown render_mode {render_mode!r}; valid render modes: rgb_array (or None)"
-            )
-        _check_count("num_envs", num_envs)
+        _check_render_mode(render_mode)
+        num_envs = _check_count("num_envs", num_envs)
         if num_threads is not None:
-            _check_count("num_threads", num_threads)
+            num_threads = _check_count("num_threads", num_threads)
         self._torch = None
         if array_backend == "torch":
             try:
@@ -141,31 +138,22 @@ class MjskillBatchedEnv(gym.Env):
             self.device = None
         self.array_backend = array_backend
         self.sim_backend = sim_backend
-        self._kwargs = dict(
-            env_id=env_id,
-            robot_uids=robot_uids,
-            obs_mode=obs_mode,
-            control_mode=control_mode,
-            reward_mode=reward_mode,
-            robot_init_qpos_noise=robot_init_qpos_noise,
-            sim_freq=sim_freq,
-        )
+        self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         # The static description (layout, bounds, default episode length) from one env.
-        spec = _native.Env(max_episode_steps=max_episode_steps, **self._kwargs).spec()
+        spec = _native.Env(**self._kwargs).spec()
         threads = num_threads if num_threads is not None else (os.cpu_count() or 1)
         # The native envs never truncate (the limit is applied here) and never reset by
         # themselves: ManiSkill's batched env keeps stepping an ended episode.
         self._native = _native.VecEnv(
             num_envs=int(num_envs),
             num_threads=int(min(threads, num_envs)),
-            max_episode_steps=UNLIMITED,
             autoreset=False,
-            **self._kwargs,
+            **dict(self._kwargs, max_episode_steps=UNLIMITED),
         )
         self.num_envs = int(num_envs)
         self.num_threads = self._native.num_threads
         self.render_mode = render_mode
-        self.metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+        self.metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
         self.max_episode_steps = int(spec["max_episode_steps"])
         self.single_action_space = _describe(self, spec, depth_dtype)
         self.single_observation_space = self._layout.space
@@ -217,6 +205,12 @@ class MjskillBatchedEnv(gym.Env):
         """Resets every env, or with ``options={"env_idx": idx}`` (indices or an ``[N]`` bool
         mask, numpy or torch) only those; env i gets seed ``seed + i``. Returns the
         observations and info of all N envs."""
+        native = self._live()
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(
+                f"options must be a dict such as {{'env_idx': [0, 2]}} (or None), got "
+                f"{type(options).__name__}"
+            )
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
@@ -237,15 +231,15 @@ class MjskillBatchedEnv(gym.Env):
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
         self._disarm_time_limits()
         if options.get("env_idx") is None:
-            obs, info = self._native.reset(seed)
+            obs, info = native.reset(seed)
             self._elapsed[:] = 0
         else:
             mask = self._index_mask(options["env_idx"])
-            obs, info = self._native.reset_envs(mask, seed)
+            obs, info = native.reset_envs(mask, seed)
             self._elapsed[mask] = 0
         info = self._info(info)
         info["reconfigure"] = False
-        return self._out(self._layout.batch(obs, self._native)), info
+        return self._out(self._layout.batch(obs, native)), info
 
     def _disarm_time_limits(self) -> None:
         """Finds gymnasium ``TimeLimit`` wrappers of this env among the callers of ``reset``
@@ -266,14 +260,15 @@ class MjskillBatchedEnv(gym.Env):
                 w._elapsed_steps = -(2**62)
 
     def step(self, action):
+        native = self._live()
         if hasattr(action, "detach"):
             action = action.detach().cpu().numpy()
         a = _as_actions(action, 2)
-        obs, reward, terminated, _, info = self._native.step(a)
+        obs, reward, terminated, _, info = native.step(a)
         self._elapsed += 1
         truncated = self._elapsed >= self.max_episode_steps
         return (
-            self._out(self._layout.batch(obs, self._native)),
+            self._out(self._layout.batch(obs, native)),
             self._out(reward),
             self._out(terminated),
             self._out(truncated),
@@ -283,9 +278,23 @@ class MjskillBatchedEnv(gym.Env):
     def render(self):
         raise RuntimeError(
             "the batched env renders no human-camera frames; render with a single env "
-            f"(gym.make('mjskill/{self.env_id}', render_mode='rgb_array')), or use a visual "
-            "obs_mode for the sensor cameras' images of every env"
+            f"(gym.make('mjskill/{self._kwargs['env_id']}', render_mode='rgb_array')), or use a "
+            "visual obs_mode for the sensor cameras' images of every env"
         )
+
+    def close(self) -> None:
+        """Frees the N envs (each owns its MuJoCo model and data). Closing again does
+        nothing; ``reset`` and ``step`` after it raise ``RuntimeError``."""
+        self._native = None
+
+    def _live(self) -> Any:
+        """The native envs, or a ``RuntimeError`` once the env is closed."""
+        if self._native is None:
+            raise RuntimeError(
+                f"this batched mjskill/{self._kwargs['env_id']} env (num_envs={self.num_envs}) "
+                "is closed; make a new one with gym.make"
+            )
+        return self._native
 
     # -- ManiSkill-style attributes --------------------------------------------------------
     @property

@@ -5,213 +5,31 @@
 from __future__ import annotations
 
 import json
+import warnings
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _native
-
-MAX_SEED = 2**32 - 1
-"""ManiSkill's seeds are 32-bit."""
-
-RENDER_MODES = ["rgb_array"]
-OBS_MODES = [
-    "state",
-    "state_dict",
-    "none",
-    "rgb",
-    "depth",
-    "rgbd",
-    "segmentation",
-    "rgb+segmentation",
-    "depth+segmentation",
-    "rgb+depth+segmentation",
-    "pointcloud",
-]
-"""ManiSkill's obs modes; any ``+`` combination of rgb, depth and segmentation is accepted."""
-DEPTH_DTYPES = ["float32", "int16"]
-"""Depth images: float32 metres, or ManiSkill's int16 millimetres."""
-_UNLIMITED = 2**32 - 1
-"""Rust-side episode length of envs made by ``gym.make``: its ``TimeLimit`` truncates."""
-
-
-def _check_seed(seed: Any) -> int | None:
-    if seed is None:
-        return None
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"seed must be an int or None, not {type(seed).__name__} ({seed!r})")
-    seed = int(seed)
-    if not 0 <= seed <= MAX_SEED:
-        raise ValueError(f"seed {seed} is out of range: seeds are 32-bit, 0..={MAX_SEED}")
-    return seed
-
-
-def _check_render_mode(render_mode: Any) -> None:
-    if render_mode is not None and render_mode not in RENDER_MODES:
-        raise ValueError(
-            f"unknown render_mode {render_mode!r}; valid render modes: "
-            f"{', '.join(RENDER_MODES)} (or None)"
-        )
-
-
-_F32_MAX = float(np.finfo(np.float32).max)
-
-
-def _as_actions(action: Any, ndim: int) -> np.ndarray:
-    """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
-    already is one); a non-numeric action is a ``TypeError``, a wrong rank a ``ValueError``,
-    and a finite value beyond float32's range (which the cast would turn into infinity) a
-    ``ValueError`` naming the value given."""
-    a = action if isinstance(action, np.ndarray) else np.asarray(action)
-    if a.dtype.kind not in "biuf":
-        raise TypeError(
-            f"actions must be numeric (float32 preferred), got dtype {a.dtype} from "
-            f"{type(action).__name__}"
-        )
-    if a.ndim != ndim:
-        want = "(action_dim,)" if ndim == 1 else "(num_envs, action_dim)"
-        raise ValueError(f"actions have shape {a.shape}, expected {want}")
-    if a.dtype.kind == "f" and a.dtype.itemsize > 4:
-        with np.errstate(invalid="ignore"):
-            big = np.isfinite(a) & (np.abs(a) > _F32_MAX)
-        if big.any():
-            at = tuple(int(i) for i in np.argwhere(big)[0])
-            name = f"action[{at[0]}]" if ndim == 1 else f"actions[{at[0]}, {at[1]}]"
-            raise ValueError(
-                f"{name} = {float(a[at])!r} is outside the float32 range (|value| <= {_F32_MAX:.9g}); "
-                "actions are float32"
-            )
-    if a.dtype != np.float32 or not a.flags.c_contiguous:
-        a = np.ascontiguousarray(a, dtype=np.float32)
-    return a
-
-
-def _nest(flat: dict[str, Any]) -> dict[str, Any]:
-    """``{"agent/qpos": x}`` → ``{"agent": {"qpos": x}}``."""
-    out: dict[str, Any] = {}
-    for key, value in flat.items():
-        node = out
-        parts = key.split("/")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = value
-    return out
-
-
-def _to_space(tree: Any) -> spaces.Space:
-    if isinstance(tree, dict):
-        return spaces.Dict({k: _to_space(v) for k, v in tree.items()})
-    return tree
-
-
-def _check_depth_dtype(depth_dtype: Any) -> None:
-    if depth_dtype not in DEPTH_DTYPES:
-        raise ValueError(
-            f"unknown depth_dtype {depth_dtype!r}; valid: {', '.join(DEPTH_DTYPES)} (float32: "
-            "metres; int16: ManiSkill's millimetres, 0 where nothing was seen)"
-        )
-
-
-def _gripper_qvel_obs(spec: dict[str, Any]) -> tuple[int, ...]:
-    """Indices into the flat state observation of the gripper joints' ``agent/qvel`` entries
-    (empty when the observation has no ``agent/qvel``)."""
-    start = next((a for name, a, _ in spec["obs_layout"] if name == "agent/qvel"), None)
-    if start is None or spec["obs_mode"] not in ("state", "state_dict"):
-        return ()
-    return tuple(start + k for k in spec["gripper_joints"])
-
-
-def _check_count(name: str, v: Any) -> None:
-    """``num_envs`` or ``num_threads``: an int in 1..=MAX_NUM_ENVS."""
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-        raise TypeError(f"{name} must be an int, not {type(v).__name__} ({v!r})")
-    if not 1 <= v <= _native.MAX_NUM_ENVS:
-        raise ValueError(
-            f"{name} {v} is out of range: 1..={_native.MAX_NUM_ENVS} (each env owns its MuJoCo "
-            "model and data; more threads than envs are clamped)"
-        )
-
-
-def _describe(env: Any, spec: dict[str, Any], depth_dtype: str) -> spaces.Box:
-    """Sets what every mjskill env class tells about itself from the native ``spec`` (ids,
-    modes, segmentation ids, observation layout, the gripper velocities' indices) and returns
-    the action space of one env."""
-    env.env_id = spec["env_id"]
-    env.robot_uids = spec["robot_uids"]
-    env.control_mode = spec["control_mode"]
-    env.obs_mode = spec["obs_mode"]
-    env.reward_mode = spec["reward_mode"]
-    env.depth_dtype = depth_dtype
-    env.segmentation_id_map = dict(spec["segmentation_id_map"])
-    env._layout = _Layout(spec, depth_dtype)
-    #: Flat-state indices of the gripper joints' velocities (``agent/qvel``), which PhysX
-    #: reports as a solver residual while a gripper pinches (docs/outcome-physics.md).
-    env.gripper_qvel_obs = _gripper_qvel_obs(spec)
-    lo, hi = spec["action_low"], spec["action_high"]
-    return spaces.Box(lo, hi, shape=lo.shape, dtype=np.float32)
-
-
-class _Layout:
-    """How a flat observation (plus sensor images) becomes the observation of an obs mode."""
-
-    def __init__(self, spec: dict[str, Any], depth_dtype: str = "float32"):
-        self.obs_mode = spec["obs_mode"]
-        self.parts = [(name, a, b) for name, a, b in spec["obs_layout"]]
-        self.cameras = spec["cameras"]
-        self.points = spec["point_count"]
-        self.depth_mm = depth_dtype == "int16"
-        ids = [i for i, _ in spec["segmentation_id_map"]]
-        max_id = max(ids, default=0)
-        low, high = spec["obs_low"], spec["obs_high"]
-        self.dict_obs = self.obs_mode not in ("state", "none")
-        if not self.dict_obs:
-            self.space: spaces.Space = spaces.Box(low, high, shape=low.shape, dtype=np.float32)
-            return
-        flat = {
-            name: spaces.Box(low[a:b], high[a:b], shape=(b - a,), dtype=np.float32)
-            for name, a, b in self.parts
-        }
-        for cam, w, h, rgb, depth, seg in self.cameras:
-            if rgb:
-                flat[f"sensor_data/{cam}/rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
-            if depth and self.depth_mm:
-                flat[f"sensor_data/{cam}/depth"] = spaces.Box(0, 32767, (h, w, 1), np.int16)
-            elif depth:
-                flat[f"sensor_data/{cam}/depth"] = spaces.Box(
-                    0.0, np.inf, (h, w, 1), np.float32
-                )
-            if seg:
-                flat[f"sensor_data/{cam}/segmentation"] = spaces.Box(
-                    0, max_id, (h, w, 1), np.int16
-                )
-        if self.points is not None:
-            n = self.points
-            flat["pointcloud/xyzw"] = spaces.Box(-np.inf, np.inf, (n, 4), np.float32)
-            flat["pointcloud/rgb"] = spaces.Box(0, 255, (n, 3), np.uint8)
-            flat["pointcloud/segmentation"] = spaces.Box(0, max_id, (n, 1), np.int16)
-        self.space = _to_space(_nest(flat))
-
-    def _visual(self, out: dict[str, Any], native: Any) -> dict[str, Any]:
-        if self.cameras:
-            out["sensor_data"] = native.images(self.depth_mm)
-        if self.points is not None:
-            out["pointcloud"] = native.point_cloud()
-        return out
-
-    def single(self, obs: np.ndarray, native: Any) -> Any:
-        if not self.dict_obs:
-            return obs
-        return self._visual(_nest({name: obs[a:b] for name, a, b in self.parts}), native)
-
-    def batch(self, obs: np.ndarray, native: Any) -> Any:
-        if not self.dict_obs:
-            return obs
-        return self._visual(_nest({name: obs[:, a:b] for name, a, b in self.parts}), native)
-
+from ._common import (
+    DEFAULT_QPOS_NOISE,
+    DEFAULT_SIM_FREQ,
+    DEPTH_DTYPES,
+    MAX_SEED,
+    OBS_MODES,
+    RENDER_FPS,
+    RENDER_MODES,
+    _as_actions,
+    _check_count,
+    _check_depth_dtype,
+    _check_render_mode,
+    _check_seed,
+    _describe,
+    env_kwargs,
+)
 
 class MjskillEnv(gym.Env):
     """One mjskill env as a ``gymnasium.Env``, made with ManiSkill's keyword names.
@@ -229,7 +47,7 @@ class MjskillEnv(gym.Env):
     the calls run one at a time (the GIL is released while a call waits for another).
     """
 
-    metadata = {"render_modes": RENDER_MODES, "render_fps": 20}
+    metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
 
     def __init__(
         self,
@@ -240,22 +58,13 @@ class MjskillEnv(gym.Env):
         reward_mode: str = "normalized_dense",
         render_mode: str | None = None,
         max_episode_steps: int | None = None,
-        robot_init_qpos_noise: float = 0.02,
-        sim_freq: int = 100,
+        robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
+        sim_freq: int = DEFAULT_SIM_FREQ,
         depth_dtype: str = "float32",
     ):
         _check_render_mode(render_mode)
         _check_depth_dtype(depth_dtype)
-        self._kwargs = dict(
-            env_id=env_id,
-            robot_uids=robot_uids,
-            obs_mode=obs_mode,
-            control_mode=control_mode,
-            reward_mode=reward_mode,
-            max_episode_steps=max_episode_steps,
-            robot_init_qpos_noise=robot_init_qpos_noise,
-            sim_freq=sim_freq,
-        )
+        self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         self._native = _native.Env(**self._kwargs)
         self.render_mode = render_mode
         self.action_space = _describe(self, self._native.spec(), depth_dtype)
@@ -400,8 +209,8 @@ class MjskillVectorEnv(VectorEnv):
         control_mode: str | None = None,
         reward_mode: str = "normalized_dense",
         max_episode_steps: int | None = None,
-        robot_init_qpos_noise: float = 0.02,
-        sim_freq: int = 100,
+        robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
+        sim_freq: int = DEFAULT_SIM_FREQ,
         render_mode: str | None = None,
         depth_dtype: str = "float32",
     ):
@@ -412,18 +221,9 @@ class MjskillVectorEnv(VectorEnv):
                 "no human frames; its sensor images come with the visual obs modes); "
                 "valid render modes: None"
             )
-        _check_count("num_envs", num_envs)
-        _check_count("num_threads", num_threads)
-        self._kwargs = dict(
-            env_id=env_id,
-            robot_uids=robot_uids,
-            obs_mode=obs_mode,
-            control_mode=control_mode,
-            reward_mode=reward_mode,
-            max_episode_steps=max_episode_steps,
-            robot_init_qpos_noise=robot_init_qpos_noise,
-            sim_freq=sim_freq,
-        )
+        num_envs = _check_count("num_envs", num_envs)
+        num_threads = _check_count("num_threads", num_threads)
+        self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         # The static description (layout, bounds, cameras) comes from one plain env.
         spec = _native.Env(**self._kwargs).spec()
         self._native = _native.VecEnv(
@@ -507,36 +307,18 @@ class MjskillVectorEnv(VectorEnv):
                                  b["rewards"], b["terminated"], b["truncated"], b["autoreset"])
         return obs
 
-def make_env(num_envs: int = 1, **kwargs):
-    """``gym.make`` entry point.
 
-    ``num_envs=1`` (the default): one :class:`MjskillEnv` in gymnasium's
-    ``PassiveEnvChecker`` (the ids are registered with the checker off, for the batched env);
-    its own episode limit is lifted, because gymnasium's ``TimeLimit`` (``max_episode_steps``,
-    default 50) truncates, as in ManiSkill. ``num_envs > 1`` (ManiSkill's ``gym.make(...,
-    num_envs=N)``): the batched :class:`mjskill.batched.MjskillBatchedEnv`, which truncates
-    each env itself (it disarms gymnasium's ``TimeLimit``). ManiSkill's ``sim_backend`` and
-    ``reconfiguration_freq`` keywords are accepted and checked (mjskill simulates with MuJoCo
-    on the CPU; its scenes have nothing to reconfigure).
-    """
-    from .batched import MjskillBatchedEnv, check_reconfiguration_freq, check_sim_backend
+def __getattr__(name: str) -> Any:
+    # make_env and make_vector_env moved to mjskill.entry_points (envs.py no longer imports
+    # the batched env); the old names stay as deprecated aliases.
+    if name in ("make_env", "make_vector_env"):
+        from . import entry_points
 
-    _check_count("num_envs", num_envs)
-    if num_envs > 1:
-        return MjskillBatchedEnv(num_envs=int(num_envs), **kwargs)
-    check_sim_backend(kwargs.pop("sim_backend", "auto"))
-    check_reconfiguration_freq(kwargs.pop("reconfiguration_freq", None))
-    batched_only = sorted({"num_threads", "array_backend"} & set(kwargs))
-    if batched_only:
-        env_id = kwargs.get("env_id", "PickCube-v1")
-        raise ValueError(
-            f"{', '.join(batched_only)} apply to the batched env (num_envs > 1); "
-            f"gym.make('mjskill/{env_id}', num_envs=1) is one MjskillEnv (numpy values)"
+        warnings.warn(
+            f"mjskill.envs.{name} is deprecated: use mjskill.{name} "
+            f"(mjskill.entry_points.{name})",
+            DeprecationWarning,
+            stacklevel=2,
         )
-    kwargs.setdefault("max_episode_steps", _UNLIMITED)
-    return gym.wrappers.PassiveEnvChecker(MjskillEnv(**kwargs))
-
-
-def make_vector_env(**kwargs) -> MjskillVectorEnv:
-    """``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point."""
-    return MjskillVectorEnv(**kwargs)
+        return getattr(entry_points, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

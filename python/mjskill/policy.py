@@ -56,8 +56,16 @@ class OnnxPolicy:
                 "OnnxPolicy needs onnxruntime: pip install onnxruntime (or mjskill[onnx])"
             ) from e
         self.path = os.fspath(path)
-        if not os.path.isfile(self.path):
+        if not os.path.exists(self.path):
             raise FileNotFoundError(f"cannot read policy file {self.path}: no such file")
+        from . import _native
+
+        # The file is checked by mjskill's own rules first (the same code as `mjskill eval
+        # --policy`: regular file, size limits, metadata, graph interface, a run on zeros), so
+        # that both languages accept and refuse the same files; errors are ValueErrors naming
+        # the file.
+        props = _native.check_policy_file(self.path)
+        self.metadata: dict[str, str] = dict(props)
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = 1
         opts.inter_op_num_threads = 1
@@ -66,22 +74,9 @@ class OnnxPolicy:
             self._session = ort.InferenceSession(
                 self.path, sess_options=opts, providers=["CPUExecutionProvider"]
             )
+            inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
         except Exception as e:  # onnxruntime raises its own exception types
             raise ValueError(f"policy file {self.path} is not a valid ONNX model: {e}") from e
-        self.metadata: dict[str, str] = dict(self._session.get_modelmeta().custom_metadata_map)
-        missing = [k for k in METADATA_KEYS if k not in self.metadata]
-        if missing:
-            raise ValueError(
-                f"policy file {self.path} lacks the metadata_props {', '.join(missing)} (a "
-                f"policy file carries {', '.join(METADATA_KEYS)}; it has: "
-                f"{', '.join(self.metadata) or 'none'})"
-            )
-        if self.metadata["obs_mode"] not in _STATE_MODES:
-            raise ValueError(
-                f"policy file {self.path} has obs_mode {self.metadata['obs_mode']!r}; policy "
-                "files take the flat state vector (obs_mode state or state_dict)"
-            )
-        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
         if len(inputs) != 1 or len(outputs) != 1:
             raise ValueError(
                 f"policy file {self.path}: the graph has {len(inputs)} inputs and "
@@ -177,13 +172,17 @@ class OnnxPolicy:
         self.act_dim = int(np.prod(act_space.shape))
         self.low = np.asarray(act_space.low, np.float32).reshape(-1)
         self.high = np.asarray(act_space.high, np.float32).reshape(-1)
-        declared = self._session.get_inputs()[0].shape[-1]
+        shape = self._session.get_inputs()[0].shape
+        declared = shape[-1] if shape else None
         if isinstance(declared, int) and declared != obs_dim:
             raise ValueError(
                 f"policy file {self.path} takes observations of {declared} values, but "
                 f"{self.metadata['env_id']} gives {obs_dim} (obs_mode {obs_mode})"
             )
-        out = self._run(np.zeros((1, obs_dim), np.float32))
+        try:
+            out = self._run(np.zeros((1, obs_dim), np.float32))
+        except Exception as e:  # onnxruntime's own exception types
+            raise ValueError(f"policy file {self.path} failed to run: {e}") from e
         if out.shape[-1] != self.act_dim:
             raise ValueError(
                 f"policy file {self.path} outputs actions of {out.shape[-1]} values, but "

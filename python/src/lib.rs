@@ -17,19 +17,24 @@
 //! bare `OverflowError`.
 #![warn(missing_docs)]
 
+mod policy;
+
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
 use mjskill::VecEnv;
-use mjskill::{Env, EnvConfig, EnvError, EnvState, Info, ObsMode, RewardMode, SimConfig};
+use mjskill::{Env, EnvConfig, EnvError, EnvState};
 use numpy::ndarray::ArrayView2;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
-use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use mjskill::mujoco::Warnings;
+
+mod args;
+use args::{config, count_arg, env_kwargs_defaults, seed_arg, type_error, UNLIMITED_EPISODE_STEPS};
 
 mod rollout;
 
@@ -71,46 +76,6 @@ fn lock_without_gil<'a, T: Send>(py: Python<'_>, m: &'a Mutex<T>) -> PyResult<Mu
     }
 }
 
-/// An integer argument as a Python int, range-checked: a value outside `lo..=hi` (also one
-/// beyond any fixed-width integer) is a `ValueError` `"{name} {value} is out of range:
-/// {valid}"`; a non-integer stays a `TypeError`.
-fn int_arg(
-    value: &Bound<'_, PyAny>,
-    name: &str,
-    lo: i128,
-    hi: i128,
-    valid: &str,
-) -> PyResult<i128> {
-    let out_of_range = || {
-        let shown = value
-            .str()
-            .map(|s| s.to_string())
-            .unwrap_or_else(|_| "(an int too large to print)".into());
-        PyValueError::new_err(format!("{name} {shown} is out of range: {valid}"))
-    };
-    match value.extract::<i128>() {
-        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
-        Ok(_) => Err(out_of_range()),
-        Err(e) if e.is_instance_of::<PyOverflowError>(value.py()) => Err(out_of_range()),
-        Err(e) => Err(e),
-    }
-}
-
-/// A seed argument (`None` or `0..=MAX_SEED`; the message is [`EnvError::BadSeed`]'s).
-fn seed_arg(seed: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<u64>> {
-    seed.filter(|s| !s.is_none())
-        .map(|s| {
-            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
-            int_arg(s, name, 0, mjskill::MAX_SEED as i128, &valid).map(|v| v as u64)
-        })
-        .transpose()
-}
-
-/// A count argument in `1..=max` (`num_envs`, `num_threads`).
-fn count_arg(value: &Bound<'_, PyAny>, name: &str, max: usize, what: &str) -> PyResult<usize> {
-    int_arg(value, name, 1, max as i128, &format!("1..={max} ({what})")).map(|v| v as usize)
-}
-
 /// `{"BadQacc": 1, ...}`: the MuJoCo warnings that fired (kind names as
 /// [`mjskill::mujoco::Warning`]'s, with their counts); `None` when none did.
 fn warnings_dict<'py>(py: Python<'py>, w: &Warnings) -> PyResult<Option<Bound<'py, PyDict>>> {
@@ -125,60 +90,14 @@ fn warnings_dict<'py>(py: Python<'py>, w: &Warnings) -> PyResult<Option<Bound<'p
     Ok(Some(d))
 }
 
-/// Whether an info key holds a boolean (stored as 0/1 on the Rust side): ManiSkill's
-/// `success`, `fail` and `is_*` keys.
-fn is_flag(key: &str) -> bool {
-    key == "success" || key == "fail" || key.starts_with("is_")
-}
-
-/// The [`EnvConfig`] for ManiSkill's keyword arguments (`max_episode_steps` and `sim_freq`
-/// as Python ints: `None` is no limit and the default 100 Hz).
-fn config(
-    robot_uids: Option<String>,
-    obs_mode: &str,
-    control_mode: Option<String>,
-    reward_mode: &str,
-    max_episode_steps: Option<&Bound<'_, PyAny>>,
-    robot_init_qpos_noise: f64,
-    sim_freq: Option<&Bound<'_, PyAny>>,
-) -> PyResult<EnvConfig> {
-    let max_episode_steps = max_episode_steps
-        .filter(|m| !m.is_none())
-        .map(|m| {
-            let valid = format!("an episode needs at least one step (1..={})", u32::MAX);
-            int_arg(m, "max_episode_steps", 1, u32::MAX as i128, &valid).map(|v| v as u32)
-        })
-        .transpose()?;
-    let sim_freq = match sim_freq.filter(|f| !f.is_none()) {
-        None => SimConfig::DEFAULT_SIM_FREQ,
-        Some(f) => {
-            let valid = format!(
-                "use a multiple of the control frequency {c} Hz between {c} and 100000 (e.g. \
-                 100, 200, 500)",
-                c = mjskill::CONTROL_FREQ
-            );
-            // Beyond u32 here; within it, SimConfig's own check names the valid rates.
-            int_arg(f, "sim_freq", 0, u32::MAX as i128, &valid)? as u32
-        }
-    };
-    Ok(EnvConfig {
-        robot: robot_uids,
-        obs_mode: ObsMode::parse(obs_mode).map_err(value_err)?,
-        reward_mode: RewardMode::parse(reward_mode).map_err(value_err)?,
-        control_mode,
-        robot_init_qpos_noise,
-        max_episode_steps,
-        sim: SimConfig { sim_freq },
-    })
-}
-
 /// The single-env info dict: `elapsed_steps`, the task keys (flags as `bool`) and, on
 /// reset, `reconfigure`.
-fn info_dict<'py>(py: Python<'py>, info: &Info) -> PyResult<Bound<'py, PyDict>> {
+fn info_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
+    let info = env.info();
     let d = PyDict::new(py);
     d.set_item("elapsed_steps", info.elapsed_steps)?;
     for (k, v) in info.keys.iter().zip(&info.values) {
-        if is_flag(k) {
+        if env.info_is_flag(k) {
             d.set_item(*k, *v != 0.0)?;
         } else {
             d.set_item(*k, *v)?;
@@ -235,7 +154,12 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("cameras", cams)?;
     d.set_item("point_count", env.point_cloud().map(|p| p.len))?;
     d.set_item("segmentation_id_map", env.segmentation_id_map())?;
-    let keys: Vec<(&str, bool)> = env.info().keys.iter().map(|k| (*k, is_flag(k))).collect();
+    let keys: Vec<(&str, bool)> = env
+        .info()
+        .keys
+        .iter()
+        .map(|k| (*k, env.info_is_flag(k)))
+        .collect();
     d.set_item("info_keys", keys)?;
     d.set_item("render_size", env.render_size())?;
     Ok(d)
@@ -320,32 +244,11 @@ impl PyEnv {
 
 #[pymethods]
 impl PyEnv {
-    /// Builds `env_id` with ManiSkill's keyword arguments.
+    /// Builds `env_id` with ManiSkill's keyword arguments (`ENV_KWARGS`).
     #[new]
-    #[pyo3(signature = (env_id, robot_uids=None, obs_mode="state", control_mode=None,
-        reward_mode="normalized_dense", max_episode_steps=None, robot_init_qpos_noise=0.02,
-        sim_freq=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        py: Python<'_>,
-        env_id: &str,
-        robot_uids: Option<String>,
-        obs_mode: &str,
-        control_mode: Option<String>,
-        reward_mode: &str,
-        max_episode_steps: Option<&Bound<'_, PyAny>>,
-        robot_init_qpos_noise: f64,
-        sim_freq: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<Self> {
-        let cfg = config(
-            robot_uids,
-            obs_mode,
-            control_mode,
-            reward_mode,
-            max_episode_steps,
-            robot_init_qpos_noise,
-            sim_freq,
-        )?;
+    #[pyo3(signature = (env_id, **kwargs))]
+    fn new(py: Python<'_>, env_id: &str, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let cfg = config(kwargs, "Env")?;
         let env = py
             .detach(|| mjskill::make(env_id, cfg))
             .map_err(value_err)?;
@@ -372,10 +275,7 @@ impl PyEnv {
         let env = &mut *g;
         py.detach(|| env.try_reset(seed).map(|_| ()))
             .map_err(value_err)?;
-        Ok((
-            PyArray1::from_slice(py, env.obs()),
-            info_dict(py, env.info())?,
-        ))
+        Ok((PyArray1::from_slice(py, env.obs()), info_dict(py, env)?))
     }
 
     /// One step: `(obs, reward, terminated, truncated, info)`.
@@ -414,7 +314,7 @@ impl PyEnv {
             reward,
             terminated,
             truncated,
-            info_dict(py, env.info())?,
+            info_dict(py, env)?,
         ))
     }
 
@@ -425,7 +325,7 @@ impl PyEnv {
 
     /// The current info dict.
     fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        info_dict(py, self.lock(py)?.info())
+        info_dict(py, &*self.lock(py)?)
     }
 
     /// The sensor images of the current state (visual obs modes; else empty); depth in
@@ -564,53 +464,30 @@ impl PyVecEnv {
     /// `num_envs` and `num_threads` are in `1..=MAX_NUM_ENVS` (more threads than envs are
     /// clamped to `num_envs`).
     #[new]
-    #[pyo3(signature = (env_id, num_envs, num_threads=None, robot_uids=None, obs_mode="state",
-        control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-        robot_init_qpos_noise=0.02, sim_freq=None, autoreset=true))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (env_id, num_envs, num_threads=None, autoreset=true, **kwargs))]
     fn new(
         py: Python<'_>,
         env_id: &str,
         num_envs: &Bound<'_, PyAny>,
         num_threads: Option<&Bound<'_, PyAny>>,
-        robot_uids: Option<String>,
-        obs_mode: &str,
-        control_mode: Option<String>,
-        reward_mode: &str,
-        max_episode_steps: Option<&Bound<'_, PyAny>>,
-        robot_init_qpos_noise: f64,
-        sim_freq: Option<&Bound<'_, PyAny>>,
         autoreset: bool,
+        kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let num_envs = count_arg(
-            num_envs,
-            "num_envs",
-            mjskill::MAX_NUM_ENVS,
-            "each env owns its MuJoCo model and data",
-        )?;
+        let num_envs = count_arg(num_envs, "num_envs")?;
         let num_threads = match num_threads.filter(|t| !t.is_none()) {
             None => 1,
-            Some(t) => count_arg(
-                t,
-                "num_threads",
-                mjskill::MAX_NUM_ENVS,
-                "the caller's thread counts; more than num_envs are clamped to num_envs",
-            )?,
+            Some(t) => count_arg(t, "num_threads")?,
         };
-        let cfg = config(
-            robot_uids,
-            obs_mode,
-            control_mode,
-            reward_mode,
-            max_episode_steps,
-            robot_init_qpos_noise,
-            sim_freq,
-        )?;
+        let cfg = config(kwargs, "VecEnv")?;
         let mut vec = py
             .detach(|| VecEnv::new(env_id, cfg, num_envs, num_threads))
             .map_err(value_err)?;
         vec.set_autoreset(autoreset);
-        let keys = vec.info_keys().iter().map(|k| (*k, is_flag(k))).collect();
+        let keys = vec
+            .info_keys()
+            .iter()
+            .map(|k| (*k, vec.info_is_flag(k)))
+            .collect();
         let masks = PyArray1::from_vec(py, vec![true; num_envs]);
         let kwargs = PyDict::new(py);
         kwargs.set_item("write", false)?;
@@ -790,37 +667,21 @@ impl PyVecEnv {
 /// rollout` records. Returns each episode's `(return, success)`. The file is written under a
 /// temporary name and renamed into place only when complete, so a failure leaves nothing.
 #[pyfunction]
-#[pyo3(signature = (path, env_id, seeds, actions, robot_uids=None, obs_mode="state",
-    control_mode=None, reward_mode="normalized_dense", max_episode_steps=None,
-    robot_init_qpos_noise=0.02, sim_freq=None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (path, env_id, seeds, actions, **kwargs))]
 fn record_episodes(
     py: Python<'_>,
     path: PathBuf,
     env_id: &str,
     seeds: Vec<Bound<'_, PyAny>>,
     actions: Vec<PyReadonlyArray2<'_, f32>>,
-    robot_uids: Option<String>,
-    obs_mode: &str,
-    control_mode: Option<String>,
-    reward_mode: &str,
-    max_episode_steps: Option<&Bound<'_, PyAny>>,
-    robot_init_qpos_noise: f64,
-    sim_freq: Option<&Bound<'_, PyAny>>,
+    kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Vec<(f64, bool)>> {
     let seeds = seeds
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            let valid = format!("seeds are 32-bit, 0..={}", mjskill::MAX_SEED);
-            int_arg(
-                s,
-                &format!("seeds[{k}]"),
-                0,
-                mjskill::MAX_SEED as i128,
-                &valid,
-            )
-            .map(|v| v as u64)
+            let name = format!("seeds[{k}]");
+            seed_arg(Some(s), &name)?.ok_or_else(|| type_error(s, &name, "an int"))
         })
         .collect::<PyResult<Vec<u64>>>()?;
     if seeds.len() != actions.len() {
@@ -830,15 +691,7 @@ fn record_episodes(
             actions.len()
         )));
     }
-    let cfg = config(
-        robot_uids,
-        obs_mode,
-        control_mode,
-        reward_mode,
-        max_episode_steps,
-        robot_init_qpos_noise,
-        sim_freq,
-    )?;
+    let cfg = config(kwargs, "record_episodes")?;
     let episodes: Vec<Vec<f32>> = actions
         .iter()
         .map(|a| a.as_array().iter().copied().collect())
@@ -958,6 +811,21 @@ fn control_modes(env_id: &str, robot_uids: &str) -> PyResult<Vec<&'static str>> 
         })
 }
 
+/// Checks a seed argument for the Python classes: `None` or an int in `0..=MAX_SEED`
+/// (returned as a Python int), else the `ValueError` or `TypeError` the native classes raise.
+#[pyfunction]
+#[pyo3(signature = (seed, name="seed"))]
+fn check_seed(seed: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<u64>> {
+    seed_arg(Some(seed), name)
+}
+
+/// Checks a count argument for the Python classes (`num_envs`, `num_threads`): an int in
+/// `1..=MAX_NUM_ENVS`, else the `ValueError` or `TypeError` the native `VecEnv` raises.
+#[pyfunction]
+fn check_count(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
+    count_arg(value, name)
+}
+
 /// The `mjskill._native` module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -968,6 +836,13 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;
+    m.add_function(wrap_pyfunction!(check_seed, m)?)?;
+    m.add_function(wrap_pyfunction!(check_count, m)?)?;
+    m.add("ENV_KWARGS", env_kwargs_defaults(m.py())?)?;
+    m.add("MAX_SEED", mjskill::MAX_SEED)?;
+    m.add("CONTROL_FREQ", mjskill::CONTROL_FREQ)?;
+    m.add("UNLIMITED_EPISODE_STEPS", UNLIMITED_EPISODE_STEPS)?;
+    m.add_function(wrap_pyfunction!(policy::check_policy_file, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_NUM_ENVS", mjskill::MAX_NUM_ENVS)?;
     Ok(())

@@ -232,3 +232,31 @@ def test_torch_backend_gives_cpu_tensors_and_takes_tensor_actions():
     vec.reset(options={"env_idx": torch.tensor([1])})
     _, _, _, _, info = vec.step(torch.zeros(2, 8))
     assert isinstance(info["episode"]["return"], torch.Tensor)
+
+
+def test_bad_options_nan_and_bool_actions_are_clear_errors():
+    env = make(4)
+    with pytest.raises(TypeError, match="options must be a dict .* got list"):
+        env.reset(seed=0, options=[1, 2])
+    env.reset(seed=0)
+    a = np.zeros(env.unwrapped.action_space.shape, np.float32)
+    a[3, 5] = np.nan
+    with pytest.raises(ValueError, match=r"\(env 3, action component 5\) is not finite"):
+        env.step(a)
+    with pytest.raises(TypeError, match="got dtype bool"):
+        env.step(np.ones(env.unwrapped.action_space.shape, bool))
+    env.step(np.zeros(env.unwrapped.action_space.shape, np.float32))
+
+
+def test_close_twice_is_harmless_and_use_after_close_raises():
+    env = make(2)
+    env.reset(seed=0)
+    env.close()
+    env.close()
+    base = env.unwrapped
+    with pytest.raises(RuntimeError, match="is closed"):
+        base.reset(seed=0)
+    with pytest.raises(RuntimeError, match="is closed"):
+        base.step(np.zeros(base.action_space.shape, np.float32))
+    with pytest.raises(RuntimeError, match="renders no human-camera frames"):
+        base.render()

@@ -192,3 +192,20 @@ def test_gripper_qvel_obs_are_the_gripper_joints_velocities(robot, expected):
         moved = max(moved, np.abs(obs[list(expected)]).max())
     assert moved > 1e-3
     assert gym.make(ENV, obs_mode="rgb").unwrapped.gripper_qvel_obs == ()
+
+
+def test_every_env_class_takes_the_native_keywords_with_the_native_defaults():
+    # One declaration: the native module's ENV_KWARGS (Rust's EnvConfig::default()).
+    import inspect
+
+    from mjskill import _native
+
+    kwargs = _native.ENV_KWARGS
+    assert kwargs["robot_init_qpos_noise"] == 0.02 and kwargs["sim_freq"] == 100
+    for cls in (mjskill.MjskillEnv, mjskill.MjskillVectorEnv, mjskill.MjskillBatchedEnv):
+        params = inspect.signature(cls).parameters
+        for name, default in kwargs.items():
+            assert params[name].default == default, (cls.__name__, name)
+    assert mjskill.MjskillEnv.metadata["render_fps"] == _native.CONTROL_FREQ == 20
+    with pytest.raises(TypeError, match=r"Env\(\) got an unexpected keyword argument 'foo'"):
+        _native.Env("PickCube-v1", foo=1)

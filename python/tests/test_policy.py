@@ -101,9 +101,13 @@ def test_onnx_policy_agrees_with_the_cli(tmp_path, dims):
     exe = os.environ.get("MJSKILL_BIN", str(ROOT / "target" / "release" / "mjskill"))
     if not os.path.exists(exe):
         pytest.skip(f"{exe} is not built")
-    out = subprocess.run([exe, "eval", "--episodes", "2", "--seed", "3", "--policy", str(f)],
-                         check=True, capture_output=True, text=True).stdout
-    report = json.loads(out)
+    run = subprocess.run([exe, "eval", "--episodes", "2", "--seed", "3", "--policy", str(f)],
+                         capture_output=True, text=True)
+    if run.returncode != 0 and "`onnx` feature" in run.stderr:
+        # The quick start's build (README); .ci/run runs this with the default features' binary.
+        pytest.skip(f"{exe} is built without the onnx feature")
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
     assert report["robot"] == "panda" and report["control_mode"] == "pd_ee_delta_pos"
     # Two runtimes round differently in the last bits; the episodes stay within 1e-3.
     assert abs(report["mean_return"] - np.mean(returns)) < 1e-3, (report, returns)

@@ -43,7 +43,7 @@
 //! ±F); contacts, joint limits and equalities stay implicit in MuJoCo's constraint solver.
 use nalgebra::DMatrix;
 
-use crate::mjcf::Drive;
+use super::desc::Drive;
 use crate::mujoco::{Data, Model, ObjType};
 
 /// Implicit micro-steps of the drive dynamics per physics substep.
@@ -131,7 +131,7 @@ pub struct Drives {
 
 impl Drives {
     /// Resolves `drives` (one force actuator per joint, named by
-    /// [`crate::mjcf::actuator_name`]) in `model`. `joints` are the robot's joints in
+    /// [`super::desc::actuator_name`]) in `model`. `joints` are the robot's joints in
     /// ManiSkill order; `gripper` names the gripper joints. Errors name a missing joint or
     /// actuator.
     pub(crate) fn new(
@@ -144,7 +144,7 @@ impl Drives {
         for d in drives {
             let j = model.require_id(ObjType::Joint, &d.joint)?;
             let actuator =
-                model.require_id(ObjType::Actuator, &crate::mjcf::actuator_name(&d.joint))?;
+                model.require_id(ObjType::Actuator, &super::desc::actuator_name(&d.joint))?;
             dofs.push(DriveDof {
                 dof: model.jnt_dofadr()[j] as usize,
                 qpos: model.jnt_qposadr()[j] as usize,

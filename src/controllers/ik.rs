@@ -10,8 +10,8 @@
 //! root frame. Fixed-size matrices: a solve allocates nothing.
 use nalgebra::{Isometry3, Matrix6, SMatrix, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 
+use super::desc::{JointKind, RobotDesc};
 use super::ControllerError;
-use crate::mjcf::urdf::{JointKind, RobotDesc};
 
 /// Maximum number of joints in a chain.
 pub const MAX_CHAIN: usize = 10;

@@ -2,8 +2,7 @@
 //! (breadth-first) order resolved to qpos/dof addresses, limits and actuators of a compiled
 //! model. Robots embed it (`RobotIds::joints`); controllers and drives read
 //! joint state through it and nothing else.
-use crate::mjcf::actuator_name;
-use crate::mjcf::urdf::RobotDesc;
+use super::desc::{actuator_name, RobotDesc};
 use crate::mujoco::{Data, Model, ObjType};
 
 /// A robot's active joints in a compiled model, ManiSkill order.

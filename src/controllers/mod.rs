@@ -11,6 +11,7 @@
 //! Arithmetic follows upstream's float32 path: actions are f32, normalised parts clip to
 //! [−1, 1] and rescale in f32, deltas are added to the f32 measured position. Targets go to
 //! the robot's [`Drives`], which turn them into forces.
+pub mod desc;
 pub mod drive;
 pub mod error;
 pub mod ik;
@@ -22,12 +23,11 @@ pub mod pd_joint_pos;
 pub mod pd_joint_pos_vel;
 pub mod pd_joint_vel;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
-use crate::mjcf::urdf::RobotDesc;
-use crate::mjcf::Drive;
-use crate::mujoco::Data;
+use crate::mujoco::{Data, Pose};
 use crate::obs::ObsWriter;
+use desc::{Drive, RobotDesc};
 pub use drive::Drives;
 pub use error::ControllerError;
 use ik::Chain;
@@ -314,14 +314,12 @@ pub trait PartController {
     fn save(&self, out: &mut Vec<f64>) {
         let c = self.core();
         out.extend(c.target_q.iter().map(|&x| x as f64));
-        let t = c.target_pose.translation.vector;
-        let q = c.target_pose.rotation;
-        out.extend_from_slice(&[t.x, t.y, t.z, q.w, q.i, q.j, q.k]);
+        out.extend_from_slice(&Pose::from_isometry(&c.target_pose).to_array());
     }
 
     /// Number of values [`PartController::save`] writes.
     fn save_len(&self) -> usize {
-        self.core().target_q.len() + 7
+        self.core().target_q.len() + Pose::LEN
     }
 
     /// Restores what [`PartController::save`] wrote; returns the number of values read.
@@ -332,12 +330,10 @@ pub trait PartController {
             *t = s[k] as f32;
             k += 1;
         }
-        let v = &s[k..k + 7];
-        c.target_pose = Isometry3::from_parts(
-            Translation3::new(v[0], v[1], v[2]),
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(v[3], v[4], v[5], v[6])),
-        );
-        k + 7
+        let mut v = [0.0; Pose::LEN];
+        v.copy_from_slice(&s[k..k + Pose::LEN]);
+        c.target_pose = Pose::from_array(v).isometry();
+        k + Pose::LEN
     }
 }
 
@@ -351,26 +347,18 @@ enum AnyPart {
     BaseForwardVel(PdBaseForwardVel),
 }
 
-impl AnyPart {
-    fn get(&self) -> &dyn PartController {
-        match self {
-            AnyPart::JointPos(p) => p,
-            AnyPart::JointVel(p) => p,
-            AnyPart::JointPosVel(p) => p,
-            AnyPart::Ee(p) => p,
-            AnyPart::BaseForwardVel(p) => p,
+/// `$body` with `$c` bound to the controller of part kind `$part` (an `AnyPart`, by
+/// reference or by mutable reference): the one dispatch over the kinds, static.
+macro_rules! with_part {
+    ($part:expr, $c:ident => $body:expr) => {
+        match $part {
+            AnyPart::JointPos($c) => $body,
+            AnyPart::JointVel($c) => $body,
+            AnyPart::JointPosVel($c) => $body,
+            AnyPart::Ee($c) => $body,
+            AnyPart::BaseForwardVel($c) => $body,
         }
-    }
-
-    fn get_mut(&mut self) -> &mut dyn PartController {
-        match self {
-            AnyPart::JointPos(p) => p,
-            AnyPart::JointVel(p) => p,
-            AnyPart::JointPosVel(p) => p,
-            AnyPart::Ee(p) => p,
-            AnyPart::BaseForwardVel(p) => p,
-        }
-    }
+    };
 }
 
 #[derive(Debug, Clone)]
@@ -470,10 +458,10 @@ impl Controller {
                     AnyPart::BaseForwardVel(PdBaseForwardVel::new(cfg, idx)?)
                 }
             };
-            let (pl, ph) = ctl.get().bounds();
+            let (pl, ph) = with_part!(&ctl, c => c.bounds());
             low.extend_from_slice(pl);
             high.extend_from_slice(ph);
-            let gains = ctl.get().gains(spec.gains);
+            let gains = with_part!(&ctl, c => c.gains(spec.gains));
             built.push(Part {
                 name: spec.name,
                 gains,
@@ -511,7 +499,7 @@ impl Controller {
         let mut joints = Vec::new();
         for p in &self.parts {
             joints.clear();
-            p.ctl.get().drive_joints(&mut joints);
+            with_part!(&p.ctl, c => c.drive_joints(&mut joints));
             for &i in &joints {
                 let name = desc.joints[active[i]].name.clone();
                 let d = Drive {
@@ -535,7 +523,7 @@ impl Controller {
     pub fn observe(&self, out: &mut ObsWriter) {
         let nested = self.parts.len() > 1;
         for p in &self.parts {
-            let Some(target) = p.ctl.get().target() else {
+            let Some(target) = with_part!(&p.ctl, c => c.target()) else {
                 continue;
             };
             let segs = [p.name, target.key()];
@@ -557,7 +545,7 @@ impl Controller {
         self.parts
             .iter()
             .map(|p| {
-                let r = off..off + p.ctl.get().bounds().0.len();
+                let r = off..off + with_part!(&p.ctl, c => c.bounds().0.len());
                 off = r.end;
                 (p.name, r)
             })
@@ -578,7 +566,7 @@ impl Controller {
     pub fn state_entries(&self) -> Vec<(String, Vec<f64>)> {
         let mut v = Vec::new();
         for p in &self.parts {
-            let Some(target) = p.ctl.get().target() else {
+            let Some(target) = with_part!(&p.ctl, c => c.target()) else {
                 continue;
             };
             let values = match target {
@@ -607,11 +595,11 @@ impl Controller {
     ) {
         self.reset(joints, data, drives);
         for k in 0..self.parts.len() {
-            let Some(key) = self.parts[k].ctl.get().target().map(|t| t.key()) else {
+            let Some(key) = with_part!(&self.parts[k].ctl, c => c.target().map(|t| t.key())) else {
                 continue;
             };
             if let Some(v) = entries.get(&self.state_key(&self.parts[k], key)) {
-                self.parts[k].ctl.get_mut().restore_target(v, drives);
+                with_part!(&mut self.parts[k].ctl, c => c.restore_target(v, drives));
             }
         }
     }
@@ -619,20 +607,23 @@ impl Controller {
     /// Raw controller state for get/set_state: all targets (positions and poses).
     pub fn save(&self, out: &mut Vec<f64>) {
         for p in &self.parts {
-            p.ctl.get().save(out);
+            with_part!(&p.ctl, c => c.save(out));
         }
     }
 
     /// Number of values [`Controller::save`] writes.
     pub fn save_len(&self) -> usize {
-        self.parts.iter().map(|p| p.ctl.get().save_len()).sum()
+        self.parts
+            .iter()
+            .map(|p| with_part!(&p.ctl, c => c.save_len()))
+            .sum()
     }
 
     /// Restores what [`Controller::save`] wrote; returns the number of values read.
     pub fn load(&mut self, s: &[f64]) -> usize {
         let mut k = 0;
         for p in &mut self.parts {
-            k += p.ctl.get_mut().load(&s[k..]);
+            k += with_part!(&mut p.ctl, c => c.load(&s[k..]));
         }
         k
     }
@@ -643,7 +634,7 @@ impl Controller {
     pub fn reset(&mut self, joints: &JointMap, data: &Data, drives: &mut Drives) {
         joints.qpos(data, &mut self.q);
         for p in &mut self.parts {
-            p.ctl.get_mut().reset(&self.q);
+            with_part!(&mut p.ctl, c => c.reset(&self.q));
         }
         for k in 0..self.n_dof {
             let q = self.q[k];
@@ -663,10 +654,12 @@ impl Controller {
         joints.qpos(data, &mut self.q);
         let mut off = 0;
         for p in &mut self.parts {
-            let ctl = p.ctl.get_mut();
-            let n = ctl.bounds().0.len();
-            ctl.set_action(&action[off..off + n], joints, &self.q, drives);
-            off += n;
+            let q = &self.q;
+            off += with_part!(&mut p.ctl, c => {
+                let n = c.bounds().0.len();
+                c.set_action(&action[off..off + n], joints, q, drives);
+                n
+            });
         }
     }
 }

@@ -2,12 +2,13 @@
 //! `agents/controllers/pd_ee_pose.py`): the `pd_ee_delta_pos`, `pd_ee_delta_pose`,
 //! `pd_ee_target_delta_pos`, `pd_ee_target_delta_pose` and `pd_ee_pose` modes. The EE target
 //! pose goes through damped-least-squares IK ([`Chain`]) to joint position targets.
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Vector3};
 
 use super::ik::Chain;
 use super::{
     clip_scale, euler_xyz, standardize, Drives, JointMap, PartController, PartCore, Target,
 };
+use crate::mujoco::Pose;
 
 /// Configuration of an end-effector part.
 #[derive(Debug, Clone, PartialEq)]
@@ -131,9 +132,9 @@ impl PartController for PdEePose {
     }
 
     fn restore_target(&mut self, v: &[f64], _drives: &mut Drives) {
-        self.core.target_pose = Isometry3::from_parts(
-            Translation3::new(v[0], v[1], v[2]),
-            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[3], v[4], v[5], v[6])),
-        );
+        // Targets restored from a state dict (ManiSkill's are float32) are renormalised.
+        let mut pose = [0.0; Pose::LEN];
+        pose.copy_from_slice(&v[..Pose::LEN]);
+        self.core.target_pose = Pose::from_array(pose).isometry_renormalized();
     }
 }

@@ -272,74 +272,23 @@ pub fn to_maniskill_in_mode(
     let mut steps = 0;
     for (k, ep) in rec.finished().enumerate() {
         let mut env_states = episode_states(path, &mut env, ep, imported.get(ep.index as usize))?;
-        let actions: Vec<f32> = match &plan {
+        let actions = match &plan {
             None => ep
                 .steps
                 .iter()
                 .flat_map(|s| s.action.iter().copied())
                 .collect(),
             Some(plan) => {
-                let mut out = Vec::new();
-                for s in &ep.steps {
-                    env.set_state(&s.state).map_err(DatasetError::env(path))?;
-                    let d = env
-                        .action_drive_targets(&s.action)
-                        .map_err(DatasetError::env(path))?;
-                    for fill in plan {
-                        match fill {
-                            PartFill::Copy(r) => out.extend_from_slice(&s.action[r.clone()]),
-                            PartFill::Targets(idx) => {
-                                out.extend(idx.iter().map(|&j| d.qpos[j] as f32))
-                            }
-                        }
-                    }
-                }
                 // The source mode keeps no controller state (checked), nor does the target.
                 for sd in &mut env_states {
                     sd.controller.clear();
                 }
-                out
+                converted_actions(path, &mut env, ep, plan)?
             }
-        };
-        let action_dim = if ep.steps.is_empty() {
-            m.action_space.low.len()
-        } else {
-            actions.len() / ep.steps.len()
         };
         let t = ep.steps.len();
         steps += t;
-        let has_fail = ep
-            .steps
-            .first()
-            .is_some_and(|s| info_flag(&s.info, "fail").is_some());
-        let obs = (m.obs_mode == "state").then(|| {
-            let mut o = ep.initial_obs.clone();
-            for s in &ep.steps {
-                o.extend_from_slice(&s.obs);
-            }
-            (o, ep.initial_obs.len())
-        });
-        let data = EpisodeData {
-            actions,
-            action_dim,
-            env_states,
-            terminated: ep.steps.iter().map(|s| s.terminated).collect(),
-            truncated: ep.steps.iter().map(|s| s.truncated).collect(),
-            success: Some(
-                ep.steps
-                    .iter()
-                    .map(|s| info_flag(&s.info, "success").unwrap_or(false))
-                    .collect(),
-            ),
-            fail: has_fail.then(|| {
-                ep.steps
-                    .iter()
-                    .map(|s| info_flag(&s.info, "fail").unwrap_or(false))
-                    .collect()
-            }),
-            rewards: Some(ep.steps.iter().map(|s| s.reward).collect()),
-            obs,
-        };
+        let data = episode_data(m, ep, actions, env_states);
         infos.push(EpisodeInfo {
             episode_id: k,
             episode_seed: ep.seed,
@@ -356,32 +305,7 @@ pub fn to_maniskill_in_mode(
             "has no finished episode to export",
         ));
     }
-    let mut env_kwargs = Map::new();
-    env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
-    env_kwargs.insert("control_mode".into(), json!(out_mode));
-    env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
-    env_kwargs.insert("robot_uids".into(), json!(m.robot));
-    env_kwargs.insert("render_mode".into(), Value::Null);
-    env_kwargs.insert("num_envs".into(), json!(1));
-    let mut extra = Map::new();
-    extra.insert("source_type".into(), json!("mjskill"));
-    extra.insert(
-        "source_desc".into(),
-        json!(match convert {
-            None => format!(
-                "exported by mjskill {} from {}",
-                env!("CARGO_PKG_VERSION"),
-                path.display()
-            ),
-            Some(c) => format!(
-                "exported by mjskill {} from {}; actions converted from {} to {c} (the joint \
-                 targets mjskill's controller set)",
-                env!("CARGO_PKG_VERSION"),
-                path.display(),
-                m.control_mode
-            ),
-        }),
-    );
+    let (env_kwargs, extra) = trajectory_kwargs(path, m, &out_mode, convert);
     let traj = Trajectory {
         json: TrajectoryJson {
             env_info: EnvInfo {
@@ -404,6 +328,113 @@ pub fn to_maniskill_in_mode(
         steps,
         videos: Vec::new(),
     })
+}
+
+/// A recorded episode's actions converted by `plan` (every step re-simulated from its
+/// recorded state to read the drive targets its action set).
+fn converted_actions(
+    path: &Path,
+    env: &mut Env,
+    ep: &EpisodeRec,
+    plan: &[PartFill],
+) -> Result<Vec<f32>, DatasetError> {
+    let mut out = Vec::new();
+    for s in &ep.steps {
+        env.set_state(&s.state).map_err(DatasetError::env(path))?;
+        let d = env
+            .action_drive_targets(&s.action)
+            .map_err(DatasetError::env(path))?;
+        for fill in plan {
+            match fill {
+                PartFill::Copy(r) => out.extend_from_slice(&s.action[r.clone()]),
+                PartFill::Targets(idx) => out.extend(idx.iter().map(|&j| d.qpos[j] as f32)),
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One episode of a ManiSkill trajectory file: `actions` (flat, as exported), the env states,
+/// and the recorded flags, rewards and (obs mode `state`) observations.
+fn episode_data(
+    m: &crate::record::Meta,
+    ep: &EpisodeRec,
+    actions: Vec<f32>,
+    env_states: Vec<StateDict>,
+) -> EpisodeData {
+    let action_dim = if ep.steps.is_empty() {
+        m.action_space.low.len()
+    } else {
+        actions.len() / ep.steps.len()
+    };
+    let has_fail = ep
+        .steps
+        .first()
+        .is_some_and(|s| info_flag(&s.info, "fail").is_some());
+    let obs = (m.obs_mode == "state").then(|| {
+        let mut o = ep.initial_obs.clone();
+        for s in &ep.steps {
+            o.extend_from_slice(&s.obs);
+        }
+        (o, ep.initial_obs.len())
+    });
+    EpisodeData {
+        actions,
+        action_dim,
+        env_states,
+        terminated: ep.steps.iter().map(|s| s.terminated).collect(),
+        truncated: ep.steps.iter().map(|s| s.truncated).collect(),
+        success: Some(
+            ep.steps
+                .iter()
+                .map(|s| info_flag(&s.info, "success").unwrap_or(false))
+                .collect(),
+        ),
+        fail: has_fail.then(|| {
+            ep.steps
+                .iter()
+                .map(|s| info_flag(&s.info, "fail").unwrap_or(false))
+                .collect()
+        }),
+        rewards: Some(ep.steps.iter().map(|s| s.reward).collect()),
+        obs,
+    }
+}
+
+/// The trajectory's `env_kwargs` and `extra` (where it came from, what was converted).
+fn trajectory_kwargs(
+    path: &Path,
+    m: &crate::record::Meta,
+    out_mode: &str,
+    convert: Option<&str>,
+) -> (Map<String, Value>, Map<String, Value>) {
+    let mut env_kwargs = Map::new();
+    env_kwargs.insert("obs_mode".into(), json!(m.obs_mode));
+    env_kwargs.insert("control_mode".into(), json!(out_mode));
+    env_kwargs.insert("reward_mode".into(), json!(m.reward_mode));
+    env_kwargs.insert("robot_uids".into(), json!(m.robot));
+    env_kwargs.insert("render_mode".into(), Value::Null);
+    env_kwargs.insert("num_envs".into(), json!(1));
+    let mut extra = Map::new();
+    extra.insert("source_type".into(), json!("mjskill"));
+    extra.insert(
+        "source_desc".into(),
+        json!(match convert {
+            None => format!(
+                "exported by mjskill {} from {}",
+                env!("CARGO_PKG_VERSION"),
+                path.display()
+            ),
+            Some(c) => format!(
+                "exported by mjskill {} from {}; actions converted from {} to {c} (the joint \
+             targets mjskill's controller set)",
+                env!("CARGO_PKG_VERSION"),
+                path.display(),
+                m.control_mode
+            ),
+        }),
+    );
+    (env_kwargs, extra)
 }
 
 /// The default output of a format: `<recording stem>.h5` / `<recording stem>_lerobot`.

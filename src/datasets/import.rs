@@ -470,7 +470,7 @@ pub fn run(a: &ImportArgs) -> Result<ImportReport, DatasetError> {
         .iter()
         .map(|e| {
             e.checked_seed()
-                .map_err(|msg| DatasetError::format(&json_path, msg))
+                .map_err(|e| DatasetError::format(&json_path, e.to_string()))
         })
         .collect::<Result<Vec<u64>, _>>()?;
     let traj = maniskill_h5::read_h5(&a.h5, &json_path, json)?;

@@ -74,36 +74,87 @@ impl EpisodeInfo {
     /// (ManiSkill's seeds are 32-bit), must agree when both are given, and at least one must
     /// be given.
     /// The error names the episode, the field and the value.
-    pub fn checked_seed(&self) -> Result<u64, String> {
+    pub fn checked_seed(&self) -> Result<u64, SeedError> {
         let id = self.episode_id;
         let max = crate::env::checks::MAX_SEED;
-        let kw = match self.reset_kwargs.get("seed") {
-            None | Some(Value::Null) => None,
-            Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {
-                format!(
-                    "episode {id}: reset_kwargs.seed {v} is not an integer in 0..={max} \
-                     (ManiSkill's seeds are 32-bit)"
-                )
-            })?),
-        };
+        let kw =
+            match self.reset_kwargs.get("seed") {
+                None | Some(Value::Null) => None,
+                Some(v) => Some(v.as_u64().filter(|s| *s <= max).ok_or_else(|| {
+                    SeedError::BadResetSeed {
+                        episode: id,
+                        value: v.to_string(),
+                    }
+                })?),
+            };
         if let Some(s) = self.episode_seed.filter(|s| *s > max) {
-            return Err(format!(
-                "episode {id}: episode_seed {s} is not in 0..={max} (ManiSkill's seeds are \
-                 32-bit)"
-            ));
+            return Err(SeedError::BadEpisodeSeed {
+                episode: id,
+                seed: s,
+            });
         }
         match (kw, self.episode_seed) {
-            (Some(a), Some(b)) if a != b => Err(format!(
-                "episode {id}: reset_kwargs.seed {a} and episode_seed {b} differ; an episode \
-                 has one reset seed"
-            )),
+            (Some(a), Some(b)) if a != b => Err(SeedError::Differ {
+                episode: id,
+                reset: a,
+                episode_seed: b,
+            }),
             (Some(s), _) | (None, Some(s)) => Ok(s),
-            (None, None) => Err(format!(
-                "episode {id}: no seed (episode_seed and reset_kwargs.seed are null or \
-                 missing); the episode cannot be replayed from its reset"
-            )),
+            (None, None) => Err(SeedError::Missing { episode: id }),
         }
     }
+}
+
+/// Why an episode of a trajectory has no usable reset seed ([`EpisodeInfo::checked_seed`]);
+/// each names the episode, the field and the value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SeedError {
+    /// `reset_kwargs.seed` is no integer in `0..=MAX_SEED`.
+    #[error(
+        "episode {episode}: reset_kwargs.seed {value} is not an integer in 0..={max} \
+         (ManiSkill's seeds are 32-bit)",
+        max = crate::env::checks::MAX_SEED
+    )]
+    BadResetSeed {
+        /// The episode id.
+        episode: usize,
+        /// The value as JSON.
+        value: String,
+    },
+    /// `episode_seed` beyond `MAX_SEED`.
+    #[error(
+        "episode {episode}: episode_seed {seed} is not in 0..={max} (ManiSkill's seeds are \
+         32-bit)",
+        max = crate::env::checks::MAX_SEED
+    )]
+    BadEpisodeSeed {
+        /// The episode id.
+        episode: usize,
+        /// The seed.
+        seed: u64,
+    },
+    /// Both seeds are given and differ.
+    #[error(
+        "episode {episode}: reset_kwargs.seed {reset} and episode_seed {episode_seed} differ; \
+         an episode has one reset seed"
+    )]
+    Differ {
+        /// The episode id.
+        episode: usize,
+        /// `reset_kwargs.seed`.
+        reset: u64,
+        /// `episode_seed`.
+        episode_seed: u64,
+    },
+    /// Neither seed is given.
+    #[error(
+        "episode {episode}: no seed (episode_seed and reset_kwargs.seed are null or \
+         missing); the episode cannot be replayed from its reset"
+    )]
+    Missing {
+        /// The episode id.
+        episode: usize,
+    },
 }
 
 /// The whole `trajectory.json`.

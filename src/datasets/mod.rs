@@ -126,13 +126,48 @@ impl DatasetError {
 }
 
 /// A temporary path next to `path` (same directory, so the final rename is atomic):
-/// `.<name>.tmp-<pid>`.
+/// `.<name>.tmp-<pid>`. Those of the same name left by killed runs (whose process is gone)
+/// are removed first.
 pub(crate) fn temp_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "output".into());
+    remove_stale_temps(path, &name);
     path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// Removes `.<name>.tmp-<pid>` files and directories next to `path` whose process is gone
+/// (Linux's /proc tells; elsewhere nothing is removed).
+fn remove_stale_temps(path: &Path, name: &str) {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let prefix = format!(".{name}.tmp-");
+    for e in entries.flatten() {
+        let file_name = e.file_name().to_string_lossy().to_string();
+        let Some(pid) = file_name
+            .strip_prefix(&prefix)
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists() {
+            continue;
+        }
+        match std::fs::symlink_metadata(e.path()) {
+            Ok(m) if m.is_dir() => std::fs::remove_dir_all(e.path()).ok(),
+            Ok(m) if m.is_file() => std::fs::remove_file(e.path()).ok(),
+            _ => None,
+        };
+    }
 }
 
 /// Files or directories written under temporary names and moved to their final names by

@@ -18,10 +18,13 @@ pub const MAX_EPISODE_STEPS: u32 = 50;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EnvError {
     /// Unknown env id.
-    #[error("unknown env id {0:?}; valid env ids: {1}")]
+    #[error("unknown env id {id:?}; valid env ids: {1}", id = crate::files::short(.0))]
     UnknownEnv(String, String),
     /// Robot not supported by this env.
-    #[error("robot {robot:?} is not supported by {env}; supported robots: {valid}")]
+    #[error(
+        "robot {r:?} is not supported by {env}; supported robots: {valid}",
+        r = crate::files::short(.robot)
+    )]
     UnsupportedRobot {
         /// Env id.
         env: String,
@@ -31,7 +34,11 @@ pub enum EnvError {
         valid: String,
     },
     /// Unknown obs or reward mode.
-    #[error("unknown {what} {got:?}; valid {}s: {valid}", what.replace('_', " "))]
+    #[error(
+        "unknown {what} {g:?}; valid {}s: {valid}",
+        what.replace('_', " "),
+        g = crate::files::short(.got)
+    )]
     UnknownMode {
         /// What was being parsed (`obs_mode`, `reward_mode`).
         what: &'static str,
@@ -42,8 +49,10 @@ pub enum EnvError {
     },
     /// A `+` obs mode with a part that is not a camera texture.
     #[error(
-        "unknown obs mode part {part:?} in {mode:?}; the parts of a + obs mode are camera \
-         textures: {valid} (e.g. rgb+depth+segmentation)"
+        "unknown obs mode part {p:?} in {m:?}; the parts of a + obs mode are camera \
+         textures: {valid} (e.g. rgb+depth+segmentation)",
+        p = crate::files::short(.part),
+        m = crate::files::short(.mode)
     )]
     UnknownObsModePart {
         /// The bad part.
@@ -74,12 +83,28 @@ pub enum EnvError {
         /// Value.
         value: f32,
     },
+    /// NaN or infinite entry of [`VecEnv::step`](super::VecEnv::step)'s actions: `index`
+    /// into the `[N × action_dim]` batch, which is component `component` of env `env`.
+    #[error(
+        "action[{index}] = {value} (env {env}, action component {component}) is not finite; \
+         actions must not contain NaN or infinity"
+    )]
+    VecActionNotFinite {
+        /// Index into the batch of actions.
+        index: usize,
+        /// The env of that entry.
+        env: usize,
+        /// The action component (of the env's action) of that entry.
+        component: usize,
+        /// Value.
+        value: f32,
+    },
     /// A state from another env, of the wrong size, or with a bad value (the message names
     /// the field).
     #[error("cannot set state: {0}")]
     BadState(String),
     /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
-    #[error("seed {0} is out of range: seeds are 32-bit, 0..=4294967295")]
+    #[error("seed {0} is out of range: seeds are 32-bit, 0..={max}", max = super::checks::MAX_SEED)]
     BadSeed(u64),
     /// An unknown robot uid, or the robot's scene could not be built.
     #[error(transparent)]
@@ -115,6 +140,24 @@ pub enum EnvError {
         max = super::vec::MAX_NUM_ENVS
     )]
     TooManyEnvs(usize),
+    /// A [`VecEnv`](super::VecEnv) whose envs would not fit in the memory available
+    /// (`MemAvailable` of `/proc/meminfo`), refused before they are made.
+    #[error(
+        "num_envs {num_envs} would need about {} MB ({} KB per env: its MuJoCo model and data, \
+         images and buffers), more than the {} MB of memory available (MemAvailable in \
+         /proc/meminfo); use fewer envs",
+        (*num_envs as u64).saturating_mul(*per_env_bytes) >> 20,
+        per_env_bytes >> 10,
+        available_bytes >> 20
+    )]
+    EnvsExceedMemory {
+        /// Envs asked for.
+        num_envs: usize,
+        /// Estimated memory of one env (bytes).
+        per_env_bytes: u64,
+        /// Memory available (bytes).
+        available_bytes: u64,
+    },
     /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
     #[error("cannot start a VecEnv worker thread: {0}")]
     WorkerThread(String),
@@ -383,8 +426,7 @@ fn names<T>(v: &[(&str, T)]) -> String {
     v.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
 }
 
-/// ManiSkill's control frequency (Hz): one env step is 1/20 s.
-pub const CONTROL_FREQ: u32 = 20;
+pub use crate::mjcf::CONTROL_FREQ;
 
 /// Physics settings (ManiSkill's `sim_config`): how many physics steps simulate one 20 Hz
 /// control step. A higher `sim_freq` is slower and closer to the continuous-time dynamics.

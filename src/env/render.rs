@@ -7,7 +7,7 @@ use std::sync::Arc;
 use super::config::Textures;
 use crate::mjcf::{GROUP_COLLISION, GROUP_HIDDEN};
 use crate::mujoco::render::{RenderError, RenderOptions, Renderer, Segmentation};
-use crate::mujoco::{Data, Model, ObjType};
+use crate::mujoco::{CameraId, Data, Model, ObjType};
 use crate::robots::MountedCamera;
 use crate::tasks::CameraDef;
 
@@ -314,9 +314,10 @@ impl Vision {
 /// segmentation into `xyzw` (indexed like the concatenated images).
 fn fuse_points(c: &SensorCam, data: &Data, depth: &[f32], seg: &[i16], xyzw: &mut [f32]) {
     let (w, h) = c.size;
-    let p = &data.cam_xpos()[3 * c.id..3 * c.id + 3];
+    let cam = CameraId::from_index(c.id);
+    let p = data.camera_pos(cam);
     // Row-major; columns are the camera's right, up and backward axes (OpenGL camera frame).
-    let m = &data.cam_xmat()[9 * c.id..9 * c.id + 9];
+    let m = data.camera_mat(cam);
     let (cx, cy, f) = (0.5 * w as f64, 0.5 * h as f64, c.focal);
     for v in 0..h {
         let y = (cy - (v as f64 + 0.5)) / f;

@@ -15,7 +15,7 @@
 //! a non-alphanumeric character (`table-workspace_visual0`, `ground/tile`). Whether a geom
 //! is drawn is the renderer's business (geom groups), not the table's.
 use crate::mjcf::{GROUND, TABLE};
-use crate::mujoco::{Model, ObjType};
+use crate::mujoco::{BodyId, Model, ObjType};
 
 /// The segmentation ids of an env and the geom → id table.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,10 +38,11 @@ impl SegmentationIds {
     /// the model lacks keep their id but label no geom.
     pub(crate) fn new(
         model: &Model,
-        links: &[(String, usize)],
+        links: &[(String, BodyId)],
         actors: &[&str],
     ) -> SegmentationIds {
-        let mut links: Vec<(usize, &str)> = links.iter().map(|(n, b)| (*b, n.as_str())).collect();
+        let mut links: Vec<(usize, &str)> =
+            links.iter().map(|(n, b)| (b.index(), n.as_str())).collect();
         links.sort_unstable();
         links.dedup_by_key(|l| l.0);
         let mut names = vec![String::new()];
@@ -127,7 +128,7 @@ mod tests {
             </body>
         </worldbody></mujoco>"#;
         let m = Model::from_xml_string(xml, &[]).unwrap();
-        let b = |n: &str| m.id(ObjType::Body, n).unwrap();
+        let b = |n: &str| m.require_body(n).unwrap();
         // Robot bodies given out of order: ids follow the body order.
         let links = [
             ("link1".to_string(), b("link1")),

@@ -25,7 +25,7 @@ use serde_json::{json, Map, Value};
 
 use super::checks::{MAX_STATE_VALUE, MAX_TARGET_VALUE};
 use super::{Env, EnvError};
-use crate::mujoco::{JointType, Model};
+use crate::mujoco::{BodyId, JointId, JointType, MocapId, Model, Pose};
 
 /// Largest root-pose difference [`Env::set_state_dict`] accepts (m, and rad for the
 /// rotation): ManiSkill stores the pose in float32.
@@ -248,7 +248,7 @@ pub(crate) enum ActorBody {
     /// A dynamic actor: a body with a free joint.
     Free {
         /// Body id.
-        body: usize,
+        body: BodyId,
         /// qpos address of the free joint.
         qadr: usize,
         /// dof address of the free joint.
@@ -257,9 +257,9 @@ pub(crate) enum ActorBody {
     /// A kinematic actor: a mocap body.
     Mocap {
         /// Body id.
-        body: usize,
-        /// Mocap index.
-        mocap: usize,
+        body: BodyId,
+        /// Mocap slot.
+        mocap: MocapId,
     },
     /// A kinematic actor that never moves in mjskill (the table): its ManiSkill pose.
     Fixed([f64; 7]),
@@ -294,22 +294,19 @@ pub(crate) fn resolve_actors(
     }];
     for &name in task_actors {
         let body = model
-            .id(crate::mujoco::ObjType::Body, name)
-            .ok_or(EnvError::NoActorBody(name))?;
-        let free = (0..model.njnt()).find(|&j| {
-            model.jnt_bodyid()[j] as usize == body && model.joint_type(j) == JointType::Free
+            .require_body(name)
+            .map_err(|_| EnvError::NoActorBody(name))?;
+        let free = (0..model.njnt()).map(JointId::from_index).find(|&j| {
+            model.jnt_bodyid()[j.index()] as usize == body.index()
+                && model.joint_type(j.index()) == JointType::Free
         });
-        let mocap = model.body_mocapid()[body];
-        let body = match (free, mocap) {
+        let body = match (free, model.body_mocap(body)) {
             (Some(j), _) => ActorBody::Free {
                 body,
-                qadr: model.jnt_qposadr()[j] as usize,
-                dadr: model.jnt_dofadr()[j] as usize,
+                qadr: model.joint_qpos_adr(j),
+                dadr: model.joint_dof_adr(j),
             },
-            (None, m) if m >= 0 => ActorBody::Mocap {
-                body,
-                mocap: m as usize,
-            },
+            (None, Some(mocap)) => ActorBody::Mocap { body, mocap },
             _ => return Err(EnvError::ActorNotMovable(name)),
         };
         out.push(Actor { name, body });
@@ -317,8 +314,13 @@ pub(crate) fn resolve_actors(
     Ok(out)
 }
 
+/// An orientation `(w, x, y, z)` from a state dict (renormalised: ManiSkill's are float32).
 fn quat_of(q: &[f64]) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
+    Pose {
+        pos: [0.0; 3],
+        quat: [q[0], q[1], q[2], q[3]],
+    }
+    .rotation_renormalized()
 }
 
 /// Angle between two (unnormalised) orientations, in radians.
@@ -387,13 +389,12 @@ impl Env {
         match a.body {
             ActorBody::Free { body, qadr, .. } => {
                 s[..7].copy_from_slice(&d.qpos()[qadr..qadr + 7]);
-                let v = d.body_velocity(body); // [angular, linear at the COM], world
+                let v = d.body_velocity(body.index()); // [angular, linear at the COM], world
                 s[7..10].copy_from_slice(&v[3..6]);
                 s[10..13].copy_from_slice(&v[0..3]);
             }
             ActorBody::Mocap { mocap, .. } => {
-                s[..3].copy_from_slice(&d.mocap_pos()[3 * mocap..3 * mocap + 3]);
-                s[3..7].copy_from_slice(&d.mocap_quat()[4 * mocap..4 * mocap + 4]);
+                s[..Pose::LEN].copy_from_slice(&d.mocap_pose(mocap).to_array());
             }
             ActorBody::Fixed(p) => s[..7].copy_from_slice(&p),
         }
@@ -424,10 +425,9 @@ impl Env {
         for a in &self.actors {
             sd.actors.insert(a.name.to_string(), self.actor_state(a));
         }
-        let root = self.sim.robot.root_body;
+        let root = self.sim.data.body_pose(self.sim.robot.root_body);
         let mut art = Vec::with_capacity(13 + 2 * self.sim.qpos.len());
-        art.extend_from_slice(&self.sim.data.xpos()[3 * root..3 * root + 3]);
-        art.extend_from_slice(&self.sim.data.xquat()[4 * root..4 * root + 4]);
+        art.extend_from_slice(&root.to_array());
         art.extend_from_slice(&[0.0; 6]);
         let n = self.sim.qpos.len();
         let mut q = vec![0.0; n];
@@ -517,6 +517,37 @@ impl Env {
     /// supplies the targets of the action that led to the state.
     pub fn set_state_dict(&mut self, sd: &StateDict) -> Result<(), EnvError> {
         // Validate everything before touching the simulation.
+        self.check_state_dict_actors(sd)?;
+        let art = self.check_state_dict_robot(sd)?;
+        let n = self.sim.qpos.len();
+        // Write the state.
+        self.write_state_dict_actors(sd);
+        self.sim
+            .robot
+            .joints
+            .set_qpos(&mut self.sim.data, &art[13..13 + n]);
+        let qv = self.sim.data.qvel_mut();
+        for (&a, &v) in self.sim.robot.joints.dof_adr.iter().zip(&art[13 + n..]) {
+            qv[a] = v;
+        }
+        self.sim.controller.set_targets_from_state(
+            &self.sim.robot.joints,
+            &self.sim.data,
+            &mut self.sim.drives,
+            &sd.controller,
+        );
+        if let Some(d) = &sd.drive {
+            for k in 0..n {
+                self.sim.drives.set_joint_target(k, d.qpos[k], d.qvel[k]);
+            }
+        }
+        self.sim.data.qacc_warmstart_mut().fill(0.0);
+        self.refresh_after_state_change();
+        Ok(())
+    }
+
+    /// The errors of [`Env::set_state_dict`] about the dict's actors.
+    fn check_state_dict_actors(&self, sd: &StateDict) -> Result<(), EnvError> {
         for name in sd.actors.keys() {
             if !self.actors.iter().any(|a| a.name == name) {
                 return Err(EnvError::BadState(format!(
@@ -543,6 +574,12 @@ impl Env {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The errors of [`Env::set_state_dict`] about the robot (articulation, controller and
+    /// drive entries); returns the articulation's values.
+    fn check_state_dict_robot<'a>(&self, sd: &'a StateDict) -> Result<&'a [f64], EnvError> {
         let uid = self.sim.spec.uid();
         if let Some(other) = sd.articulations.keys().find(|k| k.as_str() != uid) {
             return Err(EnvError::BadState(format!(
@@ -563,12 +600,11 @@ impl Env {
             )));
         }
         check_values(&format!("articulations.{uid}"), art, MAX_STATE_VALUE)?;
-        let root = self.sim.robot.root_body;
-        let rp = &self.sim.data.xpos()[3 * root..3 * root + 3];
-        let rq = &self.sim.data.xquat()[4 * root..4 * root + 4];
-        let dp = Vector3::from_column_slice(&art[..3]) - Vector3::from_column_slice(rp);
+        let root = self.sim.data.body_pose(self.sim.robot.root_body);
+        let (rp, rq) = (root.pos, root.quat);
+        let dp = Vector3::from_column_slice(&art[..3]) - Vector3::from(rp);
         if dp.norm() > ROOT_POSE_TOLERANCE
-            || rotation_distance(&art[3..7], rq) > ROOT_POSE_TOLERANCE
+            || rotation_distance(&art[3..7], &rq) > ROOT_POSE_TOLERANCE
             || art[7..13].iter().any(|v| *v != 0.0)
         {
             return Err(EnvError::BadState(format!(
@@ -626,8 +662,11 @@ impl Env {
                 check_values(key, v, MAX_TARGET_VALUE)?;
             }
         }
+        Ok(art.as_slice())
+    }
 
-        // Write the state.
+    /// Writes the actors' poses and velocities of a checked state dict.
+    fn write_state_dict_actors(&mut self, sd: &StateDict) {
         for a in &self.actors {
             let s = &sd.actors[a.name];
             match a.body {
@@ -638,8 +677,8 @@ impl Env {
                     // linear velocity and the world angular velocity.
                     let r = quat_of(&s[3..7]).to_rotation_matrix();
                     let w = Vector3::from_column_slice(&s[10..13]);
-                    let ipos = &self.sim.model.body_ipos()[3 * body..3 * body + 3];
-                    let com_offset: Vector3<f64> = r * Vector3::from_column_slice(ipos);
+                    let ipos = self.sim.model.body_com_offset(body);
+                    let com_offset: Vector3<f64> = r * Vector3::from(ipos);
                     let v_origin = Vector3::from_column_slice(&s[7..10]) - w.cross(&com_offset);
                     let w_local: Vector3<f64> = Matrix3::from(r).transpose() * w;
                     let qv = &mut self.sim.data.qvel_mut()[dadr..dadr + 6];
@@ -647,36 +686,12 @@ impl Env {
                     qv[3..].copy_from_slice(w_local.as_slice());
                 }
                 ActorBody::Mocap { mocap, .. } => {
-                    self.sim.data.mocap_pos_mut()[3 * mocap..3 * mocap + 3]
-                        .copy_from_slice(&s[..3]);
-                    self.sim.data.mocap_quat_mut()[4 * mocap..4 * mocap + 4]
-                        .copy_from_slice(&s[3..7]);
+                    let pose = Pose::from_slice(s).expect("checked: 13 values per actor");
+                    self.sim.data.set_mocap_pose(mocap, &pose);
                 }
                 ActorBody::Fixed(_) => {}
             }
         }
-        self.sim
-            .robot
-            .joints
-            .set_qpos(&mut self.sim.data, &art[13..13 + n]);
-        let qv = self.sim.data.qvel_mut();
-        for (&a, &v) in self.sim.robot.joints.dof_adr.iter().zip(&art[13 + n..]) {
-            qv[a] = v;
-        }
-        self.sim.controller.set_targets_from_state(
-            &self.sim.robot.joints,
-            &self.sim.data,
-            &mut self.sim.drives,
-            &sd.controller,
-        );
-        if let Some(d) = &sd.drive {
-            for k in 0..n {
-                self.sim.drives.set_joint_target(k, d.qpos[k], d.qvel[k]);
-            }
-        }
-        self.sim.data.qacc_warmstart_mut().fill(0.0);
-        self.refresh_after_state_change();
-        Ok(())
     }
 
     /// Recomputes everything derived from the simulation state (forward dynamics, contacts,

@@ -50,6 +50,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::{JoinHandle, Thread};
 
 use super::config::Textures;
+use super::memory;
 use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, PointCloud};
 use crate::mujoco::Warnings;
 
@@ -58,12 +59,13 @@ pub use rollout::{RolloutBuffers, VecPolicy};
 
 /// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
 ///
-/// Every env owns its MuJoCo model and data: measured 3.25 MB and 18 ms to build per
-/// PickCube-v1/panda env (1 MB for fetch), so 16384 envs already need about 53 GB and five
-/// minutes to construct, and 10⁶ would need 3.3 TB. 16384 is 4× the largest batch
-/// ManiSkill's GPU simulation is usually run with (4096). A larger request is far more likely a mistake (e.g. `2**62`) than a workload, and
-/// is refused up front with [`EnvError::TooManyEnvs`] instead of attempting a multi-terabyte
-/// allocation.
+/// Every env owns its MuJoCo model and data: measured 2.9 MB resident per PickCube-v1/panda
+/// env (about 20 MB when it renders; docs/python.md, "How many envs"), so 16384 envs need
+/// about 48 GB, and 10⁶ would need 3 TB. 16384 is 4× the largest batch ManiSkill's GPU
+/// simulation is usually run with (4096). A larger request is far more likely a mistake (e.g.
+/// `2**62`) than a workload, and is refused up front with [`EnvError::TooManyEnvs`]; a
+/// smaller one that would not fit in the memory available is refused with
+/// [`EnvError::EnvsExceedMemory`] before the envs are made.
 pub const MAX_NUM_ENVS: usize = 16_384;
 
 const CMD_STEP: u64 = 0;
@@ -110,7 +112,61 @@ struct ImageLayout {
     far: f32,
 }
 
+impl Worker {
+    /// One worker per range of `envs`, in order; `dims` = (obs_dim, act_dim, info keys).
+    fn split(
+        mut envs: Vec<Env>,
+        ranges: &[Range<usize>],
+        dims: (usize, usize, usize),
+    ) -> Vec<Worker> {
+        let (obs_dim, act_dim, nkeys) = dims;
+        let mut workers: Vec<Worker> = Vec::with_capacity(ranges.len());
+        for r in ranges.iter().rev() {
+            let part: Vec<Env> = envs.drain(r.clone()).collect();
+            let n = part.len();
+            let space = part[0].action_space();
+            let (low, high) = (space.low.clone(), space.high.clone());
+            workers.push(Worker {
+                needs_reset: vec![false; n],
+                envs: part,
+                first: r.start,
+                obs_dim,
+                act_dim,
+                nkeys,
+                action: vec![0.0; act_dim],
+                low,
+                high,
+                policy_obs: vec![0.0; n * obs_dim],
+                policy_actions: vec![0.0; n * act_dim],
+                policy_scratch: Vec::new(),
+            });
+        }
+        workers.reverse();
+        workers
+    }
+}
+
+/// Even split of `num_envs` over `threads`: the first `num_envs % threads` shares get one
+/// extra env.
+fn shares(num_envs: usize, threads: usize) -> Vec<Range<usize>> {
+    (0..threads)
+        .map(|t| {
+            let (q, r) = (num_envs / threads, num_envs % threads);
+            let start = t * q + t.min(r);
+            start..start + q + usize::from(t < r)
+        })
+        .collect()
+}
+
 impl ImageLayout {
+    /// Bytes one env takes in a VecEnv's buffers: `values` f32s (observation and action)
+    /// and its images, each held twice (the shared cells and the unpacked copy).
+    fn buffer_bytes(&self, values: usize) -> u64 {
+        let cells = values + self.rgb_cells + self.depth_len + self.seg_cells + self.xyzw_len;
+        // Depth also as millimetres, segmentation ids unpacked to one i16 per pixel.
+        (8 * cells + 2 * self.depth_len + 2 * self.px) as u64
+    }
+
     /// The layout of `env`'s sensor images (empty unless its obs mode renders).
     fn of(env: &Env) -> ImageLayout {
         let mut l = ImageLayout::default();
@@ -400,6 +456,8 @@ pub struct VecEnv {
     obs_dim: usize,
     act_dim: usize,
     keys: &'static [&'static str],
+    /// Whether each of `keys` is a flag ([`Env::info_is_flag`]).
+    key_is_flag: Vec<bool>,
     shared: Arc<Shared>,
     /// The envs stepped by the calling thread.
     local: Worker,
@@ -429,16 +487,71 @@ pub struct VecEnv {
     xyzw: Vec<f32>,
 }
 
+/// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
+/// `sh` (spinning, then parked), runs the epoch's command on its envs and counts itself done,
+/// until the command is [`CMD_QUIT`].
+fn spawn_worker(k: usize, mut w: Worker, sh: Arc<Shared>) -> Result<JoinHandle<()>, EnvError> {
+    std::thread::Builder::new()
+        .name(format!("mjskill-vecenv-{k}"))
+        .spawn(move || {
+            let mut seen = 0u64;
+            loop {
+                let mut spins = 0u32;
+                let epoch = loop {
+                    let e = sh.epoch.load(Ordering::Acquire);
+                    if e != seen {
+                        break e;
+                    }
+                    if spins < SPINS {
+                        spins += 1;
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::park();
+                    }
+                };
+                seen = epoch;
+                let command = sh.command.load(Ordering::Relaxed);
+                if command == CMD_QUIT {
+                    break;
+                }
+                // A panic in an env (a bug, or a GL driver failing mid-run) must not
+                // leave the caller waiting for `done` forever: it is caught here and
+                // re-raised on the caller's thread, as a single env's panic would be.
+                if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command))) {
+                    if let Ok(mut slot) = sh.panic_payload.lock() {
+                        slot.get_or_insert(payload);
+                    }
+                    sh.panicked.store(true, Ordering::Release);
+                }
+                sh.done.fetch_add(1, Ordering::Release);
+            }
+        })
+        .map_err(|e| EnvError::WorkerThread(e.to_string()))
+}
+
 impl VecEnv {
     /// Builds `num_envs` envs of `env_id` with `config`, spread over `threads` threads (the
     /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
     /// [`make`], every env starts reset (env i with seed 2022 + i). `num_envs` must be in
-    /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]).
+    /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]), and
+    /// `num_envs` envs like the first must fit in the memory available (`MemAvailable` of
+    /// `/proc/meminfo`; [`EnvError::EnvsExceedMemory`], checked before the others are made).
     pub fn new(
         env_id: &str,
         config: EnvConfig,
         num_envs: usize,
         threads: usize,
+    ) -> Result<VecEnv, EnvError> {
+        Self::new_within(env_id, config, num_envs, threads, memory::available_bytes())
+    }
+
+    /// [`VecEnv::new`] given the memory available (bytes; None: unknown, not checked).
+    fn new_within(
+        env_id: &str,
+        config: EnvConfig,
+        num_envs: usize,
+        threads: usize,
+        available: Option<u64>,
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
             return Err(EnvError::NoEnvs);
@@ -447,18 +560,25 @@ impl VecEnv {
             return Err(EnvError::TooManyEnvs(num_envs));
         }
         let threads = threads.clamp(1, num_envs);
+        let first = make(env_id, config.clone())?;
+        let obs_dim = first.obs().len();
+        let act_dim = first.action_space().shape[0];
+        let images = ImageLayout::of(&first);
+        // The first env's size (with its share of the buffers below) times num_envs must fit
+        // before the others are made.
+        let per_env = memory::env_bytes(&first, images.buffer_bytes(obs_dim + act_dim));
+        memory::check_fits(num_envs, per_env, available)?;
         let mut envs = Vec::with_capacity(num_envs);
-        for _ in 0..num_envs {
+        envs.push(first);
+        for _ in 1..num_envs {
             envs.push(make(env_id, config.clone())?);
         }
         let first = &envs[0];
-        let obs_dim = first.obs().len();
-        let act_dim = first.action_space().shape[0];
         let keys = first.info().keys;
         let nkeys = keys.len();
+        let key_is_flag = keys.iter().map(|k| first.info_is_flag(k)).collect();
         let single_action_space = first.action_space().clone();
         let single_observation_space = first.observation_space().clone();
-        let images = ImageLayout::of(first);
         let sensor_names: Vec<&'static str> = images.cams.iter().map(|c| c.name).collect();
         let (rgb_cells, depth_len) = (images.rgb_cells, images.depth_len);
         let (seg_cells, xyzw_len, px) = (images.seg_cells, images.xyzw_len, images.px);
@@ -490,77 +610,14 @@ impl VecEnv {
             panicked: AtomicBool::new(false),
             panic_payload: Mutex::new(None),
         });
-        // Even split: the first `num_envs % threads` shares get one extra env.
-        let ranges: Vec<Range<usize>> = (0..threads)
-            .map(|t| {
-                let (q, r) = (num_envs / threads, num_envs % threads);
-                let start = t * q + t.min(r);
-                start..start + q + usize::from(t < r)
-            })
-            .collect();
-        let mut workers: Vec<Worker> = Vec::with_capacity(threads);
-        for r in ranges.iter().rev() {
-            let part: Vec<Env> = envs.drain(r.clone()).collect();
-            let n = part.len();
-            workers.push(Worker {
-                needs_reset: vec![false; n],
-                envs: part,
-                first: r.start,
-                obs_dim,
-                act_dim,
-                nkeys,
-                action: vec![0.0; act_dim],
-                low: single_action_space.low.clone(),
-                high: single_action_space.high.clone(),
-                policy_obs: vec![0.0; n * obs_dim],
-                policy_actions: vec![0.0; n * act_dim],
-                policy_scratch: Vec::new(),
-            });
-        }
-        workers.reverse();
-        let mut workers = workers.into_iter();
+        let ranges = shares(num_envs, threads);
+        let dims = (obs_dim, act_dim, nkeys);
+        let mut workers = Worker::split(envs, &ranges, dims).into_iter();
         let local = workers.next().expect("at least one share");
         let mut handles = Vec::new();
         let mut thread_handles = Vec::new();
-        for (k, mut w) in workers.enumerate() {
-            let sh = shared.clone();
-            let h = std::thread::Builder::new()
-                .name(format!("mjskill-vecenv-{}", k + 1))
-                .spawn(move || {
-                    let mut seen = 0u64;
-                    loop {
-                        let mut spins = 0u32;
-                        let epoch = loop {
-                            let e = sh.epoch.load(Ordering::Acquire);
-                            if e != seen {
-                                break e;
-                            }
-                            if spins < SPINS {
-                                spins += 1;
-                                std::hint::spin_loop();
-                            } else {
-                                std::thread::park();
-                            }
-                        };
-                        seen = epoch;
-                        let command = sh.command.load(Ordering::Relaxed);
-                        if command == CMD_QUIT {
-                            break;
-                        }
-                        // A panic in an env (a bug, or a GL driver failing mid-run) must not
-                        // leave the caller waiting for `done` forever: it is caught here and
-                        // re-raised on the caller's thread, as a single env's panic would be.
-                        if let Err(payload) = catch_unwind(AssertUnwindSafe(|| w.run(&sh, command)))
-                        {
-                            if let Ok(mut slot) = sh.panic_payload.lock() {
-                                slot.get_or_insert(payload);
-                            }
-                            sh.panicked.store(true, Ordering::Release);
-                        }
-                        sh.done.fetch_add(1, Ordering::Release);
-                    }
-                })
-                .map_err(|e| EnvError::WorkerThread(e.to_string()))?;
+        for (k, w) in workers.enumerate() {
+            let h = spawn_worker(k + 1, w, shared.clone())?;
             thread_handles.push(h.thread().clone());
             handles.push(h);
         }
@@ -569,6 +626,7 @@ impl VecEnv {
             obs_dim,
             act_dim,
             keys,
+            key_is_flag,
             shared,
             local,
             threads: thread_handles,
@@ -742,7 +800,12 @@ impl VecEnv {
             });
         }
         if let Some((index, &value)) = actions.iter().enumerate().find(|(_, a)| !a.is_finite()) {
-            return Err(EnvError::ActionNotFinite { index, value });
+            return Err(EnvError::VecActionNotFinite {
+                index,
+                env: index / self.act_dim,
+                component: index % self.act_dim,
+                value,
+            });
         }
         for (cell, a) in self.shared.actions.iter().zip(actions) {
             cell.store(a.to_bits(), Ordering::Relaxed);
@@ -801,6 +864,13 @@ impl VecEnv {
     /// Task info keys (columns of [`VecEnv::info`]).
     pub fn info_keys(&self) -> &'static [&'static str] {
         self.keys
+    }
+    /// Whether info key `key` is a boolean flag (0 or 1), as [`Env::info_is_flag`].
+    pub fn info_is_flag(&self, key: &str) -> bool {
+        self.keys
+            .iter()
+            .position(|k| *k == key)
+            .is_some_and(|i| self.key_is_flag[i])
     }
     /// Task info values, `[N × keys]` row-major (booleans as 0/1).
     pub fn info(&self) -> &[f64] {
@@ -886,6 +956,42 @@ mod tests {
             Some("test panic in env 1")
         );
         drop(v); // the workers survived the panic and join
+    }
+
+    #[test]
+    fn envs_that_would_not_fit_in_memory_are_refused_before_they_are_made() {
+        // 16384 envs against 64 MB: refused after the first env is made (making them all
+        // would take minutes and about 48 GB).
+        let cfg = EnvConfig::default();
+        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, Some(64 << 20))
+            .unwrap_err();
+        let EnvError::EnvsExceedMemory {
+            num_envs,
+            per_env_bytes,
+            available_bytes,
+        } = e
+        else {
+            panic!("{e}");
+        };
+        assert_eq!((num_envs, available_bytes), (MAX_NUM_ENVS, 64 << 20));
+        // The estimate covers the measured 2.9 MB per PickCube-v1 env (docs/python.md).
+        assert!(
+            (3 << 20..5 << 20).contains(&per_env_bytes),
+            "{per_env_bytes}"
+        );
+        let msg = e.to_string();
+        assert!(
+            msg.contains("num_envs 16384") && msg.contains("64 MB of memory available"),
+            "{msg}"
+        );
+        // Rendering envs cost more: 100 of them do not fit in 1 GB, as 100 state envs do.
+        let rgb = EnvConfig {
+            obs_mode: crate::env::ObsMode::Rgb,
+            ..cfg.clone()
+        };
+        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, Some(1 << 30)).is_err());
+        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, Some(1 << 30)).unwrap();
+        assert_eq!(v.num_envs(), 2);
     }
 
     #[test]

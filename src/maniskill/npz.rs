@@ -4,20 +4,15 @@
 //! Supported `.npy` contents: little-endian `u1`, `i2`, `i4`, `i8`, `f4`, `f8` arrays in C
 //! order, and 0-d unicode strings (`<U…`, UTF-32). Anything else is an error naming the dtype.
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::Path;
 
 /// Why an archive could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum NpzError {
-    /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The cause.
-        source: std::io::Error,
-    },
+    /// The file could not be read, is not a regular file, or it or its members expand beyond
+    /// the size limit ([`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// Not a zip archive, or one this reader does not handle.
     #[error("{path}: {msg}")]
     Zip {
@@ -94,26 +89,32 @@ fn u32_at(b: &[u8], i: usize) -> Option<usize> {
     Some(u32::from_le_bytes(b.get(i..i + 4)?.try_into().ok()?) as usize)
 }
 
-/// Reads every array of an `.npz` file.
+/// Reads every array of an `.npz` file (a regular file; it and its members decompressed, all
+/// together, at most [`crate::files::max_bytes`]).
 pub fn read_npz(path: &Path) -> Result<BTreeMap<String, NpyArray>, NpzError> {
+    read_npz_limited(path, crate::files::max_bytes())
+}
+
+/// [`read_npz`] with the limit `limit` on the file and on its decompressed members together.
+pub fn read_npz_limited(path: &Path, limit: u64) -> Result<BTreeMap<String, NpyArray>, NpzError> {
     let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| NpzError::Io {
-        path: p.clone(),
-        source,
-    })?;
-    parse_npz(&bytes).map_err(|e| match e {
+    let bytes = crate::files::read_limited(path, limit)?;
+    parse_npz(&bytes, path, limit).map_err(|e| match e {
         ParseError::Zip(msg) => NpzError::Zip { path: p, msg },
         ParseError::Npy(name, msg) => NpzError::Npy { path: p, name, msg },
+        ParseError::File(e) => NpzError::File(e),
     })
 }
 
 enum ParseError {
     Zip(String),
     Npy(String, String),
+    File(crate::files::FileError),
 }
 
-/// Parses an `.npz` archive held in memory.
-fn parse_npz(b: &[u8]) -> Result<BTreeMap<String, NpyArray>, ParseError> {
+/// Parses an `.npz` archive held in memory (read from `path`); its members, decompressed,
+/// may hold `limit` bytes together.
+fn parse_npz(b: &[u8], path: &Path, limit: u64) -> Result<BTreeMap<String, NpyArray>, ParseError> {
     let zip = |m: &str| ParseError::Zip(m.to_string());
     // End of central directory: the last "PK\x05\x06" record.
     let eocd = (0..b.len().saturating_sub(21))
@@ -123,6 +124,8 @@ fn parse_npz(b: &[u8]) -> Result<BTreeMap<String, NpyArray>, ParseError> {
     let entries = u16_at(b, eocd + 10).ok_or_else(|| zip("truncated directory"))?;
     let mut at = u32_at(b, eocd + 16).ok_or_else(|| zip("truncated directory"))?;
     let mut out = BTreeMap::new();
+    // What the members may still expand to.
+    let mut budget = limit;
     for _ in 0..entries {
         if !b.get(at..).is_some_and(|r| r.starts_with(b"PK\x01\x02")) {
             return Err(zip("bad central directory entry"));
@@ -148,6 +151,20 @@ fn parse_npz(b: &[u8]) -> Result<BTreeMap<String, NpyArray>, ParseError> {
         if csize == u32::MAX as usize || usize_ == u32::MAX as usize {
             return Err(zip("zip64 archives are not supported"));
         }
+        let too_large = || {
+            ParseError::File(crate::files::FileError::TooLarge {
+                path: path.to_path_buf(),
+                what: format!(
+                    "member {} (with the members before it)",
+                    crate::files::short(&name)
+                ),
+                limit,
+            })
+        };
+        // The declared size is checked before anything is decompressed.
+        if usize_ as u64 > budget {
+            return Err(too_large());
+        }
         let lname = u16_at(b, local + 26).ok_or_else(|| zip("truncated local header"))?;
         let lextra = u16_at(b, local + 28).ok_or_else(|| zip("truncated local header"))?;
         let start = local + 30 + lname + lextra;
@@ -156,21 +173,30 @@ fn parse_npz(b: &[u8]) -> Result<BTreeMap<String, NpyArray>, ParseError> {
             .ok_or_else(|| zip("truncated member data"))?;
         let data = match method {
             0 => raw.to_vec(),
-            8 => {
-                let mut v = Vec::with_capacity(usize_);
-                flate2::read::DeflateDecoder::new(raw)
-                    .read_to_end(&mut v)
-                    .map_err(|e| ParseError::Zip(format!("{name}: bad deflate data: {e}")))?;
-                v
-            }
+            8 => crate::files::read_bounded(
+                flate2::read::DeflateDecoder::new(raw),
+                path,
+                &format!("member {}", crate::files::short(&name)),
+                budget,
+            )
+            .map_err(|e| match e {
+                crate::files::FileError::Io { reason, .. } => {
+                    ParseError::Zip(format!("{name}: bad deflate data: {reason}"))
+                }
+                _ => too_large(),
+            })?,
             m => {
                 return Err(ParseError::Zip(format!(
                     "{name}: compression method {m} is not supported (stored or deflate only)"
                 )))
             }
         };
+        // A member that expands beyond its declared size still counts in full.
+        budget = budget
+            .checked_sub(data.len() as u64)
+            .ok_or_else(too_large)?;
         let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        let arr = parse_npy(&data).map_err(|m| ParseError::Npy(key.clone(), m))?;
+        let arr = parse_npy(&data).map_err(|e| ParseError::Npy(key.clone(), e.to_string()))?;
         out.insert(key, arr);
     }
     Ok(out)
@@ -196,37 +222,93 @@ fn header_value<'a>(h: &'a str, key: &str) -> Option<&'a str> {
     Some(rest.trim())
 }
 
+/// Why one `.npy` array does not parse (the message of [`NpzError::Npy`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum NpyError {
+    /// No `.npy` magic.
+    #[error("not a .npy array")]
+    NotNpy,
+    /// The header is cut short.
+    #[error("truncated header")]
+    TruncatedHeader,
+    /// A format version other than 1 to 3.
+    #[error(".npy version {0} is not supported")]
+    Version(u8),
+    /// The header is not UTF-8.
+    #[error("header is not text")]
+    HeaderNotText,
+    /// A header key is missing.
+    #[error("no {0}")]
+    Missing(&'static str),
+    /// A Fortran-order array.
+    #[error("Fortran-order arrays are not supported")]
+    FortranOrder,
+    /// The shape does not parse.
+    #[error("bad shape {0}")]
+    BadShape(String),
+    /// The shape's product overflows.
+    #[error("shape {0} has more values than memory holds")]
+    TooManyValues(String),
+    /// The data is shorter than the shape says.
+    #[error("{n} values of {size} bytes do not fit the data")]
+    ShortData {
+        /// Values.
+        n: usize,
+        /// Bytes per value.
+        size: usize,
+    },
+    /// A unicode dtype whose length does not parse.
+    #[error("bad dtype {0}")]
+    BadDtype(String),
+    /// A string longer than the data.
+    #[error("{0} characters do not fit the data")]
+    ShortString(usize),
+    /// A dtype this reader does not handle.
+    #[error("dtype {0} is not supported (u1, i2, i4, i8, f4, f8, 0-d unicode)")]
+    UnsupportedDtype(String),
+}
+
 /// Parses one `.npy` file.
-fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
+fn parse_npy(b: &[u8]) -> Result<NpyArray, NpyError> {
     if !b.starts_with(b"\x93NUMPY") || b.len() < 10 {
-        return Err("not a .npy array".into());
+        return Err(NpyError::NotNpy);
     }
     let (hlen, hstart) = match b[6] {
-        1 => (u16_at(b, 8).ok_or("truncated header")?, 10),
-        2 | 3 => (u32_at(b, 8).ok_or("truncated header")?, 12),
-        v => return Err(format!(".npy version {v} is not supported")),
+        1 => (u16_at(b, 8).ok_or(NpyError::TruncatedHeader)?, 10),
+        2 | 3 => (u32_at(b, 8).ok_or(NpyError::TruncatedHeader)?, 12),
+        v => return Err(NpyError::Version(v)),
     };
-    let h = std::str::from_utf8(b.get(hstart..hstart + hlen).ok_or("truncated header")?)
-        .map_err(|_| "header is not text")?;
+    let h = std::str::from_utf8(
+        b.get(hstart..hstart + hlen)
+            .ok_or(NpyError::TruncatedHeader)?,
+    )
+    .map_err(|_| NpyError::HeaderNotText)?;
     let body = &b[hstart + hlen..];
     let descr = header_value(h, "descr")
-        .ok_or("no descr")?
+        .ok_or(NpyError::Missing("descr"))?
         .trim_matches(|c| c == '\'' || c == '"');
     if header_value(h, "fortran_order") == Some("True") {
-        return Err("Fortran-order arrays are not supported".into());
+        return Err(NpyError::FortranOrder);
     }
-    let shape_s = header_value(h, "shape").ok_or("no shape")?;
+    let shape_s = header_value(h, "shape").ok_or(NpyError::Missing("shape"))?;
     let shape: Vec<usize> = shape_s
         .trim_matches(|c| c == '(' || c == ')')
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse().map_err(|_| format!("bad shape {shape_s}")))
-        .collect::<Result<_, String>>()?;
-    let n: usize = shape.iter().product();
-    let take = |size: usize| -> Result<&[u8], String> {
-        body.get(..n * size)
-            .ok_or_else(|| format!("{n} values of {size} bytes do not fit the data"))
+        .map(|s| {
+            s.parse()
+                .map_err(|_| NpyError::BadShape(shape_s.to_string()))
+        })
+        .collect::<Result<_, NpyError>>()?;
+    let n = shape
+        .iter()
+        .try_fold(1usize, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| NpyError::TooManyValues(shape_s.to_string()))?;
+    let take = |size: usize| -> Result<&[u8], NpyError> {
+        n.checked_mul(size)
+            .and_then(|len| body.get(..len))
+            .ok_or(NpyError::ShortData { n, size })
     };
     let data = match descr {
         "|u1" | "<u1" => NpyData::U8(take(1)?.to_vec()),
@@ -261,10 +343,13 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
                 .collect(),
         ),
         d if d.starts_with("<U") && shape.is_empty() => {
-            let chars: usize = d[2..].parse().map_err(|_| format!("bad dtype {d}"))?;
-            let raw = body
-                .get(..4 * chars)
-                .ok_or_else(|| format!("{chars} characters do not fit the data"))?;
+            let chars: usize = d[2..]
+                .parse()
+                .map_err(|_| NpyError::BadDtype(d.to_string()))?;
+            let raw = chars
+                .checked_mul(4)
+                .and_then(|len| body.get(..len))
+                .ok_or(NpyError::ShortString(chars))?;
             let s: String = raw
                 .chunks_exact(4)
                 .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
@@ -273,11 +358,7 @@ fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
                 .collect();
             NpyData::Str(s)
         }
-        d => {
-            return Err(format!(
-                "dtype {d} is not supported (u1, i2, i4, i8, f4, f8, 0-d unicode)"
-            ))
-        }
+        d => return Err(NpyError::UnsupportedDtype(d.to_string())),
     };
     Ok(NpyArray { shape, data })
 }
@@ -288,26 +369,39 @@ mod tests {
 
     /// A stored (uncompressed) zip of the given members.
     fn zip_stored(members: &[(&str, Vec<u8>)]) -> Vec<u8> {
+        zip_of(members, false)
+    }
+
+    /// A zip of the given members, stored or deflated.
+    fn zip_of(members: &[(&str, Vec<u8>)], deflate: bool) -> Vec<u8> {
         let mut out = Vec::new();
         let mut central = Vec::new();
-        for (name, data) in members {
+        for (name, plain) in members {
+            let data = if deflate {
+                let mut e = flate2::write::DeflateEncoder::new(Vec::new(), Default::default());
+                std::io::Write::write_all(&mut e, plain).unwrap();
+                e.finish().unwrap()
+            } else {
+                plain.clone()
+            };
+            let method = if deflate { 8u8 } else { 0 };
             let off = out.len() as u32;
             let crc = 0u32; // not checked by the reader
             let mut local = b"PK\x03\x04".to_vec();
-            local.extend_from_slice(&[20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            local.extend_from_slice(&[20, 0, 0, 0, method, 0, 0, 0, 0, 0]);
             local.extend_from_slice(&crc.to_le_bytes());
             local.extend_from_slice(&(data.len() as u32).to_le_bytes());
-            local.extend_from_slice(&(data.len() as u32).to_le_bytes());
+            local.extend_from_slice(&(plain.len() as u32).to_le_bytes());
             local.extend_from_slice(&(name.len() as u16).to_le_bytes());
             local.extend_from_slice(&0u16.to_le_bytes());
             local.extend_from_slice(name.as_bytes());
             out.extend_from_slice(&local);
-            out.extend_from_slice(data);
+            out.extend_from_slice(&data);
             let mut c = b"PK\x01\x02".to_vec();
-            c.extend_from_slice(&[20, 0, 20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            c.extend_from_slice(&[20, 0, 20, 0, 0, 0, method, 0, 0, 0, 0, 0]);
             c.extend_from_slice(&crc.to_le_bytes());
             c.extend_from_slice(&(data.len() as u32).to_le_bytes());
-            c.extend_from_slice(&(data.len() as u32).to_le_bytes());
+            c.extend_from_slice(&(plain.len() as u32).to_le_bytes());
             c.extend_from_slice(&(name.len() as u16).to_le_bytes());
             c.extend_from_slice(&[0; 12]);
             c.extend_from_slice(&off.to_le_bytes());
@@ -355,7 +449,9 @@ mod tests {
             ("name.npy", npy("<U3", "()", &s)),
             ("step.npy", npy("<i8", "()", &35i64.to_le_bytes())),
         ]);
-        let m = parse_npz(&z).ok().expect("parses");
+        let m = parse_npz(&z, Path::new("t.npz"), 1 << 20)
+            .ok()
+            .expect("parses");
         assert_eq!(m["seg"].shape, [2, 3, 1]);
         assert_eq!(m["seg"].data, NpyData::I16(vec![-2, 300, 7, 0, 1, 2]));
         assert_eq!(m["name"].as_str(), Some("hé"));
@@ -365,13 +461,57 @@ mod tests {
     #[test]
     fn unsupported_dtypes_are_named() {
         let z = zip_stored(&[("x.npy", npy(">i2", "(1,)", &[0, 1]))]);
-        match parse_npz(&z) {
+        match parse_npz(&z, Path::new("t.npz"), 1 << 20) {
             Err(ParseError::Npy(name, msg)) => {
                 assert_eq!(name, "x");
                 assert!(msg.contains(">i2"), "{msg}");
             }
             _ => panic!("expected an npy error"),
         }
-        assert!(matches!(parse_npz(b"not a zip"), Err(ParseError::Zip(_))));
+        assert!(matches!(
+            parse_npz(b"not a zip", Path::new("t.npz"), 1 << 20),
+            Err(ParseError::Zip(_))
+        ));
+    }
+
+    #[test]
+    fn members_are_bounded_by_the_limit_together() {
+        let big = npy("|u1", "(4000,)", &[7u8; 4000]);
+        let err = |z: &[u8], limit: u64| match parse_npz(z, Path::new("bomb.npz"), limit) {
+            Err(ParseError::File(e)) => e.to_string(),
+            Ok(_) => panic!("read beyond the limit {limit}"),
+            Err(_) => panic!("not a size error"),
+        };
+        // A deflated member that expands to 4 kB from a few bytes: fine under the limit,
+        // refused over it (its declared size first, then what it really expands to).
+        let z = zip_of(&[("a.npy", big.clone())], true);
+        assert!(z.len() < 400, "{}", z.len());
+        assert!(parse_npz(&z, Path::new("bomb.npz"), 5000).is_ok());
+        let e = err(&z, 4000);
+        assert!(
+            e.contains("bomb.npz") && e.contains("limit of 4000 bytes"),
+            "{e}"
+        );
+        let mut lying = z.clone();
+        let cd = lying.len() - 22 - 46 - 5; // the central entry's declared size: 1 byte
+        lying[cd + 24..cd + 28].copy_from_slice(&1u32.to_le_bytes());
+        assert!(err(&lying, 4000).contains("member a.npy"));
+        // Three members each under the limit, together over it.
+        let z = zip_of(
+            &[
+                ("a.npy", big.clone()),
+                ("b.npy", big.clone()),
+                ("c.npy", big),
+            ],
+            true,
+        );
+        assert!(parse_npz(&z, Path::new("bomb.npz"), 13_000).is_ok());
+        assert!(err(&z, 10_000).contains("member c.npy"));
+        // A shape whose size overflows is an error, not a panic.
+        let z = zip_stored(&[("x.npy", npy("<f8", "(4294967296, 4294967296)", &[0; 8]))]);
+        assert!(matches!(
+            parse_npz(&z, Path::new("t.npz"), 1 << 20),
+            Err(ParseError::Npy(..))
+        ));
     }
 }

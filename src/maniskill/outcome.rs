@@ -21,7 +21,11 @@ pub const FORMAT: &str = "mjskill-outcomes/1";
 /// Errors of reading an outcome file; each names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum OutcomeError {
-    /// The file could not be read or decompressed.
+    /// The file could not be read or decompressed (also: not a regular file, or beyond the
+    /// size limit, [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
+    /// A directory of outcome files could not be listed.
     #[error("cannot read {path}: {source}")]
     Io {
         /// File.
@@ -58,7 +62,8 @@ pub struct OutcomeEpisode {
     pub final_success: bool,
     /// ManiSkill's boolean info entries after every step: one `0`/`1` per step.
     pub flags: IndexMap<String, String>,
-    /// Final positions of the dynamic actors in ManiSkill (m, world frame).
+    /// Final positions of the dynamic actors in ManiSkill (m, world frame): every one of the
+    /// env's dynamic actors, or none (not recorded; no distance is measured).
     #[serde(default)]
     pub final_objects: IndexMap<String, [f64; 3]>,
     /// The actions, in the file's control mode.
@@ -83,22 +88,22 @@ pub struct OutcomeFile {
 }
 
 impl OutcomeFile {
-    /// Reads an outcome file (gzip-compressed or plain JSON) and checks that every
+    /// Reads an outcome file (gzip-compressed or plain JSON; a regular file, it and its
+    /// decompressed contents at most [`crate::files::max_bytes`]) and checks that every
     /// episode's actions and flags have `steps` entries.
     pub fn open(path: &Path) -> Result<OutcomeFile, OutcomeError> {
         let p = path.display().to_string();
-        let io = |source| OutcomeError::Io {
-            path: p.clone(),
-            source,
-        };
-        let text = super::read_maybe_gzip(path).map_err(io)?;
+        let text = crate::files::read_maybe_gzip(path, crate::files::max_bytes())?;
         let bad = |msg: String| OutcomeError::Format {
             path: p.clone(),
             msg,
         };
         let f: OutcomeFile = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
         if f.format != FORMAT {
-            return Err(bad(format!("format is {:?}", f.format)));
+            return Err(bad(format!(
+                "format is {:?}",
+                crate::files::short(&f.format)
+            )));
         }
         for (k, e) in f.episodes.iter().enumerate() {
             if e.actions.len() != e.steps {
@@ -115,8 +120,11 @@ impl OutcomeFile {
                 .find(|(_, v)| v.len() != e.steps || v.bytes().any(|c| c != b'0' && c != b'1'))
             {
                 return Err(bad(format!(
-                    "episode {k} (seed {}): flags.{key} is not {} characters 0/1 ({:?})",
-                    e.seed, e.steps, v
+                    "episode {k} (seed {}): flags.{} is not {} characters 0/1 ({:?})",
+                    e.seed,
+                    crate::files::short(key),
+                    e.steps,
+                    crate::files::short(v)
                 )));
             }
         }
@@ -155,8 +163,9 @@ pub struct EpisodeOutcome {
     pub mjskill_success: bool,
     /// Steps on which some flag differs.
     pub steps_with_flag_mismatch: usize,
-    /// Largest distance between ManiSkill's and mjskill's final object positions (m).
-    pub final_object_distance_m: f64,
+    /// Largest distance between ManiSkill's and mjskill's final object positions (m); None
+    /// when the file records no final positions for the episode.
+    pub final_object_distance_m: Option<f64>,
 }
 
 /// The agreement of one outcome file (one pair and source).
@@ -184,7 +193,8 @@ pub struct PairAgreement {
     pub steps_all_flags_agree: usize,
     /// Per flag (ManiSkill's keys, in its order).
     pub flags: IndexMap<String, FlagAgreement>,
-    /// Episodes whose final object positions are within 1 cm of ManiSkill's.
+    /// Episodes whose final object positions are within 1 cm of ManiSkill's (of those with
+    /// final positions recorded).
     pub final_objects_within_1cm: usize,
     /// Per episode.
     pub per_episode: Vec<EpisodeOutcome>,
@@ -232,7 +242,8 @@ pub fn measure(
                 .ok_or_else(|| OutcomeError::Format {
                     path: p.clone(),
                     msg: format!(
-                        "flag {key:?} is not one of {}'s info flags ({})",
+                        "flag {:?} is not one of {}'s info flags ({})",
+                        crate::files::short(key),
                         file.env_id,
                         env.info()
                             .keys
@@ -263,6 +274,7 @@ pub fn measure(
         per_episode: Vec::with_capacity(episodes.len()),
     };
     let keys: Vec<String> = out.flags.keys().cloned().collect();
+    let objects = env.dynamic_actor_names();
     for ep in episodes {
         if ep.flags.keys().ne(keys.iter()) {
             return Err(OutcomeError::Format {
@@ -270,6 +282,10 @@ pub fn measure(
                 msg: format!("episode seed {} has other flags than the first", ep.seed),
             });
         }
+        check_objects(ep, &objects, &file.env_id).map_err(|msg| OutcomeError::Format {
+            path: p.clone(),
+            msg,
+        })?;
         env.try_reset(Some(ep.seed)).map_err(env_err)?;
         let columns: Vec<&[u8]> = ep.flags.values().map(|v| v.as_bytes()).collect();
         let mut mismatch_steps = 0;
@@ -291,18 +307,23 @@ pub fn measure(
             mismatch_steps += (!all) as usize;
         }
         let mj_success = env.info().success();
-        let distance = ep
-            .final_objects
-            .iter()
-            .filter_map(|(name, p)| {
-                let q = env.actor_pose(name)?;
-                Some(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt())
-            })
-            .fold(0.0, f64::max);
+        // Every name is one of the env's objects (checked above).
+        let distance = (!ep.final_objects.is_empty()).then(|| {
+            ep.final_objects
+                .iter()
+                .filter_map(|(name, p)| {
+                    let q = env.actor_pose(name)?;
+                    Some(
+                        ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2))
+                            .sqrt(),
+                    )
+                })
+                .fold(0.0, f64::max)
+        });
         out.maniskill_successes += ep.final_success as usize;
         out.mjskill_successes += mj_success as usize;
         out.same_outcome += (ep.final_success == mj_success) as usize;
-        out.final_objects_within_1cm += (distance <= 0.01) as usize;
+        out.final_objects_within_1cm += distance.is_some_and(|d| d <= 0.01) as usize;
         out.per_episode.push(EpisodeOutcome {
             seed: ep.seed,
             steps: ep.steps,
@@ -313,6 +334,36 @@ pub fn measure(
         });
     }
     Ok(out)
+}
+
+/// Checks that an episode's `final_objects` (if any: a file may record none) name exactly the
+/// env's dynamic objects: an unknown (misspelt) or missing one would otherwise count as no
+/// distance at all.
+fn check_objects(ep: &OutcomeEpisode, objects: &[&str], env_id: &str) -> Result<(), String> {
+    if ep.final_objects.is_empty() {
+        return Ok(());
+    }
+    let valid = objects.join(", ");
+    if let Some(name) = ep
+        .final_objects
+        .keys()
+        .find(|n| !objects.contains(&n.as_str()))
+    {
+        return Err(format!(
+            "episode seed {}: final_objects names {:?}, which is not one of {env_id}'s objects \
+             ({valid})",
+            ep.seed,
+            crate::files::short(name)
+        ));
+    }
+    if let Some(name) = objects.iter().find(|o| !ep.final_objects.contains_key(**o)) {
+        return Err(format!(
+            "episode seed {}: final_objects lacks {name:?}; it holds the final position of \
+             each of {env_id}'s objects ({valid})",
+            ep.seed
+        ));
+    }
+    Ok(())
 }
 
 /// The outcome files of a directory (`*.json.gz` / `*.json` with the [`FORMAT`] layout), in

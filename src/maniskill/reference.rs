@@ -15,14 +15,10 @@ pub const FORMAT: &str = "mjskill-ref-traj/1";
 /// Errors of reading a reference file; each names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum ReferenceError {
-    /// The file could not be read or decompressed.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// File.
-        path: String,
-        /// Cause.
-        source: std::io::Error,
-    },
+    /// The file could not be read or decompressed (also: not a regular file, or beyond the
+    /// size limit, [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The JSON does not have the expected structure.
     #[error("{path} is not a ManiSkill reference trajectory file: {msg}")]
     Format {
@@ -164,14 +160,10 @@ pub struct RefFile {
 }
 
 impl RefFile {
-    /// Reads a reference file (gzip-compressed or plain JSON).
+    /// Reads a reference file (gzip-compressed or plain JSON; the rule of [`crate::files`]).
     pub fn open(path: &Path) -> Result<RefFile, ReferenceError> {
         let p = path.display().to_string();
-        let io = |source| ReferenceError::Io {
-            path: p.clone(),
-            source,
-        };
-        let text = super::read_maybe_gzip(path).map_err(io)?;
+        let text = crate::files::read_maybe_gzip(path, crate::files::max_bytes())?;
         let f: RefFile = serde_json::from_slice(&text).map_err(|e| ReferenceError::Format {
             path: p.clone(),
             msg: e.to_string(),

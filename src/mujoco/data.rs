@@ -243,6 +243,11 @@ impl Data {
         // SAFETY: as step.
         unsafe { sys::mj_kinematics(self.model.ptr, self.ptr) }
     }
+    /// The most of its stack this `mjData` has used since the last reset, in `f64`s
+    /// (`maxuse_stack`).
+    pub fn max_stack_use(&self) -> usize {
+        self.raw().maxuse_stack as usize
+    }
     /// Memory MuJoCo allocated for this `mjData`: (main buffer bytes, stack bytes).
     pub fn memory_bytes(&self) -> (usize, usize) {
         let d = self.raw();

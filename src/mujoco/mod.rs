@@ -490,6 +490,54 @@ impl Model {
         unsafe { &*self.ptr }
     }
 
+    /// Bytes of the model's own arrays (`mjModel.nbuffer`: meshes and textures included).
+    pub fn memory_bytes(&self) -> usize {
+        self.raw().nbuffer as usize
+    }
+
+    /// Size of the stack every [`Data`] of this model gets, in `f64`s (`mjModel.nstack`).
+    pub fn stack_size(&self) -> usize {
+        self.raw().nstack as usize
+    }
+
+    /// The stack MuJoCo 2.2 can need for this model, in `f64`s: twice the sum of every
+    /// stack allocation of the functions mjskill calls (`mj_step`, `mj_forward` and its
+    /// stages, Jacobians, `mj_solveM`, `mj_setConst`), counted as if all were live at once.
+    /// The largest are the constraint projection (`4·njmax·nv` with the sparse index arrays),
+    /// the Newton solver (`3·nv²` plus `8·njmax`), `mj_fullM`-style dense matrices (`3·nv²`)
+    /// and the broadphase's body pairs (`nbody²/2`). MuJoCo's compiler instead reserves
+    /// `5·(njmax + neq + nv)²` (4 MB of a 4.7 MB env at `njmax` 300), since no stack use of
+    /// 2.2 is quadratic in `njmax`.
+    pub fn stack_bound(&self) -> usize {
+        let m = self.raw();
+        let n = |x: std::os::raw::c_int| x.max(0) as usize;
+        let (nv, nefc, nbody) = (n(m.nv), n(m.njmax), n(m.nbody));
+        let other = n(m.nq) + n(m.na) + n(m.nu) + n(m.ncam) + n(m.nlight) + n(m.neq);
+        let sum = 4 * nefc * nv
+            + 10 * nefc
+            + 6 * nv * nv
+            + nbody * nbody
+            + 100 * nv
+            + 30 * nbody
+            + 10 * other
+            + 1000;
+        2 * sum
+    }
+
+    /// Lowers the stack every later [`Data`] of this model gets to [`Model::stack_bound`]
+    /// when that is smaller than what the compiler chose (never raises it). Simulation is
+    /// unchanged: the stack only holds temporaries, and a stack too small would abort
+    /// (`mj_stackAlloc`'s "Stack overflow"), which the bound rules out.
+    pub fn shrink_stack(&mut self) {
+        let bound = self.stack_bound();
+        if bound < self.stack_size() {
+            // SAFETY: ptr is valid and exclusively borrowed; nstack is a plain size that
+            // mj_makeData reads when allocating a stack (no Data of this model exists yet that
+            // could depend on it: Data holds an Arc<Model>, and this takes &mut self).
+            unsafe { (*self.ptr).nstack = bound as std::os::raw::c_int };
+        }
+    }
+
     /// Number of generalised coordinates.
     pub fn nq(&self) -> usize {
         self.raw().nq as usize
@@ -595,6 +643,8 @@ impl Model {
 // After the array macros above, which it uses (macros are scoped textually).
 mod data;
 pub use data::{Contact, Data};
+mod ids;
+pub use ids::{ActuatorId, BodyId, CameraId, GeomId, JointId, MocapId, Pose};
 
 #[cfg(test)]
 mod tests {

@@ -37,12 +37,16 @@
 //! records and chunks limited to [`MAX_RECORD`], and tell a file cut short (read up to the
 //! cut) from a damaged one ([`RecordError::Corrupt`], naming the byte offset and chunk).
 
+mod camera;
+mod guard;
 pub mod image;
 mod num;
 mod reader;
 pub mod replay;
 mod scan;
 mod schema;
+use camera::Video;
+#[cfg(feature = "video")]
 pub mod video;
 
 pub use reader::{
@@ -462,9 +466,10 @@ struct Open {
 /// Typical use: [`Recorder::reset`] (or `env.reset` + [`Recorder::begin_episode`]), then
 /// [`Recorder::step`] (or `get_state` + `env.step` + [`Recorder::record_step`]) until the
 /// episode is over, then [`Recorder::end_episode`]; finally [`Recorder::finish`]. Dropping a
-/// recorder without `finish` still writes the summary (errors are then ignored).
+/// recorder without `finish` still writes the summary (errors are then ignored), except while
+/// the thread panics: the file then reads as cut short, as after a kill.
 pub struct Recorder {
-    writer: mcap::Writer<BufWriter<File>>,
+    writer: mcap::Writer<BufWriter<guard::UnwindGuard>>,
     file: File,
     path: PathBuf,
     ch: Channels,
@@ -477,20 +482,6 @@ pub struct Recorder {
     open: Option<Open>,
     info_buf: Vec<(String, f64)>,
     videos: Vec<Video>,
-}
-
-/// A camera's video channel, its encoder (made at the first frame) and reused buffers.
-#[derive(Debug)]
-struct Video {
-    channel: u16,
-    frame_id: String,
-    encoder: Option<video::H264Encoder>,
-    /// The next frame starts an episode: encode it as a keyframe (IDR with SPS/PPS), so
-    /// every episode decodes on its own.
-    keyframe: bool,
-    h264: Vec<u8>,
-    b64: String,
-    frames: u64,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -537,7 +528,9 @@ impl Recorder {
             // Buffer each chunk in memory and write it whole: the file never holds a
             // half-written chunk whose lengths are yet to be patched.
             .disable_seeking(true);
-        let mut writer = opts.create(BufWriter::new(file)).map_err(mcap_err)?;
+        let mut writer = opts
+            .create(BufWriter::new(guard::UnwindGuard(file)))
+            .map_err(mcap_err)?;
         let meta = Meta::of(env);
         writer
             .write_metadata(&Metadata {
@@ -596,112 +589,6 @@ impl Recorder {
     /// errors use from now on; writing continues into the same open file.
     pub fn renamed(&mut self, path: &Path) {
         self.path = path.to_path_buf();
-    }
-
-    /// Adds the `/<frame_id>/video` channel (`foxglove.CompressedVideo`, H.264) for the
-    /// frames of the camera `frame_id` (the human camera's is [`TOPIC_RENDER_VIDEO`]);
-    /// returns the camera's index for [`Recorder::record_camera_frame`]. Idempotent.
-    pub fn enable_video(&mut self, frame_id: &str) -> Result<usize, RecordError> {
-        if let Some(i) = self.videos.iter().position(|v| v.frame_id == frame_id) {
-            return Ok(i);
-        }
-        let text = serde_json::to_vec(&schema::compressed_video()).expect("schema serializes");
-        let topic = camera_topic(frame_id);
-        let channel = (|| -> mcap::McapResult<u16> {
-            let sid = self
-                .writer
-                .add_schema("foxglove.CompressedVideo", "jsonschema", &text)?;
-            self.writer
-                .add_channel(sid, &topic, "json", &BTreeMap::new())
-        })()
-        .map_err(|e| self.mcap_err(e))?;
-        self.videos.push(Video {
-            channel,
-            frame_id: frame_id.to_string(),
-            encoder: None,
-            keyframe: true,
-            h264: Vec::new(),
-            b64: String::new(),
-            frames: 0,
-        });
-        Ok(self.videos.len() - 1)
-    }
-
-    /// Frames written by [`Recorder::record_frame`] / [`Recorder::record_camera_frame`],
-    /// all cameras together.
-    pub fn frames(&self) -> u64 {
-        self.videos.iter().map(|v| v.frames).sum()
-    }
-
-    /// [`Recorder::record_camera_frame`] for the first camera enabled.
-    pub fn record_frame(
-        &mut self,
-        rgb: &[u8],
-        width: usize,
-        height: usize,
-    ) -> Result<(), RecordError> {
-        self.record_camera_frame(0, rgb, width, height)
-    }
-
-    /// Writes an RGB frame (H×W×3 bytes, top row first) of camera `camera` (the index
-    /// [`Recorder::enable_video`] returned) as an H.264 `foxglove.CompressedVideo` message
-    /// stamped with the time of the last message (call it right after
-    /// [`Recorder::begin_episode`] or [`Recorder::record_step`]). The first frame of every
-    /// episode is a keyframe carrying SPS and PPS; the size must not change.
-    pub fn record_camera_frame(
-        &mut self,
-        camera: usize,
-        rgb: &[u8],
-        width: usize,
-        height: usize,
-    ) -> Result<(), RecordError> {
-        use base64::Engine;
-        if camera >= self.videos.len() {
-            return Err(RecordError::Usage {
-                path: self.path.clone(),
-                msg: format!(
-                    "record_camera_frame({camera}) with {} camera(s) enabled (call enable_video)",
-                    self.videos.len()
-                ),
-            });
-        }
-        let mut v = self.videos.swap_remove(camera);
-        let ns = self.last_ns.unwrap_or(0);
-        let r = (|| {
-            let bad = |e: video::VideoError| RecordError::Refused {
-                path: self.path.clone(),
-                what: format!("a frame of camera {}: {e}", v.frame_id),
-            };
-            if v.encoder.is_none() {
-                v.encoder = Some(video::H264Encoder::new(width, height, VIDEO_FPS).map_err(bad)?);
-            }
-            let enc = v.encoder.as_mut().expect("made above");
-            if enc.size() != (width, height) {
-                return Err(bad(video::VideoError::Size {
-                    width,
-                    height,
-                    why: format!("the camera's video is {:?}", enc.size()),
-                }));
-            }
-            enc.encode(rgb, v.keyframe, &mut v.h264).map_err(bad)?;
-            v.b64.clear();
-            base64::engine::general_purpose::STANDARD.encode_string(&v.h264, &mut v.b64);
-            let msg = schema::CompressedImageMsg {
-                timestamp: schema::time(ns),
-                frame_id: &v.frame_id,
-                data: &v.b64,
-                format: "h264",
-            };
-            self.write_json(v.channel, ns, &msg)
-        })();
-        if r.is_ok() {
-            v.frames += 1;
-            v.keyframe = false;
-        }
-        self.videos.push(v);
-        let last = self.videos.len() - 1;
-        self.videos.swap(camera, last);
-        r
     }
 
     /// Adds a JSON channel of the caller's own (a `jsonschema` schema named `schema_name`,

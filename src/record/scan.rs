@@ -186,33 +186,33 @@ fn mcap_detail(e: &McapError) -> String {
 
 /// Checks that every length-prefixed field of a record lies inside it, so that parsing it
 /// allocates no more than the record's own size.
-fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
+fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), BadRecord> {
     struct W<'a>(&'a [u8], usize);
     impl W<'_> {
-        fn skip(&mut self, n: usize) -> Result<(), String> {
+        fn skip(&mut self, n: usize) -> Result<(), BadRecord> {
             match self.1.checked_add(n) {
                 Some(end) if end <= self.0.len() => {
                     self.1 = end;
                     Ok(())
                 }
-                _ => Err(format!(
-                    "a field at byte {} of the record runs past its end ({} bytes)",
-                    self.1,
-                    self.0.len()
-                )),
+                _ => Err(BadRecord::FieldPastEnd {
+                    at: self.1,
+                    len: self.0.len(),
+                }),
             }
         }
-        fn u32(&mut self) -> Result<usize, String> {
+        fn u32(&mut self) -> Result<usize, BadRecord> {
             let at = self.1;
             self.skip(4)?;
-            let b: [u8; 4] = self.0[at..at + 4].try_into().map_err(|_| "short field")?;
+            let mut b = [0u8; 4];
+            b.copy_from_slice(&self.0[at..at + 4]);
             Ok(u32::from_le_bytes(b) as usize)
         }
-        fn string(&mut self) -> Result<(), String> {
+        fn string(&mut self) -> Result<(), BadRecord> {
             let n = self.u32()?;
             self.skip(n)
         }
-        fn string_map(&mut self) -> Result<(), String> {
+        fn string_map(&mut self) -> Result<(), BadRecord> {
             let n = self.u32()?;
             let end = self.1;
             self.skip(n)?;
@@ -255,10 +255,40 @@ fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
     }
 }
 
+/// Why a record does not parse or register (the detail of [`RecordError::Corrupt`]).
+#[derive(Debug, thiserror::Error)]
+enum BadRecord {
+    /// A length-prefixed field runs past the record.
+    #[error("a field at byte {at} of the record runs past its end ({len} bytes)")]
+    FieldPastEnd {
+        /// Where the field starts.
+        at: usize,
+        /// The record's length.
+        len: usize,
+    },
+    /// The mcap crate's parse error, worded by [`mcap_detail`].
+    #[error("{0}")]
+    Mcap(String),
+    /// A schema record with the reserved id 0.
+    #[error("schema with id 0")]
+    SchemaIdZero,
+    /// A channel whose schema was not defined before it.
+    #[error("channel {channel} names unknown schema {schema}")]
+    UnknownSchema {
+        /// The channel id.
+        channel: u16,
+        /// The schema id.
+        schema: u16,
+    },
+    /// Another record where a schema or channel was expected.
+    #[error("not a schema or channel")]
+    NotSchemaOrChannel,
+}
+
 /// Parses a record whose length fields were checked.
-fn parse(opcode: u8, body: &[u8]) -> Result<Record<'_>, String> {
+fn parse(opcode: u8, body: &[u8]) -> Result<Record<'_>, BadRecord> {
     check_lengths(opcode, body)?;
-    mcap::parse_record(opcode, body).map_err(|e| mcap_detail(&e))
+    mcap::parse_record(opcode, body).map_err(|e| BadRecord::Mcap(mcap_detail(&e)))
 }
 
 /// Reads up to `buf.len()` bytes, retrying interrupted reads; 0 means end of file.
@@ -333,7 +363,9 @@ impl Scan<'_> {
                     return Err(bad(self, "a second header record".into()));
                 }
                 self.header = true;
-                let Record::Header(h) = parse(opcode, body).map_err(|d| bad(self, d))? else {
+                let Record::Header(h) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
+                else {
                     return Err(bad(self, "header record does not parse".into()));
                 };
                 on(
@@ -345,7 +377,9 @@ impl Scan<'_> {
                 )
             }
             (Section::Data, op::METADATA) => {
-                let Record::Metadata(m) = parse(opcode, body).map_err(|d| bad(self, d))? else {
+                let Record::Metadata(m) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
+                else {
                     return Err(bad(self, "metadata record does not parse".into()));
                 };
                 on(
@@ -357,12 +391,13 @@ impl Scan<'_> {
                 )
             }
             (Section::Data, op::SCHEMA | op::CHANNEL) => {
-                let rec = parse(opcode, body).map_err(|d| bad(self, d))?;
-                self.register(rec).map_err(|d| bad(self, d))
+                let rec = parse(opcode, body).map_err(|d| bad(self, d.to_string()))?;
+                self.register(rec).map_err(|d| bad(self, d.to_string()))
             }
             (Section::Data, op::CHUNK) => self.chunk(body, on),
             (Section::Data, op::MESSAGE_INDEX) => {
-                let Record::MessageIndex(ix) = parse(opcode, body).map_err(|d| bad(self, d))?
+                let Record::MessageIndex(ix) =
+                    parse(opcode, body).map_err(|d| bad(self, d.to_string()))?
                 else {
                     return Err(bad(self, "message index does not parse".into()));
                 };
@@ -424,11 +459,11 @@ impl Scan<'_> {
         }
     }
 
-    fn register(&mut self, rec: Record<'_>) -> Result<(), String> {
+    fn register(&mut self, rec: Record<'_>) -> Result<(), BadRecord> {
         match rec {
             Record::Schema { header, .. } => {
                 if header.id == 0 {
-                    return Err("schema with id 0".into());
+                    return Err(BadRecord::SchemaIdZero);
                 }
                 self.schemas.insert(header.id, header.name);
                 Ok(())
@@ -440,7 +475,10 @@ impl Scan<'_> {
                         .schemas
                         .get(&id)
                         .cloned()
-                        .ok_or_else(|| format!("channel {} names unknown schema {id}", c.id))?,
+                        .ok_or(BadRecord::UnknownSchema {
+                            channel: c.id,
+                            schema: id,
+                        })?,
                 };
                 self.channels.insert(
                     c.id,
@@ -452,7 +490,7 @@ impl Scan<'_> {
                 );
                 Ok(())
             }
-            _ => Err("not a schema or channel".into()),
+            _ => Err(BadRecord::NotSchemaOrChannel),
         }
     }
 
@@ -467,7 +505,8 @@ impl Scan<'_> {
         let ordinal = self.chunks;
         self.chunks += 1;
         let bad = |s: &Self, d: String| s.corrupt(offset, format!("chunk {ordinal}: {d}"));
-        let Record::Chunk { header, data } = parse(op::CHUNK, body).map_err(|d| bad(self, d))?
+        let Record::Chunk { header, data } =
+            parse(op::CHUNK, body).map_err(|d| bad(self, d.to_string()))?
         else {
             return Err(bad(self, "does not parse".into()));
         };
@@ -566,7 +605,7 @@ impl Scan<'_> {
                             )?;
                         }
                         rec @ (Record::Schema { .. } | Record::Channel(_)) => {
-                            self.register(rec).map_err(|d| bad(self, d))?
+                            self.register(rec).map_err(|d| bad(self, d.to_string()))?
                         }
                         other => {
                             return Err(bad(

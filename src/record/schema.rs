@@ -6,7 +6,7 @@
 
 use serde_json::{json, Value};
 
-use crate::mujoco::{Data, Model, ObjType};
+use crate::mujoco::{BodyId, Data, GeomId, Model, ObjType, Pose};
 
 fn num_or_null() -> Value {
     json!({ "type": ["number", "null"] })
@@ -216,12 +216,10 @@ pub(crate) fn body_frames(model: &Model) -> Vec<String> {
 
 /// `foxglove.FrameTransforms` with one transform per body (but the world body).
 pub(crate) fn frame_transforms_msg(data: &Data, frames: &[String], ns: u64) -> Value {
-    let (xpos, xquat) = (data.xpos(), data.xquat());
     let t = time(ns);
     let transforms: Vec<Value> = (1..frames.len())
         .map(|b| {
-            let p = &xpos[3 * b..3 * b + 3];
-            let q = &xquat[4 * b..4 * b + 4];
+            let Pose { pos: p, quat: q } = data.body_pose(BodyId::from_index(b));
             json!({
                 "timestamp": t,
                 "parent_frame_id": "world",
@@ -250,18 +248,17 @@ const GEOM_MESH: i32 = 7;
 /// [`crate::mjcf::GROUP_COLLISION`]) are skipped.
 pub(crate) fn scene_update_msg(model: &Model, frames: &[String], ns: u64) -> Value {
     let t = time(ns);
-    let (ty, size, rgba) = (model.geom_type(), model.geom_size(), model.geom_rgba());
-    let (pos, quat) = (model.geom_pos(), model.geom_quat());
+    let ty = model.geom_type();
     let (body, group) = (model.geom_bodyid(), model.geom_group());
     let mut per_body: Vec<[Vec<Value>; 3]> = vec![Default::default(); frames.len()];
     for g in 0..model.ngeom() {
-        let c = &rgba[4 * g..4 * g + 4];
+        let id = GeomId::from_index(g);
+        let c = model.geom_color(id);
         if c[3] <= 0.0 || group[g] == crate::mjcf::GROUP_COLLISION {
             continue;
         }
-        let s = &size[3 * g..3 * g + 3];
-        let p = &pos[3 * g..3 * g + 3];
-        let q = &quat[4 * g..4 * g + 4];
+        let s = model.geom_dims(id);
+        let Pose { pos: p, quat: q } = model.geom_local_pose(id);
         let (kind, dims, pz) = match ty[g] {
             GEOM_BOX => (0, [2.0 * s[0], 2.0 * s[1], 2.0 * s[2]], 0.0),
             GEOM_MESH if s.iter().all(|&x| x > 0.0) => {
@@ -334,6 +331,7 @@ pub(crate) fn compressed_video() -> Value {
 /// A `foxglove.CompressedImage` (or, with the same fields, `foxglove.CompressedVideo`)
 /// message with base64 `data`.
 #[derive(serde::Serialize, serde::Deserialize)]
+#[cfg_attr(not(feature = "video"), allow(dead_code))]
 pub(crate) struct CompressedImageMsg<'a> {
     pub(crate) timestamp: Value,
     pub(crate) frame_id: &'a str,

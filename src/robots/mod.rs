@@ -15,7 +15,7 @@ use crate::controllers::{ControlMode, Controller, ControllerError, Drives, Joint
 use crate::mjcf::urdf::{RobotDesc, RobotError as UrdfError};
 use crate::mjcf::{Drive, LinkCamera, RobotOptions, SceneError, GRAVITY};
 use crate::models::ModelFileError;
-use crate::mujoco::{Data, MjError, Model, ObjType};
+use crate::mujoco::{BodyId, Data, MjError, Model, ObjType};
 use crate::rng::NumpyRandomState;
 
 /// Why a robot, its control mode or its table scene could not be resolved or built. Messages
@@ -24,7 +24,7 @@ use crate::rng::NumpyRandomState;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RobotError {
     /// An unknown robot uid.
-    #[error("unknown robot {uid:?}; valid robots: {valid}")]
+    #[error("unknown robot {u:?}; valid robots: {valid}", u = crate::files::short(.uid))]
     UnknownRobot {
         /// The requested uid.
         uid: String,
@@ -32,7 +32,10 @@ pub enum RobotError {
         valid: String,
     },
     /// A control mode this robot does not have (or no control mode at all).
-    #[error("unknown control mode {mode:?} for robot {robot}; valid modes: {valid}")]
+    #[error(
+        "unknown control mode {m:?} for robot {robot}; valid modes: {valid}",
+        m = crate::files::short(.mode)
+    )]
     UnknownControlMode {
         /// The requested mode.
         mode: String,
@@ -464,11 +467,11 @@ pub fn spec(uid: &str) -> Result<&'static RobotSpec, RobotError> {
 #[derive(Debug, Clone, PartialEq)]
 pub enum TcpIds {
     /// A body's pose.
-    Body(usize),
+    Body(BodyId),
     /// Midpoint of two bodies, element-wise quaternion average.
-    Midpoint(usize, usize),
+    Midpoint(BodyId, BodyId),
     /// Midpoint of two offset points, orientation of a third body.
-    Tips((usize, [f64; 3]), (usize, [f64; 3]), usize),
+    Tips((BodyId, [f64; 3]), (BodyId, [f64; 3]), BodyId),
 }
 
 /// A robot's ids in a compiled model, resolved once when an env is built.
@@ -477,20 +480,20 @@ pub struct RobotIds {
     /// The active joints (ManiSkill order): addresses, names, limits, actuators.
     pub joints: JointMap,
     /// Body ids of all robot links.
-    pub bodies: Vec<usize>,
+    pub bodies: Vec<BodyId>,
     /// Body of the root link (fixed to the world at the robot's table pose).
-    pub root_body: usize,
+    pub root_body: BodyId,
     /// Body id per URDF link name lookup (name, id).
-    pub link_bodies: Vec<(String, usize)>,
+    pub link_bodies: Vec<(String, BodyId)>,
     /// The `tcp` site (at the TCP link's origin), when the robot has a TCP link.
     #[cfg_attr(not(test), allow(dead_code))] // read by the tests
     pub tcp_site: Option<usize>,
     /// Body of the TCP link.
-    pub tcp_body: Option<usize>,
+    pub tcp_body: Option<BodyId>,
     /// Bodies and offsets that define `tcp_pose` (see [`TcpDef`]).
     pub tcp_parts: TcpIds,
     /// Body ids of the two grasp fingers.
-    pub fingers: [usize; 2],
+    pub fingers: [BodyId; 2],
     /// Upward force m·g per robot body (gravity compensation), aligned with `bodies`.
     pub weight: Vec<f64>,
 }
@@ -505,19 +508,19 @@ impl RobotIds {
         let mut r = RobotIds {
             joints: JointMap::resolve(model, robot)?,
             bodies: Vec::new(),
-            root_body: 0,
+            root_body: BodyId::default(),
             link_bodies: Vec::new(),
             tcp_site: model.id(ObjType::Site, "tcp"),
             tcp_body: None,
-            tcp_parts: TcpIds::Body(0),
-            fingers: [0, 0],
+            tcp_parts: TcpIds::Body(BodyId::default()),
+            fingers: [BodyId::default(); 2],
             weight: Vec::new(),
         };
         for l in &robot.links {
-            let b = model.require_id(ObjType::Body, &l.name)?;
+            let b = model.require_body(&l.name)?;
             r.bodies.push(b);
             r.link_bodies.push((l.name.clone(), b));
-            r.weight.push(model.body_mass()[b] * GRAVITY);
+            r.weight.push(model.body_mass()[b.index()] * GRAVITY);
         }
         r.root_body = r.body(&robot.links[robot.root].name)?;
         r.fingers = [r.body(spec.grasp.finger1.0)?, r.body(spec.grasp.finger2.0)?];
@@ -539,7 +542,7 @@ impl RobotIds {
     }
 
     /// Body id of a robot link.
-    pub fn body(&self, link: &str) -> Result<usize, RobotError> {
+    pub fn body(&self, link: &str) -> Result<BodyId, RobotError> {
         self.link_bodies
             .iter()
             .find(|(n, _)| n == link)
@@ -551,22 +554,15 @@ impl RobotIds {
     /// writes an upward force m·g at each body's centre of mass into `xfrc_applied`.
     /// `xfrc_applied` persists across steps, so this is needed once per reset.
     pub fn apply_gravity_compensation(&self, data: &mut Data) {
-        let x = data.xfrc_applied_mut();
         for (&b, &w) in self.bodies.iter().zip(&self.weight) {
-            x[6 * b..6 * b + 6].copy_from_slice(&[0.0, 0.0, w, 0.0, 0.0, 0.0]);
+            data.set_body_wrench(b, [0.0, 0.0, w, 0.0, 0.0, 0.0]);
         }
     }
 
     /// `agent.tcp_pose` (PickCube's TCP) as position and raw quaternion (w, x, y, z).
     pub fn tcp_pose(&self, data: &Data) -> ([f64; 3], [f64; 4]) {
-        let pos = |b: usize| {
-            let p = &data.xpos()[3 * b..3 * b + 3];
-            [p[0], p[1], p[2]]
-        };
-        let quat = |b: usize| {
-            let q = &data.xquat()[4 * b..4 * b + 4];
-            [q[0], q[1], q[2], q[3]]
-        };
+        let pos = |b: BodyId| data.body_pos(b);
+        let quat = |b: BodyId| data.body_quat(b);
         match &self.tcp_parts {
             TcpIds::Body(b) => (pos(*b), quat(*b)),
             TcpIds::Midpoint(a, b) => {
@@ -595,13 +591,8 @@ impl RobotIds {
     }
 
     /// Pose of a body in the world.
-    pub fn body_pose(data: &Data, body: usize) -> Isometry3<f64> {
-        let p = &data.xpos()[3 * body..3 * body + 3];
-        let q = &data.xquat()[4 * body..4 * body + 4];
-        Isometry3::from_parts(
-            Translation3::new(p[0], p[1], p[2]),
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])),
-        )
+    pub fn body_pose(data: &Data, body: BodyId) -> Isometry3<f64> {
+        data.body_pose(body).isometry()
     }
 }
 
@@ -692,7 +683,7 @@ pub fn robot_scene_mjcf(robot: &str) -> Result<crate::mjcf::Mjcf, RobotError> {
 }
 
 /// Unit vector helper: the local y axis of a body in world coordinates.
-pub fn body_y_axis(data: &Data, body: usize) -> Vector3<f64> {
-    let m = &data.xmat()[9 * body..9 * body + 9];
+pub fn body_y_axis(data: &Data, body: BodyId) -> Vector3<f64> {
+    let m = data.body_mat(body);
     Vector3::new(m[1], m[4], m[7])
 }

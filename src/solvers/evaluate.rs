@@ -1,6 +1,7 @@
 //! Policy evaluation (`mjskill eval`): success rate and mean return of a policy over seeded
 //! episodes, and the episode loop `rollout` records from.
 use std::path::Path;
+#[cfg(feature = "onnx")]
 use std::sync::Arc;
 
 use serde::Serialize;
@@ -8,6 +9,7 @@ use serde::Serialize;
 use crate::env::checks::MAX_SEED;
 use crate::env::{make, Env, EnvConfig, EnvError};
 use crate::robots::RobotError;
+#[cfg(feature = "onnx")]
 use crate::solvers::onnx::{PolicyFile, PolicyFileError};
 use crate::solvers::{make_policy, required_control_mode, Policy, SolverError, POLICIES};
 
@@ -53,8 +55,39 @@ pub enum EvalError {
     /// The policy could not be built for the env.
     #[error(transparent)]
     Policy(#[from] SolverError),
+    /// The policy gave an action the env refuses (NaN or infinite entries).
+    #[error("policy {policy} gave a bad action in episode {episode} (seed {seed}): {source}")]
+    BadAction {
+        /// The policy's name or file.
+        policy: String,
+        /// The episode (0 is the first).
+        episode: u64,
+        /// Its reset seed.
+        seed: u64,
+        /// The env's error.
+        source: Box<EnvError>,
+    },
 }
 
+impl EvalError {
+    /// This error, for an episode of `policy`: an action the env refused becomes
+    /// [`EvalError::BadAction`] naming the policy, the episode and its seed.
+    pub fn in_episode(self, policy: &PolicySpec, episode: u64, seed: u64) -> EvalError {
+        match self {
+            EvalError::Env(
+                source @ (EnvError::ActionNotFinite { .. } | EnvError::ActionLength { .. }),
+            ) => EvalError::BadAction {
+                policy: policy.name(),
+                episode,
+                seed,
+                source: Box::new(source),
+            },
+            e => e,
+        }
+    }
+}
+
+#[cfg(feature = "onnx")]
 impl From<PolicyFileError> for EvalError {
     fn from(e: PolicyFileError) -> Self {
         EvalError::Policy(e.into())
@@ -65,12 +98,13 @@ impl From<PolicyFileError> for EvalError {
 pub const DEFAULT_ENV: &str = "PickCube-v1";
 
 /// A policy `eval` and `rollout` run: a built-in one by name ([`POLICIES`]) or a policy file
-/// ([`PolicyFile`], docs/training.md).
+/// (`PolicyFile` with the `onnx` feature, docs/training.md).
 #[derive(Debug, Clone)]
 pub enum PolicySpec {
     /// A built-in policy: solver, random or zero.
     Builtin(String),
     /// A policy file.
+    #[cfg(feature = "onnx")]
     File(Arc<PolicyFile>),
 }
 
@@ -86,7 +120,12 @@ impl PolicySpec {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("onnx"));
         if onnx || path.is_file() {
+            #[cfg(feature = "onnx")]
             return Ok(PolicySpec::File(Arc::new(PolicyFile::load(path)?)));
+            #[cfg(not(feature = "onnx"))]
+            return Err(EvalError::Policy(SolverError::PolicyFilesDisabled {
+                path: policy.to_string(),
+            }));
         }
         Err(EvalError::Policy(SolverError::UnknownPolicy {
             name: policy.to_string(),
@@ -98,6 +137,7 @@ impl PolicySpec {
     pub fn name(&self) -> String {
         match self {
             PolicySpec::Builtin(n) => n.clone(),
+            #[cfg(feature = "onnx")]
             PolicySpec::File(f) => f.path().display().to_string(),
         }
     }
@@ -107,6 +147,7 @@ impl PolicySpec {
     /// what was not given (`env` None, `config.robot`/`control_mode` None, `obs_mode_given`
     /// false) and a given value that differs from the file's is an error naming both
     /// ([`PolicyFile::configure`]).
+    #[cfg_attr(not(feature = "onnx"), allow(unused_mut, unused_variables))]
     pub fn target(
         &self,
         env: Option<&str>,
@@ -115,6 +156,7 @@ impl PolicySpec {
     ) -> Result<(String, EnvConfig), EvalError> {
         match self {
             PolicySpec::Builtin(_) => Ok((env.unwrap_or(DEFAULT_ENV).to_string(), config)),
+            #[cfg(feature = "onnx")]
             PolicySpec::File(f) => {
                 let id = f.configure(env, &mut config, obs_mode_given)?;
                 Ok((id, config))
@@ -126,10 +168,17 @@ impl PolicySpec {
     pub fn make_env(&self, env_id: &str, config: EnvConfig) -> Result<Env, EvalError> {
         match self {
             PolicySpec::Builtin(name) => make_env(env_id, config, name),
+            #[cfg(feature = "onnx")]
             PolicySpec::File(f) => {
                 let mut config = config;
                 f.configure(Some(env_id), &mut config, true)?;
-                Ok(make(env_id, config)?)
+                make(env_id, config).map_err(|e| {
+                    PolicyFileError::Env {
+                        path: f.path().to_path_buf(),
+                        reason: e.to_string(),
+                    }
+                    .into()
+                })
             }
         }
     }
@@ -139,6 +188,7 @@ impl PolicySpec {
     pub fn make_policy(&self, env: &Env, seed: u64) -> Result<Box<dyn Policy>, EvalError> {
         match self {
             PolicySpec::Builtin(name) => Ok(make_policy(name, env, seed)?),
+            #[cfg(feature = "onnx")]
             PolicySpec::File(f) => Ok(Box::new(f.policy(env)?)),
         }
     }
@@ -308,7 +358,8 @@ pub fn evaluate_spec(
             Some(seed + k),
             &mut action,
             |_, _, _, _, _| Ok(()),
-        )?;
+        )
+        .map_err(|e| e.in_episode(policy, k, seed + k))?;
         successes += r.success_once as usize;
         at_end += r.success_at_end as usize;
         returns += r.ret;

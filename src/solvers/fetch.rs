@@ -38,6 +38,7 @@ use super::fetch_arm::{
 };
 use super::{body_xyz, tcp_xyz, Grasp, Phases, Policy, APPROACH_TOL, CLOSE_STEPS, FETCH_GRIPPER};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Gripper pitch for the farthest cubes (rad below the horizontal). With the other tasks'
 /// 5° the stretched arm's forearm rests on the table top and holds the gripper ≈ 1 cm above
@@ -77,8 +78,8 @@ const APPROACH_TOL_ALONG: f64 = 0.015;
 /// docs/solvers.md §7.1 for Fetch.
 #[derive(Debug)]
 pub struct FetchPickCube {
-    cube: usize,
-    goal: usize,
+    cube: BodyId,
+    goal: BodyId,
     arm: FetchArm,
     phases: Phases,
     /// Gripper pitch and grasp height above the cube centre for this episode.

@@ -7,6 +7,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use super::{body_quat, body_xyz, write_pos, write_rot, ACTION_SCALE, DESCEND_TOL};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Arm lengths (m): shoulder-lift axis to wrist-flex axis when straight, and wrist-flex axis
 /// to the TCP (models/fetch/fetch.urdf), with the margin kept from a straight arm. With the
@@ -69,8 +70,8 @@ fn clamp_to_reach(target: Vector3<f64>, shoulder: Vector3<f64>, pitch: f64) -> V
 /// `pd_ee_delta_pose` (12 actions): shared by the Fetch solvers of every task.
 #[derive(Debug)]
 pub struct FetchArm {
-    gripper_link: usize,
-    shoulder: usize,
+    gripper_link: BodyId,
+    shoulder: BodyId,
     q: [f64; 15],
 }
 

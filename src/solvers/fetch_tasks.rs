@@ -36,6 +36,7 @@ use super::place_sphere::{PlaceSphereSolver, ALIGN_TOL, RELEASE_BELOW};
 use super::poke_cube::PokeCubeSolver;
 use super::{body_xyz, Policy, FETCH_GRIPPER};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Orientation tolerance before leaving the approach (rad).
 const ROT_TOL: f64 = 0.1;
@@ -69,7 +70,7 @@ const STALL_MOVE: f64 = 0.002;
 pub struct FetchPlaceSphere {
     inner: PlaceSphereSolver,
     arm: FetchArm,
-    sphere: usize,
+    sphere: BodyId,
     pitch: f64,
     /// Sphere position at the previous step and the number of consecutive lowering steps
     /// in which it moved less than [`STALL_MOVE`].
@@ -193,7 +194,7 @@ fn descended_on_peg(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
 pub struct FetchPokeCube {
     inner: PokeCubeSolver,
     arm: FetchArm,
-    peg: usize,
+    peg: BodyId,
     pitch: f64,
     /// TCP height when the peg was grasped (the carry height is [`POKE_LIFT`] above it).
     grasp_z: Option<f64>,

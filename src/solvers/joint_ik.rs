@@ -24,6 +24,7 @@ use super::body_id;
 use super::{body_xyz, Phases, Policy, APPROACH_TOL, DESCEND_TOL};
 use crate::controllers::ik::Chain;
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Most arm joints an IK chain may have.
 const MAX_ARM: usize = 6;
@@ -138,8 +139,8 @@ pub struct JointIkPickCube {
     chain: Chain,
     base: Isometry3<f64>,
     limits: [(f64, f64); MAX_ARM],
-    cube: usize,
-    goal: usize,
+    cube: BodyId,
+    goal: BodyId,
     phases: Phases,
     /// Horizontal unit normal to the cube face axis the gripper closes along (fixed per
     /// episode at the first step).
@@ -281,8 +282,8 @@ impl JointIkPickCube {
 
 /// The cube face axis (world, horizontal) the gripper should close along: of the cube's x
 /// and y axes, the one closer to the current closing axis. Returns its horizontal normal.
-fn closing_normal(env: &Env, cube: usize, closing: &Vector3<f64>) -> Vector3<f64> {
-    let m = &env.data().xmat()[9 * cube..9 * cube + 9];
+fn closing_normal(env: &Env, cube: BodyId, closing: &Vector3<f64>) -> Vector3<f64> {
+    let m = env.data().body_mat(cube);
     let ax = Vector3::new(m[0], m[3], 0.0).normalize();
     let ay = Vector3::new(m[1], m[4], 0.0).normalize();
     let d = if ax.dot(closing).abs() >= ay.dot(closing).abs() {

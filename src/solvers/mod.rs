@@ -13,7 +13,9 @@ pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
 pub mod mlp;
+#[cfg(feature = "onnx")]
 pub mod onnx;
+pub(crate) mod onnx_guard;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
@@ -24,13 +26,15 @@ pub use evaluate::{
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
 pub use mlp::{GaussianMlp, MlpError};
+#[cfg(feature = "onnx")]
 pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 
 use crate::controllers::ControllerError;
 use crate::env::Env;
+use crate::mujoco::BodyId;
 use crate::mujoco::MjError;
 use crate::robots::{RobotError, RobotId};
 
@@ -78,8 +82,18 @@ pub enum SolverError {
     #[error(transparent)]
     Mujoco(#[from] MjError),
     /// A policy file could not be loaded, fitted to the env or run.
+    #[cfg(feature = "onnx")]
     #[error(transparent)]
     PolicyFile(#[from] PolicyFileError),
+    /// A policy file given to an mjskill built without its `onnx` feature.
+    #[error(
+        "{path}: policy files need mjskill's `onnx` feature, which this build leaves out \
+         (build with the default features, or add `--features onnx`)"
+    )]
+    PolicyFilesDisabled {
+        /// The policy file's path.
+        path: String,
+    },
 }
 
 /// The policy names `rollout` and `eval` accept.
@@ -303,19 +317,18 @@ impl Phases {
 }
 
 /// A task body's id in the env's model (the task layer's lookup).
-fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<usize, SolverError> {
+fn body_id(model: &crate::mujoco::Model, name: &str) -> Result<BodyId, SolverError> {
     Ok(crate::tasks::body_id(model, name)?)
 }
 
 /// A body's world position, read from MuJoCo.
-pub(crate) fn body_xyz(env: &Env, body: usize) -> Vector3<f64> {
-    Vector3::from_column_slice(&env.data().xpos()[3 * body..3 * body + 3])
+pub(crate) fn body_xyz(env: &Env, body: BodyId) -> Vector3<f64> {
+    Vector3::from(env.data().body_pos(body))
 }
 
-/// A body's world orientation, read from MuJoCo.
-pub(crate) fn body_quat(env: &Env, body: usize) -> UnitQuaternion<f64> {
-    let q = &env.data().xquat()[4 * body..4 * body + 4];
-    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+/// A body's world orientation, read from MuJoCo (renormalised: the solvers' rotations).
+pub(crate) fn body_quat(env: &Env, body: BodyId) -> UnitQuaternion<f64> {
+    env.data().body_pose(body).rotation_renormalized()
 }
 
 /// `agent.tcp.pose.p`: the TCP link's position (PlaceSphere, PokeCube), or `tcp_pose` for a

@@ -17,7 +17,11 @@ use tract_onnx::tract_hir::infer::Factoid;
 use tract_onnx::tract_hir::internal::DimLike;
 
 use crate::env::{Env, EnvConfig, ObsMode};
+use crate::files::short;
+use crate::solvers::onnx_guard::{check_declared, check_typed, guarded};
 use crate::solvers::{Policy, SolverError};
+
+pub use crate::solvers::onnx_guard::MAX_TENSOR_ELEMENTS;
 
 /// The `metadata_props` keys every policy file carries.
 pub const METADATA_KEYS: [&str; 5] = [
@@ -128,6 +132,14 @@ pub enum PolicyFileError {
         /// The env's action size.
         env_act: usize,
     },
+    /// The env, robot or mode the metadata names cannot be built.
+    #[error("policy file {path}: {reason}")]
+    Env {
+        /// The file.
+        path: PathBuf,
+        /// The env's error.
+        reason: String,
+    },
     /// The runtime failed to run the graph.
     #[error("policy file {path} failed to run: {reason}")]
     Runtime {
@@ -177,31 +189,47 @@ fn chain(e: &TractError) -> String {
     format!("{e:#}")
 }
 
+/// The first `metadata_props` key that appears more than once (runtimes would take either
+/// value: tract the first, onnxruntime the last).
+fn duplicate_key(props: &[(String, String)]) -> Option<&str> {
+    let mut seen = std::collections::HashSet::new();
+    props
+        .iter()
+        .map(|(k, _)| k.as_str())
+        .find(|k| !seen.insert(*k))
+}
+
 impl PolicyFile {
     /// Reads `path`: an ONNX model with one input (the observation) and one output (the
     /// action), and the [`METADATA_KEYS`] in its `metadata_props`.
     pub fn load(path: impl AsRef<Path>) -> Result<PolicyFile, PolicyFileError> {
         let path = path.as_ref().to_path_buf();
-        let bytes = std::fs::read(&path).map_err(|e| PolicyFileError::Read {
+        let bytes = crate::files::read(&path).map_err(|e| PolicyFileError::Read {
             path: path.clone(),
-            reason: e.to_string(),
+            reason: e.reason(),
         })?;
         let malformed = |reason: String| PolicyFileError::Malformed {
             path: path.clone(),
             reason,
         };
         let onnx = tract_onnx::onnx();
-        let proto: ModelProto = onnx
-            .proto_model_for_read(&mut bytes.as_slice())
-            .map_err(|e| malformed(chain(&e)))?;
-        if proto.graph.is_none() {
+        let proto: ModelProto =
+            guarded(|| onnx.proto_model_for_read(&mut bytes.as_slice())).map_err(malformed)?;
+        let Some(graph) = &proto.graph else {
             return Err(malformed("it has no graph".into()));
-        }
+        };
         let props: Vec<(String, String)> = proto
             .metadata_props
             .iter()
             .map(|p| (p.key.clone(), p.value.clone()))
             .collect();
+        if let Some(k) = duplicate_key(&props) {
+            return Err(malformed(format!(
+                "its metadata_props has the key {:?} more than once; each key may appear once",
+                short(k)
+            )));
+        }
+        check_declared(graph).map_err(malformed)?;
         let get = |k: &str| {
             props
                 .iter()
@@ -214,7 +242,7 @@ impl PolicyFile {
             .filter(|k| get(k).is_none())
             .collect();
         if !missing.is_empty() {
-            let found: Vec<&str> = props.iter().map(|(k, _)| k.as_str()).collect();
+            let found: Vec<String> = props.iter().map(|(k, _)| short(k)).collect();
             return Err(PolicyFileError::MissingMetadata {
                 path,
                 missing: missing.join(", "),
@@ -238,13 +266,11 @@ impl PolicyFile {
             _ => {
                 return Err(PolicyFileError::ObsMode {
                     path,
-                    mode: meta.obs_mode,
+                    mode: short(&meta.obs_mode),
                 })
             }
         };
-        let model = onnx
-            .model_for_proto_model(&proto)
-            .map_err(|e| malformed(chain(&e)))?;
+        let model = guarded(|| onnx.model_for_proto_model(&proto)).map_err(malformed)?;
         let (inputs, outputs) = (model.inputs.len(), model.outputs.len());
         if inputs != 1 || outputs != 1 {
             return Err(PolicyFileError::Interface {
@@ -286,12 +312,7 @@ impl PolicyFile {
     ) -> Result<String, PolicyFileError> {
         let m = &self.meta;
         let check = |key: &'static str, file: &str, requested: Option<&str>| match requested {
-            Some(r) if r != file => Err(PolicyFileError::Mismatch {
-                path: self.path.clone(),
-                key,
-                file: file.to_string(),
-                requested: r.to_string(),
-            }),
+            Some(r) if r != file => Err(self.mismatch(key, file, r)),
             _ => Ok(()),
         };
         check("env_id", &m.env_id, env)?;
@@ -383,12 +404,15 @@ impl PolicyFile {
         model
             .set_input_fact(0, InferenceFact::dt_shape(f32::datum_type(), shape.clone()))
             .map_err(runtime)?;
-        let typed = model.into_optimized().map_err(|e| {
+        let cannot = |e: String| {
             interface(format!(
-                "its graph cannot take one observation of {obs_dim} values ({})",
-                chain(&e)
+                "its graph cannot take one observation of {obs_dim} values ({e})"
             ))
-        })?;
+        };
+        let typed = guarded(|| model.into_typed()).map_err(cannot)?;
+        check_typed(&typed).map_err(interface)?;
+        let typed = guarded(|| typed.into_optimized()).map_err(cannot)?;
+        check_typed(&typed).map_err(interface)?;
         let out = typed.output_fact(0).map_err(runtime)?;
         let out_shape: Option<Vec<usize>> = out.shape.as_concrete().map(|s| s.to_vec());
         let out_dim = match out_shape.as_deref() {
@@ -415,8 +439,12 @@ impl PolicyFile {
                 env_act: act_dim,
             });
         }
-        let plan = typed.into_runnable().map_err(runtime)?;
-        let state = TypedSimpleState::new(&plan).map_err(runtime)?;
+        let failed = |reason: String| PolicyFileError::Runtime {
+            path: self.path.clone(),
+            reason,
+        };
+        let plan = guarded(|| typed.into_runnable()).map_err(failed)?;
+        let state = guarded(|| TypedSimpleState::new(&plan)).map_err(failed)?;
         let input = Arc::new(Tensor::zero::<f32>(&shape).map_err(runtime)?);
         let mut policy = OnnxPolicy {
             path: self.path.clone(),
@@ -435,8 +463,8 @@ impl PolicyFile {
         PolicyFileError::Mismatch {
             path: self.path.clone(),
             key,
-            file: file.to_string(),
-            requested: requested.to_string(),
+            file: short(file),
+            requested: short(requested),
         }
     }
 }
@@ -494,10 +522,13 @@ impl OnnxPolicy {
             }
             buf.copy_from_slice(obs);
         }
-        let outputs = self
-            .state
-            .run(tvec![self.input.clone().into_tvalue()])
-            .map_err(runtime)?;
+        let input = self.input.clone().into_tvalue();
+        let state = &mut self.state;
+        let outputs =
+            guarded(|| state.run(tvec![input])).map_err(|reason| PolicyFileError::Runtime {
+                path: self.path.clone(),
+                reason,
+            })?;
         let view = outputs[0].try_as_plain_ram().map_err(runtime)?;
         let out = view.as_slice::<f32>().map_err(runtime)?;
         if out.len() != action.len() {

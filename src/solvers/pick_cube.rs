@@ -6,12 +6,13 @@
 use super::body_id;
 use super::{body_xyz, ee_action, tcp_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// The PickCube policy.
 #[derive(Debug)]
 pub struct PickCubeSolver {
-    cube: usize,
-    goal: usize,
+    cube: BodyId,
+    goal: BodyId,
     grasp: Grasp,
     phases: Phases,
 }

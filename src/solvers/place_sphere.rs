@@ -19,6 +19,7 @@ use nalgebra::Vector3;
 use super::body_id;
 use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Carrying height of the TCP (m) and its tolerance.
 const LIFT_Z: f64 = 0.08;
@@ -39,8 +40,8 @@ const RETREAT: f64 = 0.03;
 /// The PlaceSphere policy.
 #[derive(Debug)]
 pub struct PlaceSphereSolver {
-    sphere: usize,
-    bin: usize,
+    sphere: BodyId,
+    bin: BodyId,
     grasp: Grasp,
     /// Height of the grasp point above the sphere centre (m; 0 for a top-down gripper).
     pub grasp_lift: f64,

@@ -18,6 +18,7 @@ use nalgebra::Vector3;
 use super::body_id;
 use super::{body_xyz, ee_action, tcp_link_xyz, Grasp, Gripper, Phases, Policy};
 use crate::env::Env;
+use crate::mujoco::BodyId;
 use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
@@ -38,9 +39,9 @@ const PUSH_LIMIT: f64 = 0.3;
 /// The PokeCube policy.
 #[derive(Debug)]
 pub struct PokeCubeSolver {
-    cube: usize,
-    peg: usize,
-    goal: usize,
+    cube: BodyId,
+    peg: BodyId,
+    goal: BodyId,
     grasp: Grasp,
     /// Cube and goal positions at the episode start.
     cube0: Vector3<f64>,

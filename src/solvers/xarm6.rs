@@ -22,6 +22,7 @@ use super::{
     ACTION_SCALE, XARM6_ABS_GRIPPER,
 };
 use crate::env::Env;
+use crate::mujoco::BodyId;
 
 /// Steps the gripper closes before lifting (the absolute target closes it in ~3 steps; the
 /// delta gripper of `pd_ee_delta_pos` needs 8).
@@ -42,10 +43,10 @@ const GRASP: Grasp = Grasp {
 /// docs/solvers.md §7.1 for the xArm6, with the gripper turned to the cube's faces.
 #[derive(Debug)]
 pub struct Xarm6PickCube {
-    cube: usize,
-    goal: usize,
-    eef: usize,
-    pads: [usize; 2],
+    cube: BodyId,
+    goal: BodyId,
+    eef: BodyId,
+    pads: [BodyId; 2],
     phases: Phases,
     /// The gripper orientation to keep for this episode (world frame).
     want: UnitQuaternion<f64>,

@@ -85,13 +85,53 @@ pub mod poke_cube;
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model, ObjType};
+use crate::mujoco::{BodyId, Data, MjError, Model, Pose};
 pub use crate::obs::ObsWriter;
 use crate::rng::TorchGenerator;
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
 
 /// Threshold of `agent.is_static` as every task calls it (rad/s or m/s).
 pub const ROBOT_STATIC_THRESHOLD: f64 = 0.2;
+
+/// Scale of ManiSkill's distance shaping `1 − tanh(5·d)` in every task's dense reward.
+pub const REWARD_SCALE: f64 = 5.0;
+
+/// ManiSkill's shaped closeness `1 − tanh(REWARD_SCALE·d)` of a distance (or speed) `d ≥ 0`:
+/// 1 at 0, towards 0 far away.
+#[inline]
+pub fn closeness(d: f64) -> f64 {
+    1.0 - (REWARD_SCALE * d).tanh()
+}
+
+/// Vertical field of view of the tasks' sensor camera `base_camera` (90°).
+pub const SENSOR_FOVY: f64 = std::f64::consts::FRAC_PI_2;
+/// Vertical field of view of the tasks' human camera `render_camera` (1 rad).
+pub const HUMAN_FOVY: f64 = 1.0;
+
+/// The two cameras of ManiSkill's tabletop tasks, each `look_at(eye, target)`: the sensor
+/// camera `base_camera` (128×128, [`SENSOR_FOVY`]) and the human camera `render_camera`
+/// (512×512, [`HUMAN_FOVY`]).
+pub fn tabletop_cameras(
+    sensor: ([f64; 3], [f64; 3]),
+    human: ([f64; 3], [f64; 3]),
+) -> (CameraDef, CameraDef) {
+    (
+        CameraDef {
+            name: "base_camera",
+            eye: sensor.0,
+            target: sensor.1,
+            fovy: SENSOR_FOVY,
+            size: (128, 128),
+        },
+        CameraDef {
+            name: "render_camera",
+            eye: human.0,
+            target: human.1,
+            fovy: HUMAN_FOVY,
+            size: (512, 512),
+        },
+    )
+}
 
 /// A camera defined like ManiSkill's `look_at(eye, target)` with a vertical field of view.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,13 +185,12 @@ impl TaskCtx<'_> {
             .is_static(self.qvel, ROBOT_STATIC_THRESHOLD)
     }
     /// Position of a body.
-    pub fn body_pos(&self, body: usize) -> Vector3<f64> {
+    pub fn body_pos(&self, body: BodyId) -> Vector3<f64> {
         body_pos(self.data, body)
     }
     /// Quaternion (w, x, y, z) of a body.
-    pub fn body_quat(&self, body: usize) -> [f64; 4] {
-        let q = &self.data.xquat()[4 * body..4 * body + 4];
-        [q[0], q[1], q[2], q[3]]
+    pub fn body_quat(&self, body: BodyId) -> [f64; 4] {
+        self.data.body_quat(body)
     }
     /// `agent.tcp.pose.p`: the TCP link's position.
     pub fn tcp_link_pos(&self) -> Vector3<f64> {
@@ -161,8 +200,8 @@ impl TaskCtx<'_> {
             .unwrap_or_else(|| Vector3::from(self.tcp_pos))
     }
     /// Linear and angular velocity (world) of a free body.
-    pub fn body_velocity(&self, body: usize) -> (Vector3<f64>, Vector3<f64>) {
-        let v = self.data.body_velocity(body);
+    pub fn body_velocity(&self, body: BodyId) -> (Vector3<f64>, Vector3<f64>) {
+        let v = self.data.body_velocity(body.index());
         (
             Vector3::new(v[3], v[4], v[5]),
             Vector3::new(v[0], v[1], v[2]),
@@ -179,7 +218,7 @@ pub trait Task: Send + std::fmt::Debug {
     /// Resolves the task's names to ids in the compiled model.
     fn resolve(&mut self, model: &Model) -> Result<(), MjError>;
     /// Body whose contacts with the fingers decide `is_grasping`.
-    fn grasp_object(&self) -> usize;
+    fn grasp_object(&self) -> BodyId;
     /// Places the objects for a new episode, drawing from `torch` in upstream order.
     fn initialize_episode(&mut self, data: &mut Data, torch: &mut TorchGenerator);
     /// `evaluate()` keys, in upstream insertion order (without `elapsed_steps`).
@@ -206,20 +245,18 @@ pub trait Task: Send + std::fmt::Debug {
 }
 
 /// Position of a body.
-pub fn body_pos(data: &Data, body: usize) -> Vector3<f64> {
-    let p = &data.xpos()[3 * body..3 * body + 3];
-    Vector3::new(p[0], p[1], p[2])
+pub fn body_pos(data: &Data, body: BodyId) -> Vector3<f64> {
+    Vector3::from(data.body_pos(body))
 }
 
 /// Resolves a body id with an error naming it.
-pub fn body_id(model: &Model, name: &str) -> Result<usize, MjError> {
-    model.require_id(ObjType::Body, name)
+pub fn body_id(model: &Model, name: &str) -> Result<BodyId, MjError> {
+    model.require_body(name)
 }
 
 /// qpos address of a body's free joint.
 pub fn free_joint_qpos(model: &Model, body: &str) -> Result<usize, MjError> {
-    let j = model.require_id(ObjType::Joint, body)?;
-    Ok(model.jnt_qposadr()[j] as usize)
+    Ok(model.joint_qpos_adr(model.require_joint(body)?))
 }
 
 /// Writes a free body's pose (position, quaternion wxyz) into qpos. (The env zeroes every
@@ -231,10 +268,11 @@ pub fn set_free_pose(data: &mut Data, qadr: usize, pos: [f64; 3], quat: [f64; 4]
 }
 
 /// Writes a mocap body's pose.
-pub fn set_mocap_pose(model: &Model, data: &mut Data, body: usize, pos: [f64; 3], quat: [f64; 4]) {
-    let m = model.body_mocapid()[body] as usize;
-    data.mocap_pos_mut()[3 * m..3 * m + 3].copy_from_slice(&pos);
-    data.mocap_quat_mut()[4 * m..4 * m + 4].copy_from_slice(&quat);
+/// (The tasks resolve only mocap bodies here; another body is left as it is.)
+pub fn set_mocap_pose(model: &Model, data: &mut Data, body: BodyId, pos: [f64; 3], quat: [f64; 4]) {
+    if let Some(m) = model.body_mocap(body) {
+        data.set_mocap_pose(m, &Pose { pos, quat });
+    }
 }
 
 /// quat(euler XYZ (0, 0, yaw)) standardised to w ≥ 0, computed in float32 like upstream.
@@ -256,7 +294,12 @@ pub fn angle_between(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 }
 
 /// The grasp check of docs/robots.md §1.3 from the finger forces and the fingers' y axes.
-pub fn is_grasping(g: &GraspDef, data: &Data, fingers: [usize; 2], forces: &[[f64; 3]; 2]) -> bool {
+pub fn is_grasping(
+    g: &GraspDef,
+    data: &Data,
+    fingers: [BodyId; 2],
+    forces: &[[f64; 3]; 2],
+) -> bool {
     let mut ok = true;
     for (k, (&body, sign)) in fingers.iter().zip([g.finger1.1, g.finger2.1]).enumerate() {
         let f = Vector3::from(forces[k]);
@@ -272,15 +315,16 @@ pub fn is_grasping(g: &GraspDef, data: &Data, fingers: [usize; 2], forces: &[[f6
 pub fn finger_forces(
     model: &Model,
     data: &Data,
-    fingers: [usize; 2],
-    object: usize,
+    fingers: [BodyId; 2],
+    object: BodyId,
     out: &mut [[f64; 3]; 2],
 ) {
     *out = [[0.0; 3]; 2];
     let geom_body = model.geom_bodyid();
     for i in 0..data.ncon() {
         let (g1, g2) = data.contact_geoms(i);
-        let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+        let body = |g: usize| BodyId::from_index(geom_body[g] as usize);
+        let (b1, b2) = (body(g1), body(g2));
         for (k, &finger) in fingers.iter().enumerate() {
             let sign = if b1 == finger && b2 == object {
                 -1.0 // force on geom1 = −(force on geom2)

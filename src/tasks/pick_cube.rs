@@ -5,11 +5,11 @@ use std::f32::consts::PI;
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, yaw_quat_f32, CameraDef,
-    InfoValue, ObsWriter, Task, TaskCtx,
+    add_cameras, body_id, closeness, free_joint_qpos, set_free_pose, set_mocap_pose,
+    tabletop_cameras, yaw_quat_f32, CameraDef, InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::{uniform_scaled, TorchGenerator};
 use crate::robots::RobotId;
 
@@ -19,10 +19,6 @@ pub const MAX_REWARD: f64 = 5.0;
 pub const CUBE_RGBA: [f64; 4] = [1.0, 0.0, 0.0, 1.0];
 /// Goal marker colour.
 pub const GOAL_RGBA: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
-/// Sensor camera field of view (π/2) and size.
-const SENSOR_FOVY: f64 = std::f64::consts::FRAC_PI_2;
-/// Human camera field of view.
-const HUMAN_FOVY: f64 = 1.0;
 
 /// Per-robot task configuration (`PICK_CUBE_CONFIGS`, docs/tasks.md §1.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -113,9 +109,9 @@ pub struct PickCube {
     cfg: PickCubeConfig,
     /// The robot (the dense reward's static term depends on it).
     robot: RobotId,
-    cube: usize,
+    cube: BodyId,
     cube_qadr: usize,
-    goal: usize,
+    goal: BodyId,
 }
 
 impl PickCube {
@@ -124,9 +120,9 @@ impl PickCube {
         PickCube {
             cfg: config_for(robot),
             robot,
-            cube: 0,
+            cube: BodyId::default(),
             cube_qadr: 0,
-            goal: 0,
+            goal: BodyId::default(),
         }
     }
 
@@ -173,7 +169,7 @@ impl Task for PickCube {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.cube
     }
 
@@ -242,12 +238,12 @@ impl Task for PickCube {
         let tcp = Vector3::from(ctx.tcp_pos);
         let (cube, goal) = (ctx.body_pos(self.cube), ctx.body_pos(self.goal));
         let grasped = e.is_grasped.to_info();
-        let mut r = 1.0 - (5.0 * (cube - tcp).norm()).tanh();
+        let mut r = closeness((cube - tcp).norm());
         r += grasped;
-        r += (1.0 - (5.0 * (goal - cube).norm()).tanh()) * grasped;
+        r += closeness((goal - cube).norm()) * grasped;
         let n = ctx.qvel.len() - self.static_drop();
         let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
-        r += (1.0 - (5.0 * qv).tanh()) * e.is_obj_placed.to_info();
+        r += closeness(qv) * e.is_obj_placed.to_info();
         r
     }
 
@@ -260,21 +256,6 @@ impl Task for PickCube {
     }
 
     fn cameras(&self) -> (CameraDef, CameraDef) {
-        (
-            CameraDef {
-                name: "base_camera",
-                eye: self.cfg.sensor_cam.0,
-                target: self.cfg.sensor_cam.1,
-                fovy: SENSOR_FOVY,
-                size: (128, 128),
-            },
-            CameraDef {
-                name: "render_camera",
-                eye: self.cfg.human_cam.0,
-                target: self.cfg.human_cam.1,
-                fovy: HUMAN_FOVY,
-                size: (512, 512),
-            },
-        )
+        tabletop_cameras(self.cfg.sensor_cam, self.cfg.human_cam)
     }
 }

@@ -2,11 +2,11 @@
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, CameraDef, InfoValue,
-    ObsWriter, Task, TaskCtx,
+    add_cameras, body_id, closeness, free_joint_qpos, set_free_pose, set_mocap_pose,
+    tabletop_cameras, CameraDef, InfoValue, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §3) ---------------------------------------------------------------
@@ -71,9 +71,9 @@ pub fn bin_boxes() -> [([f64; 3], [f64; 3]); 5] {
 /// PlaceSphere-v1.
 #[derive(Debug, Clone, Default)]
 pub struct PlaceSphere {
-    sphere: usize,
+    sphere: BodyId,
     sphere_qadr: usize,
-    bin: usize,
+    bin: BodyId,
 }
 
 impl PlaceSphere {
@@ -119,7 +119,7 @@ impl Task for PlaceSphere {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.sphere
     }
 
@@ -173,9 +173,9 @@ impl Task for PlaceSphere {
         let (sphere, bin) = (ctx.body_pos(self.sphere), ctx.body_pos(self.bin));
         let e = PlaceSphereEval::read(info);
         let grasped = e.is_obj_grasped;
-        let mut r = 2.0 * (1.0 - (5.0 * (tcp - sphere).norm()).tanh());
+        let mut r = 2.0 * closeness((tcp - sphere).norm());
         let bin_top = bin + Vector3::new(0.0, 0.0, SHORT_SIDE_HALF + RADIUS);
-        let place = 1.0 - (5.0 * (bin_top - sphere).norm()).tanh();
+        let place = closeness((bin_top - sphere).norm());
         if grasped {
             r = 4.0 + place;
         }
@@ -207,21 +207,9 @@ impl Task for PlaceSphere {
     }
 
     fn cameras(&self) -> (CameraDef, CameraDef) {
-        (
-            CameraDef {
-                name: "base_camera",
-                eye: [0.3, 0.0, 0.2],
-                target: [-0.1, 0.0, 0.0],
-                fovy: std::f64::consts::FRAC_PI_2,
-                size: (128, 128),
-            },
-            CameraDef {
-                name: "render_camera",
-                eye: [0.6, -0.2, 0.2],
-                target: [0.0, 0.0, 0.2],
-                fovy: 1.0,
-                size: (512, 512),
-            },
+        tabletop_cameras(
+            ([0.3, 0.0, 0.2], [-0.1, 0.0, 0.0]),
+            ([0.6, -0.2, 0.2], [0.0, 0.0, 0.2]),
         )
     }
 }

@@ -20,12 +20,12 @@ use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_3, FRAC_PI_6};
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, free_joint_qpos, set_free_pose, set_mocap_pose, yaw_quat_f32, CameraDef,
-    ObsWriter, Task, TaskCtx,
+    add_cameras, body_id, closeness, free_joint_qpos, set_free_pose, set_mocap_pose,
+    tabletop_cameras, yaw_quat_f32, CameraDef, ObsWriter, Task, TaskCtx,
 };
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
-use crate::mujoco::{Data, MjError, Model};
+use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
 // ---- constants (docs/tasks.md §2) ---------------------------------------------------------------
@@ -107,11 +107,11 @@ pub fn yaw_xyz(q: [f64; 4]) -> f64 {
 /// PokeCube-v1.
 #[derive(Debug, Clone, Default)]
 pub struct PokeCube {
-    cube: usize,
+    cube: BodyId,
     cube_qadr: usize,
-    peg: usize,
+    peg: BodyId,
     peg_qadr: usize,
-    goal: usize,
+    goal: BodyId,
 }
 
 impl PokeCube {
@@ -177,7 +177,7 @@ impl Task for PokeCube {
         Ok(())
     }
 
-    fn grasp_object(&self) -> usize {
+    fn grasp_object(&self) -> BodyId {
         self.peg
     }
 
@@ -257,23 +257,23 @@ impl Task for PokeCube {
         );
         // Reaching the peg centre.
         let d = (tcp - peg).norm();
-        let mut r = 2.0 * (1.0 - (5.0 * d).tanh());
+        let mut r = 2.0 * closeness(d);
         // Grasped (and reached): head close to the cube and aligned with it.
         let grasped_reached = e.is_peg_grasped && d < REACHED_DIST;
         if grasped_reached {
-            let close = 1.0 - (5.0 * e.head_to_cube_dist).tanh();
-            let align = 1.0 - (5.0 * e.angle_diff).tanh();
+            let close = closeness(e.head_to_cube_dist);
+            let align = closeness(e.angle_diff);
             r = 4.0 + close + align;
         }
         // Fitted: cube towards the goal (3-D distance).
         if e.is_peg_cube_fit && grasped_reached {
-            r = 7.0 + (1.0 - (5.0 * (goal - cube).norm()).tanh());
+            r = 7.0 + closeness((goal - cube).norm());
         }
         // Placed: robot at rest.
         if e.is_cube_placed {
             let n = ctx.qvel.len().saturating_sub(STATIC_DROP);
             let qv = ctx.qvel[..n].iter().map(|v| v * v).sum::<f64>().sqrt();
-            r += 1.0 - (5.0 * qv).tanh();
+            r += closeness(qv);
         }
         r
     }
@@ -291,21 +291,9 @@ impl Task for PokeCube {
     }
 
     fn cameras(&self) -> (CameraDef, CameraDef) {
-        (
-            CameraDef {
-                name: "base_camera",
-                eye: [0.3, 0.0, 0.6],
-                target: [-0.1, 0.0, 0.1],
-                fovy: std::f64::consts::FRAC_PI_2,
-                size: (128, 128),
-            },
-            CameraDef {
-                name: "render_camera",
-                eye: [0.6, 0.7, 0.6],
-                target: [0.2, 0.2, 0.35],
-                fovy: 1.0,
-                size: (512, 512),
-            },
+        tabletop_cameras(
+            ([0.3, 0.0, 0.6], [-0.1, 0.0, 0.1]),
+            ([0.6, 0.7, 0.6], [0.2, 0.2, 0.35]),
         )
     }
 }

@@ -8,6 +8,7 @@ use super::common;
 
 use crate::controllers::ik::Chain;
 use crate::env::{make, EnvConfig};
+use crate::mujoco::BodyId;
 use crate::robots::{self, fetch, RobotIds};
 
 fn env(task: &str, mode: &str) -> crate::env::Env {
@@ -126,7 +127,7 @@ fn holds_the_table_pose_without_drift_or_warnings() {
     let robot_bodies = &e.robot().bodies;
     for i in 0..d.ncon() {
         let (g1, g2) = d.contact_geoms(i);
-        let b = |g: usize| e.model().geom_bodyid()[g] as usize;
+        let b = |g: usize| BodyId::from_index(e.model().geom_bodyid()[g] as usize);
         assert!(
             !robot_bodies.contains(&b(g1)) && !robot_bodies.contains(&b(g2)),
             "robot contact at rest"
@@ -411,7 +412,7 @@ fn scripted_solver_grasps_lifts_and_places_the_cube() {
                 grasped = true;
                 let q = e.obs_part("agent/qpos").unwrap();
                 fingers = (q[13], q[14]);
-                max_z = max_z.max(e.data().xpos()[3 * cube + 2]);
+                max_z = max_z.max(e.data().body_pos(cube)[2]);
             }
             Ok(())
         },

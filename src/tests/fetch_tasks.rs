@@ -84,7 +84,7 @@ fn pokecube_reward_uses_gripper_link_and_fetchs_static_rule() {
     let mut e = env("PokeCube-v1", "fetch", None);
     e.reset(Some(0));
     let gl = e.robot().body("gripper_link").unwrap();
-    let g: Vec<f64> = e.data().xpos()[3 * gl..3 * gl + 3].to_vec();
+    let g: Vec<f64> = e.data().body_pos(gl).to_vec();
     // Reached-peg stage: the peg 3 cm ahead of gripper_link.
     let peg = [g[0] + 0.03, g[1], g[2]];
     put(&mut e, "peg", peg, &[0.0; 15]);

@@ -8,5 +8,6 @@ mod fetch_tasks;
 mod foundation;
 mod poke_cube;
 mod so100;
+mod stack;
 mod widowxai;
 mod xarm6;

@@ -31,7 +31,7 @@ fn qpos_order_is_maniskills() {
     let m = e.model();
     for l in ["Fixed_Jaw_tip", "Moving_Jaw_tip"] {
         let b = e.robot().body(l).unwrap();
-        assert_eq!(m.body_mass()[b], 1e-6, "{l}");
+        assert_eq!(m.body_mass()[b.index()], 1e-6, "{l}");
     }
 }
 

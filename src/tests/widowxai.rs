@@ -29,7 +29,7 @@ fn qpos_order_is_maniskills() {
     assert_eq!(e.robot().joints.limits[6], (0.0, 0.044));
     assert_eq!(e.robot().joints.limits[2], (0.0, 2.356194490192345));
     let b = e.robot().body("ee_gripper_link").unwrap();
-    assert_eq!(e.model().body_mass()[b], 1e-6);
+    assert_eq!(e.model().body_mass()[b.index()], 1e-6);
 }
 
 #[test]

@@ -27,6 +27,11 @@ pub fn episodes(s: &str) -> Result<usize, String> {
     ranged(s, 1, MAX_SEED + 1).map(|v| v as usize)
 }
 
+/// `export --chunks-size`: 1..=4294967295.
+pub fn chunks_size(s: &str) -> Result<usize, String> {
+    ranged(s, 1, u32::MAX as u64).map(|v| v as usize)
+}
+
 /// `bench --steps`: 1..=[`super::bench::MAX_STEPS`].
 pub fn bench_steps(s: &str) -> Result<usize, String> {
     ranged(s, 1, super::bench::MAX_STEPS as u64).map(|v| v as usize)
@@ -47,11 +52,6 @@ pub fn render_frames(s: &str) -> Result<usize, String> {
     ranged(s, 1, super::bench::MAX_RENDER as u64).map(|v| v as usize)
 }
 
-/// `fit-primitives --parts` and `--segments`: 1..=[`crate::meshes::MAX_PARTS`].
-pub fn parts(s: &str) -> Result<usize, String> {
-    ranged(s, 1, crate::meshes::MAX_PARTS as u64).map(|v| v as usize)
-}
-
 /// A finite float ≥ 0 (`replay --tolerance`).
 pub fn tolerance(s: &str) -> Result<f64, String> {
     let v: f64 = s
@@ -62,70 +62,6 @@ pub fn tolerance(s: &str) -> Result<f64, String> {
         return Err(format!("{v} is not a finite number ≥ 0"));
     }
     Ok(v)
-}
-
-/// A mesh scale: finite, > 0 and at most [`crate::meshes::MAX_SCALE`].
-pub fn scale(s: &str) -> Result<f64, String> {
-    let max = crate::meshes::MAX_SCALE;
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number; valid: a positive number up to {max:e}"))?;
-    if !(v.is_finite() && v > 0.0) {
-        return Err(format!(
-            "--scale must be a positive number, got {v} (valid: 0 < scale ≤ {max:e})"
-        ));
-    }
-    if v > max {
-        return Err(format!(
-            "--scale {v:e} is too large (valid: 0 < scale ≤ {max:e})"
-        ));
-    }
-    Ok(v)
-}
-
-/// `convert-visuals --max-triangles`: 12..=1000000.
-pub fn max_triangles(s: &str) -> Result<usize, String> {
-    ranged(s, 12, 1_000_000).map(|v| v as usize)
-}
-
-/// `convert-visuals --max-error` (millimetres): a finite number in 0.001..=1000.
-pub fn max_error_mm(s: &str) -> Result<f32, String> {
-    let v: f64 = s.trim().parse().map_err(|_| {
-        format!("{s:?} is not a number; valid: --max-error in millimetres, 0.001..=1000")
-    })?;
-    if !(0.001..=1000.0).contains(&v) {
-        return Err(format!(
-            "{v} is not in 0.001..=1000 (--max-error, millimetres)"
-        ));
-    }
-    Ok(v as f32)
-}
-
-/// `convert-visuals --texture-size`: 1..=8192.
-pub fn texture_size(s: &str) -> Result<u32, String> {
-    ranged(s, 1, 8192).map(|v| v as u32)
-}
-
-/// `convert-visuals --material NAME=R,G,B,A`: four numbers in 0..=1.
-pub fn named_rgba(s: &str) -> Result<(String, [f32; 4]), String> {
-    let (name, rest) = s
-        .split_once('=')
-        .ok_or_else(|| format!("{s:?} is not NAME=R,G,B,A"))?;
-    let v: Vec<f32> = rest
-        .split(',')
-        .map(|x| {
-            x.trim()
-                .parse::<f32>()
-                .ok()
-                .filter(|v| (0.0..=1.0).contains(v))
-                .ok_or_else(|| format!("{x:?} in {s:?} is not a number in 0..=1"))
-        })
-        .collect::<Result<_, _>>()?;
-    if name.is_empty() || v.len() != 4 {
-        return Err(format!("{s:?} is not NAME=R,G,B,A (four numbers)"));
-    }
-    Ok((name.to_string(), [v[0], v[1], v[2], v[3]]))
 }
 
 #[cfg(test)]
@@ -149,11 +85,9 @@ mod tests {
         assert!(tolerance("nan").unwrap_err().contains("finite"));
         assert!(tolerance("-1").is_err() && tolerance("inf").is_err());
         assert_eq!(tolerance("0"), Ok(0.0));
-        assert!(scale("1e308").unwrap_err().contains("--scale"));
-        assert!(scale("0").unwrap_err().contains("got 0"));
-        assert_eq!(max_error_mm("0.5"), Ok(0.5));
-        assert!(max_error_mm("0").unwrap_err().contains("0.001..=1000"));
-        assert!(max_error_mm("nan").unwrap_err().contains("--max-error"));
-        assert!(max_error_mm("x").unwrap_err().contains("not a number"));
+        assert_eq!(
+            chunks_size("-1").unwrap_err(),
+            "-1 is not in 1..=4294967295"
+        );
     }
 }

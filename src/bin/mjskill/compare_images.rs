@@ -6,19 +6,27 @@ use std::path::PathBuf;
 use mjskill::maniskill::images::{list_states, Comparer, RefImageState, StateScore, Summary};
 use serde::Serialize;
 
-use crate::CliError;
+use crate::{args, CliError};
 
-/// What `compare-images` does.
+/// What `compare-images` does (its command-line arguments).
+#[derive(Debug, clap::Args)]
 pub struct CompareArgs {
-    /// The reference directory (holding `<env>__<robot>/` directories of `.npz` states).
+    /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
+    /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
+    /// `state_json`, `control_mode`).
     pub reference: PathBuf,
-    /// Only these `<env>__<robot>` directories (all when empty).
+    /// Only this `<env>__<robot>` directory (repeatable).
+    #[arg(long = "pair")]
     pub pairs: Vec<String>,
-    /// Write a panel PNG per state here.
+    /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
+    /// above, segmentation below).
+    #[arg(long)]
     pub panels: Option<PathBuf>,
-    /// At most this many states per pair.
+    /// At most this many states per pair (1..=1000000).
+    #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
     pub limit: Option<usize>,
-    /// Include the per-state scores.
+    /// Include every state's per-camera scores (and per-id IoU).
+    #[arg(long)]
     pub per_state: bool,
 }
 

@@ -1,12 +1,19 @@
-//! `mjskill import-maniskill` and `mjskill export`.
+//! `mjskill import-maniskill` and `mjskill export` (their flags always; running them needs
+//! the `datasets` feature).
+#[cfg(feature = "datasets")]
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "datasets")]
 use mjskill::datasets::export::{self, Format};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::import::{self, ImportArgs, ImportReport, ReplayBy};
+#[cfg(feature = "datasets")]
 use mjskill::datasets::DatasetError;
+#[cfg(feature = "datasets")]
 use mjskill::SimConfig;
 
 /// Runs `import-maniskill`.
+#[cfg(feature = "datasets")]
 pub fn import_maniskill(
     h5: &Path,
     json: Option<&Path>,
@@ -28,16 +35,23 @@ pub fn import_maniskill(
 }
 
 /// `export --format lerobot`'s file size limits (None: LeRobot's default).
+#[derive(Debug, clap::Args)]
 pub struct LimitArgs {
-    /// `--chunks-size`.
+    /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000;
+    /// 1..=4294967295).
+    #[arg(long, value_parser = crate::args::chunks_size, allow_hyphen_values = true)]
     pub chunks_size: Option<usize>,
-    /// `--data-files-size-in-mb`.
+    /// --format lerobot: size limit of data and meta/episodes parquet files in MB
+    /// (default 100); an episode that would reach it starts the next file.
+    #[arg(long, allow_hyphen_values = true)]
     pub data_files_size_in_mb: Option<f64>,
-    /// `--video-files-size-in-mb`.
+    /// --format lerobot: size limit of video files in MB (default 200).
+    #[arg(long, allow_hyphen_values = true)]
     pub video_files_size_in_mb: Option<f64>,
 }
 
 /// Runs `export`.
+#[cfg(feature = "datasets")]
 pub fn export(
     file: &Path,
     format: &str,
@@ -79,6 +93,18 @@ pub fn export(
             if control_mode.is_some() {
                 return Err(DatasetError::Invalid {
                     msg: "--control-mode applies to --format maniskill only".into(),
+                });
+            }
+            if std::fs::symlink_metadata(&output).is_ok_and(|m| m.file_type().is_symlink()) {
+                let target = std::fs::canonicalize(&output)
+                    .map_or_else(|_| "a missing target".into(), |t| t.display().to_string());
+                return Err(DatasetError::Invalid {
+                    msg: format!(
+                        "-o {} is a symbolic link to {target}; the dataset is written to a \
+                         temporary directory and renamed into place, which cannot go through \
+                         a link: give the directory itself or a new name",
+                        output.display()
+                    ),
                 });
             }
             let d = mjskill::datasets::lerobot::Limits::default();

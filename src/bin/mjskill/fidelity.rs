@@ -58,8 +58,7 @@ pub fn run(args: &FidelityArgs) -> Result<(), CliError> {
 fn is_mcap(path: &std::path::Path) -> Result<bool, CliError> {
     use std::io::Read;
     let mut magic = [0u8; 8];
-    let mut f =
-        std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut f = mjskill::files::open_regular(path)?;
     let n = f
         .read(&mut magic)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;

@@ -1,8 +1,8 @@
 //! The `mjskill` command line (`mjskill --help`), built on the library's public API. Its
 //! modules are the binary's own: argument parsing, output files, and the commands that are
-//! not library API (bench, plots, `fit-primitives` and `convert-visuals`: [`meshes`]).
+//! not library API (bench, plots). The mesh-authoring tools are the `mjskill-meshes` binary.
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::{Parser, Subcommand};
 
@@ -35,7 +35,6 @@ mod compare_images;
 mod datasets;
 mod fidelity;
 mod info_dir;
-mod meshes;
 mod output;
 mod plot;
 mod render;
@@ -128,74 +127,6 @@ pub enum Command {
         /// render_frames_per_s.
         #[arg(long, value_parser = args::render_frames, allow_hyphen_values = true)]
         render: Option<usize>,
-    },
-    /// Fit collision primitives to a mesh (binary/ASCII STL or OBJ) and print them as URDF
-    /// `<collision>` elements, with their volume and the mesh volume they cover.
-    FitPrimitives {
-        /// Mesh file.
-        #[arg(long)]
-        mesh: PathBuf,
-        /// Primitive kind: box, capsule, cylinder or sphere; comma-separated to take the smallest.
-        #[arg(long, default_value = "box,capsule,cylinder")]
-        shape: String,
-        /// Decompose greedily into up to this many primitives (1..=64; axis-aligned cuts);
-        /// overrides --segments.
-        #[arg(long, value_parser = args::parts, allow_hyphen_values = true)]
-        parts: Option<usize>,
-        /// Split the (cropped) mesh into this many slabs along its principal axis (1..=64).
-        #[arg(long, default_value_t = 1, value_parser = args::parts, allow_hyphen_values = true)]
-        segments: usize,
-        /// Keep only the mesh surface inside this box: "xmin,ymin,zmin,xmax,ymax,zmax" (mesh frame).
-        #[arg(long, allow_hyphen_values = true)]
-        crop: Option<String>,
-        /// Uniform scale applied to the mesh vertices first (the URDF `<mesh scale>`, e.g. 0.001
-        /// for meshes in millimetres; positive, up to 1e6); crop boxes are in the scaled frame.
-        #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
-        scale: f64,
-    },
-    /// Convert visual meshes (glTF/glb, COLLADA .dae, STL) into simplified OBJ files with
-    /// PNG textures that MuJoCo 2.2 draws (docs/rendering.md). Exactly one of --urdf (every
-    /// mesh visual of an upstream URDF), --mesh (one mesh, e.g. the table) or --texture (a
-    /// PNG re-encoded and downsampled).
-    ConvertVisuals {
-        /// Upstream URDF whose mesh visuals to convert (paths relative to it).
-        #[arg(long, conflicts_with_all = ["mesh", "texture"])]
-        urdf: Option<PathBuf>,
-        /// With --urdf: the model URDF whose links' `<visual>` elements are replaced by the
-        /// converted ones (its directory must contain --out-dir). Without it they are printed.
-        #[arg(long, requires = "urdf")]
-        into: Option<PathBuf>,
-        /// One mesh file to convert; writes <out-dir>/<name>.urdf, a one-link URDF with its
-        /// visuals.
-        #[arg(long, conflicts_with = "texture")]
-        mesh: Option<PathBuf>,
-        /// With --mesh: uniform scale baked into the vertices (positive, up to 1e6).
-        #[arg(long, default_value_t = 1.0, value_parser = args::scale, allow_hyphen_values = true)]
-        scale: f64,
-        /// A PNG texture to re-encode as <out-dir>/<name>.png.
-        #[arg(long)]
-        texture: Option<PathBuf>,
-        /// Output directory (created if missing).
-        #[arg(long)]
-        out_dir: PathBuf,
-        /// File stem for --mesh and --texture.
-        #[arg(long, default_value = "visual")]
-        name: String,
-        /// Triangle budget per mesh file (12..=1000000).
-        #[arg(long, default_value_t = meshes::visual::DEFAULT_MAX_TRIANGLES, value_parser = args::max_triangles, allow_hyphen_values = true)]
-        max_triangles: usize,
-        /// Largest distance in millimetres that simplification may move a mesh's surface
-        /// (0.001..=1000); meshes keep more triangles than --max-triangles where this needs it.
-        /// Default: up to 2 % of each mesh's extent (8 % where the budget needs it).
-        #[arg(long, value_parser = args::max_error_mm, allow_hyphen_values = true)]
-        max_error: Option<f32>,
-        /// Colour of a material the URDF names without defining it, as NAME=R,G,B,A (linear,
-        /// 0..=1; repeatable), e.g. trossen_black=0.02,0.02,0.02,1.
-        #[arg(long = "material", value_parser = args::named_rgba)]
-        materials: Vec<(String, [f32; 4])>,
-        /// Largest texture side in pixels (1..=8192; halved until it fits).
-        #[arg(long, default_value_t = meshes::visual::DEFAULT_TEXTURE_SIZE, value_parser = args::texture_size, allow_hyphen_values = true)]
-        texture_size: u32,
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
     Eval {
@@ -366,16 +297,9 @@ pub enum Command {
         /// recording's mode (Fetch's EE modes). Default: the recording's own mode.
         #[arg(long)]
         control_mode: Option<String>,
-        /// --format lerobot: files per chunk folder (LeRobot's chunks_size; default 1000).
-        #[arg(long)]
-        chunks_size: Option<usize>,
-        /// --format lerobot: size limit of data and meta/episodes parquet files in MB
-        /// (default 100); an episode that would reach it starts the next file.
-        #[arg(long)]
-        data_files_size_in_mb: Option<f64>,
-        /// --format lerobot: size limit of video files in MB (default 200).
-        #[arg(long)]
-        video_files_size_in_mb: Option<f64>,
+        // --format lerobot: how files are split.
+        #[command(flatten)]
+        limits: datasets::LimitArgs,
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
@@ -383,25 +307,7 @@ pub enum Command {
     /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
     /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
     /// (mm), mean absolute colour difference. See docs/observations.md.
-    CompareImages {
-        /// Reference directory with `<env>__<robot>/` directories of ManiSkill's `.npz`
-        /// renders (per camera `<cam>_rgb`, `<cam>_depth`, `<cam>_segmentation`;
-        /// `state_json`, `control_mode`).
-        reference: PathBuf,
-        /// Only this `<env>__<robot>` directory (repeatable).
-        #[arg(long = "pair")]
-        pairs: Vec<String>,
-        /// Write one side-by-side PNG per state here (mjskill | ManiSkill | difference; colour
-        /// above, segmentation below).
-        #[arg(long)]
-        panels: Option<PathBuf>,
-        /// At most this many states per pair (1..=1000000).
-        #[arg(long, value_parser = args::bench_steps, allow_hyphen_values = true)]
-        limit: Option<usize>,
-        /// Include every state's per-camera scores (and per-id IoU).
-        #[arg(long)]
-        per_state: bool,
-    },
+    CompareImages(compare_images::CompareArgs),
     /// Render one camera frame of a seeded initial state to a PNG file (headless, EGL);
     /// prints a JSON summary.
     Render {
@@ -449,64 +355,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             threads,
             obs_mode,
             render,
-        } => {
-            let cores = std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1);
-            let vec = match (envs, threads) {
-                (None, None) => None,
-                (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
-            };
-            let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(&obs_mode)?,
-                ..target.config()
-            };
-            let report = bench::run(target.env_id(), config, steps, vec, render)?;
-            out!("{}", serde_json::to_string(&report)?);
-            Ok(())
-        }
-        Command::FitPrimitives {
-            mesh,
-            shape,
-            parts,
-            segments,
-            crop,
-            scale,
-        } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref(), scale),
-        Command::ConvertVisuals {
-            urdf,
-            into,
-            mesh,
-            scale,
-            texture,
-            out_dir,
-            name,
-            max_triangles,
-            max_error,
-            texture_size,
-            materials,
-        } => {
-            let opts = meshes::visual::Options {
-                materials,
-                max_triangles,
-                max_error: max_error.map(|e| e / 1000.0),
-                texture_size,
-            };
-            let source = match (urdf, mesh, texture) {
-                (Some(u), None, None) => meshes::visual::Source::Urdf { urdf: u, into },
-                (None, Some(m), None) => meshes::visual::Source::Mesh { mesh: m, scale },
-                (None, None, Some(t)) => meshes::visual::Source::Texture(t),
-                _ => {
-                    return Err(
-                        "convert-visuals needs exactly one of --urdf, --mesh or --texture".into(),
-                    )
-                }
-            };
-            for line in meshes::visual::run(source, &out_dir, &name, opts)? {
-                out!("{line}");
-            }
-            Ok(())
-        }
+        } => bench_command(target, steps, envs, threads, &obs_mode, render),
         Command::Eval {
             target,
             policy,
@@ -530,31 +379,15 @@ fn run(cli: Cli) -> Result<(), CliError> {
             video,
             cameras,
             no_frame,
-        } => {
-            use std::io::IsTerminal;
-            let config = mjskill::EnvConfig {
-                obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
-                reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
-                ..target.config()
-            };
-            let policy = mjskill::solvers::PolicySpec::parse(&policy)?;
-            let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
-            let args = rollout::RolloutArgs {
-                env,
-                config,
-                policy,
-                episodes,
-                seed,
-                out,
-                progress: std::io::stderr().is_terminal(),
-                video,
-                cameras,
-                frame: !no_frame,
-            };
-            let summary = rollout::rollout(&args)?;
-            out!("{}", serde_json::to_string(&summary)?);
-            Ok(())
-        }
+        } => rollout_command(
+            target,
+            (obs_mode, reward_mode),
+            &policy,
+            episodes,
+            seed,
+            out,
+            (video, cameras, !no_frame),
+        ),
         Command::Info { file, salvage } if file.is_dir() => {
             let s = info_dir::info_dir(&file, salvage)?;
             out!("{}", serde_json::to_string(&s)?);
@@ -569,57 +402,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             file,
             tolerance,
             salvage,
-        } => {
-            let r = mjskill::record::replay::replay(&file, tolerance, salvage)?;
-            out!("{}", serde_json::to_string(&r)?);
-            if r.ok {
-                Ok(())
-            } else {
-                Err(format!(
-                    "{}: replay deviates beyond the tolerance {tolerance}",
-                    file.display()
-                )
-                .into())
-            }
-        }
-        Command::ImportManiskill {
-            h5,
-            json,
-            out,
-            by,
-            sim_freq,
-        } => {
-            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
-            out!("{}", serde_json::to_string(&r)?);
-            Ok(())
-        }
-        Command::Export {
-            file,
-            format,
-            output,
-            json,
-            video,
-            control_mode,
-            chunks_size,
-            data_files_size_in_mb,
-            video_files_size_in_mb,
-        } => {
-            let r = datasets::export(
-                &file,
-                &format,
-                output,
-                json.as_deref(),
-                video,
-                control_mode.as_deref(),
-                datasets::LimitArgs {
-                    chunks_size,
-                    data_files_size_in_mb,
-                    video_files_size_in_mb,
-                },
-            )?;
-            out!("{}", serde_json::to_string(&r)?);
-            Ok(())
-        }
+        } => replay_command(&file, tolerance, salvage),
+        cmd @ (Command::ImportManiskill { .. } | Command::Export { .. }) => datasets_command(cmd),
         Command::Render {
             target,
             seed,
@@ -630,21 +414,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             out!("{}", serde_json::to_string(&s)?);
             Ok(())
         }
-        Command::CompareImages {
-            reference,
-            pairs,
-            panels,
-            limit,
-            per_state,
-        } => {
-            let r = compare_images::run(&compare_images::CompareArgs {
-                reference,
-                pairs,
-                panels,
-                limit,
-                per_state,
-            })?;
-            out!("{}", serde_json::to_string(&r)?);
+        Command::CompareImages(args) => {
+            out!("{}", serde_json::to_string(&compare_images::run(&args)?)?);
             Ok(())
         }
         Command::Fidelity {
@@ -674,6 +445,136 @@ fn run(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
     }
+}
+
+/// `mjskill bench`: times the env (a VecEnv with `--envs`/`--threads`) and prints the report.
+fn bench_command(
+    target: EnvArgs,
+    steps: usize,
+    envs: Option<usize>,
+    threads: Option<usize>,
+    obs_mode: &str,
+    render: Option<usize>,
+) -> Result<(), CliError> {
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let vec = match (envs, threads) {
+        (None, None) => None,
+        (n, t) => Some((n.unwrap_or(2 * cores), t.unwrap_or(cores))),
+    };
+    let config = mjskill::EnvConfig {
+        obs_mode: mjskill::ObsMode::parse(obs_mode)?,
+        ..target.config()
+    };
+    let report = bench::run(target.env_id(), config, steps, vec, render)?;
+    out!("{}", serde_json::to_string(&report)?);
+    Ok(())
+}
+
+/// `mjskill rollout`: records `episodes` episodes of `policy` from `seed` on into `out`, with
+/// `--obs-mode` and `--reward-mode`, and `--video`, `--camera`s and whether to frame the video.
+fn rollout_command(
+    target: EnvArgs,
+    (obs_mode, reward_mode): (Option<String>, String),
+    policy: &str,
+    episodes: usize,
+    seed: u64,
+    out: PathBuf,
+    (video, cameras, frame): (bool, Vec<String>, bool),
+) -> Result<(), CliError> {
+    use std::io::IsTerminal;
+    let config = mjskill::EnvConfig {
+        obs_mode: mjskill::ObsMode::parse(obs_mode.as_deref().unwrap_or("state"))?,
+        reward_mode: mjskill::RewardMode::parse(&reward_mode)?,
+        ..target.config()
+    };
+    let policy = mjskill::solvers::PolicySpec::parse(policy)?;
+    let (env, config) = policy.target(target.env.as_deref(), config, obs_mode.is_some())?;
+    let args = rollout::RolloutArgs {
+        env,
+        config,
+        policy,
+        episodes,
+        seed,
+        out,
+        progress: std::io::stderr().is_terminal(),
+        video,
+        cameras,
+        frame,
+    };
+    let summary = rollout::rollout(&args)?;
+    out!("{}", serde_json::to_string(&summary)?);
+    Ok(())
+}
+
+/// `mjskill replay`: re-simulates a recording and prints the report; an error when it
+/// deviates beyond `tolerance`.
+fn replay_command(file: &Path, tolerance: f64, salvage: bool) -> Result<(), CliError> {
+    let r = mjskill::record::replay::replay(file, tolerance, salvage)?;
+    out!("{}", serde_json::to_string(&r)?);
+    if r.ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: replay deviates beyond the tolerance {tolerance}",
+            file.display()
+        )
+        .into())
+    }
+}
+
+/// `mjskill import-maniskill` and `mjskill export`.
+#[cfg(feature = "datasets")]
+fn datasets_command(cmd: Command) -> Result<(), CliError> {
+    match cmd {
+        Command::ImportManiskill {
+            h5,
+            json,
+            out,
+            by,
+            sim_freq,
+        } => {
+            let r = datasets::import_maniskill(&h5, json.as_deref(), &out, &by, sim_freq)?;
+            out!("{}", serde_json::to_string(&r)?);
+        }
+        Command::Export {
+            file,
+            format,
+            output,
+            json,
+            video,
+            control_mode,
+            limits,
+        } => {
+            let r = datasets::export(
+                &file,
+                &format,
+                output,
+                json.as_deref(),
+                video,
+                control_mode.as_deref(),
+                limits,
+            )?;
+            out!("{}", serde_json::to_string(&r)?);
+        }
+        _ => unreachable!("called for import-maniskill and export"),
+    }
+    Ok(())
+}
+
+/// Without the `datasets` feature, `import-maniskill` and `export` are an error naming it.
+#[cfg(not(feature = "datasets"))]
+fn datasets_command(cmd: Command) -> Result<(), CliError> {
+    let command = match cmd {
+        Command::ImportManiskill { .. } => "import-maniskill",
+        _ => "export",
+    };
+    Err(format!(
+        "`mjskill {command}` needs mjskill's `datasets` feature, which this build leaves out \
+         (build with the default features, or add `--features datasets`)"
+    )
+    .into())
 }
 
 fn write_output(output: Option<PathBuf>, text: &str) -> Result<(), CliError> {
@@ -725,74 +626,6 @@ fn export_mjcf(
         _ => {}
     }
     write_output(output, &mjcf.xml)
-}
-
-fn fit_primitives(
-    mesh: &std::path::Path,
-    shape: &str,
-    parts: Option<usize>,
-    segments: usize,
-    crop: Option<&str>,
-    scale: f64,
-) -> Result<(), CliError> {
-    use crate::meshes as mesh_fit;
-    let kinds: Vec<mesh_fit::Kind> = shape
-        .split(',')
-        .map(|s| s.trim().parse())
-        .collect::<Result<_, _>>()?;
-    let crop = match crop {
-        None => None,
-        Some(s) => {
-            let v: Vec<f64> = s
-                .split(',')
-                .map(|x| {
-                    x.trim()
-                        .parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite())
-                        .ok_or_else(|| format!("--crop: {x:?} is not a finite number"))
-                })
-                .collect::<Result<_, _>>()?;
-            if v.len() != 6 {
-                return Err(format!(
-                    "--crop needs 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}",
-                    v.len()
-                )
-                .into());
-            }
-            if (0..3).any(|k| v[k] > v[k + 3]) {
-                return Err(format!("--crop {s}: each minimum must not exceed its maximum").into());
-            }
-            Some(mesh_fit::Crop {
-                min: [v[0], v[1], v[2]].into(),
-                max: [v[3], v[4], v[5]].into(),
-            })
-        }
-    };
-    let bytes = std::fs::read(mesh).map_err(|e| format!("cannot read {}: {e}", mesh.display()))?;
-    let mut tris = mesh_fit::read_triangles(&bytes, &mesh.display().to_string())?;
-    mesh_fit::scale_triangles(&mut tris, scale)?;
-    let pts = mesh_fit::surface_points(&tris, crop.as_ref())?;
-    let prims = match parts {
-        Some(n) => mesh_fit::decompose(&pts, &kinds, n),
-        None if segments > 1 && kinds.len() == 1 => {
-            mesh_fit::fit_segments(&pts, kinds[0], segments)
-        }
-        None if segments > 1 => return Err("--segments needs a single --shape".into()),
-        None => mesh_fit::fit_any(&pts, &kinds).map(|p| vec![p]),
-    }?;
-    for p in &prims {
-        mesh_fit::check_primitive(p, crop.is_some())?;
-    }
-    let total: f64 = prims.iter().map(|p| p.volume()).sum();
-    for p in &prims {
-        out!("{}", p.to_urdf());
-    }
-    out!(
-        "<!-- primitives volume {total:.3e} m^3, mesh volume {:.3e} m^3 -->",
-        mesh_fit::mesh_volume(&tris)
-    );
-    Ok(())
 }
 
 /// `mjskill outcomes`: replays every outcome file under `path` and prints the agreement.

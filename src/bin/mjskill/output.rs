@@ -11,7 +11,11 @@
 //!   then continues into the same open file, so a rollout killed later leaves every finished
 //!   episode under the final name.
 //! * A run that fails or is killed before its first episode is finished never touches the
-//!   final name (a failed run removes its temporary file).
+//!   final name (a failed run removes its temporary file; the temporary files of killed runs,
+//!   which no process holds locked any more, are removed by the next rollout to the same
+//!   name).
+//! * The final name must be a regular file or not exist: a device, FIFO or socket there is
+//!   refused before anything is written.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::ErrorKind;
@@ -55,6 +59,43 @@ fn same_file(a: &File, b: &File) -> bool {
     }
 }
 
+/// Removes the temporary files `.<name>.<pid>.part` in `dir` that rollouts killed before
+/// their first episode left: those no process holds locked, whose process is gone.
+fn remove_stale(dir: &Path, name: &str) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let prefix = format!(".{name}.");
+    for e in entries.flatten() {
+        let file_name = e.file_name().to_string_lossy().to_string();
+        let Some(pid) = file_name
+            .strip_prefix(&prefix)
+            .and_then(|r| r.strip_suffix(".part"))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid == std::process::id() || process_alive(pid) {
+            continue;
+        }
+        let path = e.path();
+        if !std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file()) {
+            continue;
+        }
+        if let Ok(f) = OpenOptions::new().write(true).open(&path) {
+            if matches!(locked_elsewhere(&f), Ok(false)) {
+                std::fs::remove_file(&path).ok();
+            }
+        }
+    }
+}
+
+/// Whether process `pid` is running (Linux's /proc; elsewhere every process counts as alive,
+/// so nothing is removed).
+fn process_alive(pid: u32) -> bool {
+    !Path::new("/proc/self").exists() || Path::new("/proc").join(pid.to_string()).exists()
+}
+
 fn clash(out: &Path) -> String {
     format!(
         "{} is being written by another mjskill rollout (it holds the file's lock); choose \
@@ -75,6 +116,14 @@ impl Output {
         if out.is_dir() {
             return Err(format!("--out {} is a directory", out.display()));
         }
+        mjskill::files::check_not_special(out).map_err(|e| {
+            format!(
+                "--out {}: {}; the recording is written to a temporary file and renamed into \
+                 place, which would replace it: name a regular file",
+                out.display(),
+                e.reason()
+            )
+        })?;
         let old = match File::open(out) {
             Ok(f) => {
                 if locked_elsewhere(&f).map_err(cannot)? {
@@ -89,6 +138,7 @@ impl Output {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
         };
+        remove_stale(&dir, &name.to_string_lossy());
         let temp = dir.join(format!(
             ".{}.{}.part",
             name.to_string_lossy(),

@@ -9,7 +9,7 @@ use crate::CliError;
 use mjskill::record::image::write_png;
 use mjskill::record::RecordError;
 use mjskill::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
-use mjskill::solvers::{check_seed_range, Policy, PolicySpec};
+use mjskill::solvers::{check_seed_range, EvalError, Policy, PolicySpec};
 use mjskill::{Env, EnvConfig};
 
 /// The one-line JSON summary of a rollout.
@@ -120,6 +120,14 @@ pub fn check_frame_path(out: &Path, frame: bool) -> Result<Option<PathBuf>, CliE
 /// under `out`, and a run killed later keeps its finished episodes there.
 pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     check_seed_range(a.seed, a.episodes as u64)?;
+    if (a.video || !a.cameras.is_empty()) && !cfg!(feature = "video") {
+        return Err(
+            "--video and --camera record H.264 video, which needs mjskill's `video` \
+                    feature; this build leaves it out (build with the default features, or \
+                    add `--features video`)"
+                .into(),
+        );
+    }
     let mut env = a.policy.make_env(&a.env, a.config.clone())?;
     let mut policy = a.policy.make_policy(&env, a.seed)?;
     let frame_png = check_frame_path(&a.out, a.frame)?;
@@ -131,6 +139,12 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     }
     check_cameras(&env, &a.cameras)?;
     let (mut output, file) = Output::start(&a.out)?;
+    if let Some(png) = &frame_png {
+        if let Err(e) = mjskill::files::check_not_special(png) {
+            output.discard();
+            return Err(format!("cannot write the frame PNG: {e}; pass --no-frame").into());
+        }
+    }
     let mut rec = match Recorder::from_file(file, output.current(), &env) {
         Ok(r) => r,
         Err(e) => {
@@ -143,19 +157,37 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
         total_return: 0.0,
         steps: 0,
         frame: None,
+        episode: 0,
     };
     let t0 = Instant::now();
-    let r = record_all(
-        a,
-        &mut env,
-        policy.as_mut(),
-        &mut rec,
-        &mut output,
-        &mut run,
-        camera,
-        (render_w, render_h),
-        frame_png.as_deref(),
-    );
+    // A panic (a bug) must not leave a file that claims to be complete: it ends the run like
+    // an error, and the finished episodes are kept as for a run cut short.
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        record_all(
+            a,
+            &mut env,
+            policy.as_mut(),
+            &mut rec,
+            &mut output,
+            &mut run,
+            camera,
+            (render_w, render_h),
+            frame_png.as_deref(),
+        )
+    }))
+    .unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(format!(
+            "the rollout crashed in episode {} (seed {}): {msg}",
+            run.episode,
+            a.seed + run.episode
+        )
+        .into())
+    });
     if let Err(e) = r {
         // Keep what was finished (the file then reads as cut short), or nothing at all.
         let abandoned = rec.abandon();
@@ -242,6 +274,8 @@ struct Run {
     total_return: f64,
     steps: u64,
     frame: Option<String>,
+    /// The episode being recorded (0 is the first).
+    episode: u64,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -275,6 +309,7 @@ fn record_all(
     let mut action = vec![0.0f32; env.action_space().shape[0]];
     for k in 0..a.episodes as u64 {
         let seed = a.seed + k;
+        run.episode = k;
         env.try_reset(Some(seed))?;
         policy.reset(env);
         rec.begin_episode(env, Some(seed))?;
@@ -287,8 +322,10 @@ fn record_all(
         loop {
             policy.try_act(env, &mut action)?;
             let (reward, terminated, truncated) = rec.step(env, &action).map_err(|e| match e {
-                // A rejected action reads as the env's own error.
-                RecordError::Env { source, .. } => source.to_string(),
+                // A rejected action reads as the env's own error, naming the policy.
+                RecordError::Env { source, .. } => EvalError::Env(source)
+                    .in_episode(&a.policy, k, seed)
+                    .to_string(),
                 e => e.to_string(),
             })?;
             if a.video {

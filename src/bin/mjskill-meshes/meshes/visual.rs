@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::formats::{read_png, read_visual, Image, Part, SourceMesh};
-use super::read::MeshError;
+use super::read::{MeshError, MAX_COORD};
 
 /// Default triangle budget of one mesh file (all its materials together).
 pub const DEFAULT_MAX_TRIANGLES: usize = 3000;
@@ -89,22 +89,26 @@ pub fn simplify(part: &Part, target: usize, max_error: Option<f32>) -> Part {
         .collect();
     let (unique, remap) = meshopt::generate_vertex_remap(&verts, Some(&part.indices));
     let indices = meshopt::remap_index_buffer(Some(&part.indices), unique, &remap);
-    let verts = meshopt::remap_vertex_buffer(&verts, unique, &remap);
-    let positions: Vec<[f32; 3]> = verts.iter().map(|v| [v.0[0], v.0[1], v.0[2]]).collect();
+    let mut indices = distinct_triangles(&indices);
+    let mut verts = meshopt::remap_vertex_buffer(&verts, unique, &remap);
     use meshopt::SimplifyOptions as O;
     let (first, second) = match max_error {
         Some(e) => ((e, O::ErrorAbsolute), (e, O::ErrorAbsolute | O::Permissive)),
         None => ((0.02, O::None), (0.08, O::Permissive)),
     };
-    let mut indices = indices;
     for (error, options) in [first, second] {
         // The second pass only when the first is still over budget (texture seams held it
         // back): it may collapse across seams.
         if indices.len() / 3 > target {
+            split_crowded_vertices(&mut indices, &mut verts);
+            let positions: Vec<[f32; 3]> = verts.iter().map(|v| [v.0[0], v.0[1], v.0[2]]).collect();
             indices =
                 meshopt::simplify_decoder(&indices, &positions, target * 3, error, options, None);
         }
     }
+    // Vertex cache optimisation, too, rescans every triangle of a vertex each time it
+    // scores it.
+    split_crowded_vertices(&mut indices, &mut verts);
     let indices = meshopt::optimize_vertex_cache(&indices, verts.len());
     let mut indices = indices;
     let verts = meshopt::optimize_vertex_fetch(&mut indices, &verts);
@@ -120,6 +124,51 @@ pub fn simplify(part: &Part, target: usize, max_error: Option<f32>) -> Part {
     }
 }
 
+/// `indices` without degenerate triangles (a vertex twice) and without repeats of a
+/// triangle (the same three vertices in any order; the first is kept), which [`obj_text`]
+/// would drop anyway. A polygon fanned over a few distinct vertices (one OBJ face with
+/// 200,000 corners on 8 vertices) becomes at most 56 triangles here instead of hundreds of
+/// thousands that simplification and normals would work through.
+fn distinct_triangles(indices: &[u32]) -> Vec<u32> {
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::with_capacity(indices.len());
+    for t in indices.chunks_exact(3) {
+        let mut sorted = [t[0], t[1], t[2]];
+        sorted.sort_unstable();
+        if sorted[0] != sorted[1] && sorted[1] != sorted[2] && seen.insert(sorted) {
+            out.extend_from_slice(t);
+        }
+    }
+    out
+}
+
+/// Most triangles that share one vertex when simplifying and ordering triangles.
+/// meshoptimizer classifies each vertex by looking up every edge of its neighbours, and its
+/// vertex cache optimisation rescans a vertex's triangles whenever it scores the vertex: both
+/// take time quadratic in the triangles at a vertex (the centre of a 200,000-corner polygon
+/// fan took minutes).
+pub const MAX_TRIANGLES_AT_VERTEX: usize = 256;
+
+/// Gives every further [`MAX_TRIANGLES_AT_VERTEX`] triangles at a vertex their own copy of
+/// it (appended to `verts`), so that no vertex has more. The copies share the position, so
+/// simplification keeps them in place (a vertex where such copies meet is locked) and the
+/// OBJ writes the position once.
+fn split_crowded_vertices<T: Copy>(indices: &mut [u32], verts: &mut Vec<T>) {
+    let mut seen = vec![0usize; verts.len()];
+    let mut copies: HashMap<(u32, usize), u32> = HashMap::new();
+    for i in indices.iter_mut() {
+        let v = *i;
+        let k = seen[v as usize] / MAX_TRIANGLES_AT_VERTEX;
+        seen[v as usize] += 1;
+        if k > 0 {
+            *i = *copies.entry((v, k)).or_insert_with(|| {
+                verts.push(verts[v as usize]);
+                (verts.len() - 1) as u32
+            });
+        }
+    }
+}
+
 fn face_normal(p: &[[f32; 3]], t: &[u32]) -> Vector3<f32> {
     let a = Vector3::from(p[t[0] as usize]);
     let b = Vector3::from(p[t[1] as usize]);
@@ -127,8 +176,53 @@ fn face_normal(p: &[[f32; 3]], t: &[u32]) -> Vector3<f32> {
     (b - a).cross(&(c - a))
 }
 
+/// Most face normals a corner's normal is averaged from: where more faces meet at one
+/// position (a polygon fanned from one corner, or a crafted mesh), faces of nearly the same
+/// direction are summed into one candidate first, so that the normals take time linear in
+/// the triangles.
+pub const MAX_NORMAL_CANDIDATES: usize = 256;
+
+/// (unit direction, area-weighted normal) pairs a corner's normal is averaged from.
+type Candidates = Vec<(Vector3<f32>, Vector3<f32>)>;
+
+/// The (unit direction, area-weighted normal) candidates a corner at a position where the
+/// faces `group` meet averages from: one per face with an area, in order, or, for more than
+/// [`MAX_NORMAL_CANDIDATES`] faces, sums of faces whose unit normals fall into the same
+/// cell of a grid, the finest (from 2⁻²⁰) that leaves at most that many.
+fn normal_candidates(group: &[usize], faces: &[Vector3<f32>]) -> Candidates {
+    let own: Vec<(Vector3<f32>, Vector3<f32>)> = group
+        .iter()
+        .filter_map(|&g| Some((faces[g].try_normalize(0.0)?, faces[g])))
+        .collect();
+    if own.len() <= MAX_NORMAL_CANDIDATES {
+        return own;
+    }
+    let mut cell = 2f32.powi(-20);
+    loop {
+        let mut index: HashMap<[i32; 3], usize> = HashMap::new();
+        let mut sums: Vec<Vector3<f32>> = Vec::new();
+        for (u, n) in &own {
+            let key = [u.x, u.y, u.z].map(|x| (x / cell).round() as i32);
+            let k = *index.entry(key).or_insert_with(|| {
+                sums.push(Vector3::zeros());
+                sums.len() - 1
+            });
+            sums[k] += n;
+        }
+        // At a cell of 0.5 every unit vector falls into one of 5³ cells, so this ends.
+        if sums.len() <= MAX_NORMAL_CANDIDATES {
+            return sums
+                .into_iter()
+                .filter_map(|n| Some((n.try_normalize(0.0)?, n)))
+                .collect();
+        }
+        cell *= 2.0;
+    }
+}
+
 /// Per-corner normals of triangle list `part`: the source's, or area-weighted averages of
-/// the faces at the same position within [`CREASE_DEG`] of the corner's face.
+/// the faces at the same position within [`CREASE_DEG`] of the corner's face (see
+/// [`MAX_NORMAL_CANDIDATES`] for positions where very many faces meet).
 fn corner_normals(part: &Part) -> Vec<[f32; 3]> {
     if let Some(n) = &part.normals {
         return part.indices.iter().map(|&i| n[i as usize]).collect();
@@ -147,17 +241,19 @@ fn corner_normals(part: &Part) -> Vec<[f32; 3]> {
                 .push(f);
         }
     }
+    let candidates: HashMap<(u32, u32, u32), Candidates> = at
+        .into_iter()
+        .map(|(k, group)| (k, normal_candidates(&group, &faces)))
+        .collect();
     let cos = CREASE_DEG.to_radians().cos();
     let mut out = Vec::with_capacity(part.indices.len());
     for (f, t) in part.indices.chunks(3).enumerate() {
         let own = faces[f].try_normalize(0.0).unwrap_or(Vector3::z());
         for &i in t {
             let mut sum = Vector3::zeros();
-            for &g in &at[&key(part.positions[i as usize])] {
-                if let Some(u) = faces[g].try_normalize(0.0) {
-                    if u.dot(&own) >= cos {
-                        sum += faces[g];
-                    }
+            for (u, n) in &candidates[&key(part.positions[i as usize])] {
+                if u.dot(&own) >= cos {
+                    sum += n;
                 }
             }
             let n = sum.try_normalize(0.0).unwrap_or(own);
@@ -414,6 +510,9 @@ pub fn convert_mesh(
             }
         }
     }
+    for (k, p) in mesh.parts.iter().enumerate() {
+        check_vertices(src, k, p, scale)?;
+    }
     let total = mesh.triangles().max(1);
     let mut out = Vec::new();
     for (k, p) in mesh.parts.iter().enumerate() {
@@ -469,6 +568,38 @@ pub fn convert_mesh(
     Ok(out)
 }
 
+/// Errors naming `src` when part `k` (scaled by `scale`) has a non-finite position, normal
+/// or texture coordinate, or a position beyond ±[`MAX_COORD`] m: an OBJ with `v NaN NaN NaN`
+/// would draw nothing, or garbage.
+fn check_vertices(src: &Path, k: usize, p: &Part, scale: [f32; 3]) -> Result<(), MeshError> {
+    let bad = |what: &str, i: usize, v: &[f32]| MeshError::Malformed {
+        name: src.display().to_string(),
+        reason: format!(
+            "part {k} vertex {i} has {what} {v:?} (after scaling by {scale:?}); positions \
+             must be finite and within ±{MAX_COORD:e} m, normals and texture coordinates finite"
+        ),
+    };
+    let far = |v: &[f32]| {
+        v.iter()
+            .any(|x| !x.is_finite() || f64::from(x.abs()) > MAX_COORD)
+    };
+    if let Some((i, v)) = p.positions.iter().enumerate().find(|(_, v)| far(&v[..])) {
+        return Err(bad("the position", i, v));
+    }
+    let not_finite = |v: &[f32]| v.iter().any(|x| !x.is_finite());
+    if let Some(n) = &p.normals {
+        if let Some((i, v)) = n.iter().enumerate().find(|(_, v)| not_finite(&v[..])) {
+            return Err(bad("the normal", i, v));
+        }
+    }
+    if let Some(uv) = &p.uvs {
+        if let Some((i, v)) = uv.iter().enumerate().find(|(_, v)| not_finite(&v[..])) {
+            return Err(bad("the texture coordinate", i, v));
+        }
+    }
+    Ok(())
+}
+
 fn f3(v: &[f64; 3]) -> String {
     v.iter()
         .map(|x| trim(format!("{x:.6}")))
@@ -505,6 +636,13 @@ pub fn visual_elements(
         .collect()
 }
 
+/// A text file (URDF, MJCF) by the rule of every input file ([`mjskill::files`]).
+fn read_text(path: &Path) -> Result<String, MeshError> {
+    let bytes = mjskill::files::read(path).map_err(|e| MeshError::Invalid(e.to_string()))?;
+    String::from_utf8(bytes)
+        .map_err(|_| MeshError::Invalid(format!("cannot read {}: not UTF-8 text", path.display())))
+}
+
 /// Converts every mesh `<visual>` of the URDF at `src` (paths relative to it) into
 /// `out_dir`; returns per link its new `<visual>` elements, with file names prefixed by
 /// `prefix`. Primitive visuals are kept as they are, with their colour. Prints a line per
@@ -517,8 +655,7 @@ pub fn convert_urdf(
     log: &mut Vec<String>,
 ) -> Result<Vec<(String, Vec<String>)>, MeshError> {
     let name = src.display().to_string();
-    let text = std::fs::read_to_string(src)
-        .map_err(|e| MeshError::Invalid(format!("cannot read {name}: {e}")))?;
+    let text = read_text(src)?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| MeshError::Malformed {
         name: name.clone(),
         reason: e.to_string(),
@@ -534,6 +671,18 @@ pub fn convert_urdf(
     let dir = src.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(out_dir)
         .map_err(|e| MeshError::Invalid(format!("cannot create {}: {e}", out_dir.display())))?;
+    // Each link's meshes are written as `<link>_<visual>_<part>.obj`: a second link of the
+    // same name would overwrite the first one's.
+    let mut names = std::collections::HashSet::new();
+    if let Some(link) = robot.links.iter().find(|l| !names.insert(l.name.as_str())) {
+        return Err(MeshError::Malformed {
+            name,
+            reason: format!(
+                "link {:?} is defined twice; link names must be unique",
+                link.name
+            ),
+        });
+    }
     let mut out = Vec::new();
     let mut done: HashMap<(PathBuf, String), Vec<WrittenPart>> = HashMap::new();
     for link in &robot.links {
@@ -737,9 +886,7 @@ pub fn run(
             let visuals = convert_urdf(&urdf, out_dir, &prefix, &opts, &mut log)?;
             match into {
                 Some(model) => {
-                    let text = std::fs::read_to_string(&model).map_err(|e| {
-                        MeshError::Invalid(format!("cannot read {}: {e}", model.display()))
-                    })?;
+                    let text = read_text(&model)?;
                     let new = splice_visuals(&text, &visuals)
                         .map_err(|e| MeshError::Invalid(format!("{}: {e}", model.display())))?;
                     write(&model, new.as_bytes())?;
@@ -790,117 +937,5 @@ pub fn run(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn cube_part() -> Part {
-        // A unit cube as 12 triangles with 8 shared vertices.
-        let positions: Vec<[f32; 3]> = (0..8)
-            .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
-            .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let indices = quads
-            .iter()
-            .flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]])
-            .collect();
-        Part {
-            material: 0,
-            positions,
-            normals: None,
-            uvs: None,
-            indices,
-        }
-    }
-
-    #[test]
-    fn cube_obj_has_crease_normals_and_mujoco_loads_it() {
-        let (obj, n) = obj_text(&cube_part());
-        assert_eq!(n, 12);
-        // The 90° edges are creases: every normal is an axis.
-        for line in obj.lines().filter(|l| l.starts_with("vn ")) {
-            let v: Vec<f32> = line[3..].split(' ').map(|x| x.parse().unwrap()).collect();
-            let ones = v.iter().filter(|x| (x.abs() - 1.0).abs() < 1e-6).count();
-            assert_eq!(ones, 1, "{line}");
-        }
-        mujoco_accepts(&obj).unwrap();
-    }
-
-    #[test]
-    fn repeated_triangles_are_dropped_and_repeated_edges_split() {
-        let mut p = cube_part();
-        let first: Vec<u32> = p.indices[..3].to_vec();
-        p.indices.extend(&first); // the same triangle again
-        p.indices.extend([first[0], first[1], 7]); // reuses the directed edge (0, 2)
-        let (obj, n) = obj_text(&p);
-        assert_eq!(n, 13);
-        mujoco_accepts(&obj).unwrap();
-    }
-
-    #[test]
-    fn simplify_meets_the_budget_on_a_dense_sphere() {
-        let mut p = Part::default();
-        let (nu, nv) = (64, 32);
-        for j in 0..=nv {
-            for i in 0..=nu {
-                let (th, ph) = (
-                    std::f32::consts::PI * j as f32 / nv as f32,
-                    2.0 * std::f32::consts::PI * i as f32 / nu as f32,
-                );
-                p.positions
-                    .push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
-            }
-        }
-        for j in 0..nv {
-            for i in 0..nu {
-                let a = j * (nu + 1) + i;
-                let b = a + nu + 1;
-                p.indices.extend([a, b, a + 1, a + 1, b, b + 1]);
-            }
-        }
-        let s = simplify(&p, 500, None);
-        assert!(s.indices.len() / 3 <= 500, "{}", s.indices.len() / 3);
-        assert!(s.indices.len() / 3 >= 100);
-        // A tight bound keeps more triangles than the budget, with every vertex on the sphere.
-        let fine = simplify(&p, 500, Some(0.001));
-        assert!(fine.indices.len() / 3 > 1000, "{}", fine.indices.len() / 3);
-        for v in &fine.positions {
-            let r = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            assert!((r - 1.0).abs() < 1e-5, "{r}");
-        }
-    }
-
-    #[test]
-    fn splice_replaces_visuals_of_named_links_only() {
-        let model = "<robot name=\"r\">\n  <link name=\"a\">\n    <visual><geometry><box size=\"1 1 1\"/></geometry></visual>\n    <collision/>\n  </link>\n  <link name=\"b\"/>\n  <link name=\"c\">\n    <visual><geometry><box size=\"1 1 1\"/></geometry></visual>\n  </link>\n</robot>\n";
-        let out = splice_visuals(
-            model,
-            &[
-                ("a".into(), vec!["<visual>A</visual>".into()]),
-                ("b".into(), vec!["<visual>B</visual>".into()]),
-            ],
-        )
-        .unwrap();
-        assert!(
-            out.contains("<link name=\"a\">\n    <visual>A</visual>\n    <collision/>"),
-            "{out}"
-        );
-        assert!(
-            out.contains("<link name=\"b\">\n    <visual>B</visual>\n  </link>"),
-            "{out}"
-        );
-        assert!(
-            out.contains("<link name=\"c\">\n    <visual><geometry>"),
-            "{out}"
-        );
-        assert_eq!(out.matches("<visual").count(), 3);
-        let e = splice_visuals(model, &[("zz".into(), vec![])]).unwrap_err();
-        assert!(e.contains("zz"), "{e}");
-    }
-}
+#[path = "visual_tests.rs"]
+mod tests;

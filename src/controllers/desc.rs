@@ -1,5 +1,6 @@
-//! Reading a robot: URDF (with urdf-rs) and SRDF (the "Default" collision exclusions) into a
-//! [`RobotDesc`] that the MJCF writer and the kinematics code share.
+//! The robot description: a robot read from URDF (with urdf-rs) and SRDF (the "Default"
+//! collision exclusions) into a [`RobotDesc`], and its joints' PD [`Drive`]s. The controllers
+//! (kinematics, drives) and the MJCF writer, which consumes it, share it.
 //!
 //! Loader rules follow ManiSkill/SAPIEN (docs/robots.md §1.1): joint order is breadth-first over
 //! the kinematic tree with siblings in URDF declaration order; `continuous` joints are
@@ -147,6 +148,24 @@ pub struct RobotDesc {
     pub disabled_pairs: Vec<(String, String)>,
 }
 
+/// A PD drive on one joint (docs/controllers.md §5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drive {
+    /// Joint name.
+    pub joint: String,
+    /// Stiffness (N/m or N·m/rad).
+    pub kp: f64,
+    /// Damping.
+    pub kd: f64,
+    /// Force limit (N or N·m).
+    pub force_limit: f64,
+}
+
+/// Name of the actuator that drives `joint`.
+pub fn actuator_name(joint: &str) -> String {
+    format!("drive_{joint}")
+}
+
 /// URDF roll-pitch-yaw (fixed axes x, y, z) plus translation as an isometry.
 pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
     Isometry3::from_parts(
@@ -232,6 +251,110 @@ pub fn visuals_of(urdf: &str, file: &str) -> Result<Vec<Shape>, RobotError> {
     Ok(out)
 }
 
+/// One URDF link: inertia (rotated into the link frame), collision and visual shapes.
+fn link_desc(l: &urdf_rs::Link, file: &str) -> Result<LinkDesc, RobotError> {
+    let i = &l.inertial;
+    let ixx = &i.inertia;
+    let inertial = if i.mass.value > 0.0 {
+        let r = pose(&i.origin).rotation.to_rotation_matrix();
+        let local = Matrix3::new(
+            ixx.ixx, ixx.ixy, ixx.ixz, //
+            ixx.ixy, ixx.iyy, ixx.iyz, //
+            ixx.ixz, ixx.iyz, ixx.izz,
+        );
+        Some(Inertial {
+            mass: i.mass.value,
+            com: Vector3::from(*i.origin.xyz),
+            inertia: r.matrix() * local * r.matrix().transpose(),
+        })
+    } else {
+        None
+    };
+    let mut collisions = Vec::new();
+    for c in &l.collision {
+        collisions.push(shape(&c.origin, &c.geometry, None, file)?);
+    }
+    let mut visuals = Vec::new();
+    for v in &l.visual {
+        let rgba = v
+            .material
+            .as_ref()
+            .and_then(|m| m.color.as_ref())
+            .map(|c| *c.rgba);
+        let mut s = shape(&v.origin, &v.geometry, rgba, file)?;
+        s.texture = v
+            .material
+            .as_ref()
+            .and_then(|m| m.texture.as_ref())
+            .map(|t| t.filename.clone());
+        visuals.push(s);
+    }
+    Ok(LinkDesc {
+        name: l.name.clone(),
+        inertial,
+        collisions,
+        visuals,
+    })
+}
+
+/// One URDF joint (`link_index`: a link's index by name; `bad`: a structure error).
+fn joint_desc(
+    j: &urdf_rs::Joint,
+    link_index: &dyn Fn(&str) -> Result<usize, RobotError>,
+    bad: &dyn Fn(String) -> RobotError,
+) -> Result<JointDesc, RobotError> {
+    let kind = match j.joint_type {
+        urdf_rs::JointType::Revolute => JointKind::Revolute,
+        urdf_rs::JointType::Continuous => JointKind::Continuous,
+        urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+        urdf_rs::JointType::Fixed => JointKind::Fixed,
+        ref other => {
+            return Err(bad(format!(
+                "joint {:?} has unsupported type {other:?} (supported: revolute, continuous, prismatic, fixed)",
+                j.name
+            )))
+        }
+    };
+    let axis = Vector3::from(*j.axis.xyz);
+    let axis = if kind == JointKind::Fixed {
+        Vector3::z()
+    } else {
+        let n = axis.norm();
+        if !(n.is_finite() && n > 1e-9) {
+            return Err(bad(format!("joint {:?} has a zero axis", j.name)));
+        }
+        axis / n
+    };
+    let limits = match kind {
+        JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
+        JointKind::Fixed => (0.0, 0.0),
+        _ => {
+            if j.limit.lower > j.limit.upper {
+                return Err(bad(format!(
+                    "joint {:?} has lower limit {} above upper limit {}",
+                    j.name, j.limit.lower, j.limit.upper
+                )));
+            }
+            (j.limit.lower, j.limit.upper)
+        }
+    };
+    let mimic = j.mimic.as_ref().map(|m| Mimic {
+        leader: m.joint.clone(),
+        multiplier: m.multiplier.unwrap_or(1.0),
+        offset: m.offset.unwrap_or(0.0),
+    });
+    Ok(JointDesc {
+        name: j.name.clone(),
+        kind,
+        parent: link_index(&j.parent.link)?,
+        child: link_index(&j.child.link)?,
+        origin: pose(&j.origin),
+        axis,
+        limits,
+        mimic,
+    })
+}
+
 impl RobotDesc {
     /// Parses a URDF document and (optionally) its SRDF. `file` names the URDF in errors.
     pub fn parse(urdf: &str, srdf: Option<&str>, file: &str) -> Result<RobotDesc, RobotError> {
@@ -243,110 +366,22 @@ impl RobotDesc {
             file: file.to_string(),
             msg,
         };
-        let mut links = Vec::with_capacity(robot.links.len());
-        for l in &robot.links {
-            let i = &l.inertial;
-            let ixx = &i.inertia;
-            let inertial = if i.mass.value > 0.0 {
-                let r = pose(&i.origin).rotation.to_rotation_matrix();
-                let local = Matrix3::new(
-                    ixx.ixx, ixx.ixy, ixx.ixz, //
-                    ixx.ixy, ixx.iyy, ixx.iyz, //
-                    ixx.ixz, ixx.iyz, ixx.izz,
-                );
-                Some(Inertial {
-                    mass: i.mass.value,
-                    com: Vector3::from(*i.origin.xyz),
-                    inertia: r.matrix() * local * r.matrix().transpose(),
-                })
-            } else {
-                None
-            };
-            let mut collisions = Vec::new();
-            for c in &l.collision {
-                collisions.push(shape(&c.origin, &c.geometry, None, file)?);
-            }
-            let mut visuals = Vec::new();
-            for v in &l.visual {
-                let rgba = v
-                    .material
-                    .as_ref()
-                    .and_then(|m| m.color.as_ref())
-                    .map(|c| *c.rgba);
-                let mut s = shape(&v.origin, &v.geometry, rgba, file)?;
-                s.texture = v
-                    .material
-                    .as_ref()
-                    .and_then(|m| m.texture.as_ref())
-                    .map(|t| t.filename.clone());
-                visuals.push(s);
-            }
-            links.push(LinkDesc {
-                name: l.name.clone(),
-                inertial,
-                collisions,
-                visuals,
-            });
-        }
+        let links = robot
+            .links
+            .iter()
+            .map(|l| link_desc(l, file))
+            .collect::<Result<Vec<_>, _>>()?;
         let link_index = |name: &str| {
             links
                 .iter()
                 .position(|l| l.name == name)
                 .ok_or_else(|| bad(format!("joint refers to unknown link {name:?}")))
         };
-        let mut joints = Vec::with_capacity(robot.joints.len());
-        for j in &robot.joints {
-            let kind = match j.joint_type {
-                urdf_rs::JointType::Revolute => JointKind::Revolute,
-                urdf_rs::JointType::Continuous => JointKind::Continuous,
-                urdf_rs::JointType::Prismatic => JointKind::Prismatic,
-                urdf_rs::JointType::Fixed => JointKind::Fixed,
-                ref other => {
-                    return Err(bad(format!(
-                        "joint {:?} has unsupported type {other:?} (supported: revolute, continuous, prismatic, fixed)",
-                        j.name
-                    )))
-                }
-            };
-            let axis = Vector3::from(*j.axis.xyz);
-            let axis = if kind == JointKind::Fixed {
-                Vector3::z()
-            } else {
-                let n = axis.norm();
-                if !(n.is_finite() && n > 1e-9) {
-                    return Err(bad(format!("joint {:?} has a zero axis", j.name)));
-                }
-                axis / n
-            };
-            let limits = match kind {
-                JointKind::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
-                JointKind::Fixed => (0.0, 0.0),
-                _ => {
-                    if j.limit.lower > j.limit.upper {
-                        return Err(bad(format!(
-                            "joint {:?} has lower limit {} above upper limit {}",
-                            j.name, j.limit.lower, j.limit.upper
-                        )));
-                    }
-                    (j.limit.lower, j.limit.upper)
-                }
-            };
-            let mimic = j.mimic.as_ref().map(|m| Mimic {
-                leader: m.joint.clone(),
-                multiplier: m.multiplier.unwrap_or(1.0),
-                offset: m.offset.unwrap_or(0.0),
-            });
-            joints.push(JointDesc {
-                name: j.name.clone(),
-                kind,
-                parent: link_index(&j.parent.link)?,
-                child: link_index(&j.child.link)?,
-                origin: pose(&j.origin),
-                axis,
-                limits,
-                mimic,
-            });
-        }
+        let joints = robot
+            .joints
+            .iter()
+            .map(|j| joint_desc(j, &link_index, &bad))
+            .collect::<Result<Vec<_>, _>>()?;
         // Tree checks: every link but one has exactly one parent joint.
         let mut parent_count = vec![0usize; links.len()];
         for j in &joints {

@@ -107,6 +107,33 @@ impl SourceMesh {
     }
 }
 
+/// Most triangles one visual mesh file may expand to (all its node instances together).
+/// Robot visual meshes have at most a few hundred thousand; a file that expands to more (a
+/// glTF node shared by many parents, a COLLADA geometry instanced by many nodes) is refused
+/// before its vertices are made.
+pub const MAX_SOURCE_TRIANGLES: usize = 2_000_000;
+/// Most vertices one visual mesh file may expand to (see [`MAX_SOURCE_TRIANGLES`]).
+pub const MAX_SOURCE_VERTICES: usize = 3 * MAX_SOURCE_TRIANGLES;
+/// Most glTF node instances a file may expand to: a node that is the child of several
+/// parents is expanded once per parent, so a small file can describe exponentially many.
+pub const MAX_NODE_INSTANCES: usize = 100_000;
+
+/// Errors when `triangles` or `vertices` read so far exceed [`MAX_SOURCE_TRIANGLES`] or
+/// [`MAX_SOURCE_VERTICES`].
+fn check_budget(name: &str, triangles: usize, vertices: usize) -> Result<(), MeshError> {
+    if triangles > MAX_SOURCE_TRIANGLES || vertices > MAX_SOURCE_VERTICES {
+        return Err(malformed(
+            name,
+            format!(
+                "the mesh expands to more than {MAX_SOURCE_TRIANGLES} triangles or \
+                 {MAX_SOURCE_VERTICES} vertices (every instance counted), the most a visual \
+                 mesh may have"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn malformed(name: &str, reason: impl Into<String>) -> MeshError {
     MeshError::Malformed {
         name: name.to_string(),
@@ -118,7 +145,7 @@ fn malformed(name: &str, reason: impl Into<String>) -> MeshError {
 /// part, with material `rgba`). Textures of COLLADA files are read relative to the file.
 pub fn read_visual(path: &Path, rgba: [f32; 4]) -> Result<SourceMesh, MeshError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| malformed(&name, format!("cannot read: {e}")))?;
+    let bytes = mjskill::files::read(path).map_err(|e| malformed(&name, e.reason()))?;
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -129,6 +156,7 @@ pub fn read_visual(path: &Path, rgba: [f32; 4]) -> Result<SourceMesh, MeshError>
         "dae" => read_dae(&bytes, &name, path.parent().unwrap_or(Path::new("."))),
         "stl" | "obj" => {
             let tris = read_triangles(&bytes, &name)?;
+            check_budget(&name, tris.len(), 3 * tris.len())?;
             let mut part = Part::default();
             for t in tris {
                 for v in t {
@@ -213,13 +241,55 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| malformed(name, "glTF file has no scene"))?;
-    let mut stack: Vec<(gltf::Node, Matrix4<f32>)> =
-        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
-    while let Some((node, parent)) = stack.pop() {
+    // Depth first; `on_path[i]`: node i is an ancestor of the nodes on the stack above its
+    // `Leave`, so meeting it again as a child is a cycle. A node shared by several parents
+    // (a DAG) is expanded once per parent, which [`MAX_NODE_INSTANCES`] bounds.
+    enum Visit<'a> {
+        Enter(gltf::Node<'a>, Matrix4<f32>),
+        Leave(usize),
+    }
+    let mut on_path = vec![false; doc.nodes().count()];
+    let mut stack: Vec<Visit> = scene
+        .nodes()
+        .map(|n| Visit::Enter(n, Matrix4::identity()))
+        .collect();
+    let (mut instances, mut triangles, mut vertices) = (0usize, 0usize, 0usize);
+    while let Some(visit) = stack.pop() {
+        let (node, parent) = match visit {
+            Visit::Enter(node, parent) => (node, parent),
+            Visit::Leave(i) => {
+                on_path[i] = false;
+                continue;
+            }
+        };
+        instances += 1;
+        if instances > MAX_NODE_INSTANCES {
+            return Err(malformed(
+                name,
+                format!(
+                    "glTF nodes expand to more than {MAX_NODE_INSTANCES} node instances \
+                     (children shared by several parents are expanded once per parent)"
+                ),
+            ));
+        }
+        on_path[node.index()] = true;
+        stack.push(Visit::Leave(node.index()));
         let local = Matrix4::from(node.transform().matrix());
         let world = parent * local;
         for child in node.children() {
-            stack.push((child, world));
+            if on_path[child.index()] {
+                return Err(malformed(
+                    name,
+                    format!(
+                        "glTF node {} ({:?}) is its own ancestor (a cycle in the node graph, \
+                         reached from node {})",
+                        child.index(),
+                        child.name().unwrap_or(""),
+                        node.index()
+                    ),
+                ));
+            }
+            stack.push(Visit::Enter(child, world));
         }
         let Some(mesh) = node.mesh() else { continue };
         let normal_m: Matrix3<f32> = world
@@ -236,6 +306,10 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
             let Some(pos) = reader.read_positions() else {
                 continue;
             };
+            // Checked before anything is read: instances multiply the file's own sizes.
+            vertices += pos.len();
+            triangles += prim.indices().map_or(pos.len(), |a| a.count()) / 3;
+            check_budget(name, triangles, vertices)?;
             let positions: Vec<[f32; 3]> = pos
                 .map(|p| {
                     let q = world.transform_point(&Point3::from(p));
@@ -244,7 +318,9 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
                 .collect();
             let normals = reader.read_normals().map(|it| {
                 it.map(|n| {
-                    let m = (normal_m * Vector3::from(n)).normalize();
+                    let m = (normal_m * Vector3::from(n))
+                        .try_normalize(1e-12)
+                        .unwrap_or(Vector3::z());
                     [m.x, m.y, m.z]
                 })
                 .collect::<Vec<_>>()
@@ -303,12 +379,40 @@ pub fn read_gltf(bytes: &[u8], name: &str) -> Result<SourceMesh, MeshError> {
     Ok(out)
 }
 
-/// Reads a PNG file into RGBA.
+/// Largest side of a PNG texture read (pixels, as its header declares it).
+pub const MAX_TEXTURE_SIDE: u32 = 16_384;
+/// Most pixels of a PNG texture read, as its header declares them: 8192 × 8192 (256 MiB as
+/// RGBA). The header is checked before anything is decoded, so a file declaring more (or a
+/// small file that would decompress to more) is refused without allocating it.
+pub const MAX_TEXTURE_PIXELS: u64 = 8192 * 8192;
+
+/// Reads a PNG file into RGBA. Its declared size must be within [`MAX_TEXTURE_SIDE`] a side
+/// and [`MAX_TEXTURE_PIXELS`] in all.
 pub fn read_png(path: &Path) -> Result<Image, MeshError> {
+    read_png_within(path, MAX_TEXTURE_SIDE, MAX_TEXTURE_PIXELS)
+}
+
+/// [`read_png`] with the limits given.
+fn read_png_within(path: &Path, max_side: u32, max_pixels: u64) -> Result<Image, MeshError> {
     let name = path.display().to_string();
-    let file =
-        std::fs::File::open(path).map_err(|e| malformed(&name, format!("cannot open: {e}")))?;
-    let mut dec = png::Decoder::new(std::io::BufReader::new(file));
+    let file = mjskill::files::open_regular(path).map_err(|e| malformed(&name, e.reason()))?;
+    // The decoder's own allocations (row buffers, metadata) stay within a few rows of the
+    // largest accepted image; the output buffer is sized from the checked header.
+    let limits = png::Limits { bytes: 64 << 20 };
+    let mut dec = png::Decoder::new_with_limits(std::io::BufReader::new(file), limits);
+    let header = dec
+        .read_header_info()
+        .map_err(|e| malformed(&name, format!("PNG: {e}")))?;
+    let (w, h) = (header.width, header.height);
+    if w > max_side || h > max_side || u64::from(w) * u64::from(h) > max_pixels {
+        return Err(malformed(
+            &name,
+            format!(
+                "PNG declares {w} x {h} pixels; textures may have at most {max_side} pixels a \
+                 side and {max_pixels} pixels in all"
+            ),
+        ));
+    }
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = dec
         .read_info()
@@ -362,6 +466,23 @@ struct DaeSource {
     stride: usize,
 }
 
+/// The parts of a COLLADA document that `read_dae` looks things up in.
+struct Dae<'a, 'i> {
+    /// Elements by `id`.
+    by_id: HashMap<&'a str, roxmltree::Node<'a, 'i>>,
+    /// The file's directory (texture images are relative to it).
+    dir: &'a Path,
+}
+
+/// `#id` → `id`.
+fn id_of(url: &str) -> String {
+    url.trim_start_matches('#').to_string()
+}
+
+/// The named input sources of a primitive list: (semantic, source id, offset), the
+/// `VERTEX` input expanded into its `<vertices>` inputs, and the index stride.
+type PrimInputs = (Vec<(String, String, usize)>, usize);
+
 /// Reads a COLLADA file: the geometries instanced by the visual scene's nodes, with their
 /// transforms, the `<unit>` scale and the bound materials (diffuse colour or texture image,
 /// read relative to `dir`). The `<up_axis>` is ignored, as ManiSkill's renderer ignores it.
@@ -369,10 +490,13 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
     let text = std::str::from_utf8(bytes).map_err(|_| malformed(name, "not UTF-8"))?;
     let doc = roxmltree::Document::parse(text).map_err(|e| malformed(name, format!("XML: {e}")))?;
     let root = doc.root_element();
-    let by_id: HashMap<&str, roxmltree::Node> = root
-        .descendants()
-        .filter_map(|n| n.attribute("id").map(|id| (id, n)))
-        .collect();
+    let dae = Dae {
+        by_id: root
+            .descendants()
+            .filter_map(|n| n.attribute("id").map(|id| (id, n)))
+            .collect(),
+        dir,
+    };
     let unit = root
         .descendants()
         .find(|n| n.tag_name().name() == "unit")
@@ -384,71 +508,9 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
     // frame as written. Robotiq's outer knuckle says `Y_UP`; turning it to Z up put the
     // knuckle where ManiSkill draws none (segmentation IoU 0).
     let top = Matrix4::new_scaling(unit);
-    let id_of = |url: &str| url.trim_start_matches('#').to_string();
-
-    // Material id → (name, colour, texture image file).
-    let resolve_material = |mat_id: &str| -> (String, [f32; 4], Option<PathBuf>) {
-        let mut rgba = [0.8, 0.8, 0.8, 1.0];
-        let mut texture = None;
-        let Some(mat) = by_id.get(mat_id) else {
-            return (mat_id.to_string(), rgba, None);
-        };
-        let name = mat.attribute("name").unwrap_or(mat_id).to_string();
-        let effect = child(*mat, "instance_effect")
-            .and_then(|e| e.attribute("url"))
-            .and_then(|u| by_id.get(id_of(u).as_str()).copied());
-        if let Some(effect) = effect {
-            let diffuse = effect
-                .descendants()
-                .find(|n| n.tag_name().name() == "diffuse");
-            if let Some(d) = diffuse {
-                if let Some(c) = child(d, "color").and_then(|c| c.text()) {
-                    let v = floats(c);
-                    if v.len() >= 3 {
-                        rgba = [v[0], v[1], v[2], v.get(3).copied().unwrap_or(1.0)];
-                    }
-                }
-                if let Some(t) = child(d, "texture").and_then(|t| t.attribute("texture")) {
-                    // sampler newparam → surface newparam → image, or an image id directly.
-                    let param = |sid: &str| {
-                        effect.descendants().find(|n| {
-                            n.tag_name().name() == "newparam" && n.attribute("sid") == Some(sid)
-                        })
-                    };
-                    let mut image_id = t.to_string();
-                    if let Some(sampler) = param(t) {
-                        if let Some(src) = sampler
-                            .descendants()
-                            .find(|n| n.tag_name().name() == "source")
-                            .and_then(|n| n.text())
-                        {
-                            if let Some(surface) = param(src.trim()) {
-                                if let Some(init) = surface
-                                    .descendants()
-                                    .find(|n| n.tag_name().name() == "init_from")
-                                    .and_then(|n| n.text())
-                                {
-                                    image_id = init.trim().to_string();
-                                }
-                            }
-                        }
-                    }
-                    texture = by_id
-                        .get(image_id.as_str())
-                        .and_then(|img| {
-                            img.descendants()
-                                .find(|n| n.tag_name().name() == "init_from")
-                        })
-                        .and_then(|n| n.text())
-                        .map(|f| dir.join(f.trim().trim_start_matches("file://")));
-                    rgba = [1.0, 1.0, 1.0, 1.0];
-                }
-            }
-        }
-        (name, rgba, texture)
-    };
-
     let mut out = SourceMesh::default();
+    // (triangles, vertices) made so far, for [`check_budget`].
+    let mut expanded = (0usize, 0usize);
     let mut mat_slots: HashMap<String, usize> = HashMap::new();
     let mut textures: HashMap<PathBuf, Image> = HashMap::new();
     let scene = root
@@ -461,24 +523,7 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
         .map(|n| (n, top))
         .collect();
     while let Some((node, parent)) = stack.pop() {
-        let mut m = parent;
-        for t in node.children().filter(|c| c.is_element()) {
-            let v = floats(t.text().unwrap_or(""));
-            match t.tag_name().name() {
-                "matrix" if v.len() == 16 => m *= Matrix4::from_row_slice(&v),
-                "translate" if v.len() == 3 => {
-                    m *= Matrix4::new_translation(&Vector3::new(v[0], v[1], v[2]))
-                }
-                "scale" if v.len() == 3 => {
-                    m *= Matrix4::new_nonuniform_scaling(&Vector3::new(v[0], v[1], v[2]))
-                }
-                "rotate" if v.len() == 4 => {
-                    let axis = nalgebra::Unit::new_normalize(Vector3::new(v[0], v[1], v[2]));
-                    m *= Matrix4::from_axis_angle(&axis, v[3].to_radians())
-                }
-                _ => {}
-            }
-        }
+        let m = node_transform(node, parent);
         for c in node.children().filter(|c| c.tag_name().name() == "node") {
             stack.push((c, m));
         }
@@ -488,7 +533,7 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
         {
             let Some(geom) = inst
                 .attribute("url")
-                .and_then(|u| by_id.get(id_of(u).as_str()))
+                .and_then(|u| dae.by_id.get(id_of(u).as_str()))
             else {
                 continue;
             };
@@ -501,100 +546,27 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
             let Some(mesh) = child(*geom, "mesh") else {
                 continue;
             };
-            let mut sources: HashMap<String, DaeSource> = HashMap::new();
-            for s in mesh.children().filter(|c| c.tag_name().name() == "source") {
-                let Some(id) = s.attribute("id") else {
-                    continue;
-                };
-                let data = child(s, "float_array")
-                    .and_then(|a| a.text())
-                    .map(floats)
-                    .unwrap_or_default();
-                let stride = s
-                    .descendants()
-                    .find(|n| n.tag_name().name() == "accessor")
-                    .and_then(|a| a.attribute("stride"))
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or(3);
-                sources.insert(id.to_string(), DaeSource { data, stride });
-            }
-            // <vertices id> → its POSITION (and possibly NORMAL) sources.
-            let mut vertices_inputs: HashMap<String, Vec<(String, String)>> = HashMap::new();
-            for v in mesh
-                .children()
-                .filter(|c| c.tag_name().name() == "vertices")
-            {
-                let ins = v
-                    .children()
-                    .filter(|c| c.tag_name().name() == "input")
-                    .filter_map(|i| {
-                        Some((
-                            i.attribute("semantic")?.to_string(),
-                            id_of(i.attribute("source")?),
-                        ))
-                    })
-                    .collect();
-                vertices_inputs.insert(v.attribute("id").unwrap_or("").to_string(), ins);
-            }
-            let normal_m: Matrix3<f32> = m
-                .fixed_view::<3, 3>(0, 0)
-                .into_owned()
-                .try_inverse()
-                .unwrap_or_else(Matrix3::identity)
-                .transpose();
+            let (sources, vertices_inputs) = mesh_sources(mesh);
             for prims in mesh
                 .children()
                 .filter(|c| matches!(c.tag_name().name(), "triangles" | "polylist" | "polygons"))
             {
-                // (semantic, source id, offset)
-                let mut inputs: Vec<(String, String, usize)> = Vec::new();
-                let mut stride = 0;
-                for i in prims.children().filter(|c| c.tag_name().name() == "input") {
-                    let off: usize = i
-                        .attribute("offset")
-                        .and_then(|o| o.parse().ok())
-                        .unwrap_or(0);
-                    stride = stride.max(off + 1);
-                    let sem = i.attribute("semantic").unwrap_or("");
-                    let src = id_of(i.attribute("source").unwrap_or(""));
-                    if sem == "TEXCOORD" && i.attribute("set").is_some_and(|s| s != "0") {
-                        continue;
-                    }
-                    if sem == "VERTEX" {
-                        for (s2, src2) in vertices_inputs.get(&src).cloned().unwrap_or_default() {
-                            inputs.push((s2, src2, off));
-                        }
-                    } else {
-                        inputs.push((sem.to_string(), src, off));
-                    }
-                }
-                let find = |sem: &str| inputs.iter().find(|(s, _, _)| s == sem);
-                let Some((_, pos_src, pos_off)) = find("POSITION") else {
-                    continue;
-                };
-                let pos = sources
-                    .get(pos_src)
-                    .ok_or_else(|| malformed(name, format!("missing source {pos_src}")))?;
-                let nrm = find("NORMAL").and_then(|(_, s, o)| Some((sources.get(s)?, *o)));
-                let uv = find("TEXCOORD").and_then(|(_, s, o)| Some((sources.get(s)?, *o)));
-                // Polygons of a polylist: fan-triangulated.
-                let p: Vec<usize> = prims
-                    .children()
-                    .filter(|c| c.tag_name().name() == "p")
-                    .flat_map(|c| ints(c.text().unwrap_or("")))
-                    .collect();
-                let counts: Vec<usize> = match child(prims, "vcount") {
-                    Some(vc) => ints(vc.text().unwrap_or("")),
-                    None => vec![3; p.len() / (3 * stride.max(1))],
-                };
                 let symbol = prims.attribute("material").unwrap_or("");
                 let mat_id = bind
                     .get(symbol)
                     .cloned()
                     .unwrap_or_else(|| symbol.to_string());
-                let (mat_name, rgba, tex_path) = resolve_material(&mat_id);
+                let inputs = prim_inputs(prims, &vertices_inputs);
+                let Some((_, pos_src, pos_off)) = inputs.0.iter().find(|(s, _, _)| s == "POSITION")
+                else {
+                    continue;
+                };
+                let pos = sources
+                    .get(pos_src)
+                    .ok_or_else(|| malformed(name, format!("missing source {pos_src}")))?;
+                let (mat_name, rgba, tex_path) = dae.material(&mat_id);
                 let texture = match &tex_path {
-                    Some(path) if uv.is_some() => {
+                    Some(path) if uv_source(&inputs, &sources) => {
                         if !textures.contains_key(path) {
                             textures.insert(path.clone(), read_png(path)?);
                         }
@@ -617,47 +589,18 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
                     });
                     out.materials.len() - 1
                 });
-                let textured = texture.is_some();
-                let mut part = Part {
+                let position = (pos, *pos_off);
+                let part = fan_part(
+                    prims,
+                    &inputs,
+                    position,
+                    &sources,
+                    &m,
                     material,
-                    normals: nrm.map(|_| Vec::new()),
-                    uvs: if textured { Some(Vec::new()) } else { None },
-                    ..Default::default()
-                };
-                let get = |s: &DaeSource, k: usize, n: usize| -> Option<Vec<f32>> {
-                    let a = k * s.stride;
-                    s.data.get(a..a + n).map(|v| v.to_vec())
-                };
-                let mut cursor = 0;
-                for &n in &counts {
-                    if n < 3 || (cursor + n) * stride > p.len() {
-                        cursor += n;
-                        continue;
-                    }
-                    let base = part.positions.len() as u32;
-                    for v in 0..n {
-                        let at = (cursor + v) * stride;
-                        let q = get(pos, p[at + pos_off], 3)
-                            .ok_or_else(|| malformed(name, "position index out of range"))?;
-                        let w = m.transform_point(&Point3::new(q[0], q[1], q[2]));
-                        part.positions.push([w.x, w.y, w.z]);
-                        if let (Some(list), Some((s, o))) = (part.normals.as_mut(), nrm) {
-                            let q = get(s, p[at + o], 3).unwrap_or(vec![0.0, 0.0, 1.0]);
-                            let w = normal_m * Vector3::new(q[0], q[1], q[2]);
-                            let w = w.try_normalize(1e-12).unwrap_or(Vector3::z());
-                            list.push([w.x, w.y, w.z]);
-                        }
-                        if let (Some(list), Some((s, o))) = (part.uvs.as_mut(), uv) {
-                            let q = get(s, p[at + o], 2).unwrap_or(vec![0.0, 0.0]);
-                            // COLLADA's v grows upwards; store glTF's (downwards).
-                            list.push([q[0], 1.0 - q[1]]);
-                        }
-                    }
-                    for k in 1..n as u32 - 1 {
-                        part.indices.extend([base, base + k, base + k + 1]);
-                    }
-                    cursor += n;
-                }
+                    texture.is_some(),
+                    name,
+                    &mut expanded,
+                )?;
                 if !part.indices.is_empty() {
                     out.parts.push(part);
                 }
@@ -671,6 +614,255 @@ pub fn read_dae(bytes: &[u8], name: &str, dir: &Path) -> Result<SourceMesh, Mesh
         ));
     }
     Ok(out)
+}
+
+impl Dae<'_, '_> {
+    /// Material id → (name, colour, texture image file).
+    fn material(&self, mat_id: &str) -> (String, [f32; 4], Option<PathBuf>) {
+        let mut rgba = [0.8, 0.8, 0.8, 1.0];
+        let mut texture = None;
+        let Some(mat) = self.by_id.get(mat_id) else {
+            return (mat_id.to_string(), rgba, None);
+        };
+        let name = mat.attribute("name").unwrap_or(mat_id).to_string();
+        let effect = child(*mat, "instance_effect")
+            .and_then(|e| e.attribute("url"))
+            .and_then(|u| self.by_id.get(id_of(u).as_str()).copied());
+        if let Some(effect) = effect {
+            let diffuse = effect
+                .descendants()
+                .find(|n| n.tag_name().name() == "diffuse");
+            if let Some(d) = diffuse {
+                if let Some(c) = child(d, "color").and_then(|c| c.text()) {
+                    let v = floats(c);
+                    if v.len() >= 3 {
+                        rgba = [v[0], v[1], v[2], v.get(3).copied().unwrap_or(1.0)];
+                    }
+                }
+                if let Some(t) = child(d, "texture").and_then(|t| t.attribute("texture")) {
+                    texture = self.texture_file(effect, t);
+                    rgba = [1.0, 1.0, 1.0, 1.0];
+                }
+            }
+        }
+        (name, rgba, texture)
+    }
+
+    /// The image file of an effect's `<texture texture="...">`: sampler newparam → surface
+    /// newparam → image, or an image id directly.
+    fn texture_file(&self, effect: roxmltree::Node, t: &str) -> Option<PathBuf> {
+        let param = |sid: &str| {
+            effect
+                .descendants()
+                .find(|n| n.tag_name().name() == "newparam" && n.attribute("sid") == Some(sid))
+        };
+        let mut image_id = t.to_string();
+        if let Some(src) = param(t).and_then(|sampler| text_of(sampler, "source")) {
+            if let Some(init) = param(src.trim()).and_then(|surface| text_of(surface, "init_from"))
+            {
+                image_id = init.trim().to_string();
+            }
+        }
+        self.by_id
+            .get(image_id.as_str())
+            .and_then(|img| text_of(*img, "init_from"))
+            .map(|f| self.dir.join(f.trim().trim_start_matches("file://")))
+    }
+}
+
+/// The text of `n`'s first descendant `<tag>`.
+fn text_of<'a>(n: roxmltree::Node<'a, '_>, tag: &str) -> Option<&'a str> {
+    n.descendants()
+        .find(|c| c.tag_name().name() == tag)
+        .and_then(|c| c.text())
+}
+
+/// A node's transform: `parent` times its `<matrix>`, `<translate>`, `<scale>` and `<rotate>`
+/// elements in order.
+fn node_transform(node: roxmltree::Node, parent: Matrix4<f32>) -> Matrix4<f32> {
+    let mut m = parent;
+    for t in node.children().filter(|c| c.is_element()) {
+        let v = floats(t.text().unwrap_or(""));
+        match t.tag_name().name() {
+            "matrix" if v.len() == 16 => m *= Matrix4::from_row_slice(&v),
+            "translate" if v.len() == 3 => {
+                m *= Matrix4::new_translation(&Vector3::new(v[0], v[1], v[2]))
+            }
+            "scale" if v.len() == 3 => {
+                m *= Matrix4::new_nonuniform_scaling(&Vector3::new(v[0], v[1], v[2]))
+            }
+            "rotate" if v.len() == 4 => {
+                let axis = nalgebra::Unit::new_normalize(Vector3::new(v[0], v[1], v[2]));
+                m *= Matrix4::from_axis_angle(&axis, v[3].to_radians())
+            }
+            _ => {}
+        }
+    }
+    m
+}
+
+/// A `<mesh>`'s float sources by id, and each `<vertices id>`'s inputs (its POSITION and
+/// possibly NORMAL sources) as (semantic, source id).
+#[allow(clippy::type_complexity)]
+fn mesh_sources(
+    mesh: roxmltree::Node,
+) -> (
+    HashMap<String, DaeSource>,
+    HashMap<String, Vec<(String, String)>>,
+) {
+    let mut sources: HashMap<String, DaeSource> = HashMap::new();
+    for s in mesh.children().filter(|c| c.tag_name().name() == "source") {
+        let Some(id) = s.attribute("id") else {
+            continue;
+        };
+        let data = child(s, "float_array")
+            .and_then(|a| a.text())
+            .map(floats)
+            .unwrap_or_default();
+        let stride = s
+            .descendants()
+            .find(|n| n.tag_name().name() == "accessor")
+            .and_then(|a| a.attribute("stride"))
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(3);
+        sources.insert(id.to_string(), DaeSource { data, stride });
+    }
+    let mut vertices_inputs: HashMap<String, Vec<(String, String)>> = HashMap::new();
+    for v in mesh
+        .children()
+        .filter(|c| c.tag_name().name() == "vertices")
+    {
+        let ins = v
+            .children()
+            .filter(|c| c.tag_name().name() == "input")
+            .filter_map(|i| {
+                Some((
+                    i.attribute("semantic")?.to_string(),
+                    id_of(i.attribute("source")?),
+                ))
+            })
+            .collect();
+        vertices_inputs.insert(v.attribute("id").unwrap_or("").to_string(), ins);
+    }
+    (sources, vertices_inputs)
+}
+
+/// The inputs of a primitive list (texture coordinates of set 0 only).
+fn prim_inputs(
+    prims: roxmltree::Node,
+    vertices_inputs: &HashMap<String, Vec<(String, String)>>,
+) -> PrimInputs {
+    let mut inputs: Vec<(String, String, usize)> = Vec::new();
+    let mut stride = 0;
+    for i in prims.children().filter(|c| c.tag_name().name() == "input") {
+        let off: usize = i
+            .attribute("offset")
+            .and_then(|o| o.parse().ok())
+            .unwrap_or(0);
+        stride = stride.max(off + 1);
+        let sem = i.attribute("semantic").unwrap_or("");
+        let src = id_of(i.attribute("source").unwrap_or(""));
+        if sem == "TEXCOORD" && i.attribute("set").is_some_and(|s| s != "0") {
+            continue;
+        }
+        if sem == "VERTEX" {
+            for (s2, src2) in vertices_inputs.get(&src).cloned().unwrap_or_default() {
+                inputs.push((s2, src2, off));
+            }
+        } else {
+            inputs.push((sem.to_string(), src, off));
+        }
+    }
+    (inputs, stride)
+}
+
+/// Whether the primitive list's first `TEXCOORD` input names an existing source.
+fn uv_source(inputs: &PrimInputs, sources: &HashMap<String, DaeSource>) -> bool {
+    let first = inputs.0.iter().find(|(s, _, _)| s == "TEXCOORD");
+    first.is_some_and(|(_, s, _)| sources.contains_key(s))
+}
+
+/// A primitive list's polygons (positions from `pos` at index offset `pos_off`),
+/// fan-triangulated and transformed by `m` into one part of `material` (with normals when the list has them, with texture coordinates when
+/// `textured`).
+#[allow(clippy::too_many_arguments)]
+fn fan_part(
+    prims: roxmltree::Node,
+    (inputs, stride): &PrimInputs,
+    (pos, pos_off): (&DaeSource, usize),
+    sources: &HashMap<String, DaeSource>,
+    m: &Matrix4<f32>,
+    material: usize,
+    textured: bool,
+    name: &str,
+    expanded: &mut (usize, usize),
+) -> Result<Part, MeshError> {
+    let stride = *stride;
+    let find = |sem: &str| inputs.iter().find(|(s, _, _)| s == sem);
+    let nrm = find("NORMAL").and_then(|(_, s, o)| Some((sources.get(s)?, *o)));
+    let uv = find("TEXCOORD").and_then(|(_, s, o)| Some((sources.get(s)?, *o)));
+    let normal_m: Matrix3<f32> = m
+        .fixed_view::<3, 3>(0, 0)
+        .into_owned()
+        .try_inverse()
+        .unwrap_or_else(Matrix3::identity)
+        .transpose();
+    // Polygons of a polylist: fan-triangulated.
+    let p: Vec<usize> = prims
+        .children()
+        .filter(|c| c.tag_name().name() == "p")
+        .flat_map(|c| ints(c.text().unwrap_or("")))
+        .collect();
+    let counts: Vec<usize> = match child(prims, "vcount") {
+        Some(vc) => ints(vc.text().unwrap_or("")),
+        None => vec![3; p.len() / (3 * stride.max(1))],
+    };
+    let mut part = Part {
+        material,
+        normals: nrm.map(|_| Vec::new()),
+        uvs: if textured { Some(Vec::new()) } else { None },
+        ..Default::default()
+    };
+    let get = |s: &DaeSource, k: usize, n: usize| -> Option<Vec<f32>> {
+        let a = k * s.stride;
+        s.data.get(a..a + n).map(|v| v.to_vec())
+    };
+    let mut cursor = 0usize;
+    for &n in &counts {
+        if n < 3 || cursor.saturating_add(n).saturating_mul(stride) > p.len() {
+            cursor = cursor.saturating_add(n);
+            continue;
+        }
+        // Checked before the polygon's vertices are made: many nodes may instance one large
+        // geometry.
+        expanded.0 += n - 2;
+        expanded.1 += n;
+        check_budget(name, expanded.0, expanded.1)?;
+        let base = part.positions.len() as u32;
+        for v in 0..n {
+            let at = (cursor + v) * stride;
+            let q = get(pos, p[at + pos_off], 3)
+                .ok_or_else(|| malformed(name, "position index out of range"))?;
+            let w = m.transform_point(&Point3::new(q[0], q[1], q[2]));
+            part.positions.push([w.x, w.y, w.z]);
+            if let (Some(list), Some((s, o))) = (part.normals.as_mut(), nrm) {
+                let q = get(s, p[at + o], 3).unwrap_or(vec![0.0, 0.0, 1.0]);
+                let w = normal_m * Vector3::new(q[0], q[1], q[2]);
+                let w = w.try_normalize(1e-12).unwrap_or(Vector3::z());
+                list.push([w.x, w.y, w.z]);
+            }
+            if let (Some(list), Some((s, o))) = (part.uvs.as_mut(), uv) {
+                let q = get(s, p[at + o], 2).unwrap_or(vec![0.0, 0.0]);
+                // COLLADA's v grows upwards; store glTF's (downwards).
+                list.push([q[0], 1.0 - q[1]]);
+            }
+        }
+        for k in 1..n as u32 - 1 {
+            part.indices.extend([base, base + k, base + k + 1]);
+        }
+        cursor += n;
+    }
+    Ok(part)
 }
 
 #[cfg(test)]
