@@ -1,7 +1,8 @@
-//! `mjskill convert-visuals` under hostile input: glTF node graphs with cycles or shared
+//! `mjskill-meshes convert-visuals` under hostile input: glTF node graphs with cycles or shared
 //! children, PNG textures declaring (or decompressing to) huge sizes, non-finite vertices,
 //! huge polygons and URDFs with duplicate link names. Every file is crafted here; each case
 //! ends in an error naming the file and the limit, or in a correct conversion.
+#![cfg(feature = "mesh-tools")]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -15,7 +16,7 @@ fn dir(name: &str) -> PathBuf {
 }
 
 fn convert(args: &[&str], out_dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mjskill"))
+    Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"))
         .arg("convert-visuals")
         .args(args)
         .arg("--out-dir")

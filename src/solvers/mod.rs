@@ -15,6 +15,7 @@ pub(crate) mod joint_ik;
 pub mod mlp;
 #[cfg(feature = "onnx")]
 pub mod onnx;
+#[cfg(feature = "onnx")]
 pub(crate) mod onnx_guard;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
