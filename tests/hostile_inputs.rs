@@ -10,8 +10,10 @@
 //! `MJSKILL_REQUIRE_PYTHON` is set.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output};
+
+mod common;
+use common::run_within;
 
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
@@ -21,24 +23,6 @@ fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mjskill-hostile-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-/// Runs `cmd`, failing the test if it takes longer than `secs` seconds (a hang).
-fn run_within(mut cmd: Command, secs: u64) -> Output {
-    let mut child = cmd
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if t.elapsed() > Duration::from_secs(secs) {
-            child.kill().ok();
-            panic!("{cmd:?} took longer than {secs} s");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
 }
 
 /// The error line of a command that must fail with mjskill's error exit code, not a crash.

@@ -1,7 +1,29 @@
 //! Helpers shared by the integration tests: `export-mjcf` runs (checked by mjskill's MuJoCo
-//! and by Debian's `mujoco-compile`) and the task tests' observation and state helpers.
+//! and by Debian's `mujoco-compile`), the task tests' observation and state helpers, and
+//! command runs bounded in time (`run_within`).
 #![allow(dead_code)]
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
 use mjskill::mujoco::Model;
+
+/// Runs `cmd`, failing the test if it takes longer than `secs` seconds (a hang).
+pub fn run_within(mut cmd: Command, secs: u64) -> Output {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed() > Duration::from_secs(secs) {
+            child.kill().ok();
+            panic!("{cmd:?} took longer than {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
 
 /// Runs `mjskill export-mjcf --robot ROBOT --env ENV` to stdout (success asserted) and
 /// compiles the printed scene with mjskill's MuJoCo.
