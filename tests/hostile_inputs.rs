@@ -8,6 +8,9 @@
 //! The policy files are made by `tests/make_hostile_policy.py` (numpy and `onnx`) in the venv
 //! `.ci/setup` creates; without it those tests print a note and pass, unless
 //! `MJSKILL_REQUIRE_PYTHON` is set.
+// Policy files, exports and rollouts with policies: the default features (the quick start
+// builds without onnx and datasets; its own left-out-feature errors are in rollout_cli.rs).
+#![cfg(all(feature = "cli", feature = "onnx", feature = "datasets"))]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
