@@ -2,7 +2,6 @@
 //! its own behind the `mesh-tools` feature (gltf, meshopt): fitting collision primitives to a
 //! mesh (`fit-primitives`) and converting visual meshes into simplified, textured files MuJoCo
 //! 2.2 draws (`convert-visuals`), both in [`meshes`].
-use std::io::Write;
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
@@ -12,38 +11,15 @@ mod meshes;
 /// The command line's errors, printed with their `Display` text.
 type CliError = Box<dyn std::error::Error + Send + Sync>;
 
-/// Writes one line to standard output; a closed pipe is not an error.
-fn emit(line: std::fmt::Arguments) -> Result<(), CliError> {
-    let mut out = std::io::stdout().lock();
-    match writeln!(out, "{line}").and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
-            Err(format!("cannot write to stdout: {e}").into())
-        }
-        _ => Ok(()),
-    }
-}
-
-/// `println!` through [`emit`], returning its error from the enclosing function.
-macro_rules! out {
-    ($($t:tt)*) => {
-        emit(format_args!($($t)*))?
-    };
-}
+#[macro_use]
+#[path = "../shared/cli.rs"]
+mod cli;
+use cli::emit;
 
 /// Value parsers of the numeric flags: each checks the valid range, so that a bad value is an
 /// error naming the flag and the range before anything runs.
 mod args {
-    /// Parses an integer in `lo..=hi`; any other input is an error naming the range.
-    fn ranged(s: &str, lo: u64, hi: u64) -> Result<u64, String> {
-        let t = s.trim();
-        let v: i128 = t
-            .parse()
-            .map_err(|_| format!("{t:?} is not an integer; valid: {lo}..={hi}"))?;
-        if v < lo as i128 || v > hi as i128 {
-            return Err(format!("{v} is not in {lo}..={hi}"));
-        }
-        Ok(v as u64)
-    }
+    use crate::cli::ranged;
 
     /// `fit-primitives --parts` and `--segments`: 1..=[`crate::meshes::MAX_PARTS`].
     pub fn parts(s: &str) -> Result<usize, String> {

@@ -4,18 +4,7 @@
 
 use mjskill::MAX_SEED;
 
-/// Parses an integer in `lo..=hi`; any other input (negative, fractional, too large) is an
-/// error naming the range.
-fn ranged(s: &str, lo: u64, hi: u64) -> Result<u64, String> {
-    let t = s.trim();
-    let v: i128 = t
-        .parse()
-        .map_err(|_| format!("{t:?} is not an integer; valid: {lo}..={hi}"))?;
-    if v < lo as i128 || v > hi as i128 {
-        return Err(format!("{v} is not in {lo}..={hi}"));
-    }
-    Ok(v as u64)
-}
+use crate::cli::ranged;
 
 /// A seed: 0..=4294967295 (ManiSkill's seeds are 32-bit).
 pub fn seed(s: &str) -> Result<u64, String> {

@@ -6,24 +6,10 @@ use std::path::{Path, PathBuf};
 
 use clap::{Parser, Subcommand};
 
-/// Writes one line to standard output. A closed pipe (e.g. `mjskill envs | head`) is not an
-/// error: the reader has what it wanted.
-fn emit(line: std::fmt::Arguments) -> Result<(), CliError> {
-    let mut out = std::io::stdout().lock();
-    match writeln!(out, "{line}").and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
-            Err(format!("cannot write to stdout: {e}").into())
-        }
-        _ => Ok(()),
-    }
-}
-
-/// `println!` through [`emit`], returning its error from the enclosing function.
-macro_rules! out {
-    ($($t:tt)*) => {
-        emit(format_args!($($t)*))?
-    };
-}
+#[macro_use]
+#[path = "../shared/cli.rs"]
+mod cli;
+use cli::emit;
 
 /// The command line's errors: any error of the library (or a message), printed with its
 /// `Display` text.
