@@ -72,20 +72,7 @@ fn symlink_to_zero(p: &Path) {
 }
 
 fn python() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
-        "{} is missing: run `bash .ci/setup`",
-        p.display()
-    );
-    eprintln!(
-        "note: hostile policy test skipped: {} is missing",
-        p.display()
-    );
-    None
+    common::venv_python("hostile policy test")
 }
 
 /// The observation and action sizes of PickCube-v1 with the Panda in pd_ee_delta_pos (the

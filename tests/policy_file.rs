@@ -19,6 +19,8 @@ const ENV: &str = "PickCube-v1";
 const ROBOT: &str = "panda";
 const MODE: &str = "pd_ee_delta_pos";
 
+mod common;
+
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
 }
@@ -30,20 +32,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn python() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
-        "{} is missing: run `bash .ci/setup`",
-        p.display()
-    );
-    eprintln!(
-        "note: policy file test skipped: {} is missing (run `bash .ci/setup` to create it)",
-        p.display()
-    );
-    None
+    common::venv_python("policy file test")
 }
 
 /// The observation and action sizes of the test env.

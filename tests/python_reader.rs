@@ -12,6 +12,8 @@ use std::process::Command;
 use mjskill::record::{self, Recorder};
 use mjskill::{make, EnvConfig};
 
+mod common;
+
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("mjskill-python-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -19,20 +21,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn python() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
-    if p.exists() {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
-        "{} is missing: run `bash .ci/setup`",
-        p.display()
-    );
-    eprintln!(
-        "note: Python reader test skipped: {} is missing (run `bash .ci/setup` to create it)",
-        p.display()
-    );
-    None
+    common::venv_python("Python reader test")
 }
 
 /// The Python block of docs/recording.md's "Reading it elsewhere" section.

@@ -7,6 +7,25 @@ use std::time::{Duration, Instant};
 
 use mjskill::mujoco::Model;
 
+/// The Python of `.ci/venv` (made by `bash .ci/setup`), or `None` with a note that `test` is
+/// skipped; with `MJSKILL_REQUIRE_PYTHON` set, a missing venv fails the test instead.
+pub fn venv_python(test: &str) -> Option<std::path::PathBuf> {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".ci/venv/bin/python");
+    if p.exists() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("MJSKILL_REQUIRE_PYTHON").is_none(),
+        "{} is missing: run `bash .ci/setup`",
+        p.display()
+    );
+    eprintln!(
+        "note: {test} skipped: {} is missing (run `bash .ci/setup` to create it)",
+        p.display()
+    );
+    None
+}
+
 /// Runs `cmd`, failing the test if it takes longer than `secs` seconds (a hang).
 pub fn run_within(mut cmd: Command, secs: u64) -> Output {
     let mut child = cmd
