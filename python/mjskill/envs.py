@@ -180,6 +180,23 @@ def _restore_env(kwargs: dict, render_mode: str | None, state: str) -> MjskillEn
     return env
 
 
+def rollout_buffers(envs: Any, steps: int) -> dict[str, np.ndarray]:
+    """Zeroed rollout buffers of ``steps`` steps for ``envs`` (``num_envs`` and the single
+    spaces): ``obs`` ``[T, N, obs_dim]`` and ``actions`` ``[T, N, act_dim]`` float32,
+    ``rewards`` ``[T, N]`` float32, ``terminated``, ``truncated`` and ``autoreset`` ``[T, N]``
+    bool."""
+    t, n = int(steps), envs.num_envs
+    od, ad = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
+    return dict(
+        obs=np.zeros((t, n, od), np.float32),
+        actions=np.zeros((t, n, ad), np.float32),
+        rewards=np.zeros((t, n), np.float32),
+        terminated=np.zeros((t, n), bool),
+        truncated=np.zeros((t, n), bool),
+        autoreset=np.zeros((t, n), bool),
+    )
+
+
 class MjskillVectorEnv(VectorEnv):
     """N mjskill envs stepped on T threads in Rust, as a gymnasium 1.x ``VectorEnv``.
 
@@ -277,17 +294,7 @@ class MjskillVectorEnv(VectorEnv):
             raise ValueError(
                 f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"
             )
-        t, n = int(steps), self.num_envs
-        obs_dim = self.single_observation_space.shape[0]
-        act_dim = self.single_action_space.shape[0]
-        return dict(
-            obs=np.zeros((t, n, obs_dim), np.float32),
-            actions=np.zeros((t, n, act_dim), np.float32),
-            rewards=np.zeros((t, n), np.float32),
-            terminated=np.zeros((t, n), bool),
-            truncated=np.zeros((t, n), bool),
-            autoreset=np.zeros((t, n), bool),
-        )
+        return rollout_buffers(self, steps)
 
     def rollout(self, policy, first_step: int, buffers: dict[str, np.ndarray]) -> np.ndarray:
         """Runs T steps (the buffers' length, :meth:`rollout_buffers`) in one call, with

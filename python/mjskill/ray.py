@@ -33,7 +33,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import _native
-from .envs import MAX_SEED, MjskillVectorEnv
+from .envs import MAX_SEED, MjskillVectorEnv, rollout_buffers
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -268,11 +268,7 @@ class RayVectorEnv:
 
     def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
         """As :meth:`mjskill.MjskillVectorEnv.rollout_buffers`, for all ``num_envs`` envs."""
-        t, n = int(steps), self.num_envs
-        od, ad = self.single_observation_space.shape[0], self.single_action_space.shape[0]
-        return dict(obs=np.zeros((t, n, od), np.float32), actions=np.zeros((t, n, ad), np.float32),
-                    rewards=np.zeros((t, n), np.float32), terminated=np.zeros((t, n), bool),
-                    truncated=np.zeros((t, n), bool), autoreset=np.zeros((t, n), bool))
+        return rollout_buffers(self, steps)
 
     def rollout(self, policy: dict, first_step: int, buffers: dict[str, np.ndarray]) -> np.ndarray:
         """:meth:`mjskill.MjskillVectorEnv.rollout` on every share at once. ``policy`` holds
