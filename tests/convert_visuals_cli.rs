@@ -4,16 +4,11 @@
 //! ends in an error naming the file and the limit, or in a correct conversion.
 #![cfg(feature = "mesh-tools")]
 
-use std::path::{Path, PathBuf};
+mod common;
+use std::path::Path;
 use std::process::{Command, Output};
 
 use base64::Engine as _;
-
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mjskill-cv-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn convert(args: &[&str], out_dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"))
@@ -71,7 +66,7 @@ fn gltf(nodes: &[String]) -> String {
 
 #[test]
 fn gltf_node_cycle_is_refused_naming_the_node() {
-    let d = dir("cycle");
+    let d = common::scratch_dir("cycle");
     // Node 0 draws the triangle and is its own child; node 1 -> 2 -> 1 is a longer cycle.
     for (k, nodes) in [
         vec![r#"{"name":"loop","mesh":0,"children":[0]}"#.to_string()],
@@ -99,7 +94,7 @@ fn gltf_node_cycle_is_refused_naming_the_node() {
 
 #[test]
 fn gltf_shared_children_are_bounded() {
-    let d = dir("dag");
+    let d = common::scratch_dir("dag");
     // A Fibonacci-shaped graph: node i has the children i+1 and i+2, and nodes 24 and 25 draw
     // the triangle, so the root expands to about 240,000 instances from 26 nodes (40 nodes
     // would make 3·10⁸).
@@ -161,7 +156,7 @@ fn png_header_only(w: u32, h: u32) -> Vec<u8> {
 
 #[test]
 fn png_declaring_a_huge_size_is_refused_before_decoding() {
-    let d = dir("pnghuge");
+    let d = common::scratch_dir("pnghuge");
     // 100,000 x 100,000 RGBA would be a 40 GB allocation.
     let f = d.join("huge.png");
     std::fs::write(&f, png_header_only(100_000, 100_000)).unwrap();
@@ -183,7 +178,7 @@ fn png_declaring_a_huge_size_is_refused_before_decoding() {
 
 #[test]
 fn png_bomb_is_refused_by_its_declared_size() {
-    let d = dir("pngbomb");
+    let d = common::scratch_dir("pngbomb");
     // 9000 x 9000 grey zeros: 81 MB of pixels in a file of about 80 KB, more pixels than
     // the limit allows.
     let f = d.join("bomb.png");
@@ -244,7 +239,7 @@ fn dae(positions: &str, normals: &str) -> String {
 
 #[test]
 fn collada_with_non_finite_vertices_is_refused() {
-    let d = dir("nan");
+    let d = common::scratch_dir("nan");
     let good = "0 0 0 1 0 0 0 1 0 0 0 1";
     let f = d.join("tet.dae");
     // The well-formed file converts.
@@ -284,7 +279,7 @@ fn a_polygon_with_a_million_corners_converts() {
     // million triangles, all but a few degenerate or repeated. Before they were dropped up
     // front, normals compared every triangle at a corner with every other one there (a 200,000
     // corner face took over a minute; this one would take half an hour).
-    let d = dir("polygon");
+    let d = common::scratch_dir("polygon");
     let mut text = String::new();
     for i in 0..8 {
         text.push_str(&format!("v {} {} {}\n", i & 1, (i >> 1) & 1, (i >> 2) & 1));
@@ -311,7 +306,7 @@ fn a_cone_over_a_polygon_with_200000_distinct_corners_converts() {
     // meeting at the apex. Both the base's fan centre and the apex are shared by 200,000
     // triangles, and meshoptimizer's vertex classification and vertex cache ordering took
     // time quadratic in that (minutes) before such vertices were split.
-    let d = dir("cone");
+    let d = common::scratch_dir("cone");
     let n = 200_000;
     let mut text = String::from("v 0 0 0.5\n");
     for k in 0..n {
@@ -339,7 +334,7 @@ fn a_cone_over_a_polygon_with_200000_distinct_corners_converts() {
 
 #[test]
 fn duplicate_link_names_in_a_urdf_are_refused() {
-    let d = dir("duplinks");
+    let d = common::scratch_dir("duplinks");
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
     std::fs::write(d.join("a.obj"), obj).unwrap();
     std::fs::write(d.join("b.obj"), obj).unwrap();

@@ -6,6 +6,7 @@
 //! The Python checks use the venv `.ci/setup` creates (`.ci/venv`); without it they print a
 //! note and pass, unless `MJSKILL_REQUIRE_PYTHON` is set (`.ci/run` sets it).
 #![cfg(all(feature = "datasets", feature = "cli"))]
+mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -18,13 +19,6 @@ use mjskill::{make, EnvConfig, SimConfig};
 
 fn demos() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_demos")
-}
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-datasets-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// Names in `dir` (temporaries included: a failed command must leave none).
@@ -82,7 +76,7 @@ const EXPECTED: [Expected; 4] = [
 
 #[test]
 fn sample_demos_import_with_the_reported_success() {
-    let dir = tmp_dir("import");
+    let dir = common::scratch_dir("import");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(demos().join("demos_summary.json")).unwrap())
             .unwrap();
@@ -172,7 +166,7 @@ fn state_error(a: &maniskill_h5::EpisodeData, b: &maniskill_h5::EpisodeData) -> 
 
 #[test]
 fn imported_demos_round_trip_to_maniskill_format() {
-    let dir = tmp_dir("roundtrip");
+    let dir = common::scratch_dir("roundtrip");
     for file in [
         "PickCube-v1/trajectory.h5",
         "PlaceSphere-v1/trajectory.h5",
@@ -292,7 +286,7 @@ fn record_rollout(path: &Path, episodes: usize, steps: usize, video: bool) -> Ve
 
 #[test]
 fn exported_rollout_states_are_the_envs() {
-    let dir = tmp_dir("rollout");
+    let dir = common::scratch_dir("rollout");
     let mcap = dir.join("run.mcap");
     record_rollout(&mcap, 2, 6, false);
     let out = dir.join("run.h5");
@@ -391,7 +385,7 @@ print(json.dumps(out))
 
 #[test]
 fn lerobot_export_reads_back_with_pyarrow_and_pyav() {
-    let dir = tmp_dir("lerobot");
+    let dir = common::scratch_dir("lerobot");
     let mcap = dir.join("run.mcap");
     let frames = record_rollout(&mcap, 2, 9, true);
     let ds = dir.join("ds");
@@ -528,7 +522,7 @@ fn lerobot_export_reads_back_with_pyarrow_and_pyav() {
 
 #[test]
 fn bad_input_is_a_clear_error_and_leaves_nothing() {
-    let dir = tmp_dir("bad");
+    let dir = common::scratch_dir("bad");
     let src = demos().join("PickCube-v1");
     // A truncated h5.
     let bytes = std::fs::read(src.join("trajectory.h5")).unwrap();
@@ -624,7 +618,7 @@ fn bad_input_is_a_clear_error_and_leaves_nothing() {
 
 #[test]
 fn cli_imports_and_exports() {
-    let dir = tmp_dir("cli");
+    let dir = common::scratch_dir("cli");
     let out = dir.join("demos.mcap");
     let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
         .arg("import-maniskill")
@@ -670,7 +664,7 @@ fn cli_imports_and_exports() {
 
 #[test]
 fn rollout_records_sensor_camera_video_that_exports_to_lerobot() {
-    let dir = tmp_dir("camera");
+    let dir = common::scratch_dir("camera");
     let out = dir.join("cam.mcap");
     let mj = || Command::new(env!("CARGO_BIN_EXE_mjskill"));
     // Without a colour obs mode the camera is refused before anything is written.
@@ -830,7 +824,7 @@ fn to_png_recording(src: &Path, dst: &Path) -> Vec<Vec<u8>> {
 
 #[test]
 fn recordings_with_png_frames_still_read_and_export_to_lerobot() {
-    let dir = tmp_dir("png");
+    let dir = common::scratch_dir("png");
     let h264 = dir.join("h264.mcap");
     record_rollout(&h264, 2, 4, true);
     let old = dir.join("old.mcap");
@@ -892,7 +886,7 @@ fn file_type(p: &Path) -> std::fs::FileType {
 
 #[test]
 fn export_never_writes_over_its_input_or_one_output_over_another() {
-    let dir = tmp_dir("export-clobber");
+    let dir = common::scratch_dir("export-clobber");
     let src = dir.join("src.mcap");
     record_rollout(&src, 1, 3, false);
     let original = std::fs::read(&src).unwrap();
@@ -945,7 +939,7 @@ fn export_never_writes_over_its_input_or_one_output_over_another() {
 
 #[test]
 fn export_refuses_non_regular_outputs_and_a_failed_export_leaves_nothing() {
-    let dir = tmp_dir("export-special");
+    let dir = common::scratch_dir("export-special");
     let src = dir.join("src.mcap");
     record_rollout(&src, 1, 3, false);
     let fifo = dir.join("fifo");
@@ -1006,7 +1000,7 @@ fn demo_copy(dir: &Path) -> (PathBuf, PathBuf) {
 
 #[test]
 fn import_never_writes_over_its_input() {
-    let dir = tmp_dir("import-clobber");
+    let dir = common::scratch_dir("import-clobber");
     let (h5, json) = demo_copy(&dir);
     let (h5_bytes, json_bytes) = (std::fs::read(&h5).unwrap(), std::fs::read(&json).unwrap());
     for (out, named) in [
@@ -1065,7 +1059,7 @@ fn declare_actions(h5: &Path, shape: (usize, usize)) {
 
 #[test]
 fn import_checks_declared_shapes_before_reading() {
-    let dir = tmp_dir("import-shapes");
+    let dir = common::scratch_dir("import-shapes");
     let (h5, json) = demo_copy(&dir);
     declare_actions(&h5, (2_000_000_000, 8));
     assert!(std::fs::metadata(&h5).unwrap().len() < 1 << 20);
@@ -1108,7 +1102,7 @@ type JsonEdit = Box<dyn Fn(&mut serde_json::Value)>;
 
 #[test]
 fn import_rejects_a_json_that_disagrees_with_itself_or_the_h5() {
-    let dir = tmp_dir("import-json");
+    let dir = common::scratch_dir("import-json");
     let (_, json) = demo_copy(&dir);
     let text = std::fs::read_to_string(&json).unwrap();
     let base: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -1173,7 +1167,7 @@ fn import_rejects_a_json_that_disagrees_with_itself_or_the_h5() {
 
 #[test]
 fn import_by_states_names_a_row_with_a_zero_quaternion() {
-    let dir = tmp_dir("import-quat");
+    let dir = common::scratch_dir("import-quat");
     let (h5, _) = demo_copy(&dir);
     {
         let f = hdf5_metno::File::open_rw(&h5).unwrap();
@@ -1294,7 +1288,7 @@ print(json.dumps(out))
 
 #[test]
 fn lerobot_stats_hold_quantiles_and_per_episode_columns() {
-    let dir = tmp_dir("lerobot-stats");
+    let dir = common::scratch_dir("lerobot-stats");
     let mcap = dir.join("run.mcap");
     record_rollout(&mcap, 2, 4, true);
     let ds = dir.join("ds");
@@ -1339,7 +1333,7 @@ fn mjskill_cli(args: &[&str], paths: &[&Path]) -> std::process::Output {
 /// ManiSkill can build for Fetch) with the same outcome and objects.
 #[test]
 fn export_converts_fetch_ee_actions_to_joint_targets_that_replay_the_episode() {
-    let dir = tmp_dir("convert");
+    let dir = common::scratch_dir("convert");
     let mcap = dir.join("fetch.mcap");
     let o = mjskill_cli(
         &[
@@ -1580,7 +1574,7 @@ print(json.dumps(out))
 #[test]
 fn lerobot_export_splits_files_and_chunks_by_size_as_lerobot() {
     use mjskill::datasets::lerobot::{self, Limits};
-    let dir = tmp_dir("lerobot-split");
+    let dir = common::scratch_dir("lerobot-split");
     let mcap = dir.join("run.mcap");
     record_rollout(&mcap, 5, 6, true);
     let one = dir.join("one");
@@ -1726,7 +1720,7 @@ fn lerobot_export_splits_files_and_chunks_by_size_as_lerobot() {
 /// therefore takes no lock: its file has a private temporary name until it is complete.
 #[test]
 fn h5_written_while_other_threads_start_processes_reads_back_at_once() {
-    let dir = tmp_dir("h5-children");
+    let dir = common::scratch_dir("h5-children");
     let mcap = dir.join("demo.mcap");
     import(
         &demos().join("PokeCube-v1/trajectory.h5"),

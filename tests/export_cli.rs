@@ -82,7 +82,7 @@ fn fit_primitives_scales_millimetre_meshes() {
         stl += "endloop\nendfacet\n";
     }
     stl += "endsolid cube\n";
-    let path = std::env::temp_dir().join(format!("mjskill-mm-cube-{}.stl", std::process::id()));
+    let path = common::scratch("mm-cube.stl");
     std::fs::write(&path, stl).unwrap();
     let run = |scale: &str| {
         std::process::Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"))

@@ -1,6 +1,7 @@
 //! `mjskill fidelity`: per-step deviations from a ManiSkill reference file or from a recording
 //! replayed with other physics settings; `--resync`, `--control-mode`, `--plot` and bad input.
 #![cfg(feature = "cli")]
+mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -24,12 +25,6 @@ fn reference(name: &str) -> String {
         .join(name)
         .display()
         .to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mjskill-fidelity-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
 }
 
 /// Mean of a metric over a bucket of the file summary.
@@ -122,7 +117,7 @@ fn a_reference_file_reports_per_step_and_per_bucket_deviations() {
 
 #[test]
 fn plot_draws_the_error_curves_to_a_png() {
-    let png = tmp("curves.png");
+    let png = common::scratch("curves.png");
     let f = reference("PickCube-v1__widowxai.json.gz");
     json(&mjskill(&[
         "fidelity",
@@ -140,7 +135,7 @@ fn plot_draws_the_error_curves_to_a_png() {
 
 #[test]
 fn a_recording_replays_exactly_at_its_own_rate_and_drifts_at_another() {
-    let out = tmp("r500.mcap");
+    let out = common::scratch("r500.mcap");
     let o = mjskill(&[
         "rollout",
         "--episodes",
@@ -198,13 +193,13 @@ fn bad_input_is_an_error_naming_it() {
         &["fidelity", "/nonexistent.json.gz"],
         "/nonexistent.json.gz",
     );
-    let junk = tmp("junk.json");
+    let junk = common::scratch("junk.json");
     std::fs::write(&junk, "{\"format\": 3}").unwrap();
     fails_with(
         &["fidelity", junk.to_str().unwrap()],
         "is not a ManiSkill reference trajectory file",
     );
-    let other = tmp("other.json");
+    let other = common::scratch("other.json");
     let text = std::fs::read(Path::new(&f)).unwrap();
     let mut s = String::new();
     std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&text[..]), &mut s).unwrap();
@@ -264,7 +259,7 @@ fn a_reference_file_with_short_joint_rows_or_a_64_bit_seed_is_refused() {
     let edited = |name: &str, edit: &dyn Fn(&mut Value)| {
         let mut v = base.clone();
         edit(&mut v);
-        let p = tmp(name);
+        let p = common::scratch(name);
         std::fs::write(&p, v.to_string()).unwrap();
         p.display().to_string()
     };

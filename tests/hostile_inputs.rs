@@ -22,12 +22,6 @@ fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
 }
 
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mjskill-hostile-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 /// The error line of a command that must fail with mjskill's error exit code, not a crash.
 fn fails(o: &Output) -> String {
     let err = String::from_utf8_lossy(&o.stderr).to_string();
@@ -109,7 +103,7 @@ fn hostile(py: &Path, d: &Path, kind: &str, extra: &[&str]) -> PathBuf {
 
 #[test]
 fn rollout_out_must_be_a_regular_file() {
-    let d = dir("out");
+    let d = common::scratch_dir("out");
     // A device behind a symlink (as root, `--out /dev/null` would have replaced /dev/null).
     let null = d.join("null.mcap");
     std::fs::remove_file(&null).ok();
@@ -137,7 +131,7 @@ fn rollout_out_must_be_a_regular_file() {
 
 #[test]
 fn stale_temporaries_of_killed_runs_are_removed() {
-    let d = dir("stale");
+    let d = common::scratch_dir("stale");
     // A pid no process has (above Linux's largest pid_max).
     let dead = 4_194_400u32;
     let part = d.join(format!(".run.mcap.{dead}.part"));
@@ -165,7 +159,7 @@ fn stale_temporaries_of_killed_runs_are_removed() {
 
 #[test]
 fn export_flags_and_links_get_clear_messages() {
-    let d = dir("export");
+    let d = common::scratch_dir("export");
     let rec = d.join("run.mcap");
     let o = mjskill()
         .args(["rollout", "--episodes", "1", "--no-frame", "--out"])
@@ -215,7 +209,7 @@ fn outcome_json(objects: serde_json::Value) -> serde_json::Value {
 
 #[test]
 fn outcome_objects_must_be_the_envs() {
-    let d = dir("objects");
+    let d = common::scratch_dir("objects");
     for (name, objects, want) in [
         (
             "misspelt.json",
@@ -270,7 +264,7 @@ fn outcome_objects_must_be_the_envs() {
 #[test]
 fn compressed_inputs_stop_at_the_size_limit() {
     use std::io::Write;
-    let d = dir("bombs");
+    let d = common::scratch_dir("bombs");
     // 1 MB of JSON whitespace in a gzip file of about 1 kB.
     let gz = d.join("bomb.json.gz");
     let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
@@ -322,7 +316,7 @@ fn compressed_inputs_stop_at_the_size_limit() {
 
 #[test]
 fn devices_fifos_and_links_to_dev_zero_are_refused_as_inputs() {
-    let d = dir("inputs");
+    let d = common::scratch_dir("inputs");
     let zero = d.join("zero.onnx");
     symlink_to_zero(&zero);
     let fifo = d.join("fifo.onnx");
@@ -404,7 +398,7 @@ fn rising_goal() -> (u64, f32, f32, usize) {
 #[test]
 fn a_policy_that_crashes_mid_rollout_leaves_an_incomplete_file() {
     let Some(py) = python() else { return };
-    let d = dir("crash");
+    let d = common::scratch_dir("crash");
     let (seed, z0, z1, index) = rising_goal();
     // Out of range in the second episode only.
     let f = hostile(
@@ -449,7 +443,7 @@ fn a_policy_that_crashes_mid_rollout_leaves_an_incomplete_file() {
 #[test]
 fn policy_files_that_crash_or_exhaust_the_runtime_are_errors() {
     let Some(py) = python() else { return };
-    let d = dir("runtime");
+    let d = common::scratch_dir("runtime");
     let cases: Vec<(PathBuf, &str)> = vec![
         (hostile(&py, &d, "div-zero", &[]), "failed to run"),
         (
@@ -492,7 +486,7 @@ fn policy_files_that_crash_or_exhaust_the_runtime_are_errors() {
 #[test]
 fn policy_metadata_is_read_one_way_and_named_in_errors() {
     let Some(py) = python() else { return };
-    let d = dir("meta");
+    let d = common::scratch_dir("meta");
     for key in ["control_mode", "env_id"] {
         let f = hostile(&py, &d, "dup-meta", &["--key", key]);
         let err = fails(

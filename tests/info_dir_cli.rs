@@ -1,18 +1,12 @@
 //! `mjskill info DIR`: a directory of recording shards read as one dataset.
 #![cfg(feature = "cli")]
 
-use std::path::{Path, PathBuf};
+mod common;
+use std::path::Path;
 use std::process::Command;
 
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
-}
-
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mjskill-info-dir-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 fn json(out: &[u8]) -> serde_json::Value {
@@ -33,11 +27,11 @@ fn rollout(out: &Path, seed: u32, episodes: u32, extra: &[&str]) {
 
 #[test]
 fn shards_read_as_one_dataset_equal_one_recording_of_all_seeds() {
-    let shards = dir("shards");
+    let shards = common::scratch_dir("shards");
     rollout(&shards.join("shard-0.mcap"), 0, 2, &[]);
     rollout(&shards.join("shard-1.mcap"), 2, 2, &[]);
     std::fs::write(shards.join("notes.txt"), "not a shard").unwrap();
-    let whole = dir("whole").join("all.mcap");
+    let whole = common::scratch_dir("whole").join("all.mcap");
     rollout(&whole, 0, 4, &[]);
     let d = json(&mjskill().arg("info").arg(&shards).output().unwrap().stdout);
     let w = json(&mjskill().arg("info").arg(&whole).output().unwrap().stdout);
@@ -67,11 +61,11 @@ fn shards_read_as_one_dataset_equal_one_recording_of_all_seeds() {
 
 #[test]
 fn mixed_or_empty_directories_are_errors_naming_the_cause() {
-    let empty = dir("empty");
+    let empty = common::scratch_dir("empty");
     let o = mjskill().arg("info").arg(&empty).output().unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("holds no .mcap files"));
-    let mixed = dir("mixed");
+    let mixed = common::scratch_dir("mixed");
     rollout(&mixed.join("a.mcap"), 0, 1, &[]);
     rollout(&mixed.join("b.mcap"), 1, 1, &["--reward-mode", "sparse"]);
     let o = mjskill().arg("info").arg(&mixed).output().unwrap();

@@ -14,6 +14,7 @@
 //! the table: `cargo test --release --test outcome -- --nocapture` prints the measured
 //! figures in its form (and `mjskill outcomes tests/data/outcomes --table` as Markdown).
 #![cfg(feature = "cli")]
+mod common;
 use std::path::{Path, PathBuf};
 
 use mjskill::maniskill::outcome::{files, measure, OutcomeFile, PairAgreement};
@@ -393,8 +394,7 @@ fn outcomes_agree_with_maniskill_at_least_as_measured() {
 
 #[test]
 fn bad_outcome_files_are_errors_naming_the_problem() {
-    let dir = std::env::temp_dir().join(format!("mjskill-outcome-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch_dir("outcome");
     let write = |name: &str, v: &serde_json::Value| {
         let p = dir.join(name);
         std::fs::write(&p, v.to_string()).unwrap();
@@ -482,8 +482,7 @@ fn the_outcomes_command_prints_the_agreement() {
         text.starts_with("| source |") && text.contains("| solver | PlaceSphere-v1 | panda |"),
         "{text}"
     );
-    let empty = std::env::temp_dir().join(format!("mjskill-outcomes-empty-{}", std::process::id()));
-    std::fs::create_dir_all(&empty).unwrap();
+    let empty = common::scratch_dir("outcomes-empty");
     let o = run(&[empty.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(

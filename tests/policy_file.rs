@@ -25,12 +25,6 @@ fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-policy-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 fn python() -> Option<PathBuf> {
     common::venv_python("policy file test")
 }
@@ -54,7 +48,7 @@ fn dims_of(env_id: &str) -> (usize, usize) {
 /// Makes `name` with examples/make_test_policy.py (and its weights JSON next to it), for an
 /// MLP of `obs` → `act` values; `extra` are further arguments.
 fn make_policy(py: &Path, name: &str, obs: usize, act: usize, extra: &[&str]) -> PathBuf {
-    let out = tmp(name);
+    let out = common::scratch(name);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/make_test_policy.py");
     let o = Command::new(py)
         .arg(script)
@@ -234,7 +228,7 @@ fn eval_and_rollout_take_a_policy_file() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     // A recording of the policy replays bitwise, and its return is eval's.
-    let out = tmp("policy.mcap");
+    let out = common::scratch("policy.mcap");
     let o = mjskill()
         .args(["rollout", "--episodes", "3", "--seed", "7", "--no-frame"])
         .arg("--policy")
@@ -326,7 +320,7 @@ fn metadata_mismatches_are_refused_naming_both() {
         );
     }
     // A visual obs mode is not the policy's state vector; state_dict is the same vector.
-    let out = tmp("meta.mcap");
+    let out = common::scratch("meta.mcap");
     let err = fails(
         mjskill()
             .args(["rollout", "--obs-mode", "rgb", "--no-frame", "--policy"])
@@ -403,11 +397,11 @@ fn metadata_mismatches_are_refused_naming_both() {
 #[test]
 fn malformed_and_missing_files_are_errors_naming_the_file() {
     // No Python needed: these files are not ONNX models.
-    let garbage = tmp("garbage.onnx");
+    let garbage = common::scratch("garbage.onnx");
     std::fs::write(&garbage, b"this is not an ONNX model \x00\xff\x13").unwrap();
-    let empty = tmp("empty.onnx");
+    let empty = common::scratch("empty.onnx");
     std::fs::write(&empty, b"").unwrap();
-    let truncated = tmp("truncated.onnx");
+    let truncated = common::scratch("truncated.onnx");
     // A protobuf field header promising more bytes than there are.
     std::fs::write(&truncated, [0x3a, 0xff, 0x01, 0x0a]).unwrap();
     for f in [&garbage, &empty, &truncated] {
@@ -429,7 +423,7 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
             mjskill::solvers::EvalError::Policy(SolverError::PolicyFile(_))
         ));
     }
-    let missing = tmp("missing.onnx");
+    let missing = common::scratch("missing.onnx");
     let err = fails(
         mjskill()
             .args(["rollout", "--policy"])

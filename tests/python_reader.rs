@@ -14,12 +14,6 @@ use mjskill::{make, EnvConfig};
 
 mod common;
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-python-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 fn python() -> Option<PathBuf> {
     common::venv_python("Python reader test")
 }
@@ -86,10 +80,10 @@ fn run(py: &Path, script: &Path, file: &Path) -> (String, String) {
 #[test]
 fn the_documented_python_reader_recovers_every_finished_episode() {
     let Some(py) = python() else { return };
-    let script = tmp("example.py");
+    let script = common::scratch("example.py");
     std::fs::write(&script, documented_example()).unwrap();
     for (name, killed) in [("complete.mcap", false), ("killed.mcap", true)] {
-        let path = tmp(name);
+        let path = common::scratch(name);
         record_file(&path, 3, 4, killed, false);
         let rec = record::read(&path).unwrap();
         assert_eq!(rec.complete, !killed);
@@ -129,7 +123,7 @@ fn every_message_validates_against_its_schema() {
         eprintln!("note: no EGL: the foxglove.CompressedVideo channel is not validated");
     }
     for (name, killed) in [("schemas.mcap", false), ("schemas-killed.mcap", true)] {
-        let path = tmp(name);
+        let path = common::scratch(name);
         record_file(&path, 2, 3, killed, video);
         let (out, _) = run(&py, &script, &path);
         let counts: serde_json::Value = serde_json::from_str(out.trim()).unwrap();

@@ -1,16 +1,11 @@
 //! MCAP episode recording: round trip, exact replay from recorded states, durability of
 //! finished episodes when the recorder is killed, damaged and foreign files.
 
-use std::path::{Path, PathBuf};
+mod common;
+use std::path::Path;
 
 use mjskill::record::{self, RecordError, Recorder};
 use mjskill::{make, Env, EnvConfig};
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-record-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
 
 fn env() -> Env {
     make("PickCube-v1", EnvConfig::default()).unwrap()
@@ -80,7 +75,7 @@ fn bits(v: &[f32]) -> Vec<u32> {
 
 #[test]
 fn round_trip_and_exact_replay() {
-    let path = tmp("roundtrip.mcap");
+    let path = common::scratch("roundtrip.mcap");
     let mut env = env();
     let mut rec = Recorder::create(&path, &env).unwrap();
     let seen = record_episodes(&mut rec, &mut env, 0, 2, 6, true);
@@ -187,7 +182,7 @@ fn messages(path: &Path) -> Vec<(String, String, u64, serde_json::Value)> {
 
 #[test]
 fn channels_decode_with_any_mcap_reader() {
-    let path = tmp("decode.mcap");
+    let path = common::scratch("decode.mcap");
     let mut env = env();
     let mut rec = Recorder::create(&path, &env).unwrap();
     let steps = 3;
@@ -313,7 +308,7 @@ fn channels_decode_with_any_mcap_reader() {
 
 #[test]
 fn finished_episodes_survive_a_kill() {
-    let path = tmp("killed.mcap");
+    let path = common::scratch("killed.mcap");
     let mut env = env();
     let mut rec = Recorder::create(&path, &env).unwrap();
     let seen = record_episodes(&mut rec, &mut env, 0, 2, 4, true);
@@ -322,7 +317,7 @@ fn finished_episodes_survive_a_kill() {
     let at_kill = std::fs::read(&path).unwrap();
     // A killed process runs no destructor (which would write the footer).
     std::mem::forget(rec);
-    let copy = tmp("killed-copy.mcap");
+    let copy = common::scratch("killed-copy.mcap");
     std::fs::write(&copy, &at_kill).unwrap();
     for p in [&path, &copy] {
         let r = record::read(p).unwrap();
@@ -338,7 +333,7 @@ fn finished_episodes_survive_a_kill() {
 
 #[test]
 fn a_recorder_dropped_by_a_panic_never_claims_completeness() {
-    let path = tmp("panicked.mcap");
+    let path = common::scratch("panicked.mcap");
     let r = std::panic::catch_unwind(|| {
         let mut env = env();
         let mut rec = Recorder::create(&path, &env).unwrap();
@@ -354,7 +349,7 @@ fn a_recorder_dropped_by_a_panic_never_claims_completeness() {
 
 #[test]
 fn truncated_files_never_panic() {
-    let path = tmp("full.mcap");
+    let path = common::scratch("full.mcap");
     let mut env = env();
     let mut rec = Recorder::create(&path, &env).unwrap();
     record_episodes(&mut rec, &mut env, 0, 2, 3, true);
@@ -362,7 +357,7 @@ fn truncated_files_never_panic() {
     let bytes = std::fs::read(&path).unwrap();
     let full = record::read(&path).unwrap();
     assert_eq!(full.episodes.len(), 2);
-    let cut = tmp("cut.mcap");
+    let cut = common::scratch("cut.mcap");
     let n = bytes.len();
     let mut sizes: Vec<usize> = (0..40).map(|k| k * n / 40).collect();
     sizes.extend([1, 7, 8, 9, 20, n - 1, n - 8, n - 9]);
@@ -393,24 +388,24 @@ fn truncated_files_never_panic() {
 
 #[test]
 fn garbage_empty_and_foreign_files_are_errors_naming_the_file() {
-    let garbage = tmp("garbage.mcap");
+    let garbage = common::scratch("garbage.mcap");
     std::fs::write(
         &garbage,
         b"this is not an mcap file at all, just some text\n",
     )
     .unwrap();
-    let empty = tmp("empty.mcap");
+    let empty = common::scratch("empty.mcap");
     std::fs::write(&empty, b"").unwrap();
-    let missing = tmp("does-not-exist.mcap");
+    let missing = common::scratch("does-not-exist.mcap");
     // A valid MCAP that is not an mjskill recording.
-    let foreign = tmp("foreign.mcap");
+    let foreign = common::scratch("foreign.mcap");
     {
         let f = std::io::BufWriter::new(std::fs::File::create(&foreign).unwrap());
         let mut w = mcap::WriteOptions::new().profile("ros2").create(f).unwrap();
         w.finish().unwrap();
     }
     // Magic followed by garbage.
-    let damaged = tmp("damaged.mcap");
+    let damaged = common::scratch("damaged.mcap");
     let mut d = mcap::MAGIC.to_vec();
     d.extend((0..500u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8));
     std::fs::write(&damaged, &d).unwrap();
@@ -426,7 +421,7 @@ fn garbage_empty_and_foreign_files_are_errors_naming_the_file() {
 #[test]
 fn unwritable_path_fails_at_create() {
     let env = env();
-    let p = tmp("no-such-dir").join("sub").join("x.mcap");
+    let p = common::scratch("no-such-dir").join("sub").join("x.mcap");
     let e = Recorder::create(&p, &env).expect_err("unwritable");
     assert!(e.to_string().contains(&p.display().to_string()), "{e}");
 }

@@ -5,18 +5,13 @@
 //! and `replay`.
 #![cfg(feature = "cli")]
 
-use std::path::{Path, PathBuf};
+mod common;
+use std::path::Path;
 use std::process::Command;
 
 use mjskill::record::{self, RecordError, Recorder};
 use mjskill::{make, Env, EnvConfig};
 use rand::{Rng, SeedableRng};
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-damage-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
 
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
@@ -94,12 +89,12 @@ fn is_corrupt(e: &RecordError) -> bool {
 #[test]
 fn a_damaged_chunk_is_an_error_naming_its_offset_never_a_cut() {
     for killed in [false, true] {
-        let path = tmp(&format!("chunks-{killed}.mcap"));
+        let path = common::scratch(&format!("chunks-{killed}.mcap"));
         record_file(&path, 2, 6, killed);
         let bytes = std::fs::read(&path).unwrap();
         let cs = chunks(&bytes);
         assert!(cs.len() >= 3, "{cs:?}");
-        let bad = tmp(&format!("chunks-{killed}-bad.mcap"));
+        let bad = common::scratch(&format!("chunks-{killed}-bad.mcap"));
         for (k, &(off, len)) in cs.iter().enumerate() {
             // The compressed data, and every field of the chunk header (times, sizes, CRC).
             let clen = u32::from_le_bytes(bytes[off + 37..off + 41].try_into().unwrap()) as usize;
@@ -140,7 +135,7 @@ fn a_damaged_chunk_is_an_error_naming_its_offset_never_a_cut() {
 /// inside the first chunk with messages becomes `len`, and the chunk CRC is recomputed, so the
 /// only thing wrong is the length.
 fn with_record_length(len: u64) -> Vec<u8> {
-    let path = tmp("plain.mcap");
+    let path = common::scratch("plain.mcap");
     {
         let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
         let mut w = mcap::WriteOptions::new()
@@ -183,7 +178,7 @@ fn with_record_length(len: u64) -> Vec<u8> {
 fn a_huge_record_length_is_an_error_not_an_abort() {
     // 4e18 bytes: the length that made `mjskill info` abort with a failed allocation.
     for len in [4_000_000_000_000_000_000u64, 1 << 40, u64::MAX] {
-        let path = tmp("huge.mcap");
+        let path = common::scratch("huge.mcap");
         std::fs::write(&path, with_record_length(len)).unwrap();
         let e = record::read_raw(&path).unwrap_err();
         assert!(is_corrupt(&e), "{e}");
@@ -197,12 +192,12 @@ fn a_huge_record_length_is_an_error_not_an_abort() {
 
 #[test]
 fn cut_files_read_up_to_the_cut_and_say_truncated_before_the_metadata() {
-    let path = tmp("cut-source.mcap");
+    let path = common::scratch("cut-source.mcap");
     record_file(&path, 2, 5, false);
     let bytes = std::fs::read(&path).unwrap();
     let full = record::read(&path).unwrap();
     let first_chunk = chunks(&bytes)[0].0;
-    let cut = tmp("cut.mcap");
+    let cut = common::scratch("cut.mcap");
     // Every cut before the first chunk: the metadata (bytes ~45..~1400) is incomplete or the
     // file ends right after it.
     for n in 1..first_chunk {
@@ -251,10 +246,10 @@ fn a_closed_file_with_a_flipped_bit_anywhere_is_damaged() {
     // Every byte of a closed file is covered by a chunk CRC, the data-section CRC, the summary
     // CRC or a structure check: flips in the header, metadata, message indexes, summary and
     // footer are errors too (spot checks over each record kind).
-    let path = tmp("closed.mcap");
+    let path = common::scratch("closed.mcap");
     record_file(&path, 1, 3, false);
     let bytes = std::fs::read(&path).unwrap();
-    let bad = tmp("closed-bad.mcap");
+    let bad = common::scratch("closed-bad.mcap");
     let mut kinds = std::collections::BTreeSet::new();
     for (op, off, len) in records(&bytes) {
         kinds.insert(op);
@@ -277,12 +272,12 @@ fn a_closed_file_with_a_flipped_bit_anywhere_is_damaged() {
 
 #[test]
 fn salvage_reads_what_precedes_the_damage() {
-    let path = tmp("salvage.mcap");
+    let path = common::scratch("salvage.mcap");
     record_file(&path, 3, 4, false);
     let bytes = std::fs::read(&path).unwrap();
     // Damage the last chunk that holds messages: the episodes before it stay readable.
     let (off, len) = *chunks(&bytes).last().unwrap();
-    let bad = tmp("salvage-bad.mcap");
+    let bad = common::scratch("salvage-bad.mcap");
     std::fs::write(&bad, flipped(&bytes, off + len - 2, 1)).unwrap();
     let o = mjskill().arg("info").arg(&bad).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
@@ -316,7 +311,7 @@ fn salvage_reads_what_precedes_the_damage() {
 
 #[test]
 fn the_recorder_refuses_what_it_could_not_read_back() {
-    let path = tmp("refused.mcap");
+    let path = common::scratch("refused.mcap");
     let mut env = env();
     let mut rec = Recorder::create(&path, &env).unwrap();
     rec.reset(&mut env, Some(1)).unwrap();
@@ -383,7 +378,7 @@ fn fuzz_truncations_and_bit_flips() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(18);
     let (mut flips, mut cuts, mut cli) = (0, 0, 0);
     for killed in [false, true] {
-        let path = tmp(&format!("fuzz-{killed}.mcap"));
+        let path = common::scratch(&format!("fuzz-{killed}.mcap"));
         record_file(&path, 2, 5, killed);
         let bytes = std::fs::read(&path).unwrap();
         let orig = record::read(&path).unwrap();
@@ -399,7 +394,7 @@ fn fuzz_truncations_and_bit_flips() {
             .chain(recs.last().copied().filter(|r| killed && r.0 == 0x0C))
             .map(|(_, o, l)| (o, o + l))
             .collect();
-        let bad = tmp(&format!("fuzz-{killed}-bad.mcap"));
+        let bad = common::scratch(&format!("fuzz-{killed}-bad.mcap"));
         for k in 0..500 {
             let cut = k % 3 == 0;
             let (data, at) = if cut {

@@ -4,7 +4,7 @@
 //! in time on bad meshes.
 #![cfg(feature = "cli")]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -13,12 +13,6 @@ use common::run_within;
 
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
-}
-
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mjskill-reliab-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 fn stderr(o: &Output) -> String {
@@ -42,7 +36,7 @@ fn leftovers(d: &Path) -> Vec<String> {
 
 #[test]
 fn bad_arguments_never_touch_an_existing_recording() {
-    let d = dir("badargs");
+    let d = common::scratch_dir("badargs");
     let out = d.join("existing.mcap");
     std::fs::write(&out, b"precious bytes").unwrap();
     let png = d.join("existing.png");
@@ -95,7 +89,7 @@ fn bad_arguments_never_touch_an_existing_recording() {
 
 #[test]
 fn side_pngs_never_clobber_or_cut_the_recording() {
-    let d = dir("sidepng");
+    let d = common::scratch_dir("sidepng");
     // --out x.png: the frame PNG would be the recording itself.
     let out = d.join("x.png");
     let o = mjskill()
@@ -162,7 +156,7 @@ fn side_pngs_never_clobber_or_cut_the_recording() {
 
 #[test]
 fn two_rollouts_on_one_file_are_a_reported_clash() {
-    let d = dir("clash");
+    let d = common::scratch_dir("clash");
     let out = d.join("shared.mcap");
     let spawn = || {
         mjskill()
@@ -387,7 +381,7 @@ fn bench_reports_the_threads_it_used() {
 
 #[test]
 fn replay_tolerance_is_a_finite_number_at_least_zero() {
-    let d = dir("tol");
+    let d = common::scratch_dir("tol");
     let f = d.join("t.mcap");
     let o = mjskill()
         .args(["rollout", "--episodes", "1", "--no-frame", "--out"])
@@ -413,8 +407,7 @@ fn replay_tolerance_is_a_finite_number_at_least_zero() {
 #[test]
 fn export_mjcf_defaults_to_the_envs_robot() {
     // Printed to stdout, the scene's mesh files are not written into the working directory.
-    let cwd = std::env::temp_dir().join(format!("mjskill-export-cwd-{}", std::process::id()));
-    std::fs::create_dir_all(&cwd).unwrap();
+    let cwd = common::scratch_dir("export-cwd");
     let o = mjskill()
         .current_dir(&cwd)
         .args(["export-mjcf", "--env", "PickCubeSO100-v1"])
@@ -468,7 +461,7 @@ fn fit(d: &Path, name: &str, mesh: &[u8], args: &[&str], secs: u64) -> Output {
 #[cfg(feature = "mesh-tools")]
 #[test]
 fn fit_primitives_rejects_bad_meshes_and_stays_bounded() {
-    let d = dir("fit");
+    let d = common::scratch_dir("fit");
     let tet = |s: f64| {
         let (o, x, y, z) = ([0.0; 3], [s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, s]);
         vec![[o, y, x], [o, x, z], [o, z, y], [x, y, z]]

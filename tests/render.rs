@@ -2,6 +2,7 @@
 //! checked against projections computed independently from the camera pose and intrinsics.
 #![cfg(feature = "cli")]
 
+mod common;
 use mjskill::mujoco::ObjType;
 use mjskill::{make, Env, EnvConfig, ObsMode};
 use nalgebra::{Matrix3, Vector3};
@@ -262,12 +263,6 @@ fn render_options_change_the_image_and_bad_ones_are_rejected() {
     assert_eq!(e.sensor_rgb().unwrap().len(), 128 * 128 * 3);
 }
 
-fn tmp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-render-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
 fn decode_png(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
     let mut r = png::Decoder::new(std::io::Cursor::new(bytes))
         .read_info()
@@ -313,7 +308,7 @@ fn psnr(a: &[u8], b: &[u8]) -> f64 {
 fn recorded_video_frames_decode_to_the_rendered_images() {
     use base64::Engine;
     use mjskill::record::{read_raw, video, Recorder, TOPIC_RENDER_VIDEO};
-    let path = tmp("video.mcap");
+    let path = common::scratch("video.mcap");
     let mut e = env(ObsMode::State, 7);
     let mut rec = Recorder::create(&path, &e).unwrap();
     assert!(
@@ -410,7 +405,7 @@ fn render_command_writes_the_human_and_sensor_frames() {
         ("render_camera", 512, expect_human),
         ("base_camera", 128, expect_sensor),
     ] {
-        let out = tmp(&format!("{camera}.png"));
+        let out = common::scratch(&format!("{camera}.png"));
         let o = std::process::Command::new(bin)
             .args([
                 "render",
@@ -432,7 +427,7 @@ fn render_command_writes_the_human_and_sensor_frames() {
     }
     let o = std::process::Command::new(bin)
         .args(["render", "--camera", "top_camera", "-o"])
-        .arg(tmp("x.png"))
+        .arg(common::scratch("x.png"))
         .output()
         .unwrap();
     assert!(!o.status.success());
@@ -446,7 +441,7 @@ fn render_command_writes_the_human_and_sensor_frames() {
 #[cfg(feature = "video")]
 #[test]
 fn rollout_writes_a_frame_next_to_the_recording_and_video_on_request() {
-    let out = tmp("roll.mcap");
+    let out = common::scratch("roll.mcap");
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
         .args(["rollout", "--episodes", "1", "--video", "--out"])
         .arg(&out)

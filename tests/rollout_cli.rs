@@ -2,18 +2,12 @@
 //! trajectories: tests/reference.rs).
 #![cfg(feature = "cli")]
 
-use std::path::PathBuf;
+mod common;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mjskill-rollout-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
 }
 
 fn json(out: &[u8]) -> serde_json::Value {
@@ -22,7 +16,7 @@ fn json(out: &[u8]) -> serde_json::Value {
 
 #[test]
 fn rollout_info_and_replay_round_trip() {
-    let out = tmp("three.mcap");
+    let out = common::scratch("three.mcap");
     let o = mjskill()
         .args(["rollout", "--episodes", "3", "--seed", "5", "--out"])
         .arg(&out)
@@ -51,7 +45,7 @@ fn rollout_info_and_replay_round_trip() {
 
 #[test]
 fn no_frame_skips_the_png_next_to_the_recording() {
-    let out = tmp("noframe.mcap");
+    let out = common::scratch("noframe.mcap");
     // The frame goes next to the recording: `noframe.mcap` → `noframe.png`.
     let png = out.with_extension("png");
     let o = mjskill()
@@ -66,7 +60,7 @@ fn no_frame_skips_the_png_next_to_the_recording() {
 
 #[test]
 fn bad_files_and_unwritable_outputs_are_clear_errors() {
-    let garbage = tmp("garbage.mcap");
+    let garbage = common::scratch("garbage.mcap");
     std::fs::write(&garbage, b"definitely not mcap").unwrap();
     for cmd in ["info", "replay"] {
         let o = mjskill().arg(cmd).arg(&garbage).output().unwrap();
@@ -75,7 +69,7 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
         assert!(e.contains("garbage.mcap") && !e.contains("panicked"), "{e}");
         let o = mjskill()
             .arg(cmd)
-            .arg(tmp("missing.mcap"))
+            .arg(common::scratch("missing.mcap"))
             .output()
             .unwrap();
         let e = String::from_utf8_lossy(&o.stderr);
@@ -93,7 +87,7 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
     assert!(o.stdout.is_empty(), "no summary: nothing was simulated");
     let o = mjskill()
         .args(["rollout", "--policy", "telepathy", "--out"])
-        .arg(tmp("p.mcap"))
+        .arg(common::scratch("p.mcap"))
         .output()
         .unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("telepathy"));
@@ -102,7 +96,7 @@ fn bad_files_and_unwritable_outputs_are_clear_errors() {
 /// Starts a long rollout, waits until `finished` episodes are on disk, then kills it with
 /// `signal` and checks what survives.
 fn kill_mid_run(signal: &str, name: &str) {
-    let out = tmp(name);
+    let out = common::scratch(name);
     // A process started in the background by a script inherits SIGINT ignored, and a command
     // line program rightly keeps it so (the shell asked for it); the test runs the rollout
     // with the default disposition, as from a terminal (`env` then execs it, same pid).
@@ -202,7 +196,7 @@ fn bench_replays_the_envs_trajectory_bitwise_with_cloned_drives() {
 /// error naming the feature, writing nothing.
 #[test]
 fn left_out_features_are_named_errors() {
-    let out = tmp("feature.mcap");
+    let out = common::scratch("feature.mcap");
     let mut cases: Vec<(Vec<String>, &str)> = Vec::new();
     if !cfg!(feature = "datasets") {
         for args in [

@@ -1,8 +1,11 @@
 //! Helpers shared by the integration tests: `export-mjcf` runs (checked by mjskill's MuJoCo
 //! and by Debian's `mujoco-compile`), the task tests' observation and state helpers, and
-//! command runs bounded in time (`run_within`).
+//! command runs bounded in time (`run_within`), and the scratch directory for test files
+//! (`scratch`, `scratch_dir`).
 #![allow(dead_code)]
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use mjskill::mujoco::Model;
@@ -24,6 +27,45 @@ pub fn venv_python(test: &str) -> Option<std::path::PathBuf> {
         p.display()
     );
     None
+}
+
+/// Prefix of the test processes' scratch directories under `CARGO_TARGET_TMPDIR`.
+const SCRATCH_PREFIX: &str = "mjskill-tests-";
+
+/// This test process's scratch directory, `target/tmp/mjskill-tests-PID` (Cargo's
+/// `CARGO_TARGET_TMPDIR`): test files stay inside the target directory, never in the system's
+/// temp directory. The first call removes the directories of test processes that have exited,
+/// so only the last test binary's files stay behind (for a look after a failure).
+fn scratch_root() -> &'static Path {
+    static ROOT: OnceLock<PathBuf> = OnceLock::new();
+    ROOT.get_or_init(|| {
+        let base = Path::new(env!("CARGO_TARGET_TMPDIR"));
+        for entry in std::fs::read_dir(base).into_iter().flatten().flatten() {
+            let name = entry.file_name();
+            let pid = name.to_str().and_then(|n| n.strip_prefix(SCRATCH_PREFIX));
+            if let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok()) {
+                if !Path::new(&format!("/proc/{pid}")).exists() {
+                    let _ = std::fs::remove_dir_all(entry.path());
+                }
+            }
+        }
+        let root = base.join(format!("{SCRATCH_PREFIX}{}", std::process::id()));
+        std::fs::create_dir_all(&root).unwrap();
+        root
+    })
+}
+
+/// The path of a file named `name` in this test process's scratch directory (`scratch_root`).
+/// Names are unique within a test binary: its tests run at once and share the directory.
+pub fn scratch(name: &str) -> PathBuf {
+    scratch_root().join(name)
+}
+
+/// A directory named `name` in this test process's scratch directory, created if missing.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let d = scratch(name);
+    std::fs::create_dir_all(&d).unwrap();
+    d
 }
 
 /// Runs `cmd`, failing the test if it takes longer than `secs` seconds (a hang).
@@ -49,11 +91,7 @@ pub fn run_within(mut cmd: Command, secs: u64) -> Output {
 pub fn export_mjcf_model(robot: &str, env_id: &str) -> Model {
     // Written with -o into a directory of its own: the mesh and texture files go next to the
     // XML, never into the working directory.
-    let dir = std::env::temp_dir().join(format!(
-        "mjskill-export-{robot}-{env_id}-{}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir(&format!("export-{robot}-{env_id}"));
     let path = dir.join("scene.xml");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
         .args(["export-mjcf", "--robot", robot, "--env", env_id, "-o"])
@@ -88,8 +126,7 @@ pub fn export_mjcf_model(robot: &str, env_id: &str) -> Model {
 /// independent `mujoco-compile` (success and no "error" in its output asserted) and returns
 /// the model it printed. `tag` names the temporary directory.
 pub fn export_and_mujoco_compile(tag: &str, args: &[&str]) -> String {
-    let dir = std::env::temp_dir().join(format!("mjskill-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir(tag);
     let xml = dir.join(format!("{tag}.xml"));
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_mjskill"))
         .args(args)
