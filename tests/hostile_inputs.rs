@@ -22,19 +22,6 @@ fn mjskill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mjskill"))
 }
 
-/// The error line of a command that must fail with mjskill's error exit code, not a crash.
-fn fails(o: &Output) -> String {
-    let err = String::from_utf8_lossy(&o.stderr).to_string();
-    assert_eq!(
-        o.status.code(),
-        Some(2),
-        "expected the error exit code: {err}"
-    );
-    assert!(err.starts_with("error: "), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    err
-}
-
 fn json(o: &Output) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
         panic!(
@@ -114,7 +101,7 @@ fn rollout_out_must_be_a_regular_file() {
         let mut cmd = mjskill();
         cmd.args(["rollout", "--episodes", "1", "--no-frame", "--out"])
             .arg(out);
-        let err = fails(&run_within(cmd, 60));
+        let err = common::fails(&run_within(cmd, 60));
         assert!(
             err.contains(&out.display().to_string()) && err.contains(kind),
             "{err}"
@@ -167,7 +154,7 @@ fn export_flags_and_links_get_clear_messages() {
         .output()
         .unwrap();
     assert!(o.status.success());
-    let err = fails(
+    let err = common::fails(
         &mjskill()
             .arg("export")
             .arg(&rec)
@@ -181,7 +168,7 @@ fn export_flags_and_links_get_clear_messages() {
     let link = d.join("link");
     std::fs::remove_file(&link).ok();
     std::os::unix::fs::symlink(&target, &link).unwrap();
-    let err = fails(
+    let err = common::fails(
         &mjskill()
             .arg("export")
             .arg(&rec)
@@ -224,7 +211,7 @@ fn outcome_objects_must_be_the_envs() {
     ] {
         let p = d.join(name);
         std::fs::write(&p, outcome_json(objects).to_string()).unwrap();
-        let err = fails(&mjskill().arg("outcomes").arg(&p).output().unwrap());
+        let err = common::fails(&mjskill().arg("outcomes").arg(&p).output().unwrap());
         assert!(
             err.contains(name) && err.contains(want) && err.contains("(cube)"),
             "{err}"
@@ -234,7 +221,7 @@ fn outcome_objects_must_be_the_envs() {
     let mut v = outcome_json(serde_json::json!({"cube": [0.0, 0.0, 0.02]}));
     v["env_id"] = "PokeCube-v1".into();
     std::fs::write(&p, v.to_string()).unwrap();
-    let err = fails(&mjskill().arg("outcomes").arg(&p).output().unwrap());
+    let err = common::fails(&mjskill().arg("outcomes").arg(&p).output().unwrap());
     assert!(
         err.contains("lacks \"peg\"") && err.contains("cube, peg"),
         "{err}"
@@ -280,7 +267,7 @@ fn compressed_inputs_stop_at_the_size_limit() {
         },
         60,
     );
-    let err = fails(&o);
+    let err = common::fails(&o);
     assert!(
         err.contains("bomb.json.gz")
             && err.contains("decompressed contents")
@@ -307,7 +294,7 @@ fn compressed_inputs_stop_at_the_size_limit() {
         },
         120,
     );
-    let err = fails(&o);
+    let err = common::fails(&o);
     assert!(
         err.contains("state0.npz") && err.contains("member a.npy") && err.contains("100000"),
         "{err}"
@@ -324,7 +311,7 @@ fn devices_fifos_and_links_to_dev_zero_are_refused_as_inputs() {
     for p in [&zero, &fifo] {
         let mut c = mjskill();
         c.args(["eval", "--policy"]).arg(p);
-        let err = fails(&run_within(c, 30));
+        let err = common::fails(&run_within(c, 30));
         assert!(
             err.contains(&p.display().to_string()) && err.contains("not a regular file"),
             "{err}"
@@ -338,7 +325,7 @@ fn devices_fifos_and_links_to_dev_zero_are_refused_as_inputs() {
     for p in [outcomes, d.join("zero.json.gz")] {
         let mut c = mjskill();
         c.arg("outcomes").arg(&p);
-        let err = fails(&run_within(c, 30));
+        let err = common::fails(&run_within(c, 30));
         assert!(err.contains("not a regular file"), "{err}");
     }
     // A render archive and a mesh.
@@ -347,7 +334,7 @@ fn devices_fifos_and_links_to_dev_zero_are_refused_as_inputs() {
     symlink_to_zero(&pair.join("s.npz"));
     let mut c = mjskill();
     c.arg("compare-images").arg(d.join("images"));
-    let err = fails(&run_within(c, 60));
+    let err = common::fails(&run_within(c, 60));
     assert!(
         err.contains("s.npz") && err.contains("a character device"),
         "{err}"
@@ -357,7 +344,7 @@ fn devices_fifos_and_links_to_dev_zero_are_refused_as_inputs() {
     {
         let mut c = Command::new(env!("CARGO_BIN_EXE_mjskill-meshes"));
         c.args(["fit-primitives", "--mesh"]).arg(d.join("link.stl"));
-        let err = fails(&run_within(c, 30));
+        let err = common::fails(&run_within(c, 30));
         assert!(
             err.contains("link.stl") && err.contains("a character device"),
             "{err}"
@@ -420,7 +407,7 @@ fn a_policy_that_crashes_mid_rollout_leaves_an_incomplete_file() {
         .arg(&f)
         .arg("--out")
         .arg(&out);
-    let err = fails(&run_within(c, 120));
+    let err = common::fails(&run_within(c, 120));
     assert!(err.contains(&f.display().to_string()), "{err}");
     let i = json(&mjskill().arg("info").arg(&out).output().unwrap());
     assert_eq!(i["complete"], false, "{i}");
@@ -434,7 +421,7 @@ fn a_policy_that_crashes_mid_rollout_leaves_an_incomplete_file() {
         .arg(&f)
         .arg("--out")
         .arg(&out);
-    let err = fails(&run_within(c, 120));
+    let err = common::fails(&run_within(c, 120));
     assert!(err.contains(&f.display().to_string()), "{err}");
     assert!(!out.exists());
     assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
@@ -467,7 +454,7 @@ fn policy_files_that_crash_or_exhaust_the_runtime_are_errors() {
     for (f, want) in &cases {
         let mut c = mjskill();
         c.args(["eval", "--episodes", "1", "--policy"]).arg(f);
-        let err = fails(&run_within(c, 60));
+        let err = common::fails(&run_within(c, 60));
         assert!(
             err.contains(&f.display().to_string()) && err.contains(want),
             "{want}: {err}"
@@ -489,7 +476,7 @@ fn policy_metadata_is_read_one_way_and_named_in_errors() {
     let d = common::scratch_dir("meta");
     for key in ["control_mode", "env_id"] {
         let f = hostile(&py, &d, "dup-meta", &["--key", key]);
-        let err = fails(
+        let err = common::fails(
             &mjskill()
                 .args(["eval", "--policy"])
                 .arg(&f)
@@ -509,7 +496,7 @@ fn policy_metadata_is_read_one_way_and_named_in_errors() {
         "long-meta",
         &["--key", "env_id", "--length", "2000000"],
     );
-    let err = fails(
+    let err = common::fails(
         &mjskill()
             .args(["eval", "--policy"])
             .arg(&f)
@@ -528,7 +515,7 @@ fn policy_metadata_is_read_one_way_and_named_in_errors() {
         "long-meta",
         &["--key", "robot_uids", "--length", "1000"],
     );
-    let err = fails(
+    let err = common::fails(
         &mjskill()
             .args(["eval", "--policy"])
             .arg(&f)
@@ -547,7 +534,7 @@ fn policy_metadata_is_read_one_way_and_named_in_errors() {
         if cmd == "rollout" {
             c.args(["--no-frame", "--out"]).arg(d.join("nan.mcap"));
         }
-        let err = fails(&c.output().unwrap());
+        let err = common::fails(&c.output().unwrap());
         assert!(
             err.contains(&f.display().to_string())
                 && err.contains("episode 0 (seed 7)")

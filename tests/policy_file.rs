@@ -10,7 +10,7 @@
 #![cfg(all(feature = "onnx", feature = "cli"))]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use mjskill::solvers::{PolicySpec, SolverError};
 use mjskill::EnvConfig;
@@ -71,19 +71,6 @@ fn make_policy(py: &Path, name: &str, obs: usize, act: usize, extra: &[&str]) ->
 
 fn json(out: &[u8]) -> serde_json::Value {
     serde_json::from_slice(out).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(out)))
-}
-
-/// Runs mjskill expecting failure; returns stderr, checked to be an error line, not a panic.
-fn fails(o: Output) -> String {
-    let err = String::from_utf8_lossy(&o.stderr).to_string();
-    assert_eq!(
-        o.status.code(),
-        Some(2),
-        "expected the error exit code: {err}"
-    );
-    assert!(err.starts_with("error: "), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    err
 }
 
 /// The MLP of a weights JSON, computed in f64: normalise, clip, layers with tanh between.
@@ -266,8 +253,8 @@ fn wrong_sizes_are_refused_naming_both() {
     let Some(py) = python() else { return };
     let (obs_dim, act_dim) = dims();
     let wide = make_policy(&py, "wide_obs.onnx", obs_dim + 3, act_dim, &[]);
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["eval", "--policy"])
             .arg(&wide)
             .output()
@@ -280,8 +267,8 @@ fn wrong_sizes_are_refused_naming_both() {
         "{err}"
     );
     let act = make_policy(&py, "wide_act.onnx", obs_dim, act_dim + 2, &[]);
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["eval", "--policy"])
             .arg(&act)
             .output()
@@ -304,8 +291,8 @@ fn metadata_mismatches_are_refused_naming_both() {
         ("--env", "PokeCube-v1", "env_id", ENV),
         ("--control-mode", "pd_joint_pos", "control_mode", MODE),
     ] {
-        let err = fails(
-            mjskill()
+        let err = common::fails(
+            &mjskill()
                 .args(["eval", flag, value, "--policy"])
                 .arg(&file)
                 .output()
@@ -321,8 +308,8 @@ fn metadata_mismatches_are_refused_naming_both() {
     }
     // A visual obs mode is not the policy's state vector; state_dict is the same vector.
     let out = common::scratch("meta.mcap");
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["rollout", "--obs-mode", "rgb", "--no-frame", "--policy"])
             .arg(&file)
             .arg("--out")
@@ -372,8 +359,8 @@ fn metadata_mismatches_are_refused_naming_both() {
             "training_command",
         ],
     );
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["eval", "--policy"])
             .arg(&bare)
             .output()
@@ -384,8 +371,8 @@ fn metadata_mismatches_are_refused_naming_both() {
         "{err}"
     );
     let vis = make_policy(&py, "vis.onnx", obs_dim, act_dim, &["--obs-mode", "rgbd"]);
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["eval", "--policy"])
             .arg(&vis)
             .output()
@@ -405,8 +392,8 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
     // A protobuf field header promising more bytes than there are.
     std::fs::write(&truncated, [0x3a, 0xff, 0x01, 0x0a]).unwrap();
     for f in [&garbage, &empty, &truncated] {
-        let err = fails(
-            mjskill()
+        let err = common::fails(
+            &mjskill()
                 .args(["eval", "--policy"])
                 .arg(f)
                 .output()
@@ -424,8 +411,8 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
         ));
     }
     let missing = common::scratch("missing.onnx");
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["rollout", "--policy"])
             .arg(&missing)
             .output()
@@ -435,8 +422,8 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
         err.contains("cannot read policy file") && err.contains(&missing.display().to_string()),
         "{err}"
     );
-    let err = fails(
-        mjskill()
+    let err = common::fails(
+        &mjskill()
             .args(["eval", "--policy", "no-such-policy"])
             .output()
             .unwrap(),

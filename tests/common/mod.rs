@@ -68,6 +68,20 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     d
 }
 
+/// The error line of an mjskill run that must fail with the error exit code (2), not a crash:
+/// stderr starts with `error: ` and holds no panic message.
+pub fn fails(o: &Output) -> String {
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "expected the error exit code: {err}"
+    );
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
 /// Runs `cmd`, failing the test if it takes longer than `secs` seconds (a hang).
 pub fn run_within(mut cmd: Command, secs: u64) -> Output {
     let mut child = cmd
