@@ -15,24 +15,15 @@ import numpy as np
 import pytest
 
 import mjskill
-from conftest import ENV
+from conftest import ENV, need
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "examples" / "make_test_policy.py"
 sys.path.insert(0, str(ROOT / "examples"))
 
 
-def _need(module):
-    try:
-        return __import__(module)
-    except ImportError:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(f"{module} is not installed")
-
-
 def make_policy(tmp_path, name, obs_dim, act_dim, *extra):
-    _need("onnx")
+    need("onnx")
     out = tmp_path / name
     subprocess.run(
         [sys.executable, str(SCRIPT), "--obs-dim", str(obs_dim), "--act-dim", str(act_dim),
@@ -50,7 +41,7 @@ def dims():
 
 
 def test_onnx_policy_matches_numpy_and_clips(tmp_path, dims):
-    _need("onnxruntime")
+    need("onnxruntime")
     from policy_onnx import mlp_forward
 
     from mjskill.policy import OnnxPolicy
@@ -83,7 +74,7 @@ def test_onnx_policy_matches_numpy_and_clips(tmp_path, dims):
 
 def test_onnx_policy_agrees_with_the_cli(tmp_path, dims):
     """The same file run by onnxruntime in Python and by tract in `mjskill eval`."""
-    _need("onnxruntime")
+    need("onnxruntime")
     from mjskill.policy import OnnxPolicy
 
     f = make_policy(tmp_path, "cli.onnx", *dims)
@@ -114,7 +105,7 @@ def test_onnx_policy_agrees_with_the_cli(tmp_path, dims):
 
 
 def test_onnx_policy_errors_name_the_file(tmp_path, dims):
-    _need("onnxruntime")
+    need("onnxruntime")
     from mjskill.policy import OnnxPolicy
 
     bad = tmp_path / "bad.onnx"
@@ -140,7 +131,7 @@ def test_onnx_policy_errors_name_the_file(tmp_path, dims):
 
 
 def test_onnx_policy_runs_a_vector_env(tmp_path, dims):
-    _need("onnxruntime")
+    need("onnxruntime")
     from mjskill.policy import OnnxPolicy
 
     policy = OnnxPolicy(make_policy(tmp_path, "vec.onnx", *dims))
@@ -153,7 +144,7 @@ def test_onnx_policy_runs_a_vector_env(tmp_path, dims):
 
 def test_onnx_policy_runs_the_batched_env(tmp_path, dims):
     # gym.make(..., num_envs=N), ManiSkill's batched env (python/tests/test_batched.py).
-    _need("onnxruntime")
+    need("onnxruntime")
     from mjskill.policy import OnnxPolicy
 
     policy = OnnxPolicy(make_policy(tmp_path, "batched.onnx", *dims))

@@ -12,19 +12,10 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
-from conftest import ENV
+from conftest import ENV, need
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "tests" / "make_hostile_policy.py"
-
-
-def _need(module):
-    try:
-        return __import__(module)
-    except ImportError:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(f"{module} is not installed")
 
 
 @pytest.fixture
@@ -34,7 +25,7 @@ def dims():
 
 
 def hostile(tmp_path, dims, kind, *extra):
-    _need("onnx")
+    need("onnx")
     out = tmp_path / f"{kind}.onnx"
     subprocess.run(
         [sys.executable, str(SCRIPT), kind, "--obs-dim", str(dims[0]), "--act-dim",
@@ -84,12 +75,12 @@ def refused(path, match):
     ],
 )
 def test_files_the_cli_refuses_are_value_errors(tmp_path, dims, kind, extra, match):
-    _need("onnxruntime")
+    need("onnxruntime")
     refused(hostile(tmp_path, dims, kind, *extra), match)
 
 
 def test_non_regular_and_garbage_files_are_value_errors(tmp_path):
-    _need("onnxruntime")
+    need("onnxruntime")
     fifo = tmp_path / "fifo.onnx"
     os.mkfifo(fifo)
     refused(fifo, "a FIFO")
@@ -102,7 +93,7 @@ def test_non_regular_and_garbage_files_are_value_errors(tmp_path):
 
 
 def test_a_valid_hostile_script_file_runs(tmp_path, dims):
-    _need("onnxruntime")
+    need("onnxruntime")
     from mjskill.policy import OnnxPolicy
 
     policy = OnnxPolicy(hostile(tmp_path, dims, "plain"))
