@@ -78,12 +78,14 @@ const EXPECTED: &[Expected] = &[
         mjskill_successes: 7,
         same_outcome: 9,
         steps: 894,
-        steps_all_flags_agree: 772,
+        // Re-measured with the SO100's yielding jaw (docs/outcome-physics.md, 27 November
+        // 2026); before it 772, 839, 843, 819 and 886, with the same outcomes.
+        steps_all_flags_agree: 756,
         flags: &[
-            ("success", 839),
-            ("is_obj_placed", 843),
-            ("is_robot_static", 819),
-            ("is_grasped", 886),
+            ("success", 836),
+            ("is_obj_placed", 834),
+            ("is_robot_static", 824),
+            ("is_grasped", 853),
         ],
     },
     Expected {

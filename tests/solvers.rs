@@ -256,6 +256,72 @@ fn so100_solver_closes_8_steps_before_the_lift_and_eases_its_grip_at_the_goal() 
     }
 }
 
+/// The SO100's jaw yields as PhysX's does (docs/outcome-physics.md, "The SO100's yielding
+/// jaw"): with the cube lifted by the solver and the jaw target then set to T, ManiSkill's jaw
+/// ends at T to within 0.003 rad and holds the cube for T ≥ −0.92, and passes through it,
+/// dropping it, for T ≤ −0.94 (seeds 5000 and 5002, measured in ManiSkill 3; seed 5002 still
+/// held at −0.95). Here the same, with the band around the threshold left out: the lift is
+/// this simulator's, closed loop, so the grasp differs slightly from the replayed one of the
+/// docs' table, and between −0.9 and −0.95 either outcome is ManiSkill's.
+#[test]
+fn so100_jaw_sinks_into_a_squeezed_cube_and_drops_it_past_minus_0_93_as_in_maniskill() {
+    use mjskill::solvers::make_policy;
+    let mut env = eval::make_env("PickCubeSO100-v1", EnvConfig::default(), "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    for seed in [5000u64, 5002] {
+        for (target, held) in [
+            (-0.8f32, true),
+            (-0.85, true),
+            (-0.88, true),
+            (-0.96, false),
+            (-1.0, false),
+            (-1.1, false),
+        ] {
+            env.reset(Some(seed));
+            policy.reset(&env);
+            // The solver's episode until the cube is 5 cm up.
+            let mut lifted = false;
+            for _ in 0..50 {
+                policy.act(&env, &mut action);
+                env.step(&action).unwrap();
+                if env.obs_part("extra/obj_pose").unwrap()[2] > 0.05 {
+                    lifted = true;
+                    break;
+                }
+            }
+            assert!(lifted, "seed {seed}: the solver never lifted the cube");
+            // The arm held, the jaw target set to `target`, for 20 steps (1 s).
+            action[5] = target;
+            for _ in 0..20 {
+                env.step(&action).unwrap();
+            }
+            let jaw = env.obs_part("agent/qpos").unwrap()[5];
+            let z = env.obs_part("extra/obj_pose").unwrap()[2];
+            let grasped = env.info().flag("is_grasped");
+            if held {
+                assert!(
+                    (jaw - target).abs() < 0.005,
+                    "seed {seed}, target {target}: jaw at {jaw}"
+                );
+                assert!(
+                    z > 0.04 && grasped,
+                    "seed {seed}, target {target}: cube at z {z}, grasped {grasped}"
+                );
+            } else {
+                assert!(
+                    z < 0.02 && !grasped,
+                    "seed {seed}, target {target}: cube at z {z}, grasped {grasped}"
+                );
+                assert!(
+                    (jaw - target).abs() < 0.005,
+                    "seed {seed}, target {target}: jaw at {jaw}"
+                );
+            }
+        }
+    }
+}
+
 /// Without the `onnx` feature a policy file is an error naming the feature.
 #[cfg(not(feature = "onnx"))]
 #[test]

@@ -50,6 +50,13 @@ use crate::mujoco::{Data, Model, ObjType};
 pub const MICRO_STEPS: usize = 10;
 /// Gauss–Seidel sweeps over the coupled drive equations per micro-step.
 pub const SWEEPS: usize = 2;
+/// Substeps in a row a gripper must be sunk deeper than its release depth into an object before
+/// it lets go (one control step at ManiSkill's 100 Hz physics and 20 Hz control).
+pub const RELEASE_SUBSTEPS: u32 = 5;
+/// Contact points of a face-on pinch: MuJoCo's box–box collider gives a face against a face
+/// four (or more); its edge manifolds of three points overstate the depth (see
+/// [`Drives::release_deep_contacts`]).
+pub const FACE_CONTACTS: usize = 4;
 /// Most gripper contacts folded into a substep's drive response (more are left to MuJoCo's
 /// constraint solver alone; a two-finger grasp of a box makes at most 8).
 pub const MAX_GRIPPER_CONTACTS: usize = 16;
@@ -110,6 +117,16 @@ pub struct Drives {
     touching: Vec<bool>,
     /// Per drive: whether an equality on an undriven dof (a linkage, a mimic) moves with it.
     linked: Vec<bool>,
+    /// Penetration (m) beyond which a gripper link lets go of an object it has sunk into
+    /// (see [`Drives::release_deep_contacts`]); `None`: never.
+    release_depth: Option<f64>,
+    /// This substep's released contacts (indices into the contact list) and geom pairs.
+    released: Vec<usize>,
+    /// (gripper drive, object body) pairs that let go this substep.
+    released_pairs: Vec<(usize, usize)>,
+    /// Per drive: for how many substeps in a row its gripper links have been deeper than the
+    /// release depth in an object (see [`Drives::release_deep_contacts`]).
+    deep_substeps: Vec<u32>,
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
     mc: Vec<f64>,
@@ -139,6 +156,7 @@ impl Drives {
         drives: &[Drive],
         joints: &[String],
         gripper: &[&str],
+        release_depth: Option<f64>,
     ) -> Result<Drives, super::ControllerError> {
         let mut dofs = Vec::with_capacity(drives.len());
         for d in drives {
@@ -226,6 +244,10 @@ impl Drives {
             pinching: vec![false; n],
             touching: vec![false; n],
             linked: vec![false; n],
+            release_depth,
+            released: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
+            released_pairs: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
+            deep_substeps: vec![0; n],
             cvec: vec![0.0; nv],
             mc: vec![0.0; nv],
             fold_j: Vec::with_capacity(max_rows * nv),
@@ -422,6 +444,9 @@ impl Drives {
             if self.fold_r.len() == max_rows {
                 break;
             }
+            if self.released.contains(&c) {
+                continue;
+            }
             let (g1, g2) = data.contact_geoms(c);
             let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
             let Some((row0, rows)) = data.contact_rows(c) else {
@@ -465,6 +490,9 @@ impl Drives {
         // Pinching: an object a gripper pushes also touches the robot outside that gripper.
         self.pinching.fill(false);
         for c in 0..data.ncon() {
+            if self.released.contains(&c) {
+                continue;
+            }
             let (g1, g2) = data.contact_geoms(c);
             let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
             let (robot, object) = match (self.robot_body[b1], self.robot_body[b2]) {
@@ -476,6 +504,83 @@ impl Drives {
                 if o == object && !self.gripper_bodies[i].contains(&robot) {
                     self.pinching[i] = true;
                 }
+            }
+        }
+    }
+
+    /// Lets go of objects that a gripper has sunk into deeper than the release depth: every
+    /// contact between the links the gripper joint moves and that object gets no force this
+    /// substep (nor a place in the drive's response). PhysX's SO100 jaw sinks into a cube it
+    /// squeezes and follows its target; at about 3 mm (jaw −0.93 rad on the 25 mm cube) it
+    /// passes through and the cube drops (docs/outcome-physics.md). The depth must hold for
+    /// [`RELEASE_SUBSTEPS`] face-on substeps in a row: MuJoCo's box–box collider reports,
+    /// in some substeps, a three-point edge manifold of the same pinch with about twice the
+    /// depth (2.6 mm face-on, 5.5 mm as an edge, at a jaw target of −0.9), which would pass
+    /// for a pass-through; such substeps count neither way. Only objects (not the robot)
+    /// are let go. Grippers beyond the first eight drives never let go. No allocation: at most [`MAX_GRIPPER_CONTACTS`] contacts a substep.
+    fn release_deep_contacts(&mut self, data: &mut Data) {
+        self.released.clear();
+        self.released_pairs.clear();
+        let Some(depth) = self.release_depth else {
+            return;
+        };
+        // Per gripper drive: its links' contacts with objects, and the deepest of them.
+        let mut count = [0usize; 8];
+        let mut deepest = [0.0f64; 8];
+        for c in 0..data.ncon() {
+            let k = data.contact(c);
+            if k.excluded {
+                continue;
+            }
+            let geom_body = data.model().geom_bodyid();
+            let (b1, b2) = (geom_body[k.geom1] as usize, geom_body[k.geom2] as usize);
+            for (i, bodies) in self.gripper_bodies.iter().enumerate().take(8) {
+                let object = if bodies.contains(&b1) && !self.robot_body[b2] {
+                    b2
+                } else if bodies.contains(&b2) && !self.robot_body[b1] {
+                    b1
+                } else {
+                    continue;
+                };
+                count[i] += 1;
+                deepest[i] = deepest[i].max(-k.dist);
+                if self.released_pairs.len() < MAX_GRIPPER_CONTACTS
+                    && !self.released_pairs.contains(&(i, object))
+                {
+                    self.released_pairs.push((i, object));
+                }
+            }
+        }
+        // A face-on pinch (at least FACE_CONTACTS points) counts for or against a release;
+        // MuJoCo's edge manifolds of the same pinch (fewer points, with an exaggerated depth)
+        // count for neither.
+        let mut release = [false; 8];
+        for (i, substeps) in self.deep_substeps.iter_mut().enumerate().take(8) {
+            if count[i] >= FACE_CONTACTS {
+                *substeps = if deepest[i] > depth { *substeps + 1 } else { 0 };
+            } else if count[i] == 0 {
+                *substeps = 0;
+            }
+            release[i] = *substeps >= RELEASE_SUBSTEPS;
+        }
+        self.released_pairs.retain(|&(i, _)| release[i]);
+        if self.released_pairs.is_empty() {
+            return;
+        }
+        // ... let go: every contact between that gripper's links and that object.
+        for c in 0..data.ncon() {
+            if self.released.len() == MAX_GRIPPER_CONTACTS {
+                break;
+            }
+            let (g1, g2) = data.contact_geoms(c);
+            let geom_body = data.model().geom_bodyid();
+            let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
+            let hit = self.released_pairs.iter().any(|&(i, o)| {
+                let bodies = &self.gripper_bodies[i];
+                (o == b2 && bodies.contains(&b1)) || (o == b1 && bodies.contains(&b2))
+            });
+            if hit && data.release_contact(c) {
+                self.released.push(c);
             }
         }
     }
@@ -533,6 +638,7 @@ impl Drives {
     pub fn step(&mut self, data: &mut Data) {
         let h = data.model().timestep();
         data.step1();
+        self.release_deep_contacts(data);
         self.apply(data, h);
         data.step2();
         let v = data.qvel_mut();
@@ -552,8 +658,15 @@ impl Drives {
         2 * self.dofs.len()
     }
 
-    /// Restores what [`Drives::save`] wrote.
+    /// Forgets the last substep's contacts (see [`Drives::release_deep_contacts`]): at a reset
+    /// or a state that was set, nothing is sunk into anything yet.
+    pub fn forget_contacts(&mut self) {
+        self.deep_substeps.fill(0);
+    }
+
+    /// Restores what [`Drives::save`] wrote (and forgets the last substep's contacts).
     pub fn load(&mut self, s: &[f64]) {
+        self.forget_contacts();
         let n = self.dofs.len();
         self.target_q.copy_from_slice(&s[..n]);
         self.target_v.copy_from_slice(&s[n..2 * n]);

@@ -640,6 +640,7 @@ impl Controller {
             let q = self.q[k];
             drives.set_joint_target(k, q, 0.0);
         }
+        drives.forget_contacts();
     }
 
     /// Applies an action (already validated for length and finiteness): computes the part

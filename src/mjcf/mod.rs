@@ -208,6 +208,13 @@ pub struct RobotOptions {
     /// the partner's through `solmix`): weak grippers whose light grasp would otherwise
     /// creep under MuJoCo's soft friction.
     pub firm_contact: Vec<String>,
+    /// Links whose contacts get their own impedance `solimp` (dominating the partner's
+    /// through `solmix`), with the default time constant: PhysX's yielding grip of the SO100's
+    /// jaws, which sink into what they squeeze ([`crate::robots`]' so100 module).
+    pub contact_solimp: Vec<(String, [f64; 3])>,
+    /// Penetration (m) at which the links a gripper joint moves let go of an object they
+    /// have sunk into ([`crate::controllers::Drives`]); `None`: never.
+    pub gripper_release_depth: Option<f64>,
 }
 
 impl Default for RobotOptions {
@@ -228,6 +235,8 @@ impl Default for RobotOptions {
             torsional_friction: Vec::new(),
             cameras: Vec::new(),
             firm_contact: Vec::new(),
+            contact_solimp: Vec::new(),
+            gripper_release_depth: None,
         }
     }
 }
@@ -586,6 +595,10 @@ impl Scene {
             }
             if opts.firm_contact.contains(&l.name) {
                 g.set("solimp", nums(&FIRM_CONTACT_SOLIMP));
+                g.set("solmix", 1000);
+            }
+            if let Some((_, imp)) = opts.contact_solimp.iter().find(|(n, _)| *n == l.name) {
+                g.set("solimp", nums(imp));
                 g.set("solmix", 1000);
             }
             body.push(g);

@@ -359,6 +359,29 @@ impl Data {
         Some((c.efc_address as usize, rows))
     }
 
+    /// Switches contact `i` off for the coming [`Data::step2`]: the constraint solver gives
+    /// its rows no force (impedance `efc_D` 0, regulariser `efc_R` MuJoCo's largest value).
+    /// Call between [`Data::step1`] and [`Data::step2`]. Returns false (and changes nothing)
+    /// when the contact has no rows.
+    pub fn release_contact(&mut self, i: usize) -> bool {
+        if i >= self.ncon() {
+            return false;
+        }
+        let Some((row0, rows)) = self.contact_rows(i) else {
+            return false;
+        };
+        let nefc = self.nefc();
+        if row0 + rows > nefc {
+            return false;
+        }
+        let (pd, pr) = (self.raw().efc_D, self.raw().efc_R);
+        let d: &mut [f64] = view_mut!(pd, nefc);
+        d[row0..row0 + rows].fill(0.0);
+        let r: &mut [f64] = view_mut!(pr, nefc);
+        r[row0..row0 + rows].fill(sys::mjMAXVAL);
+        true
+    }
+
     /// Number of contacts in the current state.
     pub fn ncon(&self) -> usize {
         self.raw().ncon as usize

@@ -632,16 +632,21 @@ impl TableScene {
         let drive_list = controller.drives(&desc);
         let mut scene = crate::mjcf::Scene::new(name, timestep);
         scene.add_table_scene();
-        scene.add_robot(
-            &desc,
-            &spec.options(spec.table_base(), drive_list.clone()),
-            &|file| crate::models::file_near(spec.urdf, file).map(<[u8]>::to_vec),
-        )?;
+        let options = spec.options(spec.table_base(), drive_list.clone());
+        scene.add_robot(&desc, &options, &|file| {
+            crate::models::file_near(spec.urdf, file).map(<[u8]>::to_vec)
+        })?;
         extra(&mut scene);
         let mjcf = scene.finish();
         let model = Arc::new(mjcf.compile()?);
         let ids = RobotIds::resolve(&model, &desc, spec)?;
-        let drives = Drives::new(&model, &drive_list, &ids.joints.names, spec.gripper_joints)?;
+        let drives = Drives::new(
+            &model,
+            &drive_list,
+            &ids.joints.names,
+            spec.gripper_joints,
+            options.gripper_release_depth,
+        )?;
         Ok(TableScene {
             model,
             ids,

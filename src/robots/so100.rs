@@ -54,6 +54,22 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
 /// ManiSkill's to 3.3e-4 rad at step 1 (docs/agreement.md).
 const JAW_ARMATURE: f64 = 0.1;
 
+/// Contact impedance of the jaws (constant; MuJoCo's `solimp`). PhysX's SO100 jaw does not stop
+/// where it meets the cube: it sinks into it and follows its drive target to within a few
+/// milliradians (target −0.85 rad: −0.848; −0.9: −0.897, the jaw about 8 mm inside the
+/// cube, still holding it), with a grip of only ~10 N at −0.8, and passes through it at −1.0,
+/// dropping the cube (docs/outcome-physics.md, "The SO100's yielding jaw"). MuJoCo's default
+/// hard impedance stops the jaw at the cube (−0.82 for any target) and holds the cube under
+/// any squeeze. A constant impedance of 0.993 makes the jaw contacts a spring of a few N/mm
+/// on a cube, as PhysX's.
+pub const JAW_SOLIMP: [f64; 3] = [0.993, 0.993, 0.001];
+
+/// Penetration (m) at which the moving jaw lets go of the cube it has sunk into. With
+/// [`JAW_SOLIMP`] the jaw reaches ManiSkill's angles for the same targets, and MuJoCo's
+/// jaw–cube contact is 2.7 mm deep at −0.917 rad (PhysX still holds the cube there) and 3.15
+/// mm at −0.937 (PhysX has dropped it).
+pub const JAW_RELEASE_DEPTH: f64 = 0.0031;
+
 /// The SO100 as ManiSkill configures it.
 pub static SO100: RobotSpec = RobotSpec {
     id: super::RobotId::So100,
@@ -89,5 +105,11 @@ pub static SO100: RobotSpec = RobotSpec {
     control_modes: &CONTROL_MODES,
     parts,
     cameras: &[],
-    customize: |o| o.armature.push(("gripper".to_string(), JAW_ARMATURE)),
+    customize: |o| {
+        o.armature.push(("gripper".to_string(), JAW_ARMATURE));
+        for jaw in ["Fixed_Jaw", "Moving_Jaw"] {
+            o.contact_solimp.push((jaw.to_string(), JAW_SOLIMP));
+        }
+        o.gripper_release_depth = Some(JAW_RELEASE_DEPTH);
+    },
 };
