@@ -57,6 +57,7 @@ import argparse
 import csv
 import os
 import shlex
+import signal
 import sys
 import time
 
@@ -104,7 +105,7 @@ def defaults(env_id: str) -> dict:
     return {**BASE, **TASKS.get(env_id, TASKS["PickCube-v1"])}
 
 
-def parse_args(argv=None):
+def parse_args(argv=None, check=True):
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--env-id", default="PickCube-v1")
     env_id = pre.parse_known_args(argv)[0].env_id
@@ -116,13 +117,17 @@ def parse_args(argv=None):
     p.add_argument("--robot", default=None, help="robot uid (default: the env's)")
     p.add_argument("--control-mode", default=d["control_mode"])
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--num-envs", type=int, default=d["num_envs"])
-    p.add_argument("--num-threads", type=int, default=os.cpu_count() or 1,
-                   help="threads of the native vector env")
-    p.add_argument("--torch-threads", type=int, default=os.cpu_count() or 1)
-    p.add_argument("--num-steps", type=int, default=d["num_steps"],
+    p.add_argument("--num-envs", type=positive, default=d["num_envs"])
+    p.add_argument("--num-threads", type=positive, default=None,
+                   help="threads of the native vector env (default: the machine's cores; "
+                        "with --ray-workers N, the cluster's CPUs divided among the N actors)")
+    p.add_argument("--torch-threads", type=positive, default=os.cpu_count() or 1)
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
+                   help="where the learner runs: the update and the rollout's torch forward "
+                        "passes (auto: cuda when torch sees a GPU); the envs stay on the CPU")
+    p.add_argument("--num-steps", type=positive, default=d["num_steps"],
                    help="rollout length per env and iteration")
-    p.add_argument("--total-timesteps", type=int, default=d["total_timesteps"])
+    p.add_argument("--total-timesteps", type=positive, default=d["total_timesteps"])
     p.add_argument("--max-minutes", type=float, default=None,
                    help="stop after this much wall time (the policy is saved)")
     p.add_argument("--stop-at-success", type=float, default=None,
@@ -133,22 +138,22 @@ def parse_args(argv=None):
     p.add_argument("--gae-lambda", type=float, default=d["gae_lambda"])
     p.add_argument("--finite-horizon-gae", action="store_true",
                    help="ManiSkill's finite-horizon GAE (its default: off)")
-    p.add_argument("--update-epochs", type=int, default=d["update_epochs"])
-    p.add_argument("--num-minibatches", type=int, default=d["num_minibatches"])
+    p.add_argument("--update-epochs", type=positive, default=d["update_epochs"])
+    p.add_argument("--num-minibatches", type=positive, default=d["num_minibatches"])
     p.add_argument("--target-kl", type=float, default=d["target_kl"])
     p.add_argument("--clip-coef", type=float, default=d["clip_coef"])
     p.add_argument("--ent-coef", type=float, default=d["ent_coef"])
     p.add_argument("--vf-coef", type=float, default=d["vf_coef"])
     p.add_argument("--max-grad-norm", type=float, default=d["max_grad_norm"])
     p.add_argument("--reward-scale", type=float, default=1.0)
-    p.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256])
+    p.add_argument("--hidden", type=positive, nargs="+", default=[256, 256, 256])
     p.add_argument("--no-obs-norm", action="store_true")
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
                    help="hide the gripper joints' velocities from the actor (default) or "
                         "observe them (ManiSkill's script)")
-    p.add_argument("--eval-freq", type=int, default=d["eval_freq"],
+    p.add_argument("--eval-freq", type=positive, default=d["eval_freq"],
                    help="evaluate every N iterations (and at the first and last)")
-    p.add_argument("--num-eval-envs", type=int, default=d["num_eval_envs"])
+    p.add_argument("--num-eval-envs", type=positive, default=d["num_eval_envs"])
     p.add_argument("--eval-seed", type=int, default=2**31,
                    help="seed of the first evaluation episode (the same seeds every time)")
     p.add_argument("--clock", choices=("wall", "thread"), default="wall",
@@ -163,7 +168,7 @@ def parse_args(argv=None):
                         "default with --ray-workers); torch: one env step and one torch "
                         "forward per step (the default otherwise, and the only way with "
                         "--simulator maniskill)")
-    p.add_argument("--ray-workers", type=int, default=0,
+    p.add_argument("--ray-workers", type=non_negative, default=0,
                    help="step the training envs on N Ray actors (mjskill.ray.RayVectorEnv, "
                         "--num-threads threads each; RAY_ADDRESS for a cluster) and learn "
                         "here; 0: local. Same seed and env count give the same weights")
@@ -171,7 +176,71 @@ def parse_args(argv=None):
                    help="maniskill: train on the real ManiSkill 3's CPU simulation instead (needs "
                         "mani_skill; one PhysX env per vector slot, stepped in this process) to "
                         "compare the two simulators under the same learner")
-    return p.parse_args(argv)
+    p.add_argument("--resume", metavar="RUN_DIR", default=None,
+                   help="continue the run in RUN_DIR from its last checkpoint (checkpoint.pt: "
+                        "weights, optimiser, observation statistics, step count, random state) "
+                        "with its saved options; options given here override them, except "
+                        f"those that define the run ({', '.join(RUN_DEFINING)})")
+    args = p.parse_args(argv)
+    if check and args.resume is None:
+        check_args(p, args)
+    elif check and not os.path.isfile(os.path.join(args.resume, "checkpoint.pt")):
+        p.error(f"--resume {args.resume}: no checkpoint.pt there (a run writes one at every "
+                "evaluation and when it stops)")
+    return args
+
+
+#: Options a resumed run cannot change: they define the networks, the data or the envs.
+RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
+                "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers")
+
+
+def positive(text):
+    """argparse type: an integer >= 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{v} is not a positive integer (>= 1)")
+    return v
+
+
+def non_negative(text):
+    """argparse type: an integer >= 0."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{v} is negative")
+    return v
+
+
+def check_args(p, args):
+    """Refuses settings that cannot train (argparse errors: usage and exit status 2)."""
+    batch = args.num_envs * args.num_steps
+    if batch // args.num_minibatches < 2:
+        p.error(f"--num-minibatches {args.num_minibatches} leaves minibatches of fewer than 2 "
+                f"samples (the batch is --num-envs x --num-steps = {batch}), which the update "
+                f"skips, so nothing would train; at most {batch // 2}")
+    if args.total_timesteps < batch:
+        p.error(f"--total-timesteps {args.total_timesteps} is less than one iteration "
+                f"(--num-envs x --num-steps = {batch})")
+    for name in ("learning_rate", "gamma", "gae_lambda", "clip_coef", "vf_coef",
+                 "max_grad_norm", "reward_scale", "target_kl", "ent_coef"):
+        v = getattr(args, name)
+        if not np.isfinite(v) or v < 0:
+            p.error(f"--{name.replace('_', '-')} {v} must be a finite number >= 0")
+    if args.learning_rate == 0:
+        p.error("--learning-rate 0 trains nothing")
+    if args.gamma > 1 or args.gae_lambda > 1:
+        p.error("--gamma and --gae-lambda must be at most 1")
+    if args.max_minutes is not None and not args.max_minutes > 0:
+        p.error(f"--max-minutes {args.max_minutes} must be > 0")
+    if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
+        p.error(f"--out {args.out} exists and is not a directory; the run directory holds "
+                "policy.onnx, best.onnx, checkpoints and log.csv")
 
 
 def maniskill_vec_env(env_id, num_envs, robot, control_mode):
@@ -223,16 +292,94 @@ class RunningMeanStd:
         return np.sqrt(self.var + 1e-8)
 
 
+def resumed_args(argv):
+    """The options of a resumed run: the saved run's, then those given now. Returns (args,
+    checkpoint)."""
+    import torch
+
+    given = parse_args(argv)
+    ckpt = torch.load(os.path.join(given.resume, "checkpoint.pt"), weights_only=True)
+    saved_argv = list(ckpt["argv"])
+    now = list(sys.argv[1:] if argv is None else argv)
+    # Drop --resume DIR (or --resume=DIR) from the options given now.
+    rest, skip = [], False
+    for a in now:
+        if skip:
+            skip = False
+        elif a == "--resume":
+            skip = True
+        elif not a.startswith("--resume="):
+            rest.append(a)
+    args = parse_args(saved_argv + rest, check=False)
+    args.resume = None
+    parse_args(saved_argv + rest)  # the merged options must be valid (exits if not)
+    saved = parse_args(saved_argv, check=False)
+    changed = [k for k in RUN_DEFINING if getattr(args, k) != getattr(saved, k)]
+    if changed:
+        sys.exit(f"error: --resume {given.resume}: {', '.join('--' + k.replace('_', '-') for k in changed)} "
+                 "cannot change when a run continues (they define its networks, data or envs)")
+    args.resume = given.resume
+    args.out = given.resume  # a resumed run continues in its own directory
+    return args, ckpt
+
+
+def atomic_write(path, write):
+    """Calls ``write(tmp)`` for a temporary file beside ``path``, flushes it to disk and renames
+    it over ``path``: a run killed at any moment leaves the old file or the new one, never a
+    truncated one."""
+    tmp = f"{path}.tmp-{os.getpid()}"
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def default_num_threads(args):
+    """--num-threads when not given: the machine's cores, or with --ray-workers N the
+    cluster's CPUs shared among the N actors (each reserves that many)."""
+    if not args.ray_workers:
+        return os.cpu_count() or 1
+    import ray
+
+    if not ray.is_initialized():
+        ray.init()
+    cpus = int(ray.cluster_resources().get("CPU", 0))
+    if cpus < args.ray_workers:
+        sys.exit(f"error: --ray-workers {args.ray_workers} needs at least {args.ray_workers} CPUs "
+                 f"(one per actor), but the Ray cluster has {cpus}")
+    return max(1, cpus // args.ray_workers)
+
+
 def main(argv=None):
     args = parse_args(argv)
+    ckpt = None
+    if args.resume is not None:
+        args, ckpt = resumed_args(argv)
     clock = time.perf_counter if args.clock == "wall" else time.thread_time
     import torch
     import torch.nn as nn
     from torch.distributions.normal import Normal
 
+    if args.device == "auto":
+        args.device = "cuda" if torch.cuda.is_available() else "cpu"
+    if args.device == "cuda":
+        if not torch.cuda.is_available():
+            sys.exit("error: --device cuda, but torch sees no CUDA device (torch "
+                     f"{torch.__version__}, cuda build {torch.version.cuda}); use --device cpu")
+        # cuBLAS is deterministic with a fixed workspace (must be set before its first use).
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.use_deterministic_algorithms(True)
+    dev = torch.device(args.device)
     torch.manual_seed(args.seed)
     np.random.seed(args.seed)
     torch.set_num_threads(args.torch_threads)
+    if args.num_threads is None:
+        args.num_threads = default_num_threads(args)
     if args.rollout is None:
         args.rollout = "native" if args.ray_workers else "torch"
     native = args.rollout == "native"
@@ -269,9 +416,14 @@ def main(argv=None):
     os.makedirs(out, exist_ok=True)
     obs_dim = envs.single_observation_space.shape[0]
     act_dim = envs.single_action_space.shape[0]
-    low = torch.as_tensor(envs.single_action_space.low)
-    high = torch.as_tensor(envs.single_action_space.high)
-    command = "python " + " ".join(shlex.quote(a) for a in sys.argv)
+    low = torch.as_tensor(envs.single_action_space.low).to(dev)
+    high = torch.as_tensor(envs.single_action_space.high).to(dev)
+    # The command that trained the run (for a resumed run: the first one, whose options it
+    # keeps) and the options it was parsed from.
+    run_argv = list(ckpt["argv"]) if ckpt is not None else list(
+        sys.argv[1:] if argv is None else argv)
+    command = ckpt["command"] if ckpt is not None else (
+        "python " + " ".join(shlex.quote(a) for a in [sys.argv[0], *run_argv]))
 
     def mlp(n_out, last_std):
         layers, n_in = [], obs_dim
@@ -291,29 +443,34 @@ def main(argv=None):
     hidden = list(grip) if args.gripper_qvel == "hide" else []
     actor_keep = torch.ones(obs_dim)
     actor_keep[hidden] = 0.0
+    actor_keep = actor_keep.to(dev)
 
     class Hide(nn.Module):
         def forward(self, x):
             return x * actor_keep
 
-    actor = nn.Sequential(Hide(), *mlp(act_dim, 0.01 * np.sqrt(2)))
-    critic = mlp(1, 1.0)
-    logstd = nn.Parameter(torch.full((1, act_dim), -0.5))
+    # Initialised on the CPU (the same weights for every device), then moved.
+    actor = nn.Sequential(Hide(), *mlp(act_dim, 0.01 * np.sqrt(2))).to(dev)
+    critic = mlp(1, 1.0).to(dev)
+    logstd = nn.Parameter(torch.full((1, act_dim), -0.5, device=dev))
     params = list(actor.parameters()) + list(critic.parameters()) + [logstd]
     opt = torch.optim.Adam(params, lr=args.learning_rate, eps=1e-5)
     rms = RunningMeanStd(obs_dim)
 
     def norm(o):
+        """Observations (numpy, CPU) normalised, as float32 on the learner's device: one copy
+        per call, whatever the number of envs."""
         if args.no_obs_norm:
-            return torch.as_tensor(o, dtype=torch.float32)
+            return torch.as_tensor(o, dtype=torch.float32).to(dev)
         x = (o - rms.mean) / rms.std()
-        return torch.as_tensor(np.clip(x, -10.0, 10.0), dtype=torch.float32)
+        return torch.as_tensor(np.clip(x, -10.0, 10.0), dtype=torch.float32).to(dev)
 
     def policy_params():
         """The actor as mjskill.GaussianMlp's arguments: weights (inputs x outputs, the hidden
         inputs' rows zeroed, as the actor multiplies them by zero), observation statistics,
         the sampling std and the noise seed."""
-        layers = [(m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
+        layers = [(m.weight.detach().cpu().numpy().T.copy(),
+                   m.bias.detach().cpu().numpy().copy())
                   for m in actor if isinstance(m, nn.Linear)]
         layers[0][0][hidden] = 0.0
         mean = np.zeros(obs_dim) if args.no_obs_norm else rms.mean
@@ -321,7 +478,7 @@ def main(argv=None):
         return dict(layers=layers, obs_mean=np.asarray(mean, np.float64),
                     obs_std=np.asarray(std, np.float64),
                     obs_clip=None if args.no_obs_norm else 10.0,
-                    std=logstd.detach().exp().numpy().reshape(-1).copy(), seed=args.seed)
+                    std=logstd.detach().exp().cpu().numpy().reshape(-1).copy(), seed=args.seed)
 
     def save(tag, eval_success):
         p = policy_params()
@@ -340,12 +497,34 @@ def main(argv=None):
         }
         if args.simulator != "mjskill":
             meta["simulator"] = args.simulator
+        if resumes:
+            meta["resumed"] = ",".join(str(s) for s in resumes)
         path = os.path.join(out, f"{tag}.onnx")
-        write_mlp_policy(path, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0)
-        torch.save({"actor": actor.state_dict(), "critic": critic.state_dict(),
-                    "logstd": logstd.detach(), "obs_mean": rms.mean, "obs_var": rms.var,
-                    "obs_count": rms.count}, os.path.join(out, f"{tag}.pt"))
+        atomic_write(path, lambda tmp: write_mlp_policy(
+            tmp, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0))
+        atomic_write(os.path.join(out, f"{tag}.pt"), lambda tmp: torch.save(weights(), tmp))
         return path
+
+    def weights():
+        """The networks and observation statistics (CPU tensors: loads with
+        ``torch.load(path, weights_only=True)``)."""
+        return {"actor": {k: v.cpu() for k, v in actor.state_dict().items()},
+                "critic": {k: v.cpu() for k, v in critic.state_dict().items()},
+                "logstd": logstd.detach().cpu(), "obs_mean": torch.from_numpy(rms.mean),
+                "obs_var": torch.from_numpy(rms.var), "obs_count": float(rms.count)}
+
+    def checkpoint(next_iteration):
+        """Everything --resume needs to continue from the start of ``next_iteration``."""
+        state = weights()
+        state.update(
+            optimizer=opt.state_dict(), argv=run_argv, command=command, iteration=next_iteration,
+            global_step=global_step, best=best, resumes=resumes,
+            times=dict(wall=clock() - t_start, sim=sim_time, infer=infer_time, gae=gae_time,
+                       update=update_time, eval=eval_time),
+            torch_rng=torch.get_rng_state(),
+            cuda_rng=torch.cuda.get_rng_state() if dev.type == "cuda" else None,
+        )
+        atomic_write(os.path.join(out, "checkpoint.pt"), lambda tmp: torch.save(state, tmp))
 
     def evaluate():
         """One episode per eval env on fixed seeds, mean actions; (success rate, mean return)."""
@@ -356,7 +535,7 @@ def main(argv=None):
         ret = np.zeros(n)
         for _ in range(max_steps):
             with torch.no_grad():
-                a = torch.clamp(actor(norm(obs)), low, high).numpy()
+                a = torch.clamp(actor(norm(obs)), low, high).cpu().numpy()
             obs, r, term, trunc, _ = eval_envs.step(a)
             ret += np.where(done, 0.0, r)
             success |= term & ~done
@@ -370,34 +549,74 @@ def main(argv=None):
     minibatch = batch // args.num_minibatches
     iterations = max(1, args.total_timesteps // batch)
     b_obs = np.zeros((T, N, obs_dim), np.float32)
-    b_act = torch.zeros((T, N, act_dim))
-    b_logp = torch.zeros((T, N))
-    b_rew = torch.zeros((T, N))
-    b_val = torch.zeros((T, N))
-    b_done = torch.zeros((T, N))  # the episode ended at this step
-    b_valid = torch.zeros((T, N))  # this step was not an autoreset step
+    # The rollout's tensors live on the learner's device (observations stay numpy: the
+    # statistics and the native buffers are numpy).
+    b_act = torch.zeros((T, N, act_dim), device=dev)
+    b_logp = torch.zeros((T, N), device=dev)
+    b_rew = torch.zeros((T, N), device=dev)
+    b_val = torch.zeros((T, N), device=dev)
+    b_done = torch.zeros((T, N), device=dev)  # the episode ended at this step
+    b_valid = torch.zeros((T, N), device=dev)  # this step was not an autoreset step
 
-    log = open(os.path.join(out, "log.csv"), "w", newline="")
-    writer = csv.writer(log)
-    writer.writerow(["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
-                     "train_success", "train_return", "eval_success", "eval_return",
-                     "infer_time", "gae_time", "update_time", "eval_time"])
-    print(f"{args.env_id} {robot} {mode}: obs {obs_dim}, act {act_dim}; {N} envs x {T} steps, "
-          f"{iterations} iterations, {'native' if native else 'torch'} rollouts"
-          f"{f' on {args.ray_workers} Ray workers' if args.ray_workers else ''} -> {out}",
-          flush=True)
-
+    header = ["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
+              "train_success", "train_return", "eval_success", "eval_return",
+              "infer_time", "gae_time", "update_time", "eval_time"]
+    log_path = os.path.join(out, "log.csv")
     # Seconds in: the vector env (sim_time; native rollouts include the actor's forward
     # passes on the env threads), the rollout's torch forward passes (infer_time), GAE and the
     # observation statistics (gae_time), the update (update_time), evaluations (eval_time).
-    t_start = clock()
     sim_time = infer_time = gae_time = update_time = eval_time = 0.0
     global_step = 0
-    t0 = clock()
-    if args.ray_workers:
-        next_obs = envs.reset(seed=args.seed)
+    first_it = 1
+    best = None
+    resumes = []
+    if ckpt is not None:
+        # Continue where the checkpoint was taken: the start of iteration `first_it`, right
+        # after its evaluation. The log keeps the rows up to that point.
+        actor.load_state_dict(ckpt["actor"])
+        critic.load_state_dict(ckpt["critic"])
+        with torch.no_grad():
+            logstd.copy_(ckpt["logstd"])
+        opt.load_state_dict(ckpt["optimizer"])
+        rms.mean, rms.var = ckpt["obs_mean"].numpy().copy(), ckpt["obs_var"].numpy().copy()
+        rms.count = float(ckpt["obs_count"])
+        first_it, global_step, best = int(ckpt["iteration"]), int(ckpt["global_step"]), ckpt["best"]
+        resumes = list(ckpt["resumes"]) + [global_step]
+        tm = ckpt["times"]
+        sim_time, infer_time, gae_time = tm["sim"], tm["infer"], tm["gae"]
+        update_time, eval_time = tm["update"], tm["eval"]
+        torch.set_rng_state(ckpt["torch_rng"])
+        if ckpt["cuda_rng"] is not None and dev.type == "cuda":
+            torch.cuda.set_rng_state(ckpt["cuda_rng"])
+        with open(log_path, newline="") as f:
+            rows = [r for r in csv.reader(f)][1:]
+        rows = [r for r in rows if r and int(r[1]) <= global_step and int(r[0]) < first_it]
+        log = open(log_path, "w", newline="")
+        writer = csv.writer(log)
+        writer.writerow(header)
+        writer.writerows(rows)
+        t_start = clock() - tm["wall"]
     else:
-        next_obs, _ = envs.reset(seed=args.seed)
+        log = open(log_path, "w", newline="")
+        writer = csv.writer(log)
+        writer.writerow(header)
+        t_start = clock()
+    log.flush()
+    print(f"{args.env_id} {robot} {mode}: obs {obs_dim}, act {act_dim}; {N} envs x {T} steps, "
+          f"{iterations} iterations, {'native' if native else 'torch'} rollouts"
+          f"{f' on {args.ray_workers} Ray workers' if args.ray_workers else ''}, "
+          f"learner on {dev}"
+          f"{f', resumed at iteration {first_it} ({global_step} steps)' if ckpt else ''} -> {out}",
+          flush=True)
+
+    t0 = clock()
+    # A resumed run starts its envs afresh, from a seed of its own (the episodes in progress
+    # when the run stopped are not continued).
+    reset_seed = args.seed if ckpt is None else args.seed + 1_000_003 * len(resumes)
+    if args.ray_workers:
+        next_obs = envs.reset(seed=reset_seed)
+    else:
+        next_obs, _ = envs.reset(seed=reset_seed)
     sim_time += clock() - t0
     if native:
         buf = envs.rollout_buffers(T)
@@ -410,10 +629,23 @@ def main(argv=None):
                 return envs.rollout(GaussianMlp(**params), first_step, buffers)
     prev_done = np.zeros(N, bool)
     ep_ret = np.zeros(N)
-    best = None
-    it = 0
-    for it in range(1, iterations + 1):
-        if it % args.eval_freq == 1 or args.eval_freq == 1:
+    # SIGINT or SIGTERM ends the run after the current iteration, with the final evaluation
+    # and saves; a second one stops at once.
+    stopping = []
+
+    def on_signal(signum, frame):
+        if stopping:
+            signal.signal(signum, signal.SIG_DFL)
+            raise KeyboardInterrupt
+        stopping.append(signum)
+        print(f"signal {signum}: stopping after this iteration (again to stop at once)",
+              flush=True)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
+    it = next_it = first_it
+    for it in range(first_it, iterations + 1):
+        if (it % args.eval_freq == 1 or args.eval_freq == 1) and not (ckpt and it == first_it):
             t0 = clock()
             eval_s, eval_r = evaluate()
             eval_time += clock() - t0
@@ -428,9 +660,11 @@ def main(argv=None):
             if best is None or eval_s >= best:
                 best = eval_s
                 save("best", eval_s)
+            checkpoint(it)
             if args.stop_at_success is not None and eval_s >= args.stop_at_success:
                 print(f"eval success {eval_s:.3f} reached --stop-at-success "
                       f"{args.stop_at_success}", flush=True)
+                next_it = it
                 break
         if args.anneal_lr:
             opt.param_groups[0]["lr"] = (1.0 - (it - 1.0) / iterations) * args.learning_rate
@@ -446,7 +680,7 @@ def main(argv=None):
                 x = norm(buf["obs"].reshape(-1, obs_dim))
                 mean = actor(x)
                 dist = Normal(mean, logstd.exp().expand_as(mean))
-                b_act = torch.as_tensor(buf["actions"]).reshape(T, N, act_dim).clone()
+                b_act = torch.as_tensor(buf["actions"]).reshape(T, N, act_dim).to(dev, copy=True)
                 b_logp = dist.log_prob(b_act.reshape(-1, act_dim)).sum(1).view(T, N)
                 b_val = critic(x).view(T, N)
             b_obs = buf["obs"]
@@ -454,9 +688,8 @@ def main(argv=None):
             infer_time += clock() - t1
             valid = ~buf["autoreset"]
             done = (buf["terminated"] | buf["truncated"]) & valid
-            b_rew = torch.as_tensor(buf["rewards"] * args.reward_scale, dtype=torch.float32)
-            b_done = torch.as_tensor(done, dtype=torch.float32)
-            b_valid = torch.as_tensor(valid, dtype=torch.float32)
+            n_rew = buf["rewards"] * args.reward_scale
+            n_done, n_valid = done, valid
             ended_success, ended_return = [], []
             for t in range(T):
                 ep_ret += np.where(valid[t], buf["rewards"][t], 0.0)
@@ -467,6 +700,9 @@ def main(argv=None):
             global_step += T * N
         else:
             ended_success, ended_return = [], []
+            n_rew = np.zeros((T, N))
+            n_done = np.zeros((T, N), bool)
+            n_valid = np.zeros((T, N), bool)
             for t in range(T):
                 t0 = clock()
                 b_obs[t] = next_obs
@@ -478,7 +714,7 @@ def main(argv=None):
                     b_logp[t] = dist.log_prob(a).sum(1)
                     b_val[t] = critic(x).view(-1)
                 b_act[t] = a
-                act = torch.clamp(a, low, high).numpy()
+                act = torch.clamp(a, low, high).cpu().numpy()
                 t1 = clock()
                 next_obs, r, term, trunc, _ = envs.step(act)
                 t2 = clock()
@@ -486,9 +722,9 @@ def main(argv=None):
                 infer_time += t1 - t0
                 valid = ~prev_done  # an env that ended on the last step resets now
                 done = (term | trunc) & valid
-                b_rew[t] = torch.as_tensor(r * args.reward_scale, dtype=torch.float32)
-                b_done[t] = torch.as_tensor(done, dtype=torch.float32)
-                b_valid[t] = torch.as_tensor(valid, dtype=torch.float32)
+                n_rew[t] = r * args.reward_scale
+                n_done[t] = done
+                n_valid[t] = valid
                 ep_ret += np.where(valid, r, 0.0)
                 for i in np.flatnonzero(done):
                     ended_success.append(bool(term[i]))
@@ -497,14 +733,18 @@ def main(argv=None):
                 prev_done = done
                 global_step += N
         t0 = clock()
+        # The rollout's rewards and flags to the learner's device: one copy each per rollout.
+        b_rew = torch.as_tensor(n_rew, dtype=torch.float32).to(dev)
+        b_done = torch.as_tensor(n_done, dtype=torch.float32).to(dev)
+        b_valid = torch.as_tensor(n_valid, dtype=torch.float32).to(dev)
         if not args.no_obs_norm:
-            rms.update(b_obs.reshape(-1, obs_dim)[b_valid.numpy().reshape(-1) > 0])
+            rms.update(b_obs.reshape(-1, obs_dim)[n_valid.reshape(-1)])
         # -- GAE: the value after step t is V(obs[t+1]), the final observation at an end -----
         with torch.no_grad():
             next_value = critic(norm(next_obs)).view(-1)
-            adv = torch.zeros((T, N))
-            last = torch.zeros(N)
-            lam_sum = rew_sum = val_sum = torch.zeros(N)
+            adv = torch.zeros((T, N), device=dev)
+            last = torch.zeros(N, device=dev)
+            lam_sum = rew_sum = val_sum = torch.zeros(N, device=dev)
             for t in reversed(range(T)):
                 nv = next_value if t == T - 1 else b_val[t + 1]
                 # Propagate from step t+1 only when the episode goes on and t+1 is a real step.
@@ -532,7 +772,7 @@ def main(argv=None):
         mb = max(1, min(minibatch, n))
         stop = False
         for _ in range(args.update_epochs):
-            perm = torch.randperm(n)
+            perm = torch.randperm(n).to(dev)  # drawn on the CPU: the same order on any device
             for s in range(0, n, mb):
                 idx = perm[s:s + mb]
                 if len(idx) < 2:
@@ -576,7 +816,10 @@ def main(argv=None):
               f"update {update_time:.0f}s, eval {eval_time:.0f}s) "
               f"{global_step / wall:.0f} steps/s train success "
               f"{ts if ts == '' else round(ts, 3)}", flush=True)
+        next_it = it + 1
         if args.max_minutes is not None and wall > 60 * args.max_minutes:
+            break
+        if stopping:
             break
     t0 = clock()
     eval_s, eval_r = evaluate()
@@ -588,7 +831,9 @@ def main(argv=None):
     log.close()
     path = save("policy", eval_s)
     if best is None or eval_s >= best:
+        best = eval_s
         save("best", eval_s)
+    checkpoint(next_it)
     print(f"final eval success {eval_s:.3f} return {eval_r:.2f}; policy: {path}")
     print(f"  mjskill eval --policy {path}")
 
