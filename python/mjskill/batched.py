@@ -46,6 +46,7 @@ from ._common import (
     _check_render_mode,
     _check_seed,
     _describe,
+    _tensor_to_numpy,
     check_reconfiguration_freq,
     check_sim_backend,
     env_kwargs,
@@ -178,11 +179,11 @@ class MjskillBatchedEnv(gym.Env):
         return self._out(info)
 
     def _index_mask(self, env_idx: Any) -> np.ndarray:
-        idx = env_idx
-        if hasattr(idx, "detach"):
-            idx = idx.detach().cpu().numpy()
-        idx = np.asarray(idx)
+        idx = np.asarray(_tensor_to_numpy(env_idx, "env_idx"))
         mask = np.zeros(self.num_envs, bool)
+        if idx.size == 0:
+            # No envs to reset (an empty list is float64 to numpy, not an index array).
+            return mask
         if idx.dtype == bool:
             if idx.shape != (self.num_envs,):
                 raise ValueError(
@@ -261,8 +262,6 @@ class MjskillBatchedEnv(gym.Env):
 
     def step(self, action):
         native = self._live()
-        if hasattr(action, "detach"):
-            action = action.detach().cpu().numpy()
         a = _as_actions(action, 2)
         obs, reward, terminated, _, info = native.step(a)
         self._elapsed += 1
@@ -379,9 +378,7 @@ class ManiSkillVectorEnv(gym.vector.VectorEnv):
         return self.base_env.device
 
     def _np(self, x: Any) -> np.ndarray:
-        if hasattr(x, "detach"):
-            return x.detach().cpu().numpy()
-        return np.asarray(x)
+        return np.asarray(_tensor_to_numpy(x, "values"))
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         obs, info = self._env.reset(seed=seed, options=options)

@@ -74,7 +74,8 @@ def test_rollout_rejects_bad_buffers_and_policies():
     act_dim = vec.single_action_space.shape[0]
     buf = vec.rollout_buffers(3)
     buf["actions"] = np.zeros((3, 2, act_dim // 2), np.float32)
-    with pytest.raises(ValueError, match="rollout buffer actions has 24 values, expected 48"):
+    with pytest.raises(ValueError, match=r"rollout buffer actions has shape \[3, 2, 4\], "
+                                         r"expected \[3, 2, 8\]"):
         vec.rollout(GaussianMlp(**params(obs_dim, act_dim)), 0, buf)
     buf["actions"] = np.zeros((3, 2, 2 * act_dim), np.float32)[:, :, ::2]
     with pytest.raises(ValueError, match="rollout buffer actions must be C-contiguous"):
