@@ -55,7 +55,7 @@ use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, 
 use crate::mujoco::Warnings;
 
 mod rollout;
-pub use rollout::{RolloutBuffers, VecPolicy};
+pub use rollout::{RolloutBuffers, VecPolicy, MAX_POLICY_STEP};
 
 /// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
 ///
@@ -362,12 +362,15 @@ impl Worker {
         let Some(policy) = policy else {
             return;
         };
-        for (dst, env) in self
-            .policy_obs
-            .chunks_exact_mut(self.obs_dim)
-            .zip(&self.envs)
-        {
-            dst.copy_from_slice(env.obs());
+        // An obs mode without observations (`none`) has obs_dim 0: nothing to copy.
+        if self.obs_dim > 0 {
+            for (dst, env) in self
+                .policy_obs
+                .chunks_exact_mut(self.obs_dim)
+                .zip(&self.envs)
+            {
+                dst.copy_from_slice(env.obs());
+            }
         }
         policy.act(
             self.first,
@@ -534,24 +537,27 @@ impl VecEnv {
     /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
     /// [`make`], every env starts reset (env i with seed 2022 + i). `num_envs` must be in
     /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]), and
-    /// `num_envs` envs like the first must fit in the memory available (`MemAvailable` of
-    /// `/proc/meminfo`; [`EnvError::EnvsExceedMemory`], checked before the others are made).
+    /// `num_envs` envs like the first must fit in the memory available (the tightest of
+    /// `MemAvailable` of `/proc/meminfo`, `RLIMIT_AS` less the address space in use and the
+    /// cgroup's `memory.max` less its usage; [`EnvError::EnvsExceedMemory`], checked before
+    /// the others are made); an env that still cannot be made is
+    /// [`EnvError::VecEnvMake`], naming it and `num_envs`.
     pub fn new(
         env_id: &str,
         config: EnvConfig,
         num_envs: usize,
         threads: usize,
     ) -> Result<VecEnv, EnvError> {
-        Self::new_within(env_id, config, num_envs, threads, memory::available_bytes())
+        Self::new_within(env_id, config, num_envs, threads, memory::available())
     }
 
-    /// [`VecEnv::new`] given the memory available (bytes; None: unknown, not checked).
+    /// [`VecEnv::new`] given the memory available (None: unknown, not checked).
     fn new_within(
         env_id: &str,
         config: EnvConfig,
         num_envs: usize,
         threads: usize,
-        available: Option<u64>,
+        available: memory::Available,
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
             return Err(EnvError::NoEnvs);
@@ -567,11 +573,16 @@ impl VecEnv {
         // The first env's size (with its share of the buffers below) times num_envs must fit
         // before the others are made.
         let per_env = memory::env_bytes(&first, images.buffer_bytes(obs_dim + act_dim));
-        memory::check_fits(num_envs, per_env, available)?;
+        memory::check_all(&first, num_envs, per_env, available)?;
         let mut envs = Vec::with_capacity(num_envs);
         envs.push(first);
-        for _ in 1..num_envs {
-            envs.push(make(env_id, config.clone())?);
+        for index in 1..num_envs {
+            let env = make(env_id, config.clone()).map_err(|e| EnvError::VecEnvMake {
+                index,
+                num_envs,
+                source: Box::new(e),
+            })?;
+            envs.push(env);
         }
         let first = &envs[0];
         let keys = first.info().keys;
@@ -723,13 +734,20 @@ impl VecEnv {
     }
 
     /// Like [`VecEnv::reset`], but seeds `s..s + N` that leave ManiSkill's 32-bit range
-    /// ([`super::checks::MAX_SEED`]) are an error ([`EnvError::BadSeed`] with the first bad
-    /// seed) and nothing is reset.
+    /// ([`super::checks::MAX_SEED`]) are an error ([`EnvError::BadSeed`] for a seed beyond it,
+    /// [`EnvError::VecSeedRange`] naming the seed given when only `s + i` is) and nothing is
+    /// reset.
     pub fn try_reset(&mut self, seed: Option<u64>) -> Result<&[f32], EnvError> {
         if let Some(s) = seed {
             let last = s as u128 + self.num_envs as u128 - 1;
+            if s > super::checks::MAX_SEED {
+                return Err(EnvError::BadSeed(s));
+            }
             if last > super::checks::MAX_SEED as u128 {
-                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+                return Err(EnvError::VecSeedRange {
+                    seed: s,
+                    last_env: self.num_envs - 1,
+                });
             }
         }
         Ok(self.reset(seed))
@@ -750,7 +768,7 @@ impl VecEnv {
     /// it, or unseeded) and returns every env's observations; the other envs keep their state,
     /// observations, rewards, flags and info. A mask of the wrong length is
     /// [`EnvError::VecMaskLength`] and seeds that leave the 32-bit range are
-    /// [`EnvError::BadSeed`], with nothing reset.
+    /// [`EnvError::BadSeed`] or [`EnvError::VecSeedRange`], with nothing reset.
     pub fn reset_envs(&mut self, mask: &[bool], seed: Option<u64>) -> Result<&[f32], EnvError> {
         if mask.len() != self.num_envs {
             return Err(EnvError::VecMaskLength {
@@ -760,8 +778,14 @@ impl VecEnv {
         }
         if let (Some(s), Some(last)) = (seed, mask.iter().rposition(|&m| m)) {
             let top = s as u128 + last as u128;
+            if s > super::checks::MAX_SEED {
+                return Err(EnvError::BadSeed(s));
+            }
             if top > super::checks::MAX_SEED as u128 {
-                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+                return Err(EnvError::VecSeedRange {
+                    seed: s,
+                    last_env: last,
+                });
             }
         }
         for (cell, &m) in self.shared.reset_mask.iter().zip(mask) {
@@ -945,6 +969,7 @@ impl Drop for VecEnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mujoco::limits::Headroom;
 
     #[test]
     fn a_worker_panic_reaches_the_caller_instead_of_hanging() {
@@ -963,12 +988,20 @@ mod tests {
         // 16384 envs against 64 MB: refused after the first env is made (making them all
         // would take minutes and about 48 GB).
         let cfg = EnvConfig::default();
-        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, Some(64 << 20))
+        let room = |bytes| memory::Available {
+            memory: Some(Headroom {
+                bytes,
+                source: "MemAvailable in /proc/meminfo",
+            }),
+            address_space: None,
+        };
+        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, room(64 << 20))
             .unwrap_err();
         let EnvError::EnvsExceedMemory {
             num_envs,
             per_env_bytes,
             available_bytes,
+            ..
         } = e
         else {
             panic!("{e}");
@@ -989,8 +1022,8 @@ mod tests {
             obs_mode: crate::env::ObsMode::Rgb,
             ..cfg.clone()
         };
-        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, Some(1 << 30)).is_err());
-        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, Some(1 << 30)).unwrap();
+        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, room(1 << 30)).is_err());
+        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, room(1 << 30)).unwrap();
         assert_eq!(v.num_envs(), 2);
     }
 
