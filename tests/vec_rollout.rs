@@ -427,10 +427,22 @@ fn layers_beyond_the_size_limit_are_refused() {
 #[ignore]
 fn time_the_3x256_actor() {
     let (od, h, ad) = (42, 256, 8);
-    let w = |n: usize, k: u32| -> Vec<f32> { (0..n).map(|i| ((i as f32) * 0.37 + k as f32).sin() * 0.1).collect() };
+    let w = |n: usize, k: u32| -> Vec<f32> {
+        (0..n)
+            .map(|i| ((i as f32) * 0.37 + k as f32).sin() * 0.1)
+            .collect()
+    };
     let p = GaussianMlp::new(
-        vec![(w(od * h, 1), w(h, 2)), (w(h * h, 3), w(h, 4)), (w(h * ad, 5), w(ad, 6))],
-        vec![0.0; od], vec![1.0; od], Some(10.0)).unwrap();
+        vec![
+            (w(od * h, 1), w(h, 2)),
+            (w(h * h, 3), w(h, 4)),
+            (w(h * ad, 5), w(ad, 6)),
+        ],
+        vec![0.0; od],
+        vec![1.0; od],
+        Some(10.0),
+    )
+    .unwrap();
     for rows in [8usize, 128] {
         let obs: Vec<f32> = (0..rows * od).map(|i| (i as f32 * 0.01).cos()).collect();
         let mut out = vec![0.0; rows * ad];
@@ -438,8 +450,13 @@ fn time_the_3x256_actor() {
         let reps = 20_000 / rows;
         p.mean(&obs, &mut out, &mut scratch);
         let t = std::time::Instant::now();
-        for _ in 0..reps { p.mean(&obs, &mut out, &mut scratch); }
+        for _ in 0..reps {
+            p.mean(&obs, &mut out, &mut scratch);
+        }
         let us = t.elapsed().as_secs_f64() * 1e6 / (reps * rows) as f64;
-        println!("rows {rows}: {us:.2} us per row (checksum {})", out.iter().sum::<f32>());
+        println!(
+            "rows {rows}: {us:.2} us per row (checksum {})",
+            out.iter().sum::<f32>()
+        );
     }
 }
