@@ -74,6 +74,21 @@ _MAX_WRAPPER_DEPTH = 32
 """How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
 
 
+def _made_without_time_limit() -> bool:
+    """Whether this env is being made by ``gym.make(..., max_episode_steps=-1)``, which
+    gymnasium does not pass to the env: it only leaves its ``TimeLimit`` out. Read from
+    ``gymnasium.make``'s frame among the callers."""
+    frame = sys._getframe(1)
+    for _ in range(_MAX_WRAPPER_DEPTH):
+        if frame is None:
+            return False
+        if frame.f_code.co_name == "make" and frame.f_globals.get("__name__", "").startswith(
+                "gymnasium"):
+            return frame.f_locals.get("max_episode_steps") == -1
+        frame = frame.f_back
+    return False
+
+
 class MjskillBatchedEnv(gym.Env):
     """N mjskill envs as one batched ``gymnasium.Env`` with ManiSkill's conventions.
 
@@ -156,6 +171,10 @@ class MjskillBatchedEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
         self.max_episode_steps = int(spec["max_episode_steps"])
+        if max_episode_steps is None and _made_without_time_limit():
+            # gym.make(..., max_episode_steps=-1): gymnasium's "no time limit", as for the
+            # single env (and -1 given here or to make_vec).
+            self.max_episode_steps = UNLIMITED
         self.single_action_space = _describe(self, spec, depth_dtype)
         self.single_observation_space = self._layout.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)

@@ -219,3 +219,32 @@ def test_an_empty_env_idx_resets_no_env():
     np.testing.assert_array_equal(again, obs)
     with pytest.raises(TypeError, match="env_idx must hold env indices"):
         env.reset(options={"env_idx": [0.5]})
+
+
+def test_max_episode_steps_minus_one_means_no_limit_everywhere():
+    # Issue 42: -1 was refused by make_vec, became 50 in the batched env and meant no limit
+    # in the single env. It is gymnasium's "no time limit" in all of them now.
+    import gymnasium as gym
+
+    import mjskill
+
+    unlimited = mjskill._native.UNLIMITED_EPISODE_STEPS
+    single = gym.make("mjskill/PickCube-v1", max_episode_steps=-1)
+    direct = mjskill.MjskillEnv("PickCube-v1", max_episode_steps=-1)
+    for env in (single, direct):
+        env.reset(seed=0)
+        zero = np.zeros(env.action_space.shape, np.float32)
+        assert not any(env.step(zero)[3] for _ in range(60))
+    vec = gym.make_vec("mjskill/PickCube-v1", num_envs=2, vectorization_mode="vector_entry_point",
+                       max_episode_steps=-1)
+    assert vec.max_episode_steps == unlimited
+    for made in (gym.make("mjskill/PickCube-v1", num_envs=2, array_backend="numpy",
+                          max_episode_steps=-1),
+                 mjskill.MjskillBatchedEnv(num_envs=2, array_backend="numpy",
+                                           max_episode_steps=-1)):
+        b = made.unwrapped
+        b.reset(seed=0)
+        assert b.max_episode_steps == unlimited
+    default = gym.make("mjskill/PickCube-v1", num_envs=2, array_backend="numpy").unwrapped
+    default.reset(seed=0)
+    assert default.max_episode_steps == 50
