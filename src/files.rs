@@ -284,7 +284,15 @@ mod tests {
     fn bad_limit_values_are_ignored_and_said_so() {
         assert_eq!(max_bytes_of(None), (DEFAULT_MAX_BYTES, None));
         assert_eq!(max_bytes_of(Some(" 1000 ")), (1000, None));
-        for bad in ["1e3", "0x10", "1_000", "abc", "-1", "", "99999999999999999999999"] {
+        for bad in [
+            "1e3",
+            "0x10",
+            "1_000",
+            "abc",
+            "-1",
+            "",
+            "99999999999999999999999",
+        ] {
             let (limit, w) = max_bytes_of(Some(bad));
             assert_eq!(limit, DEFAULT_MAX_BYTES, "{bad}");
             let w = w.unwrap_or_else(|| panic!("{bad} ignored silently"));
