@@ -248,3 +248,26 @@ def test_max_episode_steps_minus_one_means_no_limit_everywhere():
     default = gym.make("mjskill/PickCube-v1", num_envs=2, array_backend="numpy").unwrapped
     default.reset(seed=0)
     assert default.max_episode_steps == 50
+
+
+def test_rendering_envs_beyond_an_address_space_limit_are_a_value_error_naming_num_envs():
+    # Issue 42, item 10: 30 rgb envs under prlimit --as=2000000000 crashed with SIGSEGV in
+    # Mesa. The memory check honours RLIMIT_AS now and names num_envs and the limit.
+    import shutil
+
+    if shutil.which("prlimit") is None:
+        pytest.skip("no prlimit")
+    code = textwrap.dedent("""
+        import mjskill
+        try:
+            mjskill.MjskillVectorEnv("PickCube-v1", num_envs=30, obs_mode="rgb")
+        except ValueError as e:
+            print("ValueError:", e)
+    """)
+    p = subprocess.run(["prlimit", "--as=2000000000", sys.executable, "-c", code],
+                       capture_output=True, text=True, timeout=600)
+    out = p.stdout + p.stderr
+    if "headless rendering is unavailable" in out:
+        pytest.skip("no headless rendering here")
+    assert p.returncode == 0, out
+    assert "ValueError: num_envs 30 would need" in out and "RLIMIT_AS" in out, out
