@@ -325,7 +325,12 @@ class MjskillVectorEnv(VectorEnv):
         Step t is the policy's step ``first_step + t`` (the key of its sampling noise, with
         the env's index). The buffers receive each step's observation before the step, raw
         action (0 where the env reset instead), reward and flags. Returns the observations
-        after the last step. The results do not depend on ``num_threads``."""
+        after the last step. The results do not depend on ``num_threads``.
+
+        The buffers must be as :meth:`rollout_buffers` makes them: exactly its dtypes and
+        shapes, C-contiguous, writable and each in its own memory; ``first_step + T`` is at
+        most 2**48. Anything else is a ``TypeError`` or ``ValueError`` naming the buffer, with
+        nothing stepped (docs/limits.md)."""
         if self._layout.dict_obs:
             raise ValueError(
                 f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"

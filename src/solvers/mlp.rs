@@ -338,7 +338,8 @@ impl VecPolicy for GaussianMlp {
         let ad = self.act_dim();
         for (r, row) in actions.chunks_exact_mut(ad).enumerate() {
             let mut rng = ChaCha8Rng::seed_from_u64(noise.seed);
-            rng.set_stream(noise.env_offset + (first + r) as u64);
+            // An offset near 2^64 wraps the stream number (never a panic).
+            rng.set_stream(noise.env_offset.wrapping_add((first + r) as u64));
             rng.set_word_pos(u128::from(step) << WORDS_PER_STEP);
             for (a, s) in row.iter_mut().zip(&noise.std) {
                 let eps: f32 = StandardNormal.sample(&mut rng);
