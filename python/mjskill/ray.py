@@ -249,8 +249,9 @@ class RayVectorEnv:
     Ray is initialised with ``address`` (default: ``RAY_ADDRESS`` or a local Ray) unless it
     already is; the actors go wherever the cluster has CPUs.
 
-    ``workers × num_threads`` CPUs must fit in the cluster (``ray.cluster_resources()``), or
-    this raises ``ValueError`` naming the numbers at once (Ray would otherwise wait for them
+    ``workers × num_threads`` CPUs must fit in the cluster (``ray.cluster_resources()``, the
+    CPUs of the nodes up now: an autoscaling cluster's nodes must be started first), or this
+    raises ``ValueError`` naming the numbers at once (Ray would otherwise wait for them
     forever). Every call waits at most ``timeout`` seconds (default 600; ``None``: no limit)
     for the actors and raises ``TimeoutError`` naming those that did not answer (a stopped
     or starved actor)."""
