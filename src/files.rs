@@ -23,12 +23,45 @@ pub const DEFAULT_MAX_BYTES: u64 = 256 << 20;
 pub const MAX_BYTES_VAR: &str = "MJSKILL_MAX_FILE_BYTES";
 
 /// The limit of bytes read from one input file or decompressed from it: [`DEFAULT_MAX_BYTES`],
-/// or the lower value of [`MAX_BYTES_VAR`].
+/// or the lower value of [`MAX_BYTES_VAR`]. A value of the variable that is not a decimal
+/// number of bytes, or is above [`DEFAULT_MAX_BYTES`], is ignored, and the first call says so
+/// on stderr (once per process).
 pub fn max_bytes() -> u64 {
-    std::env::var(MAX_BYTES_VAR)
-        .ok()
-        .and_then(|v| v.trim().parse::<u64>().ok())
-        .map_or(DEFAULT_MAX_BYTES, |v| v.min(DEFAULT_MAX_BYTES))
+    let (limit, warning) = max_bytes_of(std::env::var(MAX_BYTES_VAR).ok().as_deref());
+    if let Some(w) = warning {
+        static WARNED: std::sync::Once = std::sync::Once::new();
+        WARNED.call_once(|| eprintln!("warning: {w}"));
+    }
+    limit
+}
+
+/// The limit [`max_bytes`] takes from the variable's value `value`, and the warning for a
+/// value it ignores.
+pub fn max_bytes_of(value: Option<&str>) -> (u64, Option<String>) {
+    let Some(v) = value else {
+        return (DEFAULT_MAX_BYTES, None);
+    };
+    let t = v.trim();
+    let ignored = |why: &str| {
+        Some(format!(
+            "{MAX_BYTES_VAR}={v:?} is ignored: {why}; the limit stays {DEFAULT_MAX_BYTES} bytes \
+             (256 MiB)",
+            v = short(v)
+        ))
+    };
+    if t.is_empty() || !t.bytes().all(|b| b.is_ascii_digit()) {
+        return (
+            DEFAULT_MAX_BYTES,
+            ignored("it must be a plain decimal number of bytes, e.g. 1000000"),
+        );
+    }
+    match t.parse::<u64>() {
+        Ok(n) if n <= DEFAULT_MAX_BYTES => (n, None),
+        _ => (
+            DEFAULT_MAX_BYTES,
+            ignored("it may only lower the limit, which it exceeds"),
+        ),
+    }
 }
 
 /// Why an input file could not be read. Displayed as `cannot read FILE: REASON`
@@ -245,6 +278,32 @@ mod tests {
         let d = std::env::temp_dir().join(format!("mjskill-files-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    #[test]
+    fn bad_limit_values_are_ignored_and_said_so() {
+        assert_eq!(max_bytes_of(None), (DEFAULT_MAX_BYTES, None));
+        assert_eq!(max_bytes_of(Some(" 1000 ")), (1000, None));
+        for bad in [
+            "1e3",
+            "0x10",
+            "1_000",
+            "abc",
+            "-1",
+            "",
+            "99999999999999999999999",
+        ] {
+            let (limit, w) = max_bytes_of(Some(bad));
+            assert_eq!(limit, DEFAULT_MAX_BYTES, "{bad}");
+            let w = w.unwrap_or_else(|| panic!("{bad} ignored silently"));
+            assert!(
+                w.contains(&format!("MJSKILL_MAX_FILE_BYTES={bad:?} is ignored")),
+                "{w}"
+            );
+        }
+        let (limit, w) = max_bytes_of(Some("300000000"));
+        assert_eq!(limit, DEFAULT_MAX_BYTES);
+        assert!(w.unwrap().contains("only lower the limit"));
     }
 
     #[test]

@@ -63,7 +63,7 @@ pub use env::{
     default_robot, depth_to_mm, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage,
     DriveTargets, Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, PointCloud,
     RewardMode, RolloutBuffers, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv,
-    VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
+    VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS, MAX_POLICY_STEP,
 };
 pub use mjcf::{Mjcf, SceneError};
 pub use models::ModelFileError;

@@ -34,10 +34,20 @@ fn seeds_are_32_bit_reduced_as_documented_or_rejected() {
     assert_eq!(a.try_reset(Some(MAX_SEED)).unwrap().0.len(), obs.len());
     // VecEnv: seeds s + i; try_reset rejects a range that leaves 32 bits, reset never panics.
     let mut v = VecEnv::new("PickCube-v1", EnvConfig::default(), 2, 1).unwrap();
-    assert!(matches!(
-        v.try_reset(Some(MAX_SEED)),
-        Err(EnvError::BadSeed(s)) if s == MAX_SEED + 1
-    ));
+    // The error names the seed given, not env 1's derived seed (issue 42).
+    let e = v.try_reset(Some(MAX_SEED)).unwrap_err();
+    assert_eq!(
+        e,
+        EnvError::VecSeedRange {
+            seed: MAX_SEED,
+            last_env: 1
+        }
+    );
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("seed 4294967295 is out of range") && msg.contains("at most 4294967294"),
+        "{msg}"
+    );
     v.reset(Some(u64::MAX)); // env 1 gets (2^64 - 1 + 1) mod 2^32 = 0
     let zero = a.reset(Some(0)).0.to_vec();
     assert_eq!(v.obs_of(1).unwrap(), zero.as_slice());

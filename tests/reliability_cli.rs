@@ -224,6 +224,65 @@ fn two_rollouts_on_one_file_are_a_reported_clash() {
         "{}",
         stderr(&o)
     );
+    // The killed rollout's lock file stays (no one is left to remove it), unlocked: the next
+    // rollout to the same name takes it, and removes it when done.
+    assert_eq!(leftovers(&d), [".shared.mcap.lock"]);
+    let o = run_within(
+        {
+            let mut c = mjskill();
+            c.args(["rollout", "--episodes", "1", "--no-frame", "--out"])
+                .arg(&out);
+            c
+        },
+        60,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
+}
+
+#[test]
+fn a_finished_recording_is_never_replaced_by_a_rollout_started_while_it_ran() {
+    // Issue 42: A records 200 episodes; B, started while A runs (here before A's first
+    // episode is published, where A's file lock could not stop it), is refused at once
+    // through the output's lock file, and A's recording is the one left.
+    let d = common::scratch_dir("lockfile");
+    let out = d.join("same.mcap");
+    let a = mjskill()
+        .args(["rollout", "--episodes", "200", "--no-frame", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !d.join(".same.mcap.lock").exists() {
+        std::thread::sleep(Duration::from_millis(5));
+        assert!(t.elapsed() < Duration::from_secs(60), "A took no lock");
+    }
+    let b = run_within(
+        {
+            let mut c = mjskill();
+            c.args(["rollout", "--episodes", "5", "--no-frame", "--out"])
+                .arg(&out);
+            c
+        },
+        60,
+    );
+    assert_eq!(b.status.code(), Some(2), "{}", stderr(&b));
+    assert!(
+        stderr(&b).contains("another mjskill rollout") && stderr(&b).contains("same.mcap"),
+        "{}",
+        stderr(&b)
+    );
+    assert!(!stderr(&b).contains(".part"), "{}", stderr(&b));
+    let a = a.wait_with_output().unwrap();
+    assert!(a.status.success(), "{}", stderr(&a));
+    let i = json(&mjskill().arg("info").arg(&out).output().unwrap());
+    assert_eq!(
+        (i["episodes"].as_u64(), i["complete"].as_bool()),
+        (Some(200), Some(true))
+    );
+    assert_eq!(json(&a)["episodes"], 200);
     assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
 }
 

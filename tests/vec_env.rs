@@ -437,3 +437,69 @@ fn an_env_made_on_one_thread_renders_on_another() {
         "second step differs"
     );
 }
+
+/// Issue 42: 30 `rgb` envs under `prlimit --as=2000000000` crashed the process (SIGSEGV in
+/// Mesa's `driCreateContextAttribs`). They are refused with an error naming `num_envs` and
+/// the address-space limit, and a single rendering env past the limit gets a render error.
+#[test]
+fn rendering_envs_beyond_an_address_space_limit_are_an_error_not_a_crash() {
+    if std::env::var_os("MJSKILL_AS_CHILD").is_some() {
+        let cfg = EnvConfig {
+            obs_mode: ObsMode::Rgb,
+            ..Default::default()
+        };
+        let e = VecEnv::new("PickCube-v1", cfg.clone(), 30, 1).unwrap_err();
+        println!("vec: {e}");
+        // Envs made one by one until the limit: an error, never a crash.
+        let mut envs = Vec::new();
+        let e = loop {
+            match make("PickCube-v1", cfg.clone()) {
+                Ok(env) => envs.push(env),
+                Err(e) => break e,
+            }
+            assert!(envs.len() < 200, "no limit reached");
+        };
+        println!("single after {}: {e}", envs.len());
+        return;
+    }
+    if make(
+        "PickCube-v1",
+        EnvConfig {
+            obs_mode: ObsMode::Rgb,
+            ..Default::default()
+        },
+    )
+    .is_err()
+    {
+        eprintln!("skipped: no headless rendering here");
+        return;
+    }
+    let Ok(o) = std::process::Command::new("prlimit")
+        .arg("--as=2000000000")
+        .arg(std::env::current_exe().unwrap())
+        .args([
+            "--exact",
+            "rendering_envs_beyond_an_address_space_limit_are_an_error_not_a_crash",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env("MJSKILL_AS_CHILD", "1")
+        .output()
+    else {
+        eprintln!("skipped: no prlimit");
+        return;
+    };
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{:?}\n{out}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        out.contains("vec: num_envs 30 would need")
+            && out.contains("RLIMIT_AS")
+            && out.contains("cannot create a GL context"),
+        "{out}"
+    );
+}

@@ -350,3 +350,113 @@ fn the_rational_tanh_is_within_5e7_of_the_exact_one() {
     assert_eq!(mjskill::solvers::mlp::tanh(f32::INFINITY), 1.0);
     assert_eq!(mjskill::solvers::mlp::tanh(-1e-5), -1e-5);
 }
+
+/// Issue 42, item 5: a bias-only policy (obs_dim 0) gives its bias, and a rollout of envs
+/// with obs_mode `none` (no observations) runs instead of panicking in a worker thread
+/// (`chunk size must be non-zero`) and leaving the env unusable.
+#[test]
+fn a_bias_only_policy_acts_on_envs_without_observations() {
+    let cfg = EnvConfig {
+        obs_mode: mjskill::ObsMode::None,
+        ..short()
+    };
+    let mut v = VecEnv::new("PickCube-v1", cfg, 3, 2).unwrap();
+    let (od, ad) = dims(&v);
+    assert_eq!(od, 0);
+    let bias: Vec<f32> = (0..ad).map(|i| 0.1 * i as f32 - 0.3).collect();
+    let p = GaussianMlp::new(vec![(vec![], bias.clone())], vec![], vec![], None).unwrap();
+    let mut mean = vec![0.0; 2 * ad];
+    p.mean(&[], &mut mean, &mut Vec::new());
+    assert_eq!(mean, [bias.clone(), bias.clone()].concat());
+    let mut out = Out::new(4, 3, od, ad);
+    assert_eq!(v.rollout(Arc::new(p), 0, out.buffers()).unwrap(), 4);
+    assert_eq!(&out.actions[..ad], &bias[..]);
+    // Still usable.
+    v.step(&vec![0.0; 3 * ad]).unwrap();
+}
+
+/// Issue 42, minor: the noise is keyed by the step in 48 bits, so steps from 2^48 on would
+/// repeat step 0's noise and `2^64 - 1` would wrap: such rollouts are refused, nothing
+/// stepped.
+#[test]
+fn rollout_steps_beyond_the_noise_key_are_refused() {
+    let mut v = VecEnv::new("PickCube-v1", short(), 2, 1).unwrap();
+    let (od, ad) = dims(&v);
+    let policy: Arc<dyn VecPolicy> =
+        Arc::new(mlp(od, ad, 2).with_noise(vec![0.5; ad], 3, 0).unwrap());
+    let before = v.obs().to_vec();
+    let max = mjskill::MAX_POLICY_STEP;
+    assert_eq!(max, 1 << 48);
+    for first in [max - 2, max, u64::MAX] {
+        let mut out = Out::new(3, 2, od, ad);
+        let err = v.rollout(policy.clone(), first, out.buffers()).unwrap_err();
+        assert_eq!(
+            err,
+            EnvError::RolloutSteps {
+                first_step: first,
+                steps: 3
+            }
+        );
+        assert!(err.to_string().contains("at most 281474976710653"), "{err}");
+    }
+    assert_eq!(v.obs(), &before[..], "nothing stepped");
+    let mut out = Out::new(3, 2, od, ad);
+    assert_eq!(v.rollout(policy, max - 3, out.buffers()).unwrap(), 3);
+}
+
+/// Issue 42, item 1: layers beyond the size limit are refused (Python checks the shapes
+/// before copying anything, so a huge broadcast view costs nothing).
+#[test]
+fn layers_beyond_the_size_limit_are_refused() {
+    let max = mjskill::solvers::MAX_LAYER_ELEMENTS;
+    let e = GaussianMlp::new(
+        vec![(vec![], vec![0.0])],
+        vec![0.0; max + 1],
+        vec![1.0; max + 1],
+        None,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(e, MlpError::Length { got, .. } if got == max + 1),
+        "{e}"
+    );
+}
+
+/// Timing of `GaussianMlp::mean` for PPO's 3×256 actor (not a check; `--ignored`).
+#[test]
+#[ignore]
+fn time_the_3x256_actor() {
+    let (od, h, ad) = (42, 256, 8);
+    let w = |n: usize, k: u32| -> Vec<f32> {
+        (0..n)
+            .map(|i| ((i as f32) * 0.37 + k as f32).sin() * 0.1)
+            .collect()
+    };
+    let p = GaussianMlp::new(
+        vec![
+            (w(od * h, 1), w(h, 2)),
+            (w(h * h, 3), w(h, 4)),
+            (w(h * ad, 5), w(ad, 6)),
+        ],
+        vec![0.0; od],
+        vec![1.0; od],
+        Some(10.0),
+    )
+    .unwrap();
+    for rows in [8usize, 128] {
+        let obs: Vec<f32> = (0..rows * od).map(|i| (i as f32 * 0.01).cos()).collect();
+        let mut out = vec![0.0; rows * ad];
+        let mut scratch = Vec::new();
+        let reps = 20_000 / rows;
+        p.mean(&obs, &mut out, &mut scratch);
+        let t = std::time::Instant::now();
+        for _ in 0..reps {
+            p.mean(&obs, &mut out, &mut scratch);
+        }
+        let us = t.elapsed().as_secs_f64() * 1e6 / (reps * rows) as f64;
+        println!(
+            "rows {rows}: {us:.2} us per row (checksum {})",
+            out.iter().sum::<f32>()
+        );
+    }
+}

@@ -68,11 +68,31 @@ def _check_render_mode(render_mode: Any) -> None:
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
+def _tensor_to_numpy(x: Any, what: str) -> Any:
+    """A torch tensor (anything with ``detach``) as a numpy array on the CPU; other values
+    unchanged. Torch floats numpy has no dtype for (``bfloat16``) become float32, and another
+    dtype numpy cannot hold is a ``TypeError`` naming ``what`` and the dtype."""
+    if not hasattr(x, "detach"):
+        return x
+    t = x.detach().cpu()
+    if t.is_floating_point() and str(t.dtype) not in ("torch.float16", "torch.float32",
+                                                       "torch.float64"):
+        t = t.float()
+    try:
+        return t.numpy()
+    except (TypeError, RuntimeError) as e:
+        raise TypeError(
+            f"{what} have torch dtype {t.dtype}, which numpy cannot hold; give float32 "
+            f"({what}.float()) or int values"
+        ) from e
+
+
 def _as_actions(action: Any, ndim: int) -> np.ndarray:
     """``action`` as a C-contiguous float32 array of ``ndim`` dimensions (no copy when it
     already is one); a non-numeric or boolean action is a ``TypeError``, a wrong rank a ``ValueError``,
     and a finite value beyond float32's range (which the cast would turn into infinity) a
     ``ValueError`` naming the value given."""
+    action = _tensor_to_numpy(action, "actions")
     a = action if isinstance(action, np.ndarray) else np.asarray(action)
     if a.dtype.kind not in "iuf":
         # Booleans too: True/False are not joint targets, and taking them as 1/0 would hide

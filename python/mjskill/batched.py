@@ -46,6 +46,7 @@ from ._common import (
     _check_render_mode,
     _check_seed,
     _describe,
+    _tensor_to_numpy,
     check_reconfiguration_freq,
     check_sim_backend,
     env_kwargs,
@@ -71,6 +72,21 @@ RESET_OPTIONS = ["env_idx", "reconfigure"]
 
 _MAX_WRAPPER_DEPTH = 32
 """How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
+
+
+def _made_without_time_limit() -> bool:
+    """Whether this env is being made by ``gym.make(..., max_episode_steps=-1)``, which
+    gymnasium does not pass to the env: it only leaves its ``TimeLimit`` out. Read from
+    ``gymnasium.make``'s frame among the callers."""
+    frame = sys._getframe(1)
+    for _ in range(_MAX_WRAPPER_DEPTH):
+        if frame is None:
+            return False
+        if frame.f_code.co_name == "make" and frame.f_globals.get("__name__", "").startswith(
+                "gymnasium"):
+            return frame.f_locals.get("max_episode_steps") == -1
+        frame = frame.f_back
+    return False
 
 
 class MjskillBatchedEnv(gym.Env):
@@ -155,6 +171,10 @@ class MjskillBatchedEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
         self.max_episode_steps = int(spec["max_episode_steps"])
+        if max_episode_steps is None and _made_without_time_limit():
+            # gym.make(..., max_episode_steps=-1): gymnasium's "no time limit", as for the
+            # single env (and -1 given here or to make_vec).
+            self.max_episode_steps = UNLIMITED
         self.single_action_space = _describe(self, spec, depth_dtype)
         self.single_observation_space = self._layout.space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -178,11 +198,11 @@ class MjskillBatchedEnv(gym.Env):
         return self._out(info)
 
     def _index_mask(self, env_idx: Any) -> np.ndarray:
-        idx = env_idx
-        if hasattr(idx, "detach"):
-            idx = idx.detach().cpu().numpy()
-        idx = np.asarray(idx)
+        idx = np.asarray(_tensor_to_numpy(env_idx, "env_idx"))
         mask = np.zeros(self.num_envs, bool)
+        if idx.size == 0:
+            # No envs to reset (an empty list is float64 to numpy, not an index array).
+            return mask
         if idx.dtype == bool:
             if idx.shape != (self.num_envs,):
                 raise ValueError(
@@ -261,8 +281,6 @@ class MjskillBatchedEnv(gym.Env):
 
     def step(self, action):
         native = self._live()
-        if hasattr(action, "detach"):
-            action = action.detach().cpu().numpy()
         a = _as_actions(action, 2)
         obs, reward, terminated, _, info = native.step(a)
         self._elapsed += 1
@@ -379,9 +397,7 @@ class ManiSkillVectorEnv(gym.vector.VectorEnv):
         return self.base_env.device
 
     def _np(self, x: Any) -> np.ndarray:
-        if hasattr(x, "detach"):
-            return x.detach().cpu().numpy()
-        return np.asarray(x)
+        return np.asarray(_tensor_to_numpy(x, "values"))
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         obs, info = self._env.reset(seed=seed, options=options)

@@ -180,6 +180,10 @@ def _restore_env(kwargs: dict, render_mode: str | None, state: str) -> MjskillEn
     return env
 
 
+#: The buffers of :meth:`MjskillVectorEnv.rollout`, in its argument order.
+ROLLOUT_BUFFERS = ("obs", "actions", "rewards", "terminated", "truncated", "autoreset")
+
+
 def rollout_buffers(envs: Any, steps: int) -> dict[str, np.ndarray]:
     """Zeroed rollout buffers of ``steps`` steps for ``envs`` (``num_envs`` and the single
     spaces): ``obs`` ``[T, N, obs_dim]`` and ``actions`` ``[T, N, act_dim]`` float32,
@@ -271,20 +275,37 @@ class MjskillVectorEnv(VectorEnv):
             raise ValueError(
                 f"unsupported reset options {sorted(options)}; mjskill envs take no options"
             )
+        native = self._live()
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
-        obs, info = self._native.reset(seed)
-        return self._layout.batch(obs, self._native), info
+        obs, info = native.reset(seed)
+        return self._layout.batch(obs, native), info
 
     def step(self, actions):
+        native = self._live()
         a = _as_actions(actions, 2)
-        obs, rewards, terminated, truncated, info = self._native.step(a)
-        return self._layout.batch(obs, self._native), rewards, terminated, truncated, info
+        obs, rewards, terminated, truncated, info = native.step(a)
+        return self._layout.batch(obs, native), rewards, terminated, truncated, info
 
     @property
     def autoreset(self) -> np.ndarray:
         """Envs that reset during the last step (their action was ignored)."""
-        return self._native.autoreset()
+        return self._live().autoreset()
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Frees the N envs and their threads (``close()`` calls it once; each env owns its
+        MuJoCo model and data). ``reset``, ``step`` and ``rollout`` after it raise
+        ``RuntimeError``."""
+        self._native = None
+
+    def _live(self) -> Any:
+        """The native envs, or a ``RuntimeError`` once the env is closed."""
+        if self._native is None:
+            raise RuntimeError(
+                f"this mjskill/{self._kwargs['env_id']} vector env (num_envs={self.num_envs}) "
+                "is closed; make a new one"
+            )
+        return self._native
 
     def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
         """Buffers for :meth:`rollout` of ``steps`` steps: ``obs`` ``[T, N, obs_dim]`` and
@@ -304,13 +325,29 @@ class MjskillVectorEnv(VectorEnv):
         Step t is the policy's step ``first_step + t`` (the key of its sampling noise, with
         the env's index). The buffers receive each step's observation before the step, raw
         action (0 where the env reset instead), reward and flags. Returns the observations
-        after the last step. The results do not depend on ``num_threads``."""
+        after the last step. The results do not depend on ``num_threads``.
+
+        The buffers must be as :meth:`rollout_buffers` makes them: exactly its dtypes and
+        shapes, C-contiguous, writable and each in its own memory; ``first_step + T`` is at
+        most 2**48. Anything else is a ``TypeError`` or ``ValueError`` naming the buffer, with
+        nothing stepped (docs/limits.md)."""
         if self._layout.dict_obs:
             raise ValueError(
                 f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"
             )
+        native = self._live()
+        if not isinstance(buffers, dict):
+            raise TypeError(
+                f"buffers must be the dict rollout_buffers(T) returns, not {type(buffers).__name__}"
+            )
+        missing = [k for k in ROLLOUT_BUFFERS if k not in buffers]
+        if missing:
+            raise ValueError(
+                f"buffers lack {', '.join(missing)}; rollout takes the dict rollout_buffers(T) "
+                f"returns (keys {', '.join(ROLLOUT_BUFFERS)})"
+            )
         b = buffers
-        _, obs = _native.rollout(self._native, policy, int(first_step), b["obs"], b["actions"],
+        _, obs = _native.rollout(native, policy, first_step, b["obs"], b["actions"],
                                  b["rewards"], b["terminated"], b["truncated"], b["autoreset"])
         return obs
 

@@ -197,6 +197,8 @@ def rollout(
 def shares(num_envs: int, workers: int) -> list[tuple[int, int]]:
     """``(first env, envs)`` of ``workers`` contiguous, near-equal shares of ``num_envs`` envs
     (the first ``num_envs % workers`` shares take one env more)."""
+    if num_envs < 1:
+        raise ValueError(f"num_envs {num_envs} is out of range: at least 1")
     if not 1 <= workers <= num_envs:
         raise ValueError(f"workers {workers} is out of range: 1..={num_envs} (num_envs)")
     q, r = divmod(num_envs, workers)
@@ -215,6 +217,10 @@ class _RolloutActor:
         self.first = first
         self.vec = MjskillVectorEnv(env_id, num_envs=n, num_threads=num_threads, **env_kwargs)
         self.buffers: dict[str, np.ndarray] = {}
+
+    def pid(self) -> int:
+        """The actor's process id."""
+        return os.getpid()
 
     def spaces(self):
         v = self.vec
@@ -241,30 +247,76 @@ class RayVectorEnv:
     :class:`~mjskill.MjskillVectorEnv` of ``num_envs`` envs gives (env ``i`` is seeded with
     ``seed + i`` and samples its actions from its own stream, whichever actor holds it).
     Ray is initialised with ``address`` (default: ``RAY_ADDRESS`` or a local Ray) unless it
-    already is; the actors go wherever the cluster has CPUs."""
+    already is; the actors go wherever the cluster has CPUs.
+
+    ``workers × num_threads`` CPUs must fit in the cluster (``ray.cluster_resources()``, the
+    CPUs of the nodes up now: an autoscaling cluster's nodes must be started first), or this
+    raises ``ValueError`` naming the numbers at once (Ray would otherwise wait for them
+    forever). Every call waits at most ``timeout`` seconds (default 600; ``None``: no limit)
+    for the actors and raises ``TimeoutError`` naming those that did not answer (a stopped
+    or starved actor)."""
 
     def __init__(self, env_id: str, num_envs: int, workers: int, num_threads: int = 1,
-                 address: str | None = None, **env_kwargs: Any):
+                 address: str | None = None, timeout: float | None = 600.0,
+                 **env_kwargs: Any):
         import ray
 
-        if not ray.is_initialized():
-            ray.init(address=address)
+        num_envs = _native.check_count(num_envs, "num_envs")
+        workers = _native.check_count(workers, "workers")
+        num_threads = _native.check_count(num_threads, "num_threads")
+        if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0):
+            raise ValueError(f"timeout must be a positive number of seconds or None, got {timeout!r}")
+        self.timeout = timeout
         self.num_envs = int(num_envs)
         self.shares = shares(self.num_envs, int(workers))
+        if not ray.is_initialized():
+            ray.init(address=address)
+        cpus = ray.cluster_resources().get("CPU", 0)
+        if workers * num_threads > cpus:
+            raise ValueError(
+                f"RayVectorEnv needs workers × num_threads = {workers} × {num_threads} = "
+                f"{workers * num_threads} CPUs, but the Ray cluster has {cpus:g} "
+                "(ray.cluster_resources()['CPU']), so its actors would never start; use fewer "
+                f"workers or num_threads (at most {int(cpus)} CPUs in all)"
+            )
         actor = ray.remote(num_cpus=num_threads)(_RolloutActor)
         self._actors = [actor.remote(env_id, f, n, num_threads, env_kwargs)
                         for f, n in self.shares]
-        obs_space, act_space, steps, attrs = ray.get(self._actors[0].spaces.remote())
+        obs_space, act_space, steps, attrs = self._get(
+            [self._actors[0].spaces.remote()], "start")[0]
         self.single_observation_space, self.single_action_space = obs_space, act_space
         self.max_episode_steps = steps
         for k, v in attrs.items():
             setattr(self, k, v)
 
-    def reset(self, seed: int | None = None) -> np.ndarray:
-        """Resets every env (env ``i`` with ``seed + i``); the observations ``[N, obs_dim]``."""
+    def _get(self, refs: list, what: str) -> list:
+        """``ray.get(refs)`` within :attr:`timeout`, or a ``TimeoutError`` naming the actors
+        (``refs[k]`` is actor ``k``'s answer) that did not answer."""
         import ray
 
-        return np.concatenate(ray.get([a.reset.remote(seed) for a in self._actors]))
+        if self.timeout is None:
+            return ray.get(refs)
+        ready, pending = ray.wait(refs, num_returns=len(refs), timeout=self.timeout)
+        if pending:
+            late = [k for k, r in enumerate(refs) if r in pending]
+            raise TimeoutError(
+                f"RayVectorEnv: actor(s) {late} (envs "
+                + ", ".join(f"{self.shares[k][0]}..{sum(self.shares[k]) - 1}" for k in late)
+                + f") did not answer {what} within {self.timeout:g} s (stopped, busy or "
+                "starved of CPUs); the timeout is RayVectorEnv(timeout=...)"
+            )
+        return ray.get(refs)
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Resets every env (env ``i`` with ``seed + i``); the observations ``[N, obs_dim]``."""
+        seed = _native.check_seed(seed)
+        if seed is not None and seed + self.num_envs - 1 > MAX_SEED:
+            raise ValueError(
+                f"seed {seed} is out of range for these envs: env i is seeded with seed + i, and "
+                f"env {self.num_envs - 1} would get {seed + self.num_envs - 1}, beyond the 32-bit "
+                f"seeds 0..={MAX_SEED}; give a seed at most {MAX_SEED - self.num_envs + 1}"
+            )
+        return np.concatenate(self._get([a.reset.remote(seed) for a in self._actors], "reset"))
 
     def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
         """As :meth:`mjskill.MjskillVectorEnv.rollout_buffers`, for all ``num_envs`` envs."""
@@ -277,9 +329,12 @@ class RayVectorEnv:
         ``env_offset``. Fills ``buffers`` and returns the observations after the last step."""
         import ray
 
+        if not self._actors:
+            raise RuntimeError("this RayVectorEnv is closed")
         steps = buffers["rewards"].shape[0]
         ref = ray.put(policy)
-        parts = ray.get([a.rollout.remote(ref, int(first_step), steps) for a in self._actors])
+        parts = self._get(
+            [a.rollout.remote(ref, first_step, steps) for a in self._actors], "rollout")
         for key, dst in buffers.items():
             np.concatenate([p[0][key] for p in parts], axis=1, out=dst)
         return np.concatenate([p[1] for p in parts])

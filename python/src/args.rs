@@ -169,10 +169,17 @@ pub(crate) fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResu
                 cfg.reward_mode = RewardMode::parse(&mode).map_err(value_err)?;
             }
             "max_episode_steps" => {
+                // -1 is gymnasium's "no time limit" (gym.make's max_episode_steps=-1), here too.
                 let max = UNLIMITED_EPISODE_STEPS;
-                let valid = format!("an episode needs at least one step (1..={max})");
-                let steps = int_arg(&value, &key, 1, max as i128, &valid)?;
-                cfg.max_episode_steps = Some(steps as u32);
+                let valid =
+                    format!("an episode needs at least one step (1..={max}), or -1 for no limit");
+                let steps = int_arg(&value, &key, -1, max as i128, &valid)?;
+                if steps == 0 {
+                    return Err(PyValueError::new_err(format!(
+                        "{key} 0 is out of range: {valid}"
+                    )));
+                }
+                cfg.max_episode_steps = Some(if steps == -1 { max } else { steps as u32 });
             }
             "robot_init_qpos_noise" => cfg.robot_init_qpos_noise = f64_arg(&value, &key)?,
             "sim_freq" => {

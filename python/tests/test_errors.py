@@ -68,8 +68,10 @@ def test_bad_seeds_are_value_errors():
     with pytest.raises(ValueError, match="seed 4294967296 is out of range"):
         env.reset(seed=2**32)
     v = mjskill.MjskillVectorEnv("PickCube-v1", num_envs=2)
-    with pytest.raises(ValueError, match="seed 4294967296 is out of range"):
-        v.reset(seed=2**32 - 1)  # env 1 would get 2**32
+    # The seed given is named (issue 42), with env 1's 2**32 and the largest seed that fits.
+    with pytest.raises(ValueError, match="seed 4294967295 is out of range for these envs: .*"
+                                         "env 1 would get 4294967296.*at most 4294967294"):
+        v.reset(seed=2**32 - 1)
 
 
 def test_bad_states_are_value_errors_naming_the_field():

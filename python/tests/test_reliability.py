@@ -138,7 +138,9 @@ def test_huge_num_envs_is_a_value_error(n):
     [
         ({"sim_freq": -1}, "sim_freq -1 is out of range: use a multiple of the control frequency"),
         ({"sim_freq": 2**40}, "sim_freq 1099511627776 is out of range"),
-        ({"max_episode_steps": -1}, r"max_episode_steps -1 is out of range: .*1\.\.=4294967295"),
+        ({"max_episode_steps": -2}, r"max_episode_steps -2 is out of range: .*1\.\.=4294967295"
+                                    r"\), or -1 for no limit"),
+        ({"max_episode_steps": 0}, r"max_episode_steps 0 is out of range"),
         ({"max_episode_steps": 2**32}, "max_episode_steps 4294967296 is out of range"),
     ],
 )

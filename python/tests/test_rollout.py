@@ -74,7 +74,8 @@ def test_rollout_rejects_bad_buffers_and_policies():
     act_dim = vec.single_action_space.shape[0]
     buf = vec.rollout_buffers(3)
     buf["actions"] = np.zeros((3, 2, act_dim // 2), np.float32)
-    with pytest.raises(ValueError, match="rollout buffer actions has 24 values, expected 48"):
+    with pytest.raises(ValueError, match=r"rollout buffer actions has shape \[3, 2, 4\], "
+                                         r"expected \[3, 2, 8\]"):
         vec.rollout(GaussianMlp(**params(obs_dim, act_dim)), 0, buf)
     buf["actions"] = np.zeros((3, 2, 2 * act_dim), np.float32)[:, :, ::2]
     with pytest.raises(ValueError, match="rollout buffer actions must be C-contiguous"):
@@ -96,6 +97,39 @@ def local_ray():
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     ray.shutdown()
+
+
+def test_ray_actors_that_cannot_fit_the_cluster_fail_at_once(local_ray):
+    # Issue 42, item 11: 2 workers × 2 threads on ray.init(num_cpus=2) waited forever.
+    from mjskill.ray import RayVectorEnv
+
+    with pytest.raises(ValueError, match=r"workers × num_threads = 2 × 2 = 4 CPUs, but the "
+                                         r"Ray cluster has 2"):
+        RayVectorEnv("PickCube-v1", 4, workers=2, num_threads=2, **KW)
+    with pytest.raises(ValueError, match="num_envs 0 is out of range"):
+        RayVectorEnv("PickCube-v1", 0, workers=1, **KW)
+
+
+def test_a_stopped_ray_actor_is_a_timeout_error_not_a_hang(local_ray):
+    # Issue 42: a SIGSTOPped actor blocked RayVectorEnv.rollout forever.
+    import signal
+
+    import ray
+    from mjskill.ray import RayVectorEnv
+
+    remote = RayVectorEnv("PickCube-v1", 3, workers=2, timeout=5, **KW)
+    remote.reset(seed=1)
+    obs_dim = remote.single_observation_space.shape[0]
+    act_dim = remote.single_action_space.shape[0]
+    pid = ray.get(remote._actors[1].pid.remote())
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        with pytest.raises(TimeoutError, match=r"actor\(s\) \[1\] \(envs 2..2\) did not answer "
+                                               r"rollout within 5 s"):
+            remote.rollout(params(obs_dim, act_dim), 0, remote.rollout_buffers(2))
+    finally:
+        os.kill(pid, signal.SIGCONT)
+        remote.close()
 
 
 def test_ray_shards_roll_out_bit_for_bit_as_one_vector_env(local_ray):

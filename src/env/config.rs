@@ -106,6 +106,21 @@ pub enum EnvError {
     /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
     #[error("seed {0} is out of range: seeds are 32-bit, 0..={max}", max = super::checks::MAX_SEED)]
     BadSeed(u64),
+    /// A [`VecEnv`](super::VecEnv) reset seed `seed` whose per-env seeds `seed + i` (up to
+    /// env `last_env`) leave ManiSkill's 32-bit range; names the seed given.
+    #[error(
+        "seed {seed} is out of range for these envs: env i is seeded with seed + i, and env \
+         {last_env} would get {}, beyond the 32-bit seeds 0..={max}; give a seed at most {}",
+        *seed as u128 + *last_env as u128,
+        (super::checks::MAX_SEED as u128).saturating_sub(*last_env as u128),
+        max = super::checks::MAX_SEED
+    )]
+    VecSeedRange {
+        /// The seed given.
+        seed: u64,
+        /// The highest env index it seeds.
+        last_env: usize,
+    },
     /// An unknown robot uid, or the robot's scene could not be built.
     #[error(transparent)]
     Robot(#[from] RobotError),
@@ -140,12 +155,13 @@ pub enum EnvError {
         max = super::vec::MAX_NUM_ENVS
     )]
     TooManyEnvs(usize),
-    /// A [`VecEnv`](super::VecEnv) whose envs would not fit in the memory available
-    /// (`MemAvailable` of `/proc/meminfo`), refused before they are made.
+    /// A [`VecEnv`](super::VecEnv) whose envs would not fit in the memory this process may
+    /// still take (the tightest of `MemAvailable` of `/proc/meminfo`, the address-space
+    /// limit `RLIMIT_AS` and the cgroup's `memory.max`), refused before they are made.
     #[error(
         "num_envs {num_envs} would need about {} MB ({} KB per env: its MuJoCo model and data, \
-         images and buffers), more than the {} MB of memory available (MemAvailable in \
-         /proc/meminfo); use fewer envs",
+         images and buffers), more than the {} MB of memory available ({limit}); use fewer \
+         envs",
         (*num_envs as u64).saturating_mul(*per_env_bytes) >> 20,
         per_env_bytes >> 10,
         available_bytes >> 20
@@ -157,6 +173,20 @@ pub enum EnvError {
         per_env_bytes: u64,
         /// Memory available (bytes).
         available_bytes: u64,
+        /// Which limit that is (`"MemAvailable in /proc/meminfo"`, the address-space limit,
+        /// the cgroup's).
+        limit: &'static str,
+    },
+    /// Env `index` of a [`VecEnv`](super::VecEnv) of `num_envs` could not be made (e.g. a
+    /// memory limit reached while making them).
+    #[error("cannot make env {index} of num_envs {num_envs}: {source}; use fewer envs")]
+    VecEnvMake {
+        /// The env that failed (0-based).
+        index: usize,
+        /// Envs asked for.
+        num_envs: usize,
+        /// Why.
+        source: Box<EnvError>,
     },
     /// A [`VecEnv`](super::VecEnv) worker thread could not be started (the OS error's text).
     #[error("cannot start a VecEnv worker thread: {0}")]
@@ -194,6 +224,21 @@ pub enum EnvError {
         got: usize,
         /// The length that fits the rewards' T steps.
         expected: usize,
+    },
+    /// A [`VecEnv::rollout`](super::VecEnv::rollout) whose steps `first_step..first_step +
+    /// steps` leave the policy's step range `0..`[`MAX_POLICY_STEP`](super::MAX_POLICY_STEP)
+    /// (the step keys the policy's sampling noise; steps beyond it would repeat or wrap).
+    #[error(
+        "rollout steps {first_step}..{first_step}+{steps} leave the policy's step range \
+         0..{max} (2^48; the step keys the sampling noise): give first_step at most {}",
+        (super::MAX_POLICY_STEP as u128).saturating_sub(*steps as u128),
+        max = super::MAX_POLICY_STEP
+    )]
+    RolloutSteps {
+        /// The rollout's first step.
+        first_step: u64,
+        /// Its number of steps.
+        steps: usize,
     },
     /// A rollout's policy gave a NaN or infinite action.
     #[error("the policy's action for env {env} at step {step} is {value}, not finite")]

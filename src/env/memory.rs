@@ -1,7 +1,9 @@
 //! The memory a [`VecEnv`](super::VecEnv) of N envs needs, checked against the memory the
-//! machine has available before the envs are made (docs/python.md, "How many envs").
+//! process may still take (the machine's available memory, `RLIMIT_AS`, the cgroup's limit)
+//! before the envs are made (docs/python.md, "How many envs").
 
 use super::{Env, EnvError};
+use crate::mujoco::limits::{self, Headroom};
 
 /// Memory of one env besides its MuJoCo model, data and images (bytes): the controller,
 /// task, observation writer, the MuJoCo compiler's leftovers and the allocator's overhead.
@@ -31,38 +33,67 @@ pub(crate) fn env_bytes(env: &Env, image_bytes: u64) -> u64 {
         + ENV_OVERHEAD_BYTES
 }
 
-/// `MemAvailable` of a `/proc/meminfo` text, in bytes.
-pub(crate) fn parse_mem_available(meminfo: &str) -> Option<u64> {
-    let line = meminfo.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let mut it = line["MemAvailable:".len()..].split_whitespace();
-    let kb: u64 = it.next()?.parse().ok()?;
-    match it.next() {
-        Some("kB") => kb.checked_mul(1024),
-        _ => None,
+/// Address space one more rendering env takes beyond its resident memory (bytes): measured
+/// 64 MB of new address space per `rgb` env made after the first (glibc's 64 MB malloc
+/// heaps, reserved by Mesa's context), against 29 MB resident. Under `RLIMIT_AS` the estimate
+/// of a rendering env grows by this.
+pub const RENDER_ADDRESS_SPACE_BYTES: u64 = 64 << 20;
+
+/// The memory this process may still take: the tightest of `MemAvailable` and the cgroup's
+/// `memory.max` less its usage, and separately the address-space limit (`RLIMIT_AS`) less
+/// the address space in use, which a rendering env uses more of than its resident memory.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Available {
+    /// Resident memory left (None: unknown, e.g. not Linux).
+    pub memory: Option<Headroom>,
+    /// Address space left under `RLIMIT_AS` (None: no limit).
+    pub address_space: Option<Headroom>,
+}
+
+/// The limits of this process now.
+pub(crate) fn available() -> Available {
+    Available {
+        memory: [limits::mem_available(), limits::cgroup()]
+            .into_iter()
+            .flatten()
+            .min_by_key(|h| h.bytes),
+        address_space: limits::address_space(),
     }
 }
 
-/// The memory available for new allocations (`MemAvailable` of `/proc/meminfo`, bytes);
-/// None where there is no such file (not Linux), and then nothing is checked.
-pub(crate) fn available_bytes() -> Option<u64> {
-    parse_mem_available(&std::fs::read_to_string("/proc/meminfo").ok()?)
+/// Checks that `num_envs` envs like `env` of `per_env` bytes fit in both limits of
+/// `available`.
+pub(crate) fn check_all(
+    env: &Env,
+    num_envs: usize,
+    per_env: u64,
+    available: Available,
+) -> Result<(), EnvError> {
+    check_fits(num_envs, per_env, available.memory)?;
+    let extra = if env.config().obs_mode.is_visual() {
+        RENDER_ADDRESS_SPACE_BYTES
+    } else {
+        0
+    };
+    check_fits(num_envs, per_env + extra, available.address_space)
 }
 
-/// Checks that `num_envs` envs of `per_env` bytes fit in `available` bytes (no check when
+/// Checks that `num_envs` envs of `per_env` bytes fit in `available` (no check when
 /// `available` is unknown).
 pub(crate) fn check_fits(
     num_envs: usize,
     per_env: u64,
-    available: Option<u64>,
+    available: Option<Headroom>,
 ) -> Result<(), EnvError> {
     let Some(available) = available else {
         return Ok(());
     };
-    if (num_envs as u64).saturating_mul(per_env) > available {
+    if (num_envs as u64).saturating_mul(per_env) > available.bytes {
         return Err(EnvError::EnvsExceedMemory {
             num_envs,
             per_env_bytes: per_env,
-            available_bytes: available,
+            available_bytes: available.bytes,
+            limit: available.source,
         });
     }
     Ok(())
@@ -73,21 +104,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn mem_available_is_read_in_bytes() {
-        let text = "MemTotal:       24684032 kB\nMemFree:        16349184 kB\n\
-                    MemAvailable:   22212608 kB\nBuffers:          123 kB\n";
-        assert_eq!(parse_mem_available(text), Some(22_212_608 * 1024));
-        assert_eq!(parse_mem_available("MemTotal: 5 kB\n"), None);
-        assert_eq!(parse_mem_available("MemAvailable: lots\n"), None);
-        assert_eq!(parse_mem_available("MemAvailable: 5 MB\n"), None);
-    }
-
-    #[test]
     fn envs_that_do_not_fit_are_an_error_naming_the_sizes() {
         let mb = 1 << 20;
-        assert!(check_fits(100, mb, Some(100 * mb)).is_ok());
+        let room = |bytes| {
+            Some(Headroom {
+                bytes,
+                source: "MemAvailable in /proc/meminfo",
+            })
+        };
+        assert!(check_fits(100, mb, room(100 * mb)).is_ok());
         assert!(check_fits(16_384, 5 * mb, None).is_ok());
-        let e = check_fits(4096, 5 * mb, Some(1024 * mb))
+        let e = check_fits(4096, 5 * mb, room(1024 * mb))
             .unwrap_err()
             .to_string();
         assert!(
@@ -98,6 +125,6 @@ mod tests {
             "{e}"
         );
         // No overflow on absurd sizes.
-        assert!(check_fits(usize::MAX, u64::MAX, Some(1)).is_err());
+        assert!(check_fits(usize::MAX, u64::MAX, room(1)).is_err());
     }
 }

@@ -49,13 +49,14 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering}
 use std::sync::{Arc, Mutex};
 use std::thread::{JoinHandle, Thread};
 
-use super::config::Textures;
 use super::memory;
 use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, PointCloud};
 use crate::mujoco::Warnings;
 
+mod images;
 mod rollout;
-pub use rollout::{RolloutBuffers, VecPolicy};
+use images::{pack_bytes, pack_i16, store_f32, unpack_bytes, unpack_i16, ImageLayout};
+pub use rollout::{RolloutBuffers, VecPolicy, MAX_POLICY_STEP};
 
 /// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
 ///
@@ -80,37 +81,6 @@ const CMD_STEP_POLICY: u64 = 5;
 const CMD_TEST_PANIC: u64 = 3;
 /// Busy-wait iterations before a waiting thread parks or yields.
 const SPINS: u32 = 20_000;
-
-/// Where one sensor camera's images live inside an env's image block.
-#[derive(Debug, Clone)]
-struct CamSlot {
-    name: &'static str,
-    size: (usize, usize),
-    /// First pixel of the camera within the env's block (cameras are concatenated).
-    at: usize,
-}
-
-/// Image layout of one env (identical for all envs of a VecEnv); empty for non-visual modes.
-/// Every texture of an env travels as one block: colour bytes packed four per cell,
-/// segmentation ids two per cell, depth and point coordinates as f32 bits.
-#[derive(Debug, Clone, Default)]
-struct ImageLayout {
-    cams: Vec<CamSlot>,
-    tex: Textures,
-    point_cloud: bool,
-    /// Pixels per env (all cameras).
-    px: usize,
-    /// rgb cells per env (`3·px` bytes rounded up to whole cells).
-    rgb_cells: usize,
-    /// segmentation cells per env (`2·px` bytes rounded up).
-    seg_cells: usize,
-    /// depth values per env.
-    depth_len: usize,
-    /// point-cloud values per env (`4·px`).
-    xyzw_len: usize,
-    /// The far clip plane (the depth of nothing), for the millimetre depth.
-    far: f32,
-}
 
 impl Worker {
     /// One worker per range of `envs`, in order; `dims` = (obs_dim, act_dim, info keys).
@@ -156,102 +126,6 @@ fn shares(num_envs: usize, threads: usize) -> Vec<Range<usize>> {
             start..start + q + usize::from(t < r)
         })
         .collect()
-}
-
-impl ImageLayout {
-    /// Bytes one env takes in a VecEnv's buffers: `values` f32s (observation and action)
-    /// and its images, each held twice (the shared cells and the unpacked copy).
-    fn buffer_bytes(&self, values: usize) -> u64 {
-        let cells = values + self.rgb_cells + self.depth_len + self.seg_cells + self.xyzw_len;
-        // Depth also as millimetres, segmentation ids unpacked to one i16 per pixel.
-        (8 * cells + 2 * self.depth_len + 2 * self.px) as u64
-    }
-
-    /// The layout of `env`'s sensor images (empty unless its obs mode renders).
-    fn of(env: &Env) -> ImageLayout {
-        let mut l = ImageLayout::default();
-        let Some(v) = env.vision.as_ref().filter(|v| v.tex.any()) else {
-            return l;
-        };
-        l.tex = v.tex;
-        l.point_cloud = env.point_cloud().is_some();
-        l.far = env.render_options().clip.1 as f32;
-        let mut k = 0;
-        while let Some(img) = v.sensor_image(k) {
-            l.cams.push(CamSlot {
-                name: img.name,
-                size: (img.width, img.height),
-                at: l.px,
-            });
-            l.px += img.width * img.height;
-            k += 1;
-        }
-        if l.tex.rgb {
-            l.rgb_cells = (3 * l.px).div_ceil(4);
-        }
-        if l.tex.segmentation {
-            l.seg_cells = (2 * l.px).div_ceil(4);
-        }
-        if l.tex.depth {
-            l.depth_len = l.px;
-        }
-        if l.point_cloud {
-            l.xyzw_len = 4 * l.px;
-        }
-        l
-    }
-}
-
-/// Packs int16 values two per cell (little-endian; an odd last value is zero-padded).
-fn pack_i16(cells: &[AtomicU32], values: &[i16]) {
-    for (cell, c) in cells.iter().zip(values.chunks(2)) {
-        let hi = c.get(1).copied().unwrap_or(0) as u16 as u32;
-        cell.store(c[0] as u16 as u32 | hi << 16, Ordering::Relaxed);
-    }
-}
-
-/// Unpacks cells written by [`pack_i16`] into `dst`.
-fn unpack_i16(dst: &mut [i16], cells: &[AtomicU32]) {
-    for (d, cell) in dst.chunks_mut(2).zip(cells) {
-        let v = cell.load(Ordering::Relaxed);
-        d[0] = v as u16 as i16;
-        if let Some(x) = d.get_mut(1) {
-            *x = (v >> 16) as u16 as i16;
-        }
-    }
-}
-
-/// Stores f32 values as bits.
-fn store_f32(cells: &[AtomicU32], values: &[f32]) {
-    for (cell, v) in cells.iter().zip(values) {
-        cell.store(v.to_bits(), Ordering::Relaxed);
-    }
-}
-
-/// Packs `bytes` four per cell (little-endian; a short last chunk is zero-padded).
-fn pack_bytes(cells: &[AtomicU32], bytes: &[u8]) {
-    let chunks = bytes.chunks_exact(4);
-    let rest = chunks.remainder();
-    let n = chunks.len();
-    for (cell, c) in cells.iter().zip(chunks) {
-        cell.store(
-            u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
-            Ordering::Relaxed,
-        );
-    }
-    if !rest.is_empty() {
-        let mut b = [0u8; 4];
-        b[..rest.len()].copy_from_slice(rest);
-        cells[n].store(u32::from_le_bytes(b), Ordering::Relaxed);
-    }
-}
-
-/// Unpacks cells written by [`pack_bytes`] into `dst` (4 bytes per cell; `dst` holds whole
-/// cells, so padding bytes land in it too).
-fn unpack_bytes(dst: &mut [u8], cells: &[AtomicU32]) {
-    for (d, cell) in dst.chunks_exact_mut(4).zip(cells) {
-        d.copy_from_slice(&cell.load(Ordering::Relaxed).to_le_bytes());
-    }
 }
 
 /// State shared between the caller and the workers.
@@ -362,12 +236,15 @@ impl Worker {
         let Some(policy) = policy else {
             return;
         };
-        for (dst, env) in self
-            .policy_obs
-            .chunks_exact_mut(self.obs_dim)
-            .zip(&self.envs)
-        {
-            dst.copy_from_slice(env.obs());
+        // An obs mode without observations (`none`) has obs_dim 0: nothing to copy.
+        if self.obs_dim > 0 {
+            for (dst, env) in self
+                .policy_obs
+                .chunks_exact_mut(self.obs_dim)
+                .zip(&self.envs)
+            {
+                dst.copy_from_slice(env.obs());
+            }
         }
         policy.act(
             self.first,
@@ -534,24 +411,27 @@ impl VecEnv {
     /// calling thread counts as one; more threads than envs are clamped to `num_envs`). Like
     /// [`make`], every env starts reset (env i with seed 2022 + i). `num_envs` must be in
     /// `1..=`[`MAX_NUM_ENVS`] ([`EnvError::NoEnvs`], [`EnvError::TooManyEnvs`]), and
-    /// `num_envs` envs like the first must fit in the memory available (`MemAvailable` of
-    /// `/proc/meminfo`; [`EnvError::EnvsExceedMemory`], checked before the others are made).
+    /// `num_envs` envs like the first must fit in the memory available (the tightest of
+    /// `MemAvailable` of `/proc/meminfo`, `RLIMIT_AS` less the address space in use and the
+    /// cgroup's `memory.max` less its usage; [`EnvError::EnvsExceedMemory`], checked before
+    /// the others are made); an env that still cannot be made is
+    /// [`EnvError::VecEnvMake`], naming it and `num_envs`.
     pub fn new(
         env_id: &str,
         config: EnvConfig,
         num_envs: usize,
         threads: usize,
     ) -> Result<VecEnv, EnvError> {
-        Self::new_within(env_id, config, num_envs, threads, memory::available_bytes())
+        Self::new_within(env_id, config, num_envs, threads, memory::available())
     }
 
-    /// [`VecEnv::new`] given the memory available (bytes; None: unknown, not checked).
+    /// [`VecEnv::new`] given the memory available (None: unknown, not checked).
     fn new_within(
         env_id: &str,
         config: EnvConfig,
         num_envs: usize,
         threads: usize,
-        available: Option<u64>,
+        available: memory::Available,
     ) -> Result<VecEnv, EnvError> {
         if num_envs == 0 {
             return Err(EnvError::NoEnvs);
@@ -567,11 +447,16 @@ impl VecEnv {
         // The first env's size (with its share of the buffers below) times num_envs must fit
         // before the others are made.
         let per_env = memory::env_bytes(&first, images.buffer_bytes(obs_dim + act_dim));
-        memory::check_fits(num_envs, per_env, available)?;
+        memory::check_all(&first, num_envs, per_env, available)?;
         let mut envs = Vec::with_capacity(num_envs);
         envs.push(first);
-        for _ in 1..num_envs {
-            envs.push(make(env_id, config.clone())?);
+        for index in 1..num_envs {
+            let env = make(env_id, config.clone()).map_err(|e| EnvError::VecEnvMake {
+                index,
+                num_envs,
+                source: Box::new(e),
+            })?;
+            envs.push(env);
         }
         let first = &envs[0];
         let keys = first.info().keys;
@@ -723,13 +608,20 @@ impl VecEnv {
     }
 
     /// Like [`VecEnv::reset`], but seeds `s..s + N` that leave ManiSkill's 32-bit range
-    /// ([`super::checks::MAX_SEED`]) are an error ([`EnvError::BadSeed`] with the first bad
-    /// seed) and nothing is reset.
+    /// ([`super::checks::MAX_SEED`]) are an error ([`EnvError::BadSeed`] for a seed beyond it,
+    /// [`EnvError::VecSeedRange`] naming the seed given when only `s + i` is) and nothing is
+    /// reset.
     pub fn try_reset(&mut self, seed: Option<u64>) -> Result<&[f32], EnvError> {
         if let Some(s) = seed {
             let last = s as u128 + self.num_envs as u128 - 1;
+            if s > super::checks::MAX_SEED {
+                return Err(EnvError::BadSeed(s));
+            }
             if last > super::checks::MAX_SEED as u128 {
-                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+                return Err(EnvError::VecSeedRange {
+                    seed: s,
+                    last_env: self.num_envs - 1,
+                });
             }
         }
         Ok(self.reset(seed))
@@ -750,7 +642,7 @@ impl VecEnv {
     /// it, or unseeded) and returns every env's observations; the other envs keep their state,
     /// observations, rewards, flags and info. A mask of the wrong length is
     /// [`EnvError::VecMaskLength`] and seeds that leave the 32-bit range are
-    /// [`EnvError::BadSeed`], with nothing reset.
+    /// [`EnvError::BadSeed`] or [`EnvError::VecSeedRange`], with nothing reset.
     pub fn reset_envs(&mut self, mask: &[bool], seed: Option<u64>) -> Result<&[f32], EnvError> {
         if mask.len() != self.num_envs {
             return Err(EnvError::VecMaskLength {
@@ -760,8 +652,14 @@ impl VecEnv {
         }
         if let (Some(s), Some(last)) = (seed, mask.iter().rposition(|&m| m)) {
             let top = s as u128 + last as u128;
+            if s > super::checks::MAX_SEED {
+                return Err(EnvError::BadSeed(s));
+            }
             if top > super::checks::MAX_SEED as u128 {
-                return Err(EnvError::BadSeed((super::checks::MAX_SEED + 1).max(s)));
+                return Err(EnvError::VecSeedRange {
+                    seed: s,
+                    last_env: last,
+                });
             }
         }
         for (cell, &m) in self.shared.reset_mask.iter().zip(mask) {
@@ -945,6 +843,7 @@ impl Drop for VecEnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mujoco::limits::Headroom;
 
     #[test]
     fn a_worker_panic_reaches_the_caller_instead_of_hanging() {
@@ -963,12 +862,20 @@ mod tests {
         // 16384 envs against 64 MB: refused after the first env is made (making them all
         // would take minutes and about 48 GB).
         let cfg = EnvConfig::default();
-        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, Some(64 << 20))
+        let room = |bytes| memory::Available {
+            memory: Some(Headroom {
+                bytes,
+                source: "MemAvailable in /proc/meminfo",
+            }),
+            address_space: None,
+        };
+        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, room(64 << 20))
             .unwrap_err();
         let EnvError::EnvsExceedMemory {
             num_envs,
             per_env_bytes,
             available_bytes,
+            ..
         } = e
         else {
             panic!("{e}");
@@ -989,23 +896,8 @@ mod tests {
             obs_mode: crate::env::ObsMode::Rgb,
             ..cfg.clone()
         };
-        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, Some(1 << 30)).is_err());
-        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, Some(1 << 30)).unwrap();
+        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, room(1 << 30)).is_err());
+        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, room(1 << 30)).unwrap();
         assert_eq!(v.num_envs(), 2);
-    }
-
-    #[test]
-    fn bytes_survive_packing_with_a_partial_last_cell() {
-        // Two cameras of 7 and 5 bytes: 2 + 2 cells, the second camera starts at cell 2.
-        let cells: Vec<AtomicU32> = (0..4).map(|_| AtomicU32::new(u32::MAX)).collect();
-        let (a, b) = ([1u8, 2, 3, 4, 5, 6, 7], [8u8, 9, 10, 11, 12]);
-        pack_bytes(&cells[0..], &a);
-        pack_bytes(&cells[2..], &b);
-        let mut out = [0xAAu8; 16];
-        unpack_bytes(&mut out, &cells);
-        assert_eq!(&out[..7], &a);
-        assert_eq!(out[7], 0, "padding is zeroed");
-        assert_eq!(&out[8..13], &b);
-        assert_eq!(&out[13..], &[0, 0, 0]);
     }
 }

@@ -10,6 +10,7 @@
 //! printed; they are counted in `mjData.warning` and surfaced through [`Data::warnings`].
 #![allow(unsafe_code)]
 
+pub(crate) mod limits;
 pub mod render;
 
 use std::ffi::{CStr, CString};

@@ -47,6 +47,9 @@ pub enum RenderError {
     /// A bad argument (camera id, image size, buffer length).
     #[error("{0}")]
     Invalid(String),
+    /// Too little address space left under the process's limit for a new GL context.
+    #[error("cannot create a GL context: {0}")]
+    Memory(String),
     /// EGL failed after the context was created.
     #[error("rendering failed: {0}")]
     Failed(String),
@@ -137,6 +140,40 @@ impl EglError {
             source,
             hint: "",
         }
+    }
+}
+
+/// Address space a new GL context needs, with a margin (bytes): measured, each context after
+/// the first takes 64 MB of new address space (one of glibc's malloc heaps, against 29 MB
+/// resident), and 4 times that is required.
+pub const GL_CONTEXT_ADDRESS_SPACE: u64 = 256 << 20;
+
+/// Address space the first GL context of a process needs, with a margin (bytes): measured,
+/// Mesa's EGL display, its llvmpipe rasteriser threads and the first context take 600 MB.
+pub const FIRST_GL_CONTEXT_ADDRESS_SPACE: u64 = 768 << 20;
+
+/// Whether this process has made a GL context.
+static CONTEXT_MADE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Refuses to create a GL context with less than [`GL_CONTEXT_ADDRESS_SPACE`] (the first:
+/// [`FIRST_GL_CONTEXT_ADDRESS_SPACE`]) of address space left under `RLIMIT_AS` (`prlimit
+/// --as`, `ulimit -v`): Mesa does not check its allocations there and crashes the process
+/// (SIGSEGV in `driCreateContextAttribs`), where a clean error is possible.
+fn check_address_space(left: Option<super::limits::Headroom>) -> Result<(), RenderError> {
+    let need = if CONTEXT_MADE.load(std::sync::atomic::Ordering::Relaxed) {
+        GL_CONTEXT_ADDRESS_SPACE
+    } else {
+        FIRST_GL_CONTEXT_ADDRESS_SPACE
+    };
+    match left {
+        Some(h) if h.bytes < need => Err(RenderError::Memory(format!(
+            "a new GL context needs about {} MB of address space, and {} MB are left ({}); \
+             raise the limit or make fewer rendering envs",
+            need >> 20,
+            h.bytes >> 20,
+            h.source
+        ))),
+        _ => Ok(()),
     }
 }
 
@@ -358,8 +395,12 @@ impl Renderer {
             )));
         }
         super::init().map_err(|e| RenderError::Invalid(e.to_string()))?;
+        // Before EGL is initialised too: Mesa's display and rasteriser threads are most of
+        // what the first context takes.
+        check_address_space(super::limits::address_space())?;
         let e = egl_display()?;
         let _guard = CREATE.lock().unwrap_or_else(|p| p.into_inner());
+        check_address_space(super::limits::address_space())?;
         e.egl
             .bind_api(egl::OPENGL_API)
             .map_err(|err| RenderError::Unavailable(format!("eglBindAPI failed: {err}")))?;
@@ -369,6 +410,7 @@ impl Renderer {
             .map_err(|err| {
                 RenderError::Unavailable(format!("eglCreateContext (desktop GL) failed: {err}"))
             })?;
+        CONTEXT_MADE.store(true, std::sync::atomic::Ordering::Relaxed);
         if let Err(msg) = make_current(e, ctx) {
             let _ = e.egl.destroy_context(e.display, ctx);
             return Err(RenderError::Unavailable(msg.to_string()));

@@ -10,10 +10,18 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::env::VecPolicy;
+use crate::env::{VecPolicy, MAX_POLICY_STEP};
 
-/// Words of the random stream reserved for one env step (far more than any action needs).
+/// Words of the random stream reserved for one env step (2^20, far more than any action
+/// needs). ChaCha8's word position has 68 bits, so steps below 2^48 ([`MAX_POLICY_STEP`],
+/// which `VecEnv::rollout` enforces) each get their own words; 2^48 would repeat step 0.
 const WORDS_PER_STEP: u32 = 20;
+const _: () = assert!(MAX_POLICY_STEP == 1 << (68 - WORDS_PER_STEP));
+
+/// Most values one layer's weights (and the observation size, the biases, the standard
+/// deviations) may have: 2^24, as for one tensor of a policy file (docs/limits.md). PPO's
+/// actors have about 2^16.
+pub const MAX_LAYER_ELEMENTS: usize = 1 << 24;
 
 /// Why a [`GaussianMlp`] could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -24,7 +32,8 @@ pub enum MlpError {
     /// A layer's weights or bias do not fit the sizes around it.
     #[error(
         "layer {layer} has {weights} weights and {bias} biases, but takes {inputs} inputs \
-         (weights are inputs × outputs, row-major, one bias per output)"
+         (weights are inputs × outputs, row-major, one bias per output, at most {max} weights)",
+        max = MAX_LAYER_ELEMENTS
     )]
     LayerShape {
         /// The layer's index.
@@ -109,6 +118,13 @@ impl GaussianMlp {
             return Err(MlpError::NoLayers);
         }
         let obs_dim = obs_mean.len();
+        if obs_dim > MAX_LAYER_ELEMENTS {
+            return Err(MlpError::Length {
+                what: "obs_mean (the observation size)",
+                got: obs_dim,
+                expected: MAX_LAYER_ELEMENTS,
+            });
+        }
         if obs_std.len() != obs_dim {
             return Err(MlpError::Length {
                 what: "obs_std",
@@ -136,7 +152,11 @@ impl GaussianMlp {
         let mut inputs = obs_dim;
         for (layer, (w, b)) in layers.into_iter().enumerate() {
             let outputs = b.len();
-            if outputs == 0 || w.len() != inputs * outputs {
+            if outputs == 0
+                || outputs > MAX_LAYER_ELEMENTS
+                || Some(w.len()) != inputs.checked_mul(outputs)
+                || w.len() > MAX_LAYER_ELEMENTS
+            {
                 return Err(MlpError::LayerShape {
                     layer,
                     weights: w.len(),
@@ -215,23 +235,30 @@ impl GaussianMlp {
         self.layers.last().map_or(0, |l| l.outputs)
     }
 
-    /// Mean actions of `k` observations (`obs`: `[k × obs_dim]`, `out`: `[k × act_dim]`).
-    /// Each row's result depends only on that row (not on `k` or the blocking).
+    /// Mean actions of `k` observations (`obs`: `[k × obs_dim]`, `out`: `[k × act_dim]`;
+    /// `k` is `out`'s row count, and a policy of `obs_dim` 0 reads nothing from `obs`, so its
+    /// actions are the last layer's bias). Each row's result depends only on that row (not on
+    /// `k` or the blocking). Rows that `obs` lacks are left as they are.
     pub fn mean(&self, obs: &[f32], out: &mut [f32], scratch: &mut Vec<f32>) {
         let (od, ad) = (self.obs_dim(), self.act_dim());
-        let rows = obs.len() / od.max(1);
+        let rows = match obs.len().checked_div(od) {
+            Some(r) => r.min(out.len() / ad),
+            None => out.len() / ad,
+        };
         scratch.resize(2 * BLOCK * self.width, 0.0);
         let (a, b) = scratch.split_at_mut(BLOCK * self.width);
         for start in (0..rows).step_by(BLOCK) {
             let k = BLOCK.min(rows - start);
-            for (r, x) in a[..k * od].chunks_exact_mut(od).enumerate() {
-                let o = &obs[(start + r) * od..(start + r + 1) * od];
-                for (i, x) in x.iter_mut().enumerate() {
-                    let z = (o[i] as f64 - self.obs_mean[i]) / self.obs_std[i];
-                    *x = match self.obs_clip {
-                        Some(c) => z.clamp(-c, c),
-                        None => z,
-                    } as f32;
+            if od > 0 {
+                for (r, x) in a[..k * od].chunks_exact_mut(od).enumerate() {
+                    let o = &obs[(start + r) * od..(start + r + 1) * od];
+                    for (i, x) in x.iter_mut().enumerate() {
+                        let z = (o[i] as f64 - self.obs_mean[i]) / self.obs_std[i];
+                        *x = match self.obs_clip {
+                            Some(c) => z.clamp(-c, c),
+                            None => z,
+                        } as f32;
+                    }
                 }
             }
             let (mut cur, mut next) = (&mut *a, &mut *b);
@@ -311,7 +338,8 @@ impl VecPolicy for GaussianMlp {
         let ad = self.act_dim();
         for (r, row) in actions.chunks_exact_mut(ad).enumerate() {
             let mut rng = ChaCha8Rng::seed_from_u64(noise.seed);
-            rng.set_stream(noise.env_offset + (first + r) as u64);
+            // An offset near 2^64 wraps the stream number (never a panic).
+            rng.set_stream(noise.env_offset.wrapping_add((first + r) as u64));
             rng.set_word_pos(u128::from(step) << WORDS_PER_STEP);
             for (a, s) in row.iter_mut().zip(&noise.std) {
                 let eps: f32 = StandardNormal.sample(&mut rng);

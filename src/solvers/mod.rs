@@ -26,7 +26,7 @@ pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
-pub use mlp::{GaussianMlp, MlpError};
+pub use mlp::{GaussianMlp, MlpError, MAX_LAYER_ELEMENTS};
 #[cfg(feature = "onnx")]
 pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 

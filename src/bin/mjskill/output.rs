@@ -2,9 +2,14 @@
 //! and published under its final name once it holds a finished episode, with an exclusive
 //! lock that makes two rollouts writing the same file a reported clash.
 //!
-//! * Before anything is simulated, an existing file at the final name is locked (`flock`
-//!   through [`File::try_lock`]); if another rollout holds it, that is the clash. The
-//!   temporary file `.<name>.<pid>.part` is created and locked.
+//! * Before anything is simulated, the rollout takes the output's lock file `.<name>.lock`
+//!   next to it (`flock` through [`File::try_lock`]) and holds it until it ends; if another
+//!   rollout holds it, that is the clash, refused at once, so two rollouts never write one
+//!   `--out` at the same time and a finished recording is never replaced by a run that
+//!   started while it was being written. The lock file is removed when the rollout ends (a
+//!   killed rollout's is reused). An existing file at the final name is locked too (for
+//!   rollouts of versions without the lock file), and the temporary file
+//!   `.<name>.<pid>.part` is created and locked.
 //! * After the first finished episode, the temporary file becomes the final name: a hard link
 //!   when no file is there (atomic, never replacing a file another rollout published
 //!   meanwhile), else a rename over the old file (whose lock this rollout holds). Recording
@@ -26,6 +31,8 @@ use std::path::{Path, PathBuf};
 pub struct Output {
     out: PathBuf,
     temp: PathBuf,
+    /// The output's lock file, held (locked) until the end.
+    _lock: LockFile,
     /// The lock on the file found at the final name at start, held until the end.
     _held: Option<File>,
     published: bool,
@@ -96,6 +103,83 @@ fn process_alive(pid: u32) -> bool {
     !Path::new("/proc/self").exists() || Path::new("/proc").join(pid.to_string()).exists()
 }
 
+/// The lock file `.<name>.lock` of an output, locked by this process; removed on drop.
+#[derive(Debug)]
+struct LockFile {
+    path: PathBuf,
+    file: File,
+}
+
+impl LockFile {
+    /// Takes the lock of `out` (whose file name is `name`, in `dir`): Ok(None) when another
+    /// rollout holds it.
+    fn take(dir: &Path, name: &str) -> std::io::Result<Option<LockFile>> {
+        let path = dir.join(format!(".{name}.lock"));
+        // A lock file removed by its holder between our open and our lock would leave us
+        // locking a file no one else can find: lock, then check that the name still leads
+        // to the file locked, else try again.
+        for _ in 0..10 {
+            let file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(TryLockError::WouldBlock) => return Ok(None),
+                Err(TryLockError::Error(e)) if e.kind() == ErrorKind::Unsupported => {
+                    return Self::take_unlocked(path, file);
+                }
+                Err(TryLockError::Error(e)) => return Err(e),
+            }
+            match File::open(&path) {
+                Ok(now) if same_file(&now, &file) => {
+                    write_pid(&file);
+                    return Ok(Some(LockFile { path, file }));
+                }
+                Ok(_) => continue,
+                Err(e) if e.kind() == ErrorKind::NotFound => continue,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(None)
+    }
+
+    /// Where the file system has no `flock`: the lock file names its holder's pid, and a
+    /// running holder other than this process is a clash.
+    fn take_unlocked(path: PathBuf, file: File) -> std::io::Result<Option<LockFile>> {
+        let holder = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|s| s.trim().parse::<u32>().ok());
+        if holder.is_some_and(|p| p != std::process::id() && process_alive(p)) {
+            return Ok(None);
+        }
+        write_pid(&file);
+        Ok(Some(LockFile { path, file }))
+    }
+}
+
+/// Writes this process's id into the lock file (who holds it, for people and for file
+/// systems without locks).
+fn write_pid(file: &File) {
+    use std::io::{Seek, Write};
+    let mut f = file;
+    file.set_len(0).ok();
+    f.seek(std::io::SeekFrom::Start(0)).ok();
+    f.write_all(format!("{}\n", std::process::id()).as_bytes())
+        .ok();
+}
+
+impl Drop for LockFile {
+    fn drop(&mut self) {
+        // Removed while still locked, so a rollout that opened it meanwhile finds, after
+        // locking, that the name no longer leads to it and tries again.
+        std::fs::remove_file(&self.path).ok();
+        self.file.unlock().ok();
+    }
+}
+
 fn clash(out: &Path) -> String {
     format!(
         "{} is being written by another mjskill rollout (it holds the file's lock); choose \
@@ -124,6 +208,15 @@ impl Output {
                 e.reason()
             )
         })?;
+        let dir = match out.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let lock = match LockFile::take(&dir, &name.to_string_lossy()) {
+            Ok(Some(l)) => l,
+            Ok(None) => return Err(clash(out)),
+            Err(e) => return Err(cannot(e)),
+        };
         let old = match File::open(out) {
             Ok(f) => {
                 if locked_elsewhere(&f).map_err(cannot)? {
@@ -133,10 +226,6 @@ impl Output {
             }
             Err(e) if e.kind() == ErrorKind::NotFound => None,
             Err(e) => return Err(cannot(e)),
-        };
-        let dir = match out.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
         };
         remove_stale(&dir, &name.to_string_lossy());
         let temp = dir.join(format!(
@@ -158,6 +247,7 @@ impl Output {
             Output {
                 out: out.to_path_buf(),
                 temp,
+                _lock: lock,
                 _held: old,
                 published: false,
             },
@@ -180,14 +270,15 @@ impl Output {
     }
 
     /// Gives the file its final name (idempotent). A file at the final name that another
-    /// rollout has locked is a clash: the error says where this run's recording was left.
+    /// rollout has locked is a clash (only a rollout without the lock file can cause one):
+    /// the error says that this run's temporary file is removed, which the caller does.
     pub fn publish(&mut self) -> Result<(), String> {
         if self.published {
             return Ok(());
         }
         let fail = |e: std::io::Error| {
             format!(
-                "cannot move the recording to {}: {e}; it was left in {}",
+                "cannot move the recording to {}: {e}; this run's recording ({}) is removed",
                 self.out.display(),
                 self.temp.display()
             )
@@ -200,7 +291,7 @@ impl Output {
                     let mine = self._held.as_ref().is_some_and(|h| same_file(h, &f));
                     if !mine && locked_elsewhere(&f).map_err(fail)? {
                         return Err(format!(
-                            "{}; this run's recording was left in {}",
+                            "{}; this run's recording ({}) is removed",
                             clash(&self.out),
                             self.temp.display()
                         ));
@@ -233,7 +324,7 @@ impl Output {
             return Ok(());
         }
         Err(format!(
-            "{}; this run's recording was left in {}",
+            "{}; this run's recording ({}) is removed",
             clash(&self.out),
             self.temp.display()
         ))
@@ -283,6 +374,26 @@ mod tests {
         std::io::Write::write_all(&mut f, b", episode 2").unwrap();
         drop(f);
         assert_eq!(std::fs::read(&out).unwrap(), b"episode 1, episode 2");
+        // The lock file goes with the run.
+        assert_eq!(leftovers(&d), [".run.mcap.lock"]);
+        drop(o);
         assert!(leftovers(&d).is_empty());
+    }
+
+    #[test]
+    fn a_second_writer_is_refused_while_the_first_holds_the_lock() {
+        let d = std::env::temp_dir().join(format!("mjskill-output-{}-lock", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let out = d.join("run.mcap");
+        // Before the first has published anything (no file at the final name yet).
+        let (a, _fa) = Output::start(&out).unwrap();
+        let e = Output::start(&out).unwrap_err();
+        assert!(e.contains("another mjskill rollout"), "{e}");
+        assert!(d.join(".run.mcap.lock").exists());
+        a.discard();
+        assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
+        let (b, _fb) = Output::start(&out).unwrap();
+        b.discard();
+        std::fs::remove_dir_all(&d).ok();
     }
 }

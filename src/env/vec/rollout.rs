@@ -12,6 +12,11 @@ use std::sync::Arc;
 use super::{VecEnv, CMD_STEP_POLICY};
 use crate::env::EnvError;
 
+/// Steps a [`VecPolicy`] is asked for are below this (2^48): [`VecEnv::rollout`] refuses a
+/// `first_step` whose steps would reach it ([`EnvError::RolloutSteps`]), so that a policy
+/// keying its noise by the step (as `GaussianMlp` does, in 48 bits) never repeats or wraps.
+pub const MAX_POLICY_STEP: u64 = 1 << 48;
+
 /// A policy that [`VecEnv::rollout`] evaluates on the worker threads, each thread on its own
 /// contiguous share of the envs.
 ///
@@ -21,7 +26,8 @@ use crate::env::EnvError;
 pub trait VecPolicy: Send + Sync + std::fmt::Debug {
     /// Writes the raw actions `actions` (`[k × act_dim]`, row-major) of envs
     /// `first..first + k` for their observations `obs` (`[k × obs_dim]`) at rollout step
-    /// `step` (the `first_step` of [`VecEnv::rollout`] plus the step's index). `scratch` belongs
+    /// `step` (the `first_step` of [`VecEnv::rollout`] plus the step's index, below
+    /// [`MAX_POLICY_STEP`]). `scratch` belongs
     /// to the calling thread and is kept between calls, so that a policy allocates only on its
     /// first call.
     fn act(
@@ -93,7 +99,8 @@ impl VecEnv {
     /// `t` of the rollout is the policy's step `first_step + t`. Returns `T`; the observations
     /// after the last step are [`VecEnv::obs`].
     ///
-    /// Buffers of the wrong length are [`EnvError::RolloutBuffer`] with nothing stepped; a
+    /// Buffers of the wrong length are [`EnvError::RolloutBuffer`] and steps that reach
+    /// [`MAX_POLICY_STEP`] are [`EnvError::RolloutSteps`], with nothing stepped; a
     /// non-finite action is [`EnvError::PolicyActionNotFinite`] after the step that produced
     /// it (the env with that action did not step, and reports `truncated`).
     pub fn rollout(
@@ -104,6 +111,9 @@ impl VecEnv {
     ) -> Result<usize, EnvError> {
         let (n, od, ad) = (self.num_envs, self.obs_dim, self.act_dim);
         let steps = out.steps(n, od, ad)?;
+        if (first_step as u128) + (steps as u128) > MAX_POLICY_STEP as u128 {
+            return Err(EnvError::RolloutSteps { first_step, steps });
+        }
         self.set_policy(Some(policy));
         let mut result = Ok(steps);
         for t in 0..steps {
