@@ -10,6 +10,10 @@ docs/training.md):
 
     python examples/policy_onnx.py hide IN.onnx OUT.onnx --obs 16,17
 
+and gives a file another name of the same env (PickCubeSO100-v1 is PickCube-v1 with the SO100):
+
+    python examples/policy_onnx.py retarget IN.onnx OUT.onnx --env-id PickCube-v1
+
 The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
 clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
 last); output ``action`` (float32, [batch, act_dim]), the mean action.
@@ -170,6 +174,24 @@ def hide_obs(src, dst, indices, note):
     return model
 
 
+def retarget(src, dst, env_id, note):
+    """Writes ``src`` as ``dst`` for another env id, the graph unchanged: for envs that are
+    the same task under two names (ManiSkill's PickCubeSO100-v1 is PickCube-v1 with
+    ``robot_uids="so100"``, PickCubeWidowXAI-v1 the same with ``"widowxai"``). Records the
+    ``note`` (appended to ``derived``). Returns the ModelProto."""
+    import onnx
+
+    model = onnx.load(str(src))
+    props = {p.key: p.value for p in model.metadata_props}
+    props["env_id"] = env_id
+    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, props)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(dst))
+    return model
+
+
 def main(argv=None):
     import argparse
 
@@ -180,7 +202,16 @@ def main(argv=None):
     h.add_argument("dst")
     h.add_argument("--obs", required=True, help="comma-separated flat observation indices")
     h.add_argument("--note", default=None, help="text for the `derived` metadata")
+    r = sub.add_parser("retarget", help="the same graph for another name of the same env")
+    r.add_argument("src")
+    r.add_argument("dst")
+    r.add_argument("--env-id", required=True)
+    r.add_argument("--note", default=None, help="text for the `derived` metadata")
     a = p.parse_args(argv)
+    if a.command == "retarget":
+        note = a.note or f"env_id set to {a.env_id} by examples/policy_onnx.py retarget"
+        retarget(a.src, a.dst, a.env_id, note)
+        return
     idx = [int(i) for i in a.obs.split(",")]
     note = a.note or f"observation entries {a.obs} hidden by examples/policy_onnx.py hide"
     hide_obs(a.src, a.dst, idx, note)

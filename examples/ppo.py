@@ -499,6 +499,7 @@ def main(argv=None):
             meta["simulator"] = args.simulator
         if resumes:
             meta["resumed"] = ",".join(str(s) for s in resumes)
+            meta["resume_commands"] = " ; ".join(resume_commands)
         path = os.path.join(out, f"{tag}.onnx")
         atomic_write(path, lambda tmp: write_mlp_policy(
             tmp, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0))
@@ -519,6 +520,7 @@ def main(argv=None):
         state.update(
             optimizer=opt.state_dict(), argv=run_argv, command=command, iteration=next_iteration,
             global_step=global_step, best=best, resumes=resumes,
+            resume_commands=resume_commands,
             times=dict(wall=clock() - t_start, sim=sim_time, infer=infer_time, gae=gae_time,
                        update=update_time, eval=eval_time),
             torch_rng=torch.get_rng_state(),
@@ -570,6 +572,7 @@ def main(argv=None):
     first_it = 1
     best = None
     resumes = []
+    resume_commands = []
     if ckpt is not None:
         # Continue where the checkpoint was taken: the start of iteration `first_it`, right
         # after its evaluation. The log keeps the rows up to that point.
@@ -582,6 +585,8 @@ def main(argv=None):
         rms.count = float(ckpt["obs_count"])
         first_it, global_step, best = int(ckpt["iteration"]), int(ckpt["global_step"]), ckpt["best"]
         resumes = list(ckpt["resumes"]) + [global_step]
+        resume_commands = list(ckpt.get("resume_commands", [])) + [
+            "python " + " ".join(shlex.quote(a) for a in sys.argv)]
         tm = ckpt["times"]
         sim_time, infer_time, gae_time = tm["sim"], tm["infer"], tm["gae"]
         update_time, eval_time = tm["update"], tm["eval"]

@@ -9,24 +9,34 @@ use std::process::Command;
 
 use mjskill::solvers::PolicyFile;
 
-/// (file, env id, control mode, success rate of `mjskill eval --policy FILE --episodes 100
-/// --seed 10000` measured when the file was shipped).
-const SHIPPED: &[(&str, &str, &str, f64)] = &[
+/// (file, env id, robot, control mode, success rate of `mjskill eval --policy FILE --episodes
+/// 100 --seed 10000` measured when the file was shipped).
+const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
         "PickCube-v1",
+        "panda",
         "pd_joint_delta_pos",
         0.95,
     ),
     (
         "PlaceSphere-v1__panda.onnx",
         "PlaceSphere-v1",
+        "panda",
         "pd_joint_delta_pos",
         0.93,
     ),
     (
         "PokeCube-v1__panda.onnx",
         "PokeCube-v1",
+        "panda",
+        "pd_ee_delta_pose",
+        0.92,
+    ),
+    (
+        "PickCube-v1__xarm6_robotiq.onnx",
+        "PickCube-v1",
+        "xarm6_robotiq",
         "pd_ee_delta_pose",
         0.92,
     ),
@@ -53,16 +63,27 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
     let mut listed: Vec<String> = SHIPPED.iter().map(|s| s.0.to_string()).collect();
     listed.sort();
     assert_eq!(files, listed);
-    for &(file, env_id, mode, _) in SHIPPED {
+    for &(file, env_id, robot, mode, _) in SHIPPED {
         let p = PolicyFile::load(dir().join(file)).unwrap();
         let m = p.meta();
         assert_eq!(m.env_id, env_id, "{file}");
-        assert_eq!(m.robot_uids, "panda", "{file}");
+        assert_eq!(m.robot_uids, robot, "{file}");
+        assert_eq!(file, format!("{env_id}__{robot}.onnx"));
         assert_eq!(m.control_mode, mode, "{file}");
         assert_eq!(m.obs_mode, "state", "{file}");
+        // A file retargeted to another name of the same env (PickCube-v1 with the SO100 is
+        // PickCubeSO100-v1) keeps the command that trained it and says so in `derived`.
+        let derived = m.props.iter().find(|(k, _)| k == "derived");
+        let trained_on = match derived {
+            Some((_, d)) if d.contains("retarget") => {
+                let rest = m.training_command.split("--env-id ").nth(1).unwrap_or("");
+                rest.split(' ').next().unwrap_or("").to_string()
+            }
+            _ => env_id.to_string(),
+        };
         assert!(
             m.training_command
-                .starts_with(&format!("python examples/ppo.py --env-id {env_id} ")),
+                .starts_with(&format!("python examples/ppo.py --env-id {trained_on} ")),
             "{file}: {}",
             m.training_command
         );
@@ -75,7 +96,7 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
 
 #[test]
 fn shipped_policies_solve_their_tasks_in_mjskill() {
-    for &(file, env_id, _, rate) in SHIPPED {
+    for &(file, env_id, _, _, rate) in SHIPPED {
         let o = Command::new(env!("CARGO_BIN_EXE_mjskill"))
             .args([
                 "eval",

@@ -129,6 +129,7 @@ def test_ppo_resume_continues_a_stopped_run(tmp_path):
 
     meta = {p.key: p.value for p in onnx.load(out / "policy.onnx").metadata_props}
     assert meta["resumed"] == str(2 * BATCH)
+    assert "--resume" in meta["resume_commands"] and "--total-timesteps 192" in meta["resume_commands"]
     assert meta["env_steps"] == str(4 * BATCH)
     assert "--resume" not in meta["training_command"]
 
