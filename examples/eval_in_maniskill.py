@@ -21,6 +21,8 @@ import sys
 import numpy as np
 
 KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode")
+#: ManiSkill's envs that fix their robot (gym.make refuses robot_uids for them).
+FIXED_ROBOT = {"PickCubeSO100-v1": "so100", "PickCubeWidowXAI-v1": "widowxai"}
 
 
 def load(path):
@@ -60,7 +62,12 @@ def main():
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401  (registers ManiSkill's envs)
 
-    env = gym.make(meta["env_id"], num_envs=1, obs_mode="state", robot_uids=meta["robot_uids"],
+    # PickCubeSO100-v1 and PickCubeWidowXAI-v1 fix their robot and refuse `robot_uids`.
+    robot = {} if meta["env_id"] in FIXED_ROBOT else dict(robot_uids=meta["robot_uids"])
+    if robot == {} and FIXED_ROBOT[meta["env_id"]] != meta["robot_uids"]:
+        sys.exit(f"policy file {a.policy}: {meta['env_id']} is for {FIXED_ROBOT[meta['env_id']]}, "
+                 f"not {meta['robot_uids']}")
+    env = gym.make(meta["env_id"], num_envs=1, obs_mode="state", **robot,
                    control_mode=meta["control_mode"], reward_mode=a.reward_mode,
                    sim_backend=a.sim_backend)
     space = env.unwrapped.single_action_space if hasattr(env.unwrapped, "single_action_space") \

@@ -192,6 +192,38 @@ def retarget(src, dst, env_id, note):
     return model
 
 
+def floor_actions(src, dst, floors, note):
+    """Writes ``src`` as ``dst`` with a lower bound on some action components: ``floors``
+    maps an action index to its least value (the others are left as they are), applied to
+    the graph's output with ``Max``. Records the ``note`` (appended to ``derived``). Returns
+    the ModelProto."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    model = onnx.load(str(src))
+    g = model.graph
+    out = g.output[0]
+    act_dim = out.type.tensor_type.shape.dim[-1].dim_value
+    if any(not 0 <= k < act_dim for k in floors):
+        raise ValueError(f"action indices {sorted(floors)} out of range 0..{act_dim - 1}")
+    lo = np.full(act_dim, np.finfo(np.float32).min, np.float32)
+    for k, v in floors.items():
+        lo[k] = v
+    old = out.name
+    raw = old + "_unfloored"
+    for node in g.node:
+        node.output[:] = [raw if o == old else o for o in node.output]
+    g.initializer.append(numpy_helper.from_array(lo, "action_floor"))
+    g.node.append(helper.make_node("Max", [raw, "action_floor"], [old]))
+    props = {p.key: p.value for p in model.metadata_props}
+    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, props)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(dst))
+    return model
+
+
 def main(argv=None):
     import argparse
 
@@ -207,7 +239,19 @@ def main(argv=None):
     r.add_argument("dst")
     r.add_argument("--env-id", required=True)
     r.add_argument("--note", default=None, help="text for the `derived` metadata")
+    f = sub.add_parser("floor", help="a lower bound on action components")
+    f.add_argument("src")
+    f.add_argument("dst")
+    f.add_argument("--action", required=True, action="append",
+                   help="INDEX:LEAST, e.g. 7:-0.545 (repeatable)")
+    f.add_argument("--note", default=None, help="text for the `derived` metadata")
     a = p.parse_args(argv)
+    if a.command == "floor":
+        floors = {int(x.split(":")[0]): float(x.split(":")[1]) for x in a.action}
+        note = a.note or ("actions floored by examples/policy_onnx.py floor: "
+                          + ", ".join(f"{k} >= {v}" for k, v in sorted(floors.items())))
+        floor_actions(a.src, a.dst, floors, note)
+        return
     if a.command == "retarget":
         note = a.note or f"env_id set to {a.env_id} by examples/policy_onnx.py retarget"
         retarget(a.src, a.dst, a.env_id, note)

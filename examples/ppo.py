@@ -65,7 +65,7 @@ import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from policy_onnx import write_mlp_policy  # noqa: E402
+from policy_onnx import floor_actions, write_mlp_policy  # noqa: E402
 
 #: ManiSkill's ppo.py defaults (its Args dataclass).
 BASE = dict(
@@ -176,6 +176,10 @@ def parse_args(argv=None, check=True):
                    help="maniskill: train on the real ManiSkill 3's CPU simulation instead (needs "
                         "mani_skill; one PhysX env per vector slot, stepped in this process) to "
                         "compare the two simulators under the same learner")
+    p.add_argument("--action-floor", metavar="INDEX:LEAST", action="append", default=[],
+                   help="a least value for an action component, in training, evaluation and "
+                        "the exported file (repeatable; e.g. 7:-0.545 keeps the WidowX AI's "
+                        "carriage target at 10 mm or more, docs/training.md); torch rollouts")
     p.add_argument("--resume", metavar="RUN_DIR", default=None,
                    help="continue the run in RUN_DIR from its last checkpoint (checkpoint.pt: "
                         "weights, optimiser, observation statistics, step count, random state) "
@@ -192,7 +196,8 @@ def parse_args(argv=None, check=True):
 
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
-                "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers")
+                "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
+                "action_floor")
 
 
 def positive(text):
@@ -232,6 +237,16 @@ def check_args(p, args):
         v = getattr(args, name)
         if not np.isfinite(v) or v < 0:
             p.error(f"--{name.replace('_', '-')} {v} must be a finite number >= 0")
+    for f in args.action_floor:
+        k, _, v = f.partition(":")
+        try:
+            int(k), float(v)
+        except ValueError:
+            p.error(f"--action-floor {f!r}: expected INDEX:LEAST, e.g. 7:-0.545")
+        if not np.isfinite(float(v)):
+            p.error(f"--action-floor {f!r}: the least value must be finite")
+    if args.action_floor and (args.rollout == "native" or args.ray_workers):
+        p.error("--action-floor works with torch rollouts (--rollout torch)")
     if args.learning_rate == 0:
         p.error("--learning-rate 0 trains nothing")
     if args.gamma > 1 or args.gae_lambda > 1:
@@ -418,6 +433,11 @@ def main(argv=None):
     act_dim = envs.single_action_space.shape[0]
     low = torch.as_tensor(envs.single_action_space.low).to(dev)
     high = torch.as_tensor(envs.single_action_space.high).to(dev)
+    floors = {int(f.split(":")[0]): float(f.split(":")[1]) for f in args.action_floor}
+    if any(not 0 <= k < len(low) for k in floors):
+        sys.exit(f"error: --action-floor indices {sorted(floors)} out of range 0..{len(low) - 1}")
+    for k, v in floors.items():
+        low[k] = max(float(low[k]), v)
     # The command that trained the run (for a resumed run: the first one, whose options it
     # keeps) and the options it was parsed from.
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
@@ -501,8 +521,14 @@ def main(argv=None):
             meta["resumed"] = ",".join(str(s) for s in resumes)
             meta["resume_commands"] = " ; ".join(resume_commands)
         path = os.path.join(out, f"{tag}.onnx")
-        atomic_write(path, lambda tmp: write_mlp_policy(
-            tmp, layers, mean, std, meta, obs_clip=None if args.no_obs_norm else 10.0))
+        def write(tmp):
+            write_mlp_policy(tmp, layers, mean, std, meta,
+                             obs_clip=None if args.no_obs_norm else 10.0)
+            if floors:
+                floor_actions(tmp, tmp, floors, "trained with --action-floor " +
+                              " ".join(args.action_floor))
+
+        atomic_write(path, write)
         atomic_write(os.path.join(out, f"{tag}.pt"), lambda tmp: torch.save(weights(), tmp))
         return path
 

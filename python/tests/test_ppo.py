@@ -40,6 +40,8 @@ def run(*args, timeout=300):
     (["--out", "/dev/null"], "exists and is not a directory"),
     (["--ray-workers", "-2"], "-2 is negative"),
     (["--resume", "/nonexistent/run"], "no checkpoint.pt there"),
+    (["--action-floor", "seven"], "expected INDEX:LEAST"),
+    (["--action-floor", "7:-0.5", "--rollout", "native"], "works with torch rollouts"),
 ])
 def test_ppo_refuses_settings_that_cannot_train(args, message):
     r = run(*args)
@@ -154,3 +156,19 @@ def test_sigterm_ends_the_run_with_its_final_evaluation_and_saves(tmp_path):
     ckpt = torch.load(out / "checkpoint.pt", weights_only=True)
     assert ckpt["global_step"] < 10_000 * BATCH
     assert log_rows(out)[-1]["eval_success"] != ""
+
+
+def test_action_floor_bounds_the_trained_files_actions(tmp_path):
+    pytest.importorskip("torch")
+    ort = pytest.importorskip("onnxruntime")
+    import numpy as np
+
+    out = tmp_path / "run"
+    r = run(*SMALL, "--total-timesteps", str(2 * BATCH), "--out", str(out),
+            "--action-floor", "7:0.25")
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = ort.InferenceSession(str(out / "policy.onnx"), providers=["CPUExecutionProvider"])
+    x = np.random.default_rng(0).normal(0, 100, (256, s.get_inputs()[0].shape[1]))
+    a = s.run(None, {s.get_inputs()[0].name: x.astype(np.float32)})[0]
+    assert a[:, 7].min() >= 0.25
+    assert a[:, 0].min() < 0.25  # the other components are not floored
