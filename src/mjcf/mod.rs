@@ -210,7 +210,7 @@ pub struct RobotOptions {
     pub firm_contact: Vec<String>,
     /// Links whose contacts get their own impedance `solimp` (dominating the partner's
     /// through `solmix`), with the default time constant: PhysX's yielding grip of the SO100's
-    /// jaws, which sink into what they squeeze ([`crate::robots`]' so100 module).
+    /// jaws, which sink into what they squeeze (docs/outcome-physics.md).
     pub contact_solimp: Vec<(String, [f64; 3])>,
     /// Penetration (m) at which the links a gripper joint moves let go of an object they
     /// have sunk into ([`crate::controllers::Drives`]); `None`: never.
