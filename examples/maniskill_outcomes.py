@@ -127,12 +127,14 @@ def read_h5(h5_path):
 _ENVS = {}
 
 
-def replay(env_id, robot, mode, seed, actions, reuse=False):
+def replay(env_id, robot, mode, seed, actions, reuse=False, target_noise=None):
     """Replays `actions` open loop in a ManiSkill env: per-step boolean info flags, final
     success and the final positions of the dynamic actors. The env is made fresh for the
     episode, or with `reuse` made once per (env, robot, mode) and reset for every episode,
     as ManiSkill's replay_trajectory tool does (PhysX CPU keeps contact caches across
-    resets, so the two can differ slightly)."""
+    resets, so the two can differ slightly). `target_noise` = (rng, sigma) adds N(0, sigma)
+    to the arm joint targets the arm controller sets at every step (for end-effector modes,
+    whose actions are not joint targets)."""
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401 (registers the envs)
     import torch
@@ -154,6 +156,18 @@ def replay(env_id, robot, mode, seed, actions, reuse=False):
         env = gym.make(env_id, **kw)
         if reuse:
             _ENVS[key] = env
+    arm = getattr(env.unwrapped.agent.controller, "controllers", {}).get("arm")
+    set_targets = arm.set_drive_targets if arm is not None else None
+    if target_noise is not None:
+        if arm is None:
+            raise ValueError(f"{env_id} {robot} {mode}: no arm controller to perturb")
+        noise_rng, sigma = target_noise
+
+        def noisy(t):
+            return set_targets(t + torch.as_tensor(noise_rng.normal(0.0, sigma, tuple(t.shape)),
+                                                   dtype=t.dtype))
+
+        arm.set_drive_targets = noisy
     try:
         env.reset(seed=seed)
         flags = {}
@@ -171,6 +185,8 @@ def replay(env_id, robot, mode, seed, actions, reuse=False):
                 objects[name] = [float(f32_text(v)) for v in actor.pose.p.reshape(-1)[:3].tolist()]
         return {k: "".join(v) for k, v in flags.items()}, final, objects
     finally:
+        if arm is not None:
+            arm.set_drive_targets = set_targets
         if not reuse:
             env.close()
 
@@ -321,17 +337,23 @@ def perturb(a):
         with gzip.open(os.path.join(a.files, name)) as f:
             d = json.load(f)
         n_arm = ARM_JOINTS.get(d["robot"])
-        if d["control_mode"] != "pd_joint_pos" or n_arm is None:
-            print(f"{name}: skipped (perturbs pd_joint_pos files of {sorted(ARM_JOINTS)})",
-                  file=sys.stderr)
+        ee = d["control_mode"].startswith("pd_ee_delta")
+        if not ee and (d["control_mode"] != "pd_joint_pos" or n_arm is None):
+            print(f"{name}: skipped (perturbs pd_joint_pos files of {sorted(ARM_JOINTS)} and "
+                  "pd_ee_delta_* files)", file=sys.stderr)
             continue
         replayed = perturbed = flips = 0
         for e in d["episodes"]:
             actions = np.asarray(e["actions"], dtype=np.float32)
-            noisy = actions.copy()
-            noisy[:, :n_arm] += rng.normal(0.0, a.perturb, noisy[:, :n_arm].shape)
             _, base, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"], actions)
-            _, pert, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"], noisy)
+            if ee:
+                # The noise goes on the joint targets the EE controller computes.
+                _, pert, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"],
+                                    actions, target_noise=(rng, a.perturb))
+            else:
+                noisy = actions.copy()
+                noisy[:, :n_arm] += rng.normal(0.0, a.perturb, noisy[:, :n_arm].shape)
+                _, pert, _ = replay(d["env_id"], d["robot"], d["control_mode"], e["seed"], noisy)
             replayed += base
             perturbed += pert
             flips += base != pert
