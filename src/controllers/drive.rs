@@ -55,7 +55,7 @@ pub const SWEEPS: usize = 2;
 pub const RELEASE_SUBSTEPS: u32 = 5;
 /// Contact points of a face-on pinch: MuJoCo's box–box collider gives a face against a face
 /// four (or more); its edge manifolds of three points overstate the depth (see
-/// [`Drives::release_deep_contacts`]).
+/// `Drives::release_deep_contacts`).
 pub const FACE_CONTACTS: usize = 4;
 /// Most gripper contacts folded into a substep's drive response (more are left to MuJoCo's
 /// constraint solver alone; a two-finger grasp of a box makes at most 8).
@@ -118,14 +118,14 @@ pub struct Drives {
     /// Per drive: whether an equality on an undriven dof (a linkage, a mimic) moves with it.
     linked: Vec<bool>,
     /// Penetration (m) beyond which a gripper link lets go of an object it has sunk into
-    /// (see [`Drives::release_deep_contacts`]); `None`: never.
+    /// (see `Drives::release_deep_contacts`); `None`: never.
     release_depth: Option<f64>,
     /// This substep's released contacts (indices into the contact list) and geom pairs.
     released: Vec<usize>,
     /// (gripper drive, object body) pairs that let go this substep.
     released_pairs: Vec<(usize, usize)>,
     /// Per drive: for how many substeps in a row its gripper links have been deeper than the
-    /// release depth in an object (see [`Drives::release_deep_contacts`]).
+    /// release depth in an object (see `Drives::release_deep_contacts`).
     deep_substeps: Vec<u32>,
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
@@ -658,7 +658,7 @@ impl Drives {
         2 * self.dofs.len()
     }
 
-    /// Forgets the last substep's contacts (see [`Drives::release_deep_contacts`]): at a reset
+    /// Forgets the last substep's contacts (see `Drives::release_deep_contacts`): at a reset
     /// or a state that was set, nothing is sunk into anything yet.
     pub fn forget_contacts(&mut self) {
         self.deep_substeps.fill(0);
