@@ -135,6 +135,21 @@ def save_weights_json(path, layers, obs_mean, obs_std, obs_clip):
         )
 
 
+def save_derived(model, dst, note, **props):
+    """Saves ``model`` as ``dst`` with its metadata updated by ``props`` and ``note`` appended
+    to ``derived`` (how the file was edited after training), after onnx's checker."""
+    import onnx
+
+    meta = {p.key: p.value for p in model.metadata_props}
+    meta.update(props)
+    meta["derived"] = "; ".join(x for x in (meta.get("derived", ""), note) if x)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, meta)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(dst))
+    return model
+
+
 def hide_obs(src, dst, indices, note):
     """Writes ``src`` as ``dst`` with the observation entries ``indices`` hidden: their rows of
     the first layer become zero and their contribution at observation 0 (after normalisation
@@ -165,13 +180,8 @@ def hide_obs(src, dst, indices, note):
         init[name].CopyFrom(numpy_helper.from_array(value.astype(np.float32), name))
     props = {p.key: p.value for p in model.metadata_props}
     old = [int(i) for i in props.get("hidden_obs", "").split(",") if i]
-    props["hidden_obs"] = ",".join(str(i) for i in sorted(set(old + idx)))
-    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, props)
-    onnx.checker.check_model(model)
-    onnx.save(model, str(dst))
-    return model
+    hidden = ",".join(str(i) for i in sorted(set(old + idx)))
+    return save_derived(model, dst, note, hidden_obs=hidden)
 
 
 def retarget(src, dst, env_id, note):
@@ -181,15 +191,7 @@ def retarget(src, dst, env_id, note):
     ``note`` (appended to ``derived``). Returns the ModelProto."""
     import onnx
 
-    model = onnx.load(str(src))
-    props = {p.key: p.value for p in model.metadata_props}
-    props["env_id"] = env_id
-    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, props)
-    onnx.checker.check_model(model)
-    onnx.save(model, str(dst))
-    return model
+    return save_derived(onnx.load(str(src)), dst, note, env_id=env_id)
 
 
 def floor_actions(src, dst, floors, note):
@@ -215,13 +217,7 @@ def floor_actions(src, dst, floors, note):
         node.output[:] = [raw if o == old else o for o in node.output]
     g.initializer.append(numpy_helper.from_array(lo, "action_floor"))
     g.node.append(helper.make_node("Max", [raw, "action_floor"], [old]))
-    props = {p.key: p.value for p in model.metadata_props}
-    props["derived"] = "; ".join(x for x in (props.get("derived", ""), note) if x)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, props)
-    onnx.checker.check_model(model)
-    onnx.save(model, str(dst))
-    return model
+    return save_derived(model, dst, note)
 
 
 def main(argv=None):

@@ -200,26 +200,22 @@ RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_step
                 "action_floor")
 
 
-def positive(text):
-    """argparse type: an integer >= 1."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{v} is not a positive integer (>= 1)")
-    return v
+def int_at_least(least, what):
+    """argparse type: an integer >= ``least`` (``what`` says which in the error)."""
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if v < least:
+            raise argparse.ArgumentTypeError(f"{v} {what}")
+        return v
+    return parse
 
 
-def non_negative(text):
-    """argparse type: an integer >= 0."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{v} is negative")
-    return v
+#: argparse types: integers >= 1 and >= 0.
+positive = int_at_least(1, "is not a positive integer (>= 1)")
+non_negative = int_at_least(0, "is negative")
 
 
 def check_args(p, args):

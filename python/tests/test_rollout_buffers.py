@@ -12,21 +12,14 @@ import numpy as np
 import pytest
 
 from mjskill import GaussianMlp, MjskillVectorEnv
+from test_rollout import params as rollout_params
 
 KW = dict(max_episode_steps=6)
 
 
 def params(obs_dim, act_dim, seed=0, hidden=8):
-    r = np.random.default_rng(seed)
-    layers = [
-        (r.normal(0, 0.4, (obs_dim, hidden)).astype(np.float32),
-         r.normal(0, 0.1, hidden).astype(np.float32)),
-        (r.normal(0, 1.5, (hidden, act_dim)).astype(np.float32),
-         r.normal(0, 0.1, act_dim).astype(np.float32)),
-    ]
-    return dict(layers=layers, obs_mean=r.normal(0, 0.1, obs_dim),
-                obs_std=r.uniform(0.5, 2.0, obs_dim), obs_clip=10.0,
-                std=np.full(act_dim, 0.3, np.float32), seed=7)
+    """test_rollout's seeded GaussianMlp arguments, with 8 hidden units."""
+    return rollout_params(obs_dim, act_dim, seed=seed, hidden=hidden)
 
 
 @pytest.fixture(scope="module")
