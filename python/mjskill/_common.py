@@ -260,3 +260,11 @@ def check_reconfiguration_freq(freq: Any) -> int:
             "have fixed assets: nothing is reconfigured)"
         )
     return int(freq)
+
+
+def live(native: Any, what: str, remedy: str = "make a new one") -> Any:
+    """``native`` (the native envs of a vector env), or a ``RuntimeError`` naming ``what``
+    and the ``remedy`` once it is closed (``native`` is None)."""
+    if native is None:
+        raise RuntimeError(f"{what} is closed; {remedy}")
+    return native

@@ -50,6 +50,7 @@ from ._common import (
     check_reconfiguration_freq,
     check_sim_backend,
     env_kwargs,
+    live,
 )
 
 __all__ = [
@@ -307,12 +308,8 @@ class MjskillBatchedEnv(gym.Env):
 
     def _live(self) -> Any:
         """The native envs, or a ``RuntimeError`` once the env is closed."""
-        if self._native is None:
-            raise RuntimeError(
-                f"this batched mjskill/{self._kwargs['env_id']} env (num_envs={self.num_envs}) "
-                "is closed; make a new one with gym.make"
-            )
-        return self._native
+        what = f"this batched mjskill/{self._kwargs['env_id']} env (num_envs={self.num_envs})"
+        return live(self._native, what, "make a new one with gym.make")
 
     # -- ManiSkill-style attributes --------------------------------------------------------
     @property

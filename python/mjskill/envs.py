@@ -29,6 +29,7 @@ from ._common import (
     _check_seed,
     _describe,
     env_kwargs,
+    live,
 )
 
 class MjskillEnv(gym.Env):
@@ -300,12 +301,8 @@ class MjskillVectorEnv(VectorEnv):
 
     def _live(self) -> Any:
         """The native envs, or a ``RuntimeError`` once the env is closed."""
-        if self._native is None:
-            raise RuntimeError(
-                f"this mjskill/{self._kwargs['env_id']} vector env (num_envs={self.num_envs}) "
-                "is closed; make a new one"
-            )
-        return self._native
+        return live(self._native, f"this mjskill/{self._kwargs['env_id']} vector env "
+                                   f"(num_envs={self.num_envs})")
 
     def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
         """Buffers for :meth:`rollout` of ``steps`` steps: ``obs`` ``[T, N, obs_dim]`` and

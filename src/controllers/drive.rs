@@ -127,6 +127,9 @@ pub struct Drives {
     /// Per drive: for how many substeps in a row its gripper links have been deeper than the
     /// release depth in an object (see `Drives::release_deep_contacts`).
     deep_substeps: Vec<u32>,
+    /// Per drive, this substep: its gripper links' contacts with objects, and the deepest.
+    pinch_count: Vec<usize>,
+    pinch_depth: Vec<f64>,
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
     mc: Vec<f64>,
@@ -248,6 +251,8 @@ impl Drives {
             released: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
             released_pairs: Vec::with_capacity(MAX_GRIPPER_CONTACTS),
             deep_substeps: vec![0; n],
+            pinch_count: vec![0; n],
+            pinch_depth: vec![0.0; n],
             cvec: vec![0.0; nv],
             mc: vec![0.0; nv],
             fold_j: Vec::with_capacity(max_rows * nv),
@@ -517,7 +522,7 @@ impl Drives {
     /// in some substeps, a three-point edge manifold of the same pinch with about twice the
     /// depth (2.6 mm face-on, 5.5 mm as an edge, at a jaw target of −0.9), which would pass
     /// for a pass-through; such substeps count neither way. Only objects (not the robot)
-    /// are let go. Grippers beyond the first eight drives never let go. No allocation: at most [`MAX_GRIPPER_CONTACTS`] contacts a substep.
+    /// are let go. No allocation: at most [`MAX_GRIPPER_CONTACTS`] contacts a substep.
     fn release_deep_contacts(&mut self, data: &mut Data) {
         self.released.clear();
         self.released_pairs.clear();
@@ -525,8 +530,8 @@ impl Drives {
             return;
         };
         // Per gripper drive: its links' contacts with objects, and the deepest of them.
-        let mut count = [0usize; 8];
-        let mut deepest = [0.0f64; 8];
+        self.pinch_count.fill(0);
+        self.pinch_depth.fill(0.0);
         for c in 0..data.ncon() {
             let k = data.contact(c);
             if k.excluded {
@@ -534,7 +539,7 @@ impl Drives {
             }
             let geom_body = data.model().geom_bodyid();
             let (b1, b2) = (geom_body[k.geom1] as usize, geom_body[k.geom2] as usize);
-            for (i, bodies) in self.gripper_bodies.iter().enumerate().take(8) {
+            for (i, bodies) in self.gripper_bodies.iter().enumerate() {
                 let object = if bodies.contains(&b1) && !self.robot_body[b2] {
                     b2
                 } else if bodies.contains(&b2) && !self.robot_body[b1] {
@@ -542,8 +547,8 @@ impl Drives {
                 } else {
                     continue;
                 };
-                count[i] += 1;
-                deepest[i] = deepest[i].max(-k.dist);
+                self.pinch_count[i] += 1;
+                self.pinch_depth[i] = self.pinch_depth[i].max(-k.dist);
                 if self.released_pairs.len() < MAX_GRIPPER_CONTACTS
                     && !self.released_pairs.contains(&(i, object))
                 {
@@ -554,16 +559,20 @@ impl Drives {
         // A face-on pinch (at least FACE_CONTACTS points) counts for or against a release;
         // MuJoCo's edge manifolds of the same pinch (fewer points, with an exaggerated depth)
         // count for neither.
-        let mut release = [false; 8];
-        for (i, substeps) in self.deep_substeps.iter_mut().enumerate().take(8) {
-            if count[i] >= FACE_CONTACTS {
-                *substeps = if deepest[i] > depth { *substeps + 1 } else { 0 };
-            } else if count[i] == 0 {
+        for (i, substeps) in self.deep_substeps.iter_mut().enumerate() {
+            if self.pinch_count[i] >= FACE_CONTACTS {
+                *substeps = if self.pinch_depth[i] > depth {
+                    *substeps + 1
+                } else {
+                    0
+                };
+            } else if self.pinch_count[i] == 0 {
                 *substeps = 0;
             }
-            release[i] = *substeps >= RELEASE_SUBSTEPS;
         }
-        self.released_pairs.retain(|&(i, _)| release[i]);
+        let substeps = &self.deep_substeps;
+        self.released_pairs
+            .retain(|&(i, _)| substeps[i] >= RELEASE_SUBSTEPS);
         if self.released_pairs.is_empty() {
             return;
         }
