@@ -65,6 +65,7 @@ import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from demos import pretrain  # noqa: E402
 from policy_onnx import floor_actions, write_mlp_policy  # noqa: E402
 
 #: ManiSkill's ppo.py defaults (its Args dataclass).
@@ -115,7 +116,9 @@ def parse_args(argv=None, check=True):
     )
     p.add_argument("--env-id", default="PickCube-v1", help="mjskill env id")
     p.add_argument("--robot", default=None, help="robot uid (default: the env's)")
-    p.add_argument("--control-mode", default=d["control_mode"])
+    p.add_argument("--control-mode", default=None,
+                   help=f"control mode (default: the demos' with --demos, else "
+                        f"{d['control_mode']})")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--num-envs", type=positive, default=d["num_envs"])
     p.add_argument("--num-threads", type=positive, default=None,
@@ -180,6 +183,25 @@ def parse_args(argv=None, check=True):
                    help="a least value for an action component, in training, evaluation and "
                         "the exported file (repeatable; e.g. 7:-0.545 keeps the WidowX AI's "
                         "carriage target at 10 mm or more, docs/training.md); torch rollouts")
+    p.add_argument("--demos", metavar="FILE", nargs="+", default=None,
+                   help="demonstrations to learn from (mjskill rollout recordings, .mcap, or "
+                        "ManiSkill trajectory files, .h5 with their .json): the actor is "
+                        "cloned from them and the critic fitted to their returns before PPO "
+                        "starts, and a behaviour-cloning term that decays to 0 over "
+                        "--bc-decay-steps joins PPO's loss (docs/training.md, 'Learning from "
+                        "demonstrations'); only successful episodes are used")
+    p.add_argument("--bc-epochs", type=positive, default=200,
+                   help="passes over the demos of the warm start (actor and critic)")
+    p.add_argument("--bc-coef", type=float, default=0.5,
+                   help="weight of the behaviour-cloning term in PPO's loss at the start")
+    p.add_argument("--bc-decay-steps", type=positive, default=500_000,
+                   help="env steps over which the behaviour-cloning term falls linearly to 0")
+    p.add_argument("--critic-warmup-steps", type=non_negative, default=0,
+                   help="with --demos: env steps at the start during which only the critic "
+                        "learns (the cloned actor is held while the critic learns its returns)")
+    p.add_argument("--demo-logstd", type=float, default=-1.5,
+                   help="the sampling log std after the warm start (PPO's own start is -0.5; "
+                        "a narrower one keeps the cloned behaviour while PPO begins)")
     p.add_argument("--resume", metavar="RUN_DIR", default=None,
                    help="continue the run in RUN_DIR from its last checkpoint (checkpoint.pt: "
                         "weights, optimiser, observation statistics, step count, random state) "
@@ -197,7 +219,7 @@ def parse_args(argv=None, check=True):
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
                 "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
-                "action_floor")
+                "action_floor", "demos", "bc_epochs", "demo_logstd")
 
 
 def int_at_least(least, what):
@@ -229,7 +251,7 @@ def check_args(p, args):
         p.error(f"--total-timesteps {args.total_timesteps} is less than one iteration "
                 f"(--num-envs x --num-steps = {batch})")
     for name in ("learning_rate", "gamma", "gae_lambda", "clip_coef", "vf_coef",
-                 "max_grad_norm", "reward_scale", "target_kl", "ent_coef"):
+                 "max_grad_norm", "reward_scale", "target_kl", "ent_coef", "bc_coef"):
         v = getattr(args, name)
         if not np.isfinite(v) or v < 0:
             p.error(f"--{name.replace('_', '-')} {v} must be a finite number >= 0")
@@ -243,6 +265,10 @@ def check_args(p, args):
             p.error(f"--action-floor {f!r}: the least value must be finite")
     if args.action_floor and (args.rollout == "native" or args.ray_workers):
         p.error("--action-floor works with torch rollouts (--rollout torch)")
+    if not np.isfinite(args.demo_logstd):
+        p.error(f"--demo-logstd {args.demo_logstd} must be finite")
+    if args.demos and args.simulator != "mjskill":
+        p.error("--demos trains on mjskill (--simulator mjskill)")
     if args.learning_rate == 0:
         p.error("--learning-rate 0 trains nothing")
     if args.gamma > 1 or args.gae_lambda > 1:
@@ -371,6 +397,19 @@ def main(argv=None):
     ckpt = None
     if args.resume is not None:
         args, ckpt = resumed_args(argv)
+    demos = None
+    if args.demos:
+        # Every file is read and checked before any env is built.
+        from demos import DemoError, load
+
+        try:
+            demos = load(args.demos, args.env_id, args.robot, args.control_mode)
+        except DemoError as e:
+            sys.exit(f"error: {e}")
+        args.robot = args.robot or demos.robot
+        args.control_mode = args.control_mode or demos.control_mode
+    if args.control_mode is None:
+        args.control_mode = defaults(args.env_id)["control_mode"]
     clock = time.perf_counter if args.clock == "wall" else time.thread_time
     import torch
     import torch.nn as nn
@@ -409,6 +448,24 @@ def main(argv=None):
 
         gid = f"mjskill/{args.env_id}"
         kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state")
+        eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
+                                 **kw)
+        if demos is not None:
+            from demos import DemoError, replay_missing_obs
+
+            try:
+                replay_missing_obs(demos, lambda: gym.make(gid, **kw))
+            except DemoError as e:
+                sys.exit(f"error: {e}")
+            dim = eval_envs.single_observation_space.shape[0]
+            if demos.obs_dim != dim:
+                sys.exit(f"error: --demos {' '.join(args.demos)}: observations of "
+                         f"{demos.obs_dim} values, but {args.env_id} with {args.robot} in "
+                         f"{args.control_mode} observes {dim} (demos of another mjskill "
+                         "version or env options?)")
+            print(f"demos: {len(demos.episodes)} successful episodes, {demos.steps} steps "
+                  f"from {len(demos.files)} file(s); {demos.skipped_failed} failed episodes "
+                  "left out", flush=True)
         if args.ray_workers:
             from mjskill.ray import RayVectorEnv
 
@@ -416,8 +473,6 @@ def main(argv=None):
                                 num_threads=args.num_threads, **kw)
         else:
             envs = gym.make_vec(gid, num_envs=args.num_envs, num_threads=args.num_threads, **kw)
-        eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
-                                 **kw)
         base = eval_envs.unwrapped
         robot, mode, max_steps = base.robot_uids, base.control_mode, base.max_episode_steps
         version = mjskill.__version__
@@ -505,12 +560,17 @@ def main(argv=None):
             "control_mode": mode,
             "obs_mode": "state",
             "training_command": command,
-            "algorithm": "ppo (examples/ppo.py)",
+            "algorithm": "ppo (examples/ppo.py)" if demos is None else
+                         "ppo with a behaviour-cloning warm start and term (examples/ppo.py "
+                         "--demos)",
             "env_steps": str(global_step),
             "eval_success": "" if eval_success is None else f"{eval_success:.4f}",
             "mjskill_version": version,
             "hidden_obs": ",".join(str(i) for i in hidden),
         }
+        if demos is not None:
+            meta["demos"] = (f"{len(demos.episodes)} episodes, {demos.steps} steps: "
+                             + " ".join(os.path.basename(f) for f in demos.files))
         if args.simulator != "mjskill":
             meta["simulator"] = args.simulator
         if resumes:
@@ -567,6 +627,30 @@ def main(argv=None):
             if done.all():
                 break
         return float(success.mean()), float(ret.mean())
+
+    if demos is not None:
+        # The demos' steps: raw observations (normalised with the running statistics where
+        # used), actions and discounted returns.
+        demo_obs, demo_all_obs = demos.obs, demos.all_obs
+        demo_act = torch.as_tensor(demos.actions).to(dev)
+        demo_ret = torch.as_tensor(demos.returns(args.gamma) * args.reward_scale).to(dev)
+        if ckpt is None:
+            # The warm start: observation statistics from the demos, the actor's mean cloned,
+            # the critic fitted to the returns, the sampling std narrowed.
+            t0 = clock()
+            if not args.no_obs_norm:
+                rms.update(demo_obs.astype(np.float64))
+            pretrain(actor, critic, norm(demo_obs), demo_act, norm(demo_all_obs), demo_ret,
+                     args.bc_epochs, seed=args.seed, log=lambda m: print(m, flush=True))
+            with torch.no_grad():
+                logstd.fill_(args.demo_logstd)
+            print(f"warm start: {clock() - t0:.1f} s", flush=True)
+
+    def bc_weight(step):
+        """The behaviour-cloning term's weight after ``step`` env steps."""
+        if demos is None:
+            return 0.0
+        return args.bc_coef * max(0.0, 1.0 - step / args.bc_decay_steps)
 
     T, N = args.num_steps, args.num_envs
     batch = T * N
@@ -764,7 +848,9 @@ def main(argv=None):
         b_rew = torch.as_tensor(n_rew, dtype=torch.float32).to(dev)
         b_done = torch.as_tensor(n_done, dtype=torch.float32).to(dev)
         b_valid = torch.as_tensor(n_valid, dtype=torch.float32).to(dev)
-        if not args.no_obs_norm:
+        if not args.no_obs_norm and demos is None:
+            # (With --demos the statistics stay the demos': the cloned actor reads its inputs
+            # as it learned them.)
             rms.update(b_obs.reshape(-1, obs_dim)[n_valid.reshape(-1)])
         # -- GAE: the value after step t is V(obs[t+1]), the final observation at an end -----
         with torch.no_grad():
@@ -823,6 +909,13 @@ def main(argv=None):
                 v_loss = 0.5 * ((critic(f_obs[idx]).view(-1) - f_ret[idx]) ** 2).mean()
                 ent = dist.entropy().sum(1).mean()
                 loss = pg - args.ent_coef * ent + args.vf_coef * v_loss
+                w = bc_weight(global_step)
+                if demos is not None and global_step <= args.critic_warmup_steps:
+                    loss, w = args.vf_coef * v_loss, 0.0
+                if w > 0:
+                    j = torch.randint(len(demo_obs), (len(idx),))
+                    bc = ((actor(norm(demo_obs[j.numpy()])) - demo_act[j.to(dev)]) ** 2).mean()
+                    loss = loss + w * bc
                 opt.zero_grad()
                 loss.backward()
                 nn.utils.clip_grad_norm_(params, args.max_grad_norm)

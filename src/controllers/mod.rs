@@ -310,6 +310,21 @@ pub trait PartController {
     /// joint targets, or `[p, q]`) and holds the drives on it.
     fn restore_target(&mut self, _values: &[f64], _drives: &mut Drives) {}
 
+    /// The inverse of [`PartController::set_action`] for joint position parts: writes into
+    /// `out` (the part's action slice) the action that sets each action joint `i` (ManiSkill
+    /// index) to the position target `target(i)` given the measured positions `q`, clipped
+    /// to the action bounds. `false` (and `out` untouched) for parts whose action is not a
+    /// joint position (velocities, EE poses, a base) or when a joint has no target.
+    fn action_for_targets(
+        &self,
+        _target: &dyn Fn(usize) -> Option<f64>,
+        _joints: &JointMap,
+        _q: &[f64],
+        _out: &mut [f32],
+    ) -> bool {
+        false
+    }
+
     /// Raw state (joint targets, then the target pose as `[p, q]`).
     fn save(&self, out: &mut Vec<f64>) {
         let c = self.core();
@@ -602,6 +617,37 @@ impl Controller {
                 with_part!(&mut self.parts[k].ctl, c => c.restore_target(v, drives));
             }
         }
+    }
+
+    /// The action of this mode that reproduces joint position targets (converting an action
+    /// of another mode of the same robot, as ManiSkill's `replay_trajectory
+    /// --target-control-mode` does): every part for which `copy(name)` gives a slice takes
+    /// it as is (the same part in both modes); every other part must be a joint position
+    /// part and takes the action that sets its joints to `target(i)` (ManiSkill index i)
+    /// from the measured positions of `data` ([`PartController::action_for_targets`]).
+    /// Returns the name of the first part that can be neither copied nor inverted.
+    pub fn action_for_targets<'a>(
+        &self,
+        joints: &JointMap,
+        data: &Data,
+        target: &dyn Fn(usize) -> Option<f64>,
+        copy: &dyn Fn(&str) -> Option<&'a [f32]>,
+        out: &mut [f32],
+    ) -> Result<(), &'static str> {
+        let mut q = vec![0.0; self.n_dof];
+        joints.qpos(data, &mut q);
+        for (p, (_, r)) in self.parts.iter().zip(self.part_ranges()) {
+            let slot = &mut out[r.clone()];
+            match copy(p.name) {
+                Some(a) if a.len() == slot.len() => slot.copy_from_slice(a),
+                _ => {
+                    if !with_part!(&p.ctl, c => c.action_for_targets(target, joints, &q, slot)) {
+                        return Err(p.name);
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Raw controller state for get/set_state: all targets (positions and poses).

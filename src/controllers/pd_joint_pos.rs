@@ -28,6 +28,24 @@ pub struct PdJointPos {
     followers: Vec<(usize, usize, f32, f32)>,
 }
 
+impl JointPosConfig {
+    /// The range a normalised action entry `k` (robot joint `i`) is scaled to: the explicit
+    /// bounds, else the joint's limits.
+    fn range(&self, k: usize, i: usize, joints: &JointMap) -> (f32, f32) {
+        let lo = self
+            .low
+            .as_ref()
+            .map(|l| l[k])
+            .unwrap_or(joints.limits[i].0 as f32);
+        let hi = self
+            .high
+            .as_ref()
+            .map(|h| h[k])
+            .unwrap_or(joints.limits[i].1 as f32);
+        (lo, hi)
+    }
+}
+
 impl PdJointPos {
     /// Builds the part on the action joints `idx` (ManiSkill indices); `limits(i)` gives the
     /// limits of joint i, the bounds of a part that is not normalised and has no explicit
@@ -86,16 +104,7 @@ impl PartController for PdJointPos {
         let core = &mut self.core;
         for (k, &i) in core.idx.iter().enumerate() {
             let x = if cfg.normalize {
-                let lo = cfg
-                    .low
-                    .as_ref()
-                    .map(|l| l[k])
-                    .unwrap_or(joints.limits[i].0 as f32);
-                let hi = cfg
-                    .high
-                    .as_ref()
-                    .map(|h| h[k])
-                    .unwrap_or(joints.limits[i].1 as f32);
+                let (lo, hi) = cfg.range(k, i, joints);
                 clip_scale(a[k], lo, hi)
             } else {
                 a[k]
@@ -114,6 +123,37 @@ impl PartController for PdJointPos {
         self.cfg
             .use_target
             .then_some(Target::Qpos(&self.core.target_q))
+    }
+
+    fn action_for_targets(
+        &self,
+        target: &dyn Fn(usize) -> Option<f64>,
+        joints: &JointMap,
+        q: &[f64],
+        out: &mut [f32],
+    ) -> bool {
+        let cfg = &self.cfg;
+        let core = &self.core;
+        if core.idx.iter().any(|&i| target(i).is_none()) {
+            return false;
+        }
+        for (k, &i) in core.idx.iter().enumerate() {
+            let t = target(i).unwrap_or_default();
+            let x = match (cfg.use_delta, cfg.use_target) {
+                (true, true) => t - core.target_q[k] as f64,
+                (true, false) => t - q[i],
+                (false, _) => t,
+            };
+            out[k] = if cfg.normalize {
+                // The inverse of `clip_scale`, clipped to [−1, 1].
+                let (lo, hi) = cfg.range(k, i, joints);
+                let (mid, half) = (0.5 * (hi as f64 + lo as f64), 0.5 * (hi as f64 - lo as f64));
+                (((x - mid) / half) as f32).clamp(-1.0, 1.0)
+            } else {
+                (x as f32).clamp(core.low[k], core.high[k])
+            };
+        }
+        true
     }
 
     fn restore_target(&mut self, v: &[f64], drives: &mut Drives) {

@@ -103,6 +103,11 @@ pub enum EnvError {
     /// the field).
     #[error("cannot set state: {0}")]
     BadState(String),
+    /// An action of one control mode that cannot be converted to another
+    /// ([`Env::convert_action`](super::Env::convert_action)); the message names the modes
+    /// and the part.
+    #[error("{0}")]
+    ModeConversion(String),
     /// A seed beyond ManiSkill's 32-bit seeds ([`MAX_SEED`](super::checks::MAX_SEED)).
     #[error("seed {0} is out of range: seeds are 32-bit, 0..={max}", max = super::checks::MAX_SEED)]
     BadSeed(u64),

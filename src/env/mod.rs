@@ -8,6 +8,7 @@
 mod cameras;
 pub mod checks;
 mod config;
+mod convert;
 mod memory;
 mod registry;
 pub mod render;

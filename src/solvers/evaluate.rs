@@ -266,6 +266,11 @@ pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env
         match config.control_mode.as_deref() {
             None => config.control_mode = Some(required.to_string()),
             Some(m) if m == required => {}
+            // The scripted solvers run in other modes through `ModeConverted`, which reports
+            // a mode it cannot convert to when the policy is built.
+            Some(m) if policy == "solver" => {
+                crate::robots::spec(&robot)?.control_mode(m)?;
+            }
             Some(m) => {
                 // An unknown mode is reported as such, with the robot's valid modes.
                 crate::robots::spec(&robot)?.control_mode(m)?;

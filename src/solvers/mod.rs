@@ -7,6 +7,7 @@
 //! that phase, counting the step on which it was entered (the spec's \[audited\] reading).
 //! Positions are read from MuJoCo before each step, so they work in every observation mode.
 
+mod convert;
 mod evaluate;
 pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
@@ -22,6 +23,7 @@ pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
 pub(crate) mod xarm6;
 
+pub use convert::ModeConverted;
 pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
@@ -50,8 +52,12 @@ pub enum SolverError {
         /// The valid names.
         valid: String,
     },
-    /// The env's control mode is not the one the scripted solver drives.
-    #[error("the scripted solver for {robot} drives {required}, but the env uses {mode}")]
+    /// The env's control mode is not the one the scripted solver drives, and the solver's
+    /// actions cannot be converted to it ([`ModeConverted`]).
+    #[error(
+        "the scripted solver for {robot} drives {required}, and its actions cannot be \
+         converted to the env's {mode}: {why}"
+    )]
     WrongControlMode {
         /// The robot.
         robot: &'static str,
@@ -59,6 +65,8 @@ pub enum SolverError {
         required: String,
         /// The env's mode.
         mode: String,
+        /// Why the conversion is refused.
+        why: String,
     },
     /// No scripted solver for this (env, robot) pair.
     #[error("no scripted solver for {env} with {robot}; available: {available}")]
@@ -206,12 +214,14 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let mode = env.control_mode();
     let required = required_control_mode("solver", robot).unwrap_or(mode);
     if mode != required {
-        return Err(SolverError::WrongControlMode {
-            robot,
-            required: required.to_string(),
-            mode: mode.to_string(),
-        });
+        return boxed(ModeConverted::new(env, required, native_solver));
     }
+    native_solver(env)
+}
+
+/// The scripted solver of `env`'s (env, robot) pair, in the env's mode (the solver's own).
+fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
+    let robot = env.robot_spec().uid();
     match (env.id(), robot) {
         ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(env, PANDA_GRIPPER)),
         ("PickCube-v1", "fetch") => boxed(fetch::FetchPickCube::new(env)),
