@@ -14,6 +14,15 @@ and gives a file another name of the same env (PickCubeSO100-v1 is PickCube-v1 w
 
     python examples/policy_onnx.py retarget IN.onnx OUT.onnx --env-id PickCube-v1
 
+and sets a least value for action components (again on a floored file: the new values replace
+those of the same components, the others are kept):
+
+    python examples/policy_onnx.py floor IN.onnx OUT.onnx --action 7:-0.545
+
+Every edit reads a regular file only (a FIFO or device is refused, never read), refuses a file
+whose metadata names a key twice, and writes OUT beside itself under a temporary name, renamed
+into place once complete: OUT may be IN, and a failed write (a full disk) leaves it as it was.
+
 The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
 clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
 last); output ``action`` (float32, [batch, act_dim]), the mean action.
@@ -22,6 +31,8 @@ last); output ``action`` (float32, [batch, act_dim]), the mean action.
 from __future__ import annotations
 
 import json
+import os
+import stat
 
 import numpy as np
 
@@ -135,18 +146,115 @@ def save_weights_json(path, layers, obs_mean, obs_std, obs_clip):
         )
 
 
-def save_derived(model, dst, note, **props):
-    """Saves ``model`` as ``dst`` with its metadata updated by ``props`` and ``note`` appended
-    to ``derived`` (how the file was edited after training), after onnx's checker."""
+def parse_floor(text):
+    """``INDEX:LEAST`` (e.g. ``7:-0.545``) as (index, least): an index >= 0 and a finite
+    least value that float32 holds (the file stores float32). ValueError otherwise, naming
+    the text and the form expected."""
+    parts = str(text).split(":")
+    form = f"{text!r}: expected INDEX:LEAST, e.g. 7:-0.545"
+    if len(parts) != 2:
+        raise ValueError(form)
+    try:
+        k, v = int(parts[0]), float(parts[1])
+    except ValueError:
+        raise ValueError(form) from None
+    check_floor(k, v, repr(str(text)))
+    return k, v
+
+
+def check_floor(k, v, what=None):
+    """ValueError unless ``k`` is an action index >= 0 and ``v`` a finite least value within
+    float32's range; ``what`` names them in the message (default ``k:v``)."""
+    what = what or f"{k}:{v}"
+    if k < 0:
+        raise ValueError(f"{what}: the action index {k} is negative")
+    f32 = float(np.finfo(np.float32).max)
+    if not np.isfinite(v) or abs(v) > f32:
+        raise ValueError(f"{what}: the least value must be a finite number within "
+                         f"float32's range (±{f32:.4g})")
+
+
+def parse_floors(texts):
+    """A list of ``INDEX:LEAST`` as a dict index -> least; an index given twice is a
+    ValueError (even with the same value: one floor per component)."""
+    floors = {}
+    for t in texts:
+        k, v = parse_floor(t)
+        if k in floors:
+            raise ValueError(f"action index {k} is given twice ({k}:{floors[k]:g} and {t}); "
+                             "give each component one floor")
+        floors[k] = v
+    return floors
+
+
+def load_policy(path):
+    """Reads the ONNX file ``path``: a regular file only (a FIFO, device or directory is
+    refused, never read, so nothing hangs), whose metadata names each key once (runtimes
+    would take either value of a duplicated key: mjskill refuses such a file, and an edit
+    must not merge it into one it accepts). Returns the ModelProto."""
     import onnx
 
-    meta = {p.key: p.value for p in model.metadata_props}
+    fd = os.open(str(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO"
+                    if stat.S_ISFIFO(st.st_mode) else "a device or socket")
+            raise ValueError(f"{path} is {kind}, not a regular file; a policy file is one")
+        with os.fdopen(fd, "rb") as f:
+            fd = None
+            data = f.read()
+    finally:
+        if fd is not None:
+            os.close(fd)
+    model = onnx.load_model_from_string(data)
+    seen = set()
+    for p in model.metadata_props:
+        if p.key in seen:
+            raise ValueError(f"{path}: its metadata_props has the key {p.key!r} more than once; "
+                             "each key may appear once (mjskill refuses such a file)")
+        seen.add(p.key)
+    return model
+
+
+def save_atomic(model, dst):
+    """Writes ``model`` to ``dst`` through a temporary file beside it (flushed to disk, then
+    renamed over ``dst``): a failed write leaves ``dst`` as it was, even when it is the
+    file the model was read from."""
+    import onnx
+
+    dst = str(dst)
+    tmp = os.path.join(os.path.dirname(os.path.abspath(dst)),
+                       f".{os.path.basename(dst)}.tmp-{os.getpid()}")
+    try:
+        onnx.save(model, tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, dst)
+    except BaseException:
+        if os.path.lexists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def save_derived(model, dst, note, **props):
+    """Saves ``model`` as ``dst`` (atomically, :func:`save_atomic`) with its metadata
+    updated by ``props`` and ``note`` appended to ``derived`` (how the file was edited after
+    training), after onnx's checker. A metadata key given twice is a ValueError."""
+    import onnx
+
+    meta = {}
+    for p in model.metadata_props:
+        if p.key in meta:
+            raise ValueError(f"its metadata_props has the key {p.key!r} more than once; each "
+                             "key may appear once (mjskill refuses such a file)")
+        meta[p.key] = p.value
     meta.update(props)
     meta["derived"] = "; ".join(x for x in (meta.get("derived", ""), note) if x)
     del model.metadata_props[:]
     onnx.helper.set_model_props(model, meta)
     onnx.checker.check_model(model)
-    onnx.save(model, str(dst))
+    save_atomic(model, dst)
     return model
 
 
@@ -159,7 +267,7 @@ def hide_obs(src, dst, indices, note):
     import onnx
     from onnx import numpy_helper
 
-    model = onnx.load(str(src))
+    model = load_policy(src)
     graph = model.graph
     init = {t.name: t for t in graph.initializer}
     names = {"obs_mean", "obs_std", "w0", "b0"}
@@ -189,34 +297,49 @@ def retarget(src, dst, env_id, note):
     the same task under two names (ManiSkill's PickCubeSO100-v1 is PickCube-v1 with
     ``robot_uids="so100"``, PickCubeWidowXAI-v1 the same with ``"widowxai"``). Records the
     ``note`` (appended to ``derived``). Returns the ModelProto."""
-    import onnx
-
-    return save_derived(onnx.load(str(src)), dst, note, env_id=env_id)
+    return save_derived(load_policy(src), dst, note, env_id=env_id)
 
 
 def floor_actions(src, dst, floors, note):
     """Writes ``src`` as ``dst`` with a lower bound on some action components: ``floors``
     maps an action index to its least value (the others are left as they are), applied to
-    the graph's output with ``Max``. Records the ``note`` (appended to ``derived``). Returns
-    the ModelProto."""
-    import onnx
+    the graph's output with ``Max``. On a file floored before (``action_floor``, as this
+    function and examples/ppo.py --action-floor write it), the given components get the new
+    values and the others keep theirs. Least values must be finite and within float32's
+    range (a NaN floor would be run differently by tract and onnxruntime). Records the
+    ``note`` (appended to ``derived``). Returns the ModelProto."""
     from onnx import helper, numpy_helper
 
-    model = onnx.load(str(src))
+    for k, v in floors.items():
+        check_floor(int(k), float(v))  # the command line's rule
+    model = load_policy(src)
     g = model.graph
     out = g.output[0]
     act_dim = out.type.tensor_type.shape.dim[-1].dim_value
     if any(not 0 <= k < act_dim for k in floors):
         raise ValueError(f"action indices {sorted(floors)} out of range 0..{act_dim - 1}")
-    lo = np.full(act_dim, np.finfo(np.float32).min, np.float32)
+    init = {t.name: t for t in g.initializer}
+    floored = "action_floor" in init and any(
+        n.op_type == "Max" and "action_floor" in n.input and out.name in n.output
+        for n in g.node)
+    if "action_floor" in init and not floored:
+        raise ValueError(f"{src} has an initializer named action_floor that is not the "
+                         "output's floor; cannot floor it")
+    if floored:
+        lo = numpy_helper.to_array(init["action_floor"]).astype(np.float32).copy()
+    else:
+        lo = np.full(act_dim, np.finfo(np.float32).min, np.float32)
     for k, v in floors.items():
         lo[k] = v
-    old = out.name
-    raw = old + "_unfloored"
-    for node in g.node:
-        node.output[:] = [raw if o == old else o for o in node.output]
-    g.initializer.append(numpy_helper.from_array(lo, "action_floor"))
-    g.node.append(helper.make_node("Max", [raw, "action_floor"], [old]))
+    if floored:
+        init["action_floor"].CopyFrom(numpy_helper.from_array(lo, "action_floor"))
+    else:
+        old = out.name
+        raw = old + "_unfloored"
+        for node in g.node:
+            node.output[:] = [raw if o == old else o for o in node.output]
+        g.initializer.append(numpy_helper.from_array(lo, "action_floor"))
+        g.node.append(helper.make_node("Max", [raw, "action_floor"], [old]))
     return save_derived(model, dst, note)
 
 
@@ -242,19 +365,28 @@ def main(argv=None):
                    help="INDEX:LEAST, e.g. 7:-0.545 (repeatable)")
     f.add_argument("--note", default=None, help="text for the `derived` metadata")
     a = p.parse_args(argv)
-    if a.command == "floor":
-        floors = {int(x.split(":")[0]): float(x.split(":")[1]) for x in a.action}
-        note = a.note or ("actions floored by examples/policy_onnx.py floor: "
-                          + ", ".join(f"{k} >= {v}" for k, v in sorted(floors.items())))
-        floor_actions(a.src, a.dst, floors, note)
-        return
-    if a.command == "retarget":
-        note = a.note or f"env_id set to {a.env_id} by examples/policy_onnx.py retarget"
-        retarget(a.src, a.dst, a.env_id, note)
-        return
-    idx = [int(i) for i in a.obs.split(",")]
-    note = a.note or f"observation entries {a.obs} hidden by examples/policy_onnx.py hide"
-    hide_obs(a.src, a.dst, idx, note)
+    try:
+        if a.command == "floor":
+            try:
+                floors = parse_floors(a.action)
+            except ValueError as e:
+                f.error(f"--action {e}")
+            note = a.note or ("actions floored by examples/policy_onnx.py floor: "
+                              + ", ".join(f"{k} >= {v}" for k, v in sorted(floors.items())))
+            floor_actions(a.src, a.dst, floors, note)
+            return
+        if a.command == "retarget":
+            note = a.note or f"env_id set to {a.env_id} by examples/policy_onnx.py retarget"
+            retarget(a.src, a.dst, a.env_id, note)
+            return
+        try:
+            idx = [int(i) for i in a.obs.split(",")]
+        except ValueError:
+            h.error(f"--obs {a.obs!r}: expected comma-separated integers, e.g. 16,17")
+        note = a.note or f"observation entries {a.obs} hidden by examples/policy_onnx.py hide"
+        hide_obs(a.src, a.dst, idx, note)
+    except (ValueError, OSError) as e:
+        raise SystemExit(f"error: {e}") from None
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from demos import pretrain  # noqa: E402
-from policy_onnx import floor_actions, write_mlp_policy  # noqa: E402
+from policy_onnx import floor_actions, load_policy, parse_floors, write_mlp_policy  # noqa: E402
 
 #: ManiSkill's ppo.py defaults (its Args dataclass).
 BASE = dict(
@@ -213,7 +213,19 @@ def parse_args(argv=None, check=True):
     elif check and not os.path.isfile(os.path.join(args.resume, "checkpoint.pt")):
         p.error(f"--resume {args.resume}: no checkpoint.pt there (a run writes one at every "
                 "evaluation and when it stops)")
+    elif check and args.out is not None and not same_dir(args.out, args.resume):
+        p.error(f"--out {args.out} with --resume {args.resume}: a resumed run continues in its "
+                "own directory; leave --out out (or copy the run directory and resume the copy)")
     return args
+
+
+def same_dir(a, b):
+    """Whether paths ``a`` and ``b`` name the same directory (or, not existing, the same
+    path)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
 
 
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
@@ -255,14 +267,10 @@ def check_args(p, args):
         v = getattr(args, name)
         if not np.isfinite(v) or v < 0:
             p.error(f"--{name.replace('_', '-')} {v} must be a finite number >= 0")
-    for f in args.action_floor:
-        k, _, v = f.partition(":")
-        try:
-            int(k), float(v)
-        except ValueError:
-            p.error(f"--action-floor {f!r}: expected INDEX:LEAST, e.g. 7:-0.545")
-        if not np.isfinite(float(v)):
-            p.error(f"--action-floor {f!r}: the least value must be finite")
+    try:
+        parse_floors(args.action_floor)  # examples/policy_onnx.py floor's rule
+    except ValueError as e:
+        p.error(f"--action-floor {e}")
     if args.action_floor and (args.rollout == "native" or args.ray_workers):
         p.error("--action-floor works with torch rollouts (--rollout torch)")
     if not np.isfinite(args.demo_logstd):
@@ -332,10 +340,8 @@ class RunningMeanStd:
 def resumed_args(argv):
     """The options of a resumed run: the saved run's, then those given now. Returns (args,
     checkpoint)."""
-    import torch
-
     given = parse_args(argv)
-    ckpt = torch.load(os.path.join(given.resume, "checkpoint.pt"), weights_only=True)
+    ckpt = load_checkpoint(given.resume)
     saved_argv = list(ckpt["argv"])
     now = list(sys.argv[1:] if argv is None else argv)
     # Drop --resume DIR (or --resume=DIR) from the options given now.
@@ -347,17 +353,50 @@ def resumed_args(argv):
             skip = True
         elif not a.startswith("--resume="):
             rest.append(a)
+    if "--action-floor" in option_names(rest):
+        # Given again, the floors replace the saved ones (then compared with them below).
+        saved_argv = without_option(saved_argv, "--action-floor")
+        saved_floors = parse_args(list(ckpt["argv"]), check=False).action_floor
+    else:
+        saved_floors = None
     args = parse_args(saved_argv + rest, check=False)
     args.resume = None
     parse_args(saved_argv + rest)  # the merged options must be valid (exits if not)
     saved = parse_args(saved_argv, check=False)
-    changed = [k for k in RUN_DEFINING if getattr(args, k) != getattr(saved, k)]
+    if saved_floors is not None:
+        saved.action_floor = saved_floors
+
+    def differs(k):
+        a, b = getattr(args, k), getattr(saved, k)
+        if k == "action_floor":  # the same floors, in any order or spelling
+            return parse_floors(a) != parse_floors(b)
+        return a != b
+
+    changed = [k for k in RUN_DEFINING if differs(k)]
     if changed:
         sys.exit(f"error: --resume {given.resume}: {', '.join('--' + k.replace('_', '-') for k in changed)} "
                  "cannot change when a run continues (they define its networks, data or envs)")
     args.resume = given.resume
     args.out = given.resume  # a resumed run continues in its own directory
     return args, ckpt
+
+
+def option_names(argv):
+    """The option names in ``argv`` (``--x`` of ``--x V`` and ``--x=V``)."""
+    return [a.split("=", 1)[0] for a in argv if a.startswith("--")]
+
+
+def without_option(argv, name):
+    """``argv`` without the option ``name`` (``name V`` and ``name=V``)."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == name:
+            skip = True
+        elif not a.startswith(name + "="):
+            out.append(a)
+    return out
 
 
 def atomic_write(path, write):
@@ -374,6 +413,176 @@ def atomic_write(path, write):
         if os.path.exists(tmp):
             os.remove(tmp)
         raise
+
+
+#: The run directory's lock file: held (flock) by the ppo.py that writes the directory, and
+#: naming its pid.
+RUN_LOCK = ".ppo.lock"
+
+
+def hold_run_dir(out):
+    """Makes the run directory ``out`` and takes its lock (RUN_LOCK, never through a
+    symlink), so that one ppo.py at a time writes there: a second one, new or --resume,
+    exits with an error naming the holder's pid. Returns the open lock file; the lock lasts
+    as long as this process (or until the file is closed). Then removes the temporary files
+    (``*.tmp-PID``) that runs killed while saving left there."""
+    import errno
+    import fcntl
+
+    os.makedirs(out, exist_ok=True)
+    path = os.path.join(out, RUN_LOCK)
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            sys.exit(f"error: run directory {out}: its lock file {path} is a symbolic link, "
+                     "which ppo.py never writes through; remove the link")
+        sys.exit(f"error: run directory {out}: cannot create its lock file {path}: {e}")
+    f = os.fdopen(fd, "r+")
+    holder = None
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = f.read().strip() or "unknown"
+    except OSError:
+        # No locks on this file system: the pid in the file, if its process runs, holds it.
+        pid = f.read().strip()
+        if pid.isdigit() and int(pid) != os.getpid() and process_alive(int(pid)):
+            holder = pid
+    if holder is not None:
+        f.close()
+        sys.exit(f"error: run directory {out} is in use by another examples/ppo.py (pid "
+                 f"{holder}, which holds {path}); wait for it to finish or stop it, or train "
+                 "into another --out")
+    f.seek(0)
+    f.truncate()
+    f.write(f"{os.getpid()}\n")
+    f.flush()
+    os.fsync(f.fileno())
+    for name in os.listdir(out):
+        tail = name.rpartition(".tmp-")[2]
+        path = os.path.join(out, name)
+        if (".tmp-" in name and tail.isdigit() and int(tail) != os.getpid()
+                and not process_alive(int(tail)) and os.path.isfile(path)
+                and not os.path.islink(path)):
+            os.remove(path)
+    return f
+
+
+def process_alive(pid):
+    """Whether process ``pid`` exists."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+#: What a checkpoint of this script holds.
+CHECKPOINT_KEYS = ("actor", "critic", "logstd", "optimizer", "obs_mean", "obs_var",
+                   "obs_count", "argv", "command", "iteration", "global_step", "best",
+                   "resumes", "times", "torch_rng", "cuda_rng")
+
+
+def load_checkpoint(run):
+    """The checkpoint of run directory ``run``; exits with an error naming the file when it
+    cannot be read (damaged, cut short, not this script's)."""
+    import torch
+
+    path = os.path.join(run, "checkpoint.pt")
+    why = None
+    try:
+        ckpt = torch.load(path, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file
+        why = f"it cannot be read ({type(e).__name__})"
+    else:
+        missing = ([k for k in CHECKPOINT_KEYS if k not in ckpt] if isinstance(ckpt, dict)
+                   else list(CHECKPOINT_KEYS))
+        if missing:
+            why = f"it lacks {', '.join(missing)}"
+    if why:
+        sys.exit(f"error: --resume {run}: {path} is not a checkpoint of examples/ppo.py: {why}; "
+                 "it is damaged (a full disk, a copy cut short) or another file. The run's "
+                 "policies are still in policy.onnx and best.onnx there")
+    return ckpt
+
+
+def check_checkpoint_is_the_runs(out, command, robot, mode):
+    """--resume: refuses a checkpoint of another run (a copy from another directory), whose
+    training command, robot or control mode differ from those of the run directory's
+    policy.onnx (written with the checkpoints; its env id may be retargeted)."""
+    path = os.path.join(out, "policy.onnx")
+    if not os.path.isfile(path):
+        return
+    try:
+        meta = {p.key: p.value for p in load_policy(path).metadata_props}
+    except Exception:  # noqa: BLE001 - an unreadable file has nothing to compare
+        return
+    mine = dict(training_command=command, robot_uids=robot, control_mode=mode)
+    diff = [k for k, v in mine.items() if k in meta and meta[k] != v]
+    if diff:
+        sys.exit(f"error: --resume {out}: checkpoint.pt is not this run's: its "
+                 + "; ".join(f"{k} is {mine[k]!r}, the run's policy.onnx has {meta[k]!r}"
+                             for k in diff)
+                 + ". Resume the directory the checkpoint came from")
+
+
+#: log.csv's columns.
+LOG_HEADER = ["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
+              "train_success", "train_return", "eval_success", "eval_return",
+              "infer_time", "gae_time", "update_time", "eval_time"]
+
+
+def start_log(log_path, resume_at=None):
+    """Opens the run's log.csv for appending; returns (file, csv writer). A new run starts
+    it with the header. A resumed run (``resume_at``: the (iteration, env steps) its
+    checkpoint continues from) keeps the rows the checkpoint counts; rows after it (written
+    after the checkpoint by a run then killed) and a row cut short are dropped. The log is
+    never rewritten in place: a new one is written beside it and renamed over it, so a
+    failing write (a full disk) leaves the log as it was."""
+    def write(rows):
+        def w(tmp):
+            with open(tmp, "w", newline="") as f:
+                csv.writer(f).writerows(rows)
+        atomic_write(log_path, w)
+
+    if resume_at is None or not os.path.exists(log_path):
+        write([LOG_HEADER])
+    else:
+        first_it, global_step = resume_at
+        with open(log_path, newline="") as f:
+            text = f.read()
+        rows = list(csv.reader(text.splitlines()))
+        if not rows or rows[0] != LOG_HEADER:
+            sys.exit(f"error: {log_path} does not start with ppo.py's header "
+                     f"({','.join(LOG_HEADER)}); it is not this script's log")
+        body = rows[1:]
+        if text and not text.endswith("\n") and body:
+            body = body[:-1]  # cut short by a kill
+
+        def counted(r):
+            try:
+                return (len(r) == len(LOG_HEADER) and int(r[0]) < first_it
+                        and int(r[1]) <= global_step)
+            except ValueError:
+                return False
+
+        kept = [r for r in body if counted(r)]
+        if len(kept) != len(rows) - 1:
+            print(f"{log_path}: {len(rows) - 1 - len(kept)} row(s) after the checkpoint or cut "
+                  "short dropped", flush=True)
+            write([LOG_HEADER] + kept)
+    log = open(log_path, "a", newline="")
+    return log, csv.writer(log)
+
+
+def append_row(log, writer, row):
+    """Appends ``row`` to the log and flushes it to disk (before any checkpoint counts it)."""
+    writer.writerow(row)
+    log.flush()
+    os.fsync(log.fileno())
 
 
 def default_num_threads(args):
@@ -395,6 +604,8 @@ def default_num_threads(args):
 def main(argv=None):
     args = parse_args(argv)
     ckpt = None
+    # One writer per run directory: its lock is taken as soon as the directory is known.
+    run_lock = hold_run_dir(args.resume or args.out) if (args.resume or args.out) else None
     if args.resume is not None:
         args, ckpt = resumed_args(argv)
     demos = None
@@ -479,14 +690,19 @@ def main(argv=None):
     sim_tag = "" if args.simulator == "mjskill" else f"__{args.simulator}"
     out = args.out or os.path.join("runs",
                                    f"{args.env_id}__{robot}__{mode}__{args.seed}{sim_tag}")
-    os.makedirs(out, exist_ok=True)
+    if run_lock is None:
+        run_lock = hold_run_dir(out)
     obs_dim = envs.single_observation_space.shape[0]
     act_dim = envs.single_action_space.shape[0]
     low = torch.as_tensor(envs.single_action_space.low).to(dev)
     high = torch.as_tensor(envs.single_action_space.high).to(dev)
-    floors = {int(f.split(":")[0]): float(f.split(":")[1]) for f in args.action_floor}
+    floors = parse_floors(args.action_floor)
     if any(not 0 <= k < len(low) for k in floors):
-        sys.exit(f"error: --action-floor indices {sorted(floors)} out of range 0..{len(low) - 1}")
+        # Known only now (the action size is the env's); a usage error as argparse's.
+        print(f"{os.path.basename(sys.argv[0])}: error: --action-floor indices "
+              f"{sorted(floors)} out of range 0..{len(low) - 1} ({robot} in {mode} has "
+              f"{len(low)} action components)", file=sys.stderr)
+        sys.exit(2)
     for k, v in floors.items():
         low[k] = max(float(low[k]), v)
     # The command that trained the run (for a resumed run: the first one, whose options it
@@ -495,6 +711,8 @@ def main(argv=None):
         sys.argv[1:] if argv is None else argv)
     command = ckpt["command"] if ckpt is not None else (
         "python " + " ".join(shlex.quote(a) for a in [sys.argv[0], *run_argv]))
+    if ckpt is not None:
+        check_checkpoint_is_the_runs(out, command, robot, mode)
 
     def mlp(n_out, last_std):
         layers, n_in = [], obs_dim
@@ -666,9 +884,6 @@ def main(argv=None):
     b_done = torch.zeros((T, N), device=dev)  # the episode ended at this step
     b_valid = torch.zeros((T, N), device=dev)  # this step was not an autoreset step
 
-    header = ["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
-              "train_success", "train_return", "eval_success", "eval_return",
-              "infer_time", "gae_time", "update_time", "eval_time"]
     log_path = os.path.join(out, "log.csv")
     # Seconds in: the vector env (sim_time; native rollouts include the actor's forward
     # passes on the env threads), the rollout's torch forward passes (infer_time), GAE and the
@@ -699,20 +914,11 @@ def main(argv=None):
         torch.set_rng_state(ckpt["torch_rng"])
         if ckpt["cuda_rng"] is not None and dev.type == "cuda":
             torch.cuda.set_rng_state(ckpt["cuda_rng"])
-        with open(log_path, newline="") as f:
-            rows = [r for r in csv.reader(f)][1:]
-        rows = [r for r in rows if r and int(r[1]) <= global_step and int(r[0]) < first_it]
-        log = open(log_path, "w", newline="")
-        writer = csv.writer(log)
-        writer.writerow(header)
-        writer.writerows(rows)
+        log, writer = start_log(log_path, (first_it, global_step))
         t_start = clock() - tm["wall"]
     else:
-        log = open(log_path, "w", newline="")
-        writer = csv.writer(log)
-        writer.writerow(header)
+        log, writer = start_log(log_path)
         t_start = clock()
-    log.flush()
     print(f"{args.env_id} {robot} {mode}: obs {obs_dim}, act {act_dim}; {N} envs x {T} steps, "
           f"{iterations} iterations, {'native' if native else 'torch'} rollouts"
           f"{f' on {args.ray_workers} Ray workers' if args.ray_workers else ''}, "
@@ -760,11 +966,13 @@ def main(argv=None):
             t0 = clock()
             eval_s, eval_r = evaluate()
             eval_time += clock() - t0
-            # An evaluation row: the policy after `global_step` env steps.
-            writer.writerow([it - 1, global_step, f"{clock() - t_start:.3f}",
-                             f"{sim_time:.3f}", f"{infer_time + gae_time + update_time:.3f}",
-                             "", "", eval_s, eval_r, f"{infer_time:.3f}", f"{gae_time:.3f}",
-                             f"{update_time:.3f}", f"{eval_time:.3f}"])
+            # An evaluation row: the policy after `global_step` env steps (on disk before
+            # the checkpoint that counts it).
+            append_row(log, writer, [
+                it - 1, global_step, f"{clock() - t_start:.3f}", f"{sim_time:.3f}",
+                f"{infer_time + gae_time + update_time:.3f}", "", "", eval_s, eval_r,
+                f"{infer_time:.3f}", f"{gae_time:.3f}", f"{update_time:.3f}",
+                f"{eval_time:.3f}"])
             print(f"eval after {global_step} steps: success {eval_s:.3f} return {eval_r:.2f}",
                   flush=True)
             save("policy", eval_s)
@@ -927,10 +1135,10 @@ def main(argv=None):
         wall = clock() - t_start
         ts = float(np.mean(ended_success)) if ended_success else ""
         tr = float(np.mean(ended_return)) if ended_return else ""
-        writer.writerow([it, global_step, f"{wall:.3f}", f"{sim_time:.3f}", f"{learner_time:.3f}",
-                         ts, tr, "", "", f"{infer_time:.3f}", f"{gae_time:.3f}",
-                         f"{update_time:.3f}", f"{eval_time:.3f}"])
-        log.flush()
+        append_row(log, writer, [
+            it, global_step, f"{wall:.3f}", f"{sim_time:.3f}", f"{learner_time:.3f}", ts, tr,
+            "", "", f"{infer_time:.3f}", f"{gae_time:.3f}", f"{update_time:.3f}",
+            f"{eval_time:.3f}"])
         print(f"it {it}/{iterations} steps {global_step} wall {wall:.0f}s "
               f"(sim {sim_time:.0f}s, infer {infer_time:.0f}s, gae {gae_time:.0f}s, "
               f"update {update_time:.0f}s, eval {eval_time:.0f}s) "
@@ -944,10 +1152,10 @@ def main(argv=None):
     t0 = clock()
     eval_s, eval_r = evaluate()
     eval_time += clock() - t0
-    writer.writerow([it, global_step, f"{clock() - t_start:.3f}", f"{sim_time:.3f}",
-                     f"{infer_time + gae_time + update_time:.3f}", "", "", eval_s, eval_r,
-                     f"{infer_time:.3f}", f"{gae_time:.3f}", f"{update_time:.3f}",
-                     f"{eval_time:.3f}"])
+    append_row(log, writer, [
+        it, global_step, f"{clock() - t_start:.3f}", f"{sim_time:.3f}",
+        f"{infer_time + gae_time + update_time:.3f}", "", "", eval_s, eval_r,
+        f"{infer_time:.3f}", f"{gae_time:.3f}", f"{update_time:.3f}", f"{eval_time:.3f}"])
     log.close()
     path = save("policy", eval_s)
     if best is None or eval_s >= best:

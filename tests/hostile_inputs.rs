@@ -70,10 +70,16 @@ fn dims() -> (usize, usize) {
     (env.obs().len(), env.action_space().shape[0])
 }
 
-/// Makes a policy file of `kind` with tests/make_hostile_policy.py.
+/// Makes a policy file of `kind` with tests/make_hostile_policy.py (named after `kind` and
+/// `extra`, so that files of one kind with other options do not replace each other).
 fn hostile(py: &Path, d: &Path, kind: &str, extra: &[&str]) -> PathBuf {
     let (obs, act) = dims();
-    let out = d.join(format!("{kind}.onnx"));
+    let tag: String = extra
+        .concat()
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let out = d.join(format!("{kind}{tag}.onnx"));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/make_hostile_policy.py");
     let o = Command::new(py)
         .arg(script)
@@ -447,6 +453,16 @@ fn policy_files_that_crash_or_exhaust_the_runtime_are_errors() {
             "16777216 elements",
         ),
         (hostile(&py, &d, "nan-mul-zero", &[]), "constant zero"),
+        // Non-finite constants (issue 48, finding 4): a NaN floor, which tract's Max skips
+        // and onnxruntime's returns, and an infinite one.
+        (
+            hostile(&py, &d, "floor", &["--value", "nan", "--index", "2"]),
+            "holds NaN at index 2",
+        ),
+        (
+            hostile(&py, &d, "floor", &["--value=-inf", "--index", "1"]),
+            "holds -inf at index 1",
+        ),
         (hostile(&py, &d, "int64-out", &[]), "f32"),
         (hostile(&py, &d, "rank3-out", &[]), "shape"),
         (hostile(&py, &d, "loop", &[]), "Loop"),
@@ -460,6 +476,14 @@ fn policy_files_that_crash_or_exhaust_the_runtime_are_errors() {
             "{want}: {err}"
         );
     }
+    // A finite floor is fine.
+    let f = hostile(&py, &d, "floor", &["--value", "0.25"]);
+    let o = mjskill()
+        .args(["eval", "--episodes", "1", "--policy"])
+        .arg(&f)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // A tensor within the limit is fine.
     let f = hostile(&py, &d, "const-shape", &["--shape", "1000,1000"]);
     let o = mjskill()

@@ -13,6 +13,8 @@ KIND:
   loop           a Loop with the constant trip count --trip
   nan-mul-zero   obs[:act] multiplied by a constant zero
   nan-out        NaN actions: sqrt(-1 - |obs[:act]|)
+  floor          a plain policy with an action floor (Max with a constant, as
+                 examples/policy_onnx.py floor writes) of --value (e.g. nan, inf) at --index
   int64-out, bool-out, rank3-out
                  outputs of the wrong type or rank
   dup-meta       a valid graph with the metadata key --key twice (values --meta-value and
@@ -109,6 +111,12 @@ def build(a):
                   helper.make_node("Abs", ["xs"], ["ax"]),
                   helper.make_node("Sub", ["minus1", "ax"], ["neg"]),
                   helper.make_node("Sqrt", ["neg"], ["action"])]
+    elif k == "floor":
+        plain_action(nodes, inits, a.obs_dim, a.act_dim, out="raw")
+        lo = np.full(a.act_dim, np.finfo(np.float32).min, np.float32)
+        lo[a.index] = np.float32(float(a.value))
+        inits.append(const("action_floor", lo))
+        nodes.append(helper.make_node("Max", ["raw", "action_floor"], ["action"]))
     elif k in ("int64-out", "bool-out", "rank3-out"):
         plain_action(nodes, inits, a.obs_dim, a.act_dim, out="a0")
         if k == "int64-out":
@@ -143,6 +151,7 @@ def main():
     p.add_argument("--index", type=int, default=0)
     p.add_argument("--threshold", type=float, default=0.0)
     p.add_argument("--sign", type=float, default=1.0)
+    p.add_argument("--value", default="0.5", help="the floor of `floor` (nan and inf too)")
     p.add_argument("--shape", default="1000000000,1000000000")
     p.add_argument("--trip", type=int, default=10**15)
     p.add_argument("--key", default="control_mode")

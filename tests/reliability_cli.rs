@@ -240,6 +240,58 @@ fn two_rollouts_on_one_file_are_a_reported_clash() {
     assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
 }
 
+/// A symlink at the lock path is never written through (issue 48, finding 5): the rollout
+/// refuses, naming the link, and the file it points to (here the previous recording) is left
+/// whole. A dangling symlink or a name ending in `/` at `--out` is refused before anything is
+/// simulated (1000 episodes would take minutes).
+#[test]
+fn a_symlink_at_the_lock_path_or_the_output_is_refused_untouched() {
+    let d = common::scratch_dir("locklink");
+    let out = d.join("x.mcap");
+    let previous = d.join("previous.mcap");
+    std::fs::write(&previous, b"the previous recording").unwrap();
+    let lock = d.join(".x.mcap.lock");
+    std::os::unix::fs::symlink(&previous, &lock).unwrap();
+    let rollout = |out: &Path| {
+        let mut c = mjskill();
+        c.args(["rollout", "--episodes", "1000", "--no-frame", "--out"])
+            .arg(out);
+        run_within(c, 60)
+    };
+    let o = rollout(&out);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains(".x.mcap.lock") && e.contains("symbolic link") && e.contains("previous.mcap"),
+        "{e}"
+    );
+    assert!(!e.contains("another mjskill rollout"), "{e}");
+    assert_eq!(std::fs::read(&previous).unwrap(), b"the previous recording");
+    assert!(std::fs::symlink_metadata(&lock)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(!out.exists());
+    std::fs::remove_file(&lock).unwrap();
+    // A dangling symlink at --out, and a name ending in a slash.
+    let dangling = d.join("dangling.mcap");
+    std::os::unix::fs::symlink(d.join("missing/dir/y.mcap"), &dangling).unwrap();
+    let t = Instant::now();
+    let o = rollout(&dangling);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("symbolic link"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("another mjskill rollout"));
+    let slash = format!("{}/", d.join("z.mcap").display());
+    let o = rollout(Path::new(&slash));
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("ends with a slash"), "{}", stderr(&o));
+    assert!(
+        t.elapsed() < Duration::from_secs(30),
+        "refused only after simulating"
+    );
+    assert!(leftovers(&d).is_empty(), "{:?}", leftovers(&d));
+}
+
 #[test]
 fn a_finished_recording_is_never_replaced_by_a_rollout_started_while_it_ran() {
     // Issue 42: A records 200 episodes; B, started while A runs (here before A's first

@@ -322,6 +322,80 @@ fn so100_jaw_sinks_into_a_squeezed_cube_and_drops_it_past_minus_0_93_as_in_manis
     }
 }
 
+/// The SO100's jaw release counters (the substeps in a row the jaw has been sunk into the
+/// cube) are part of the state (issue 48, finding 6): a state saved in the middle of a squeeze,
+/// restored into another env, continues bit for bit, and so does a recording's `state_before`
+/// (the same `get_state`). Counters that are not whole numbers are refused, naming the value;
+/// a state saved before the counters were part of it still restores.
+#[test]
+fn so100_state_saved_mid_squeeze_continues_bit_for_bit() {
+    use mjskill::solvers::make_policy;
+    let mut env = eval::make_env("PickCubeSO100-v1", EnvConfig::default(), "solver").unwrap();
+    let mut copy = eval::make_env("PickCubeSO100-v1", EnvConfig::default(), "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    let n_ctl = env.get_state().controller.len();
+    let n_drives = env.drives().len();
+    let counters = n_ctl - n_drives..n_ctl;
+    let (mut squeezed, mut compared) = (0, 0);
+    let cases = [5000u64, 5002].map(|seed| [-0.88f32, -0.9, -0.93, -0.96, -1.0].map(|t| (seed, t)));
+    for (seed, target) in cases.into_iter().flatten() {
+        env.reset(Some(seed));
+        policy.reset(&env);
+        for _ in 0..50 {
+            policy.act(&env, &mut action);
+            env.step(&action).unwrap();
+            if env.obs_part("extra/obj_pose").unwrap()[2] > 0.05 {
+                break;
+            }
+        }
+        // The arm held, the jaw squeezing at `target`: every step's state, restored in the
+        // other env, gives the next three steps bit for bit.
+        action[5] = target;
+        for _ in 0..20 {
+            let saved = env.get_state();
+            squeezed += usize::from(saved.controller[counters.clone()].iter().any(|&c| c > 0.0));
+            copy.set_state(&saved).unwrap();
+            assert_eq!(copy.get_state(), saved);
+            for k in 0..3 {
+                let a = env.step(&action).unwrap().obs.to_vec();
+                let b = copy.step(&action).unwrap().obs.to_vec();
+                let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(
+                    same,
+                    "seed {seed}, target {target}: step {k} after a restore differs"
+                );
+            }
+            assert_eq!(
+                copy.get_state(),
+                env.get_state(),
+                "seed {seed}, target {target}"
+            );
+            compared += 1;
+            env.set_state(&saved).unwrap();
+            env.step(&action).unwrap();
+        }
+    }
+    assert_eq!(compared, 200);
+    assert!(squeezed >= 10, "only {squeezed} states saved mid-squeeze");
+    // A counter must be a whole number of substeps in 0..=u32::MAX.
+    let good = env.get_state();
+    for bad in [1.5, -1.0, 5e9] {
+        let mut s = good.clone();
+        s.controller[counters.start] = bad;
+        let e = env.set_state(&s).unwrap_err().to_string();
+        let want = format!("controller[{}] = {bad}", counters.start);
+        assert!(e.contains(&want) && e.contains("jaw release count"), "{e}");
+    }
+    assert_eq!(env.get_state(), good, "a refused state changes nothing");
+    // A state without the counters (saved by an earlier version) restores them at zero.
+    let mut old = good.clone();
+    old.controller.truncate(counters.start);
+    env.set_state(&old).unwrap();
+    let now = env.get_state();
+    assert!(now.controller[counters].iter().all(|&c| c == 0.0));
+}
+
 /// Without the `onnx` feature a policy file is an error naming the feature.
 #[cfg(not(feature = "onnx"))]
 #[test]

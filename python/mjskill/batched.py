@@ -72,21 +72,30 @@ RESET_OPTIONS = ["env_idx", "reconfigure"]
 """ManiSkill's ``reset`` options the batched env takes."""
 
 _MAX_WRAPPER_DEPTH = 32
-"""How many callers of ``reset`` are searched for gymnasium's ``TimeLimit``."""
+"""How many callers are searched for gymnasium's ``make`` and ``TimeLimit`` (:func:`_callers`)."""
+
+
+def _callers(depth: int):
+    """The frames of the callers, from ``depth`` levels above the function that iterates
+    this generator (1: its caller) on, at most :data:`_MAX_WRAPPER_DEPTH` of them. The one place the batched env reads the
+    call stack: gymnasium passes it neither ``make``'s ``max_episode_steps=-1`` (it only
+    leaves its ``TimeLimit`` out, and ``env.spec``, which ``make`` sets after the env is
+    built, says ``None`` either way) nor the ``TimeLimit`` around it."""
+    frame = sys._getframe(depth + 1)
+    for _ in range(_MAX_WRAPPER_DEPTH):
+        if frame is None:
+            return
+        yield frame
+        frame = frame.f_back
 
 
 def _made_without_time_limit() -> bool:
-    """Whether this env is being made by ``gym.make(..., max_episode_steps=-1)``, which
-    gymnasium does not pass to the env: it only leaves its ``TimeLimit`` out. Read from
+    """Whether this env is being made by ``gym.make(..., max_episode_steps=-1)``: read from
     ``gymnasium.make``'s frame among the callers."""
-    frame = sys._getframe(1)
-    for _ in range(_MAX_WRAPPER_DEPTH):
-        if frame is None:
-            return False
+    for frame in _callers(1):
         if frame.f_code.co_name == "make" and frame.f_globals.get("__name__", "").startswith(
                 "gymnasium"):
             return frame.f_locals.get("max_episode_steps") == -1
-        frame = frame.f_back
     return False
 
 
@@ -267,14 +276,10 @@ class MjskillBatchedEnv(gym.Env):
         (``gym.make`` puts one outside it; ``TimeLimit.reset`` zeroes its counter and then calls
         in here), takes the smallest limit as the per-env ``max_episode_steps`` and moves their
         counters back by 2**62 steps, so their scalar ``truncated = True`` never fires."""
-        frame = sys._getframe(2)
-        for _ in range(_MAX_WRAPPER_DEPTH):
-            if frame is None:
-                break
+        for frame in _callers(2):
             w = frame.f_locals.get("self")
             if isinstance(w, gym.wrappers.TimeLimit) and w.unwrapped is self:
                 self._time_limits.add(w)
-            frame = frame.f_back
         if self._time_limits:
             self.max_episode_steps = min(int(w._max_episode_steps) for w in self._time_limits)
             for w in self._time_limits:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -33,7 +34,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import _native
-from .envs import MAX_SEED, MjskillVectorEnv, rollout_buffers
+from ._common import live
+from .envs import MAX_SEED, ROLLOUT_BUFFERS, MjskillVectorEnv, rollout_buffers
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -210,6 +212,47 @@ def shares(num_envs: int, workers: int) -> list[tuple[int, int]]:
     return out
 
 
+def check_rollout_buffers(envs: Any, buffers: Any, first_step: Any) -> int:
+    """Checks, before any actor steps, what :meth:`mjskill.MjskillVectorEnv.rollout` checks
+    before it steps: ``buffers`` as :func:`rollout_buffers` makes them for ``envs`` (its keys,
+    exactly its dtypes and shapes for some T >= 1, C-contiguous, writable, each in its own
+    memory) and ``0 <= first_step``, ``first_step + T <= 2**48``. Returns T; raises
+    ``TypeError`` or ``ValueError`` naming the buffer."""
+    if not isinstance(buffers, dict):
+        raise TypeError(
+            f"buffers must be the dict rollout_buffers(T) returns, not {type(buffers).__name__}")
+    missing = [k for k in ROLLOUT_BUFFERS if k not in buffers]
+    if missing:
+        raise ValueError(f"buffers lack {', '.join(missing)}; rollout takes the dict "
+                         f"rollout_buffers(T) returns (keys {', '.join(ROLLOUT_BUFFERS)})")
+    r = buffers["rewards"]
+    if not isinstance(r, np.ndarray) or r.ndim != 2 or r.shape[0] < 1:
+        raise ValueError("buffers['rewards'] must be a [T, num_envs] array with T >= 1, as "
+                         "rollout_buffers(T) makes it")
+    steps = r.shape[0]
+    want = rollout_buffers(envs, steps)
+    for k in ROLLOUT_BUFFERS:
+        b, w = buffers[k], want[k]
+        if not isinstance(b, np.ndarray):
+            raise TypeError(f"buffers[{k!r}] must be a numpy array, not {type(b).__name__}")
+        if b.dtype != w.dtype or b.shape != w.shape:
+            raise ValueError(f"buffers[{k!r}] is {b.dtype} {list(b.shape)}; rollout needs "
+                             f"{w.dtype} {list(w.shape)} (rollout_buffers({steps}))")
+        if not (b.flags.c_contiguous and b.flags.writeable):
+            raise ValueError(f"buffers[{k!r}] must be C-contiguous and writable")
+    for i, a in enumerate(ROLLOUT_BUFFERS):
+        for b in ROLLOUT_BUFFERS[i + 1:]:
+            if np.may_share_memory(buffers[a], buffers[b]):
+                raise ValueError(f"buffers[{a!r}] and buffers[{b!r}] share memory; each "
+                                 "buffer must have its own")
+    if isinstance(first_step, bool) or not isinstance(first_step, (int, np.integer)):
+        raise TypeError(f"first_step must be an integer, not {type(first_step).__name__}")
+    if not 0 <= first_step <= 2**48 - steps:
+        raise ValueError(f"first_step {first_step} is out of range: 0 <= first_step and "
+                         f"first_step + T ({steps}) <= 2**48")
+    return steps
+
+
 class _RolloutActor:
     """One share of a :class:`RayVectorEnv`: envs ``first..first + n`` of the whole."""
 
@@ -264,9 +307,11 @@ class RayVectorEnv:
         num_envs = _native.check_count(num_envs, "num_envs")
         workers = _native.check_count(workers, "workers")
         num_threads = _native.check_count(num_threads, "num_threads")
-        if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0):
+        if timeout is not None and not (isinstance(timeout, (int, float))
+                                        and not isinstance(timeout, bool) and timeout > 0):
             raise ValueError(f"timeout must be a positive number of seconds or None, got {timeout!r}")
-        self.timeout = timeout
+        # An infinite timeout is no limit (Ray's wait takes finite seconds only).
+        self.timeout = None if timeout is None or math.isinf(timeout) else float(timeout)
         self.num_envs = int(num_envs)
         self.shares = shares(self.num_envs, int(workers))
         if not ray.is_initialized():
@@ -307,8 +352,13 @@ class RayVectorEnv:
             )
         return ray.get(refs)
 
+    def _live(self) -> list:
+        """The actors, or a ``RuntimeError`` once :meth:`close` has ended them."""
+        return live(self._actors or None, "this RayVectorEnv", "make a new one")
+
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Resets every env (env ``i`` with ``seed + i``); the observations ``[N, obs_dim]``."""
+        actors = self._live()
         seed = _native.check_seed(seed)
         if seed is not None and seed + self.num_envs - 1 > MAX_SEED:
             raise ValueError(
@@ -316,7 +366,7 @@ class RayVectorEnv:
                 f"env {self.num_envs - 1} would get {seed + self.num_envs - 1}, beyond the 32-bit "
                 f"seeds 0..={MAX_SEED}; give a seed at most {MAX_SEED - self.num_envs + 1}"
             )
-        return np.concatenate(self._get([a.reset.remote(seed) for a in self._actors], "reset"))
+        return np.concatenate(self._get([a.reset.remote(seed) for a in actors], "reset"))
 
     def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
         """As :meth:`mjskill.MjskillVectorEnv.rollout_buffers`, for all ``num_envs`` envs."""
@@ -329,12 +379,11 @@ class RayVectorEnv:
         ``env_offset``. Fills ``buffers`` and returns the observations after the last step."""
         import ray
 
-        if not self._actors:
-            raise RuntimeError("this RayVectorEnv is closed")
-        steps = buffers["rewards"].shape[0]
+        actors = self._live()
+        steps = check_rollout_buffers(self, buffers, first_step)
         ref = ray.put(policy)
         parts = self._get(
-            [a.rollout.remote(ref, first_step, steps) for a in self._actors], "rollout")
+            [a.rollout.remote(ref, first_step, steps) for a in actors], "rollout")
         for key, dst in buffers.items():
             np.concatenate([p[0][key] for p in parts], axis=1, out=dst)
         return np.concatenate([p[1] for p in parts])

@@ -68,6 +68,8 @@ def refused(path, match):
         ("bool-out", (), "f32"),
         ("rank3-out", (), "shape"),
         ("nan-mul-zero", (), "constant zero"),
+        ("floor", ("--value", "nan", "--index", "2"), "holds NaN at index 2"),
+        ("floor", ("--value", "inf"), "holds inf at index 0"),
         ("loop", ("--trip", str(10**15)), "Loop"),
         ("div-zero", (), "failed to run"),
         ("const-shape", ("--shape", "1000000000,1000000000"), "16777216 elements"),

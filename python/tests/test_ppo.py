@@ -42,6 +42,10 @@ def run(*args, timeout=300):
     (["--resume", "/nonexistent/run"], "no checkpoint.pt there"),
     (["--action-floor", "seven"], "expected INDEX:LEAST"),
     (["--action-floor", "7:-0.5", "--rollout", "native"], "works with torch rollouts"),
+    (["--action-floor", "7:0.5", "--action-floor", "7:0.25"], "given twice"),
+    (["--action-floor", "7:0.5:1"], "expected INDEX:LEAST"),
+    (["--action-floor", "7:1e39"], "float32's range"),
+    (["--action-floor", "7:nan"], "finite number"),
 ])
 def test_ppo_refuses_settings_that_cannot_train(args, message):
     r = run(*args)
@@ -172,3 +176,189 @@ def test_action_floor_bounds_the_trained_files_actions(tmp_path):
     a = s.run(None, {s.get_inputs()[0].name: x.astype(np.float32)})[0]
     assert a[:, 7].min() >= 0.25
     assert a[:, 0].min() < 0.25  # the other components are not floored
+
+
+# -- run directories (issue 48): one writer, logs that lose nothing, checkpoints checked -----
+
+def hold_in_another_process(run_dir):
+    """A process that holds ``run_dir``'s lock (ppo.hold_run_dir) until killed."""
+    code = ("import sys, time; sys.path.insert(0, sys.argv[1]); import ppo; "
+            "f = ppo.hold_run_dir(sys.argv[2]); print('held', flush=True); time.sleep(300)")
+    p = subprocess.Popen([sys.executable, "-c", code, str(PPO.parent), str(run_dir)],
+                         stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "held"
+    return p
+
+
+def test_a_second_ppo_on_one_run_directory_is_refused_naming_the_holder(tmp_path):
+    run_dir = tmp_path / "run"
+    holder = hold_in_another_process(run_dir)
+    try:
+        # A new run, and a resume (before its checkpoint is even read), both refused.
+        (run_dir / "checkpoint.pt").write_bytes(b"the holder's checkpoint")
+        for args in (["--out", str(run_dir)], ["--resume", str(run_dir)]):
+            r = run(*SMALL, *args) if args[0] == "--out" else run(*args)
+            assert r.returncode == 1, (args, r.stderr[-2000:])
+            assert f"pid {holder.pid}" in r.stderr and "in use" in r.stderr, r.stderr[-2000:]
+            assert "Traceback" not in r.stderr
+        assert (run_dir / "checkpoint.pt").read_bytes() == b"the holder's checkpoint"
+    finally:
+        holder.kill()
+        holder.wait()
+    # Once the holder is gone, the directory is free again (the lock goes with the process).
+    ppo = load_ppo_module()
+    f = ppo.hold_run_dir(str(run_dir))
+    f.close()
+
+
+def test_the_run_lock_never_writes_through_a_symlink(tmp_path):
+    ppo = load_ppo_module()
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    victim = tmp_path / "victim.csv"
+    victim.write_text("precious")
+    (run_dir / ppo.RUN_LOCK).symlink_to(victim)
+    with pytest.raises(SystemExit, match="symbolic link"):
+        ppo.hold_run_dir(str(run_dir))
+    assert victim.read_text() == "precious"
+
+
+def test_stale_temporary_files_of_killed_runs_are_removed(tmp_path):
+    ppo = load_ppo_module()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    for name in (f"checkpoint.pt.tmp-{dead.pid}", f"policy.onnx.tmp-{dead.pid}",
+                 f"mine.tmp-{os.getpid()}", "notes.tmp-x"):
+        (run_dir / name).write_text("x")
+    ppo.hold_run_dir(str(run_dir)).close()
+    left = sorted(p.name for p in run_dir.iterdir())
+    assert left == sorted([ppo.RUN_LOCK, f"mine.tmp-{os.getpid()}", "notes.tmp-x"]), left
+
+
+def test_resume_refuses_another_out(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "checkpoint.pt").write_bytes(b"x")
+    r = run("--resume", str(run_dir), "--out", str(tmp_path / "other"))
+    assert r.returncode == 2 and "continues in its own directory" in r.stderr, r.stderr[-2000:]
+    assert not (tmp_path / "other").exists()
+
+
+def write_log(path, rows, tail=""):
+    import csv as _csv
+
+    with open(path, "w", newline="") as f:
+        w = _csv.writer(f)
+        w.writerow(load_ppo_module().LOG_HEADER)
+        w.writerows(rows)
+        f.write(tail)
+
+
+def row(it, steps, eval_s=""):
+    return [it, steps, "1.0", "0.5", "0.4", "" if eval_s != "" else 0.5, "", eval_s, "",
+            "0.1", "0.1", "0.2", "0.0"]
+
+
+def test_resume_keeps_the_counted_rows_and_drops_later_and_torn_ones(tmp_path):
+    ppo = load_ppo_module()
+    log_path = tmp_path / "log.csv"
+    # Eval after 0 steps, iterations 1-2, eval after 96 steps (the checkpoint: continue at
+    # iteration 3), then an iteration the kill cut off, and a torn row.
+    counted = [row(0, 0, 0.0), row(1, 48), row(2, 96), row(2, 96, 0.5)]
+    write_log(log_path, counted + [row(3, 144)], tail="4,192,1.2")
+    log, writer = ppo.start_log(str(log_path), (3, 96))
+    ppo.append_row(log, writer, row(3, 144))
+    log.close()
+    rows = log_rows(tmp_path)
+    assert [(r["iteration"], r["env_steps"]) for r in rows] == [
+        ("0", "0"), ("1", "48"), ("2", "96"), ("2", "96"), ("3", "144")]
+    assert not [p for p in tmp_path.iterdir() if ".tmp-" in p.name]
+    # Nothing to drop: the log is appended to, not rewritten.
+    ino = os.stat(log_path).st_ino
+    log, writer = ppo.start_log(str(log_path), (4, 144))
+    log.close()
+    assert os.stat(log_path).st_ino == ino and len(log_rows(tmp_path)) == 5
+
+
+def test_a_failing_resume_write_leaves_the_log_whole(tmp_path, monkeypatch):
+    ppo = load_ppo_module()
+    log_path = tmp_path / "log.csv"
+    write_log(log_path, [row(i, 48 * i) for i in range(1, 60)] + [row(60, 2880)])
+    before = log_path.read_bytes()
+
+    def full_disk(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(ppo.os, "fsync", full_disk)
+    with pytest.raises(OSError, match="No space"):
+        ppo.start_log(str(log_path), (60, 59 * 48))  # the last row must go: a rewrite
+    assert log_path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["log.csv"]
+
+
+def test_log_rows_are_on_disk_before_the_checkpoint_that_counts_them(tmp_path):
+    # SIGKILL right after each new checkpoint: the log holds every row the checkpoint
+    # counts, and --resume continues from it with none lost.
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("mjskill")
+    out = tmp_path / "run"
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    p = subprocess.Popen([sys.executable, str(PPO), *SMALL, "--eval-freq", "1",
+                          "--total-timesteps", str(10_000 * BATCH), "--out", str(out)],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    ckpt = out / "checkpoint.pt"
+    deadline = time.time() + 240
+    seen = None
+    while time.time() < deadline:
+        try:
+            ino = os.stat(ckpt).st_ino
+        except FileNotFoundError:
+            ino = None
+        if ino is not None and seen is not None and ino != seen:
+            break  # the second checkpoint was just renamed into place
+        seen = seen or ino
+        time.sleep(0.001)
+    p.kill()
+    p.wait()
+    last = torch.load(ckpt, weights_only=True)
+    evals = [r for r in log_rows(out) if r["eval_success"] != ""]
+    assert int(evals[-1]["env_steps"]) >= last["global_step"], (evals, last["global_step"])
+    r = run("--resume", str(out), "--total-timesteps", str(last["global_step"] + 2 * BATCH))
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = log_rows(out)
+    steps = [int(x["env_steps"]) for x in rows if x["eval_success"] != ""]
+    assert last["global_step"] in steps and steps == sorted(steps), steps
+    walls = [float(x["wall_time"]) for x in rows]
+    assert walls == sorted(walls)
+
+
+def test_a_damaged_or_foreign_checkpoint_is_a_clear_error(tmp_path):
+    torch = pytest.importorskip("torch")
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    for content in (b"", b"PK\x03\x04 cut short", None):
+        if content is None:
+            torch.save({"argv": []}, run_dir / "checkpoint.pt")
+        else:
+            (run_dir / "checkpoint.pt").write_bytes(content)
+        r = run("--resume", str(run_dir))
+        assert r.returncode == 1, r.stderr[-2000:]
+        assert "is not a checkpoint of examples/ppo.py" in r.stderr, r.stderr[-2000:]
+        assert "Traceback" not in r.stderr and "weights_only" not in r.stderr
+
+
+def test_resume_refuses_a_checkpoint_of_another_run(tmp_path):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("mjskill")
+    a, b = tmp_path / "panda", tmp_path / "so100"
+    for out, robot in ((a, "panda"), (b, "so100")):
+        r = run(*SMALL, "--robot", robot, "--control-mode", "pd_joint_delta_pos",
+                "--total-timesteps", str(BATCH), "--out", str(out))
+        assert r.returncode == 0, r.stderr[-3000:]
+    (a / "checkpoint.pt").write_bytes((b / "checkpoint.pt").read_bytes())
+    before = (a / "log.csv").read_bytes()
+    r = run("--resume", str(a))
+    assert r.returncode == 1 and "checkpoint.pt is not this run's" in r.stderr, r.stderr[-3000:]
+    assert (a / "log.csv").read_bytes() == before

@@ -153,6 +153,46 @@ def test_ray_shards_roll_out_bit_for_bit_as_one_vector_env(local_ray):
     remote.close()
 
 
+def test_ray_env_refuses_what_the_local_env_refuses_before_stepping(local_ray):
+    # Issue 48: a bad buffer failed only after the actors had stepped (or not at all), reset
+    # after close said "need at least one array to concatenate", timeout=inf overflowed.
+    from mjskill.ray import RayVectorEnv
+
+    remote = RayVectorEnv("PickCube-v1", 3, workers=2, timeout=float("inf"), **KW)
+    assert remote.timeout is None
+    obs_dim = remote.single_observation_space.shape[0]
+    act_dim = remote.single_action_space.shape[0]
+    p = params(obs_dim, act_dim)
+    start = remote.reset(seed=3)
+    good = remote.rollout_buffers(2)
+    bad = [
+        ({**good, "obs": good["obs"][:, :2]}, ValueError, r"buffers\['obs'\] is float32"),
+        ({**good, "rewards": good["rewards"].astype(np.float64)}, ValueError, "float64"),
+        ({**good, "actions": np.asfortranarray(good["actions"][:, :, :1].repeat(
+            act_dim, 2))}, ValueError, "C-contiguous"),
+        ({**good, "truncated": good["terminated"]}, ValueError, "share memory"),
+        ({k: v for k, v in good.items() if k != "autoreset"}, ValueError, "lack autoreset"),
+        ([], TypeError, "must be the dict"),
+    ]
+    for buffers, kind, match in bad:
+        with pytest.raises(kind, match=match):
+            remote.rollout(p, 0, buffers)
+    with pytest.raises(ValueError, match="first_step"):
+        remote.rollout(p, 2**48 - 1, good)
+    # Nothing stepped: the envs are where the reset left them.
+    local = MjskillVectorEnv("PickCube-v1", num_envs=3, num_threads=1, **KW)
+    np.testing.assert_array_equal(start, local.reset(seed=3)[0])
+    a, last_a = rollout(local, p, 2, first_step=0)
+    np.testing.assert_array_equal(remote.rollout(p, 0, good), last_a)
+    remote.close()
+    with pytest.raises(RuntimeError, match="RayVectorEnv is closed"):
+        remote.reset(seed=0)
+    with pytest.raises(RuntimeError, match="RayVectorEnv is closed"):
+        remote.rollout(p, 0, good)
+    with pytest.raises(ValueError, match="timeout must be"):
+        RayVectorEnv("PickCube-v1", 1, workers=1, timeout=float("nan"), **KW)
+
+
 def ppo(tmp_path, name, *extra):
     out = tmp_path / name
     cmd = [sys.executable, str(REPO / "examples" / "ppo.py"), "--env-id", "PickCube-v1",

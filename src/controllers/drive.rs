@@ -562,7 +562,7 @@ impl Drives {
         for (i, substeps) in self.deep_substeps.iter_mut().enumerate() {
             if self.pinch_count[i] >= FACE_CONTACTS {
                 *substeps = if self.pinch_depth[i] > depth {
-                    *substeps + 1
+                    substeps.saturating_add(1)
                 } else {
                     0
                 };
@@ -656,26 +656,90 @@ impl Drives {
         }
     }
 
-    /// Appends the targets (position then velocity, per drive) to `out`.
+    /// Appends the drives' state to `out`: the targets (position then velocity, per drive),
+    /// then, for a robot whose gripper lets go of deep contacts (the SO100's jaw, see
+    /// `Drives::release_deep_contacts`), the release counters (per drive, the substeps in a
+    /// row its gripper has been sunk deeper than the release depth), which decide the next
+    /// substeps' releases: with them a restored state continues bit for bit.
     pub fn save(&self, out: &mut Vec<f64>) {
-        out.extend_from_slice(&self.target_q);
-        out.extend_from_slice(&self.target_v);
+        self.save_targets(out);
+        if self.release_depth.is_some() {
+            out.extend(self.deep_substeps.iter().map(|&c| f64::from(c)));
+        }
     }
 
     /// Number of values [`Drives::save`] writes.
     pub fn save_len(&self) -> usize {
+        self.targets_len() + self.counters_len()
+    }
+
+    /// Number of release counters [`Drives::save`] writes (0 for a robot without a release
+    /// depth).
+    fn counters_len(&self) -> usize {
+        if self.release_depth.is_some() {
+            self.dofs.len()
+        } else {
+            0
+        }
+    }
+
+    /// Appends the targets alone (position then velocity, per drive) to `out`.
+    pub fn save_targets(&self, out: &mut Vec<f64>) {
+        out.extend_from_slice(&self.target_q);
+        out.extend_from_slice(&self.target_v);
+    }
+
+    /// Number of values [`Drives::save_targets`] writes: also the length of a saved state
+    /// from before the release counters were part of it, which [`Drives::load`] takes
+    /// (with the counters at zero).
+    pub fn targets_len(&self) -> usize {
         2 * self.dofs.len()
     }
 
+    /// Checks the release counters of `s`, a state of [`Drives::save_len`] (or
+    /// [`Drives::targets_len`]) values: each must be a whole number from 0 to `u32::MAX`.
+    /// The error gives the counter's index in `s`, its value and the valid range.
+    pub fn check_saved(&self, s: &[f64]) -> Result<(), (usize, f64, String)> {
+        let from = self.targets_len();
+        for (i, &x) in s.iter().enumerate().skip(from) {
+            if !(0.0..=f64::from(u32::MAX)).contains(&x) || x.fract() != 0.0 {
+                return Err((
+                    i,
+                    x,
+                    format!(
+                        "is not a jaw release count (a whole number of substeps from 0 to {})",
+                        u32::MAX
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Forgets the last substep's contacts (see `Drives::release_deep_contacts`): at a reset
-    /// or a state that was set, nothing is sunk into anything yet.
+    /// nothing is sunk into anything yet.
     pub fn forget_contacts(&mut self) {
         self.deep_substeps.fill(0);
     }
 
-    /// Restores what [`Drives::save`] wrote (and forgets the last substep's contacts).
+    /// Restores what [`Drives::save`] wrote; a state of [`Drives::targets_len`] values (the
+    /// targets alone) restores the release counters at zero. Counters must have passed
+    /// [`Drives::check_saved`] (others are clamped into range).
     pub fn load(&mut self, s: &[f64]) {
+        self.load_targets(s);
         self.forget_contacts();
+        if s.len() >= self.save_len() {
+            let from = self.targets_len();
+            for (c, &x) in self.deep_substeps.iter_mut().zip(&s[from..]) {
+                // In range after check_saved; `as` saturates anything else.
+                *c = x as u32;
+            }
+        }
+    }
+
+    /// Restores the targets from what [`Drives::save_targets`] (or [`Drives::save`]) wrote,
+    /// leaving the release counters as they are.
+    pub fn load_targets(&mut self, s: &[f64]) {
         let n = self.dofs.len();
         self.target_q.copy_from_slice(&s[..n]);
         self.target_v.copy_from_slice(&s[n..2 * n]);

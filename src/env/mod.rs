@@ -620,18 +620,30 @@ impl Env {
                 s.env_id, s.robot, s.control_mode, mine.0, mine.1, mine.2
             )));
         }
-        if s.physics.len() != self.sim.data.state_len()
-            || s.controller.len() != self.sim.controller.save_len() + self.sim.drives.save_len()
-        {
+        // The controller part: the controller's targets, then the drives' (targets, and the
+        // SO100 jaw's release counters; a state saved before the counters were part of it
+        // restores them at zero).
+        let ctl = self.sim.controller.save_len();
+        let drives = &self.sim.drives;
+        let sizes_ok = s.physics.len() == self.sim.data.state_len()
+            && (s.controller.len() == ctl + drives.save_len()
+                || s.controller.len() == ctl + drives.targets_len());
+        if !sizes_ok {
             return Err(EnvError::BadState(format!(
                 "state sizes {} / {} do not match this env's {} / {}",
                 s.physics.len(),
                 s.controller.len(),
                 self.sim.data.state_len(),
-                self.sim.controller.save_len() + self.sim.drives.save_len()
+                ctl + drives.save_len()
             )));
         }
         checks::check_state_values(&self.sim.model, s)?;
+        if let Err((i, x, why)) = drives.check_saved(&s.controller[ctl..]) {
+            return Err(EnvError::BadState(format!(
+                "controller[{}] = {x} {why}",
+                ctl + i
+            )));
+        }
         self.sim
             .data
             .set_state(&s.physics)

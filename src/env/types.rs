@@ -76,7 +76,8 @@ pub struct EnvState {
     pub control_mode: String,
     /// MuJoCo state ([`Data::get_state`](crate::mujoco::Data::get_state)).
     pub physics: Vec<f64>,
-    /// Controller targets.
+    /// Controller targets, then the drives' state: their targets and, for the SO100, its
+    /// jaw's release counters (`Drives::save`).
     pub controller: Vec<f64>,
     /// Steps since reset.
     pub elapsed_steps: u32,

@@ -5,7 +5,9 @@
 //!   error, without the panic's message on stderr;
 //! * [`check_declared`] refuses, before the runtime sees the graph, tensors whose declared
 //!   size (initializers, constants, the shapes given to `ConstantOfShape`, `Expand`, `Tile`)
-//!   exceeds [`MAX_TENSOR_ELEMENTS`];
+//!   exceeds [`MAX_TENSOR_ELEMENTS`], and constants (initializers, constant tensors, float
+//!   attributes) holding NaN or an infinity: a NaN action floor, say, which tract's `Max`
+//!   skips and onnxruntime's returns;
 //! * [`check_typed`] refuses a graph, fitted to one observation, that computes a tensor of
 //!   unknown size or beyond the limit, or multiplies by a constant zero (which the two
 //!   runtimes evaluate differently: tract folds `x * 0` to 0, onnxruntime gives NaN for a NaN
@@ -107,9 +109,62 @@ fn too_large(what: String, dims: &[i64]) -> String {
 
 fn check_tensor(what: impl Fn() -> String, t: &TensorProto) -> Result<(), String> {
     match elements(&t.dims) {
-        Some(n) if n <= MAX_TENSOR_ELEMENTS => Ok(()),
-        _ => Err(too_large(what(), &t.dims)),
+        Some(n) if n <= MAX_TENSOR_ELEMENTS => {}
+        _ => return Err(too_large(what(), &t.dims)),
     }
+    match first_non_finite(t) {
+        Some((i, v)) => Err(non_finite(&what(), i, v)),
+        None => Ok(()),
+    }
+}
+
+/// The index and value of the first NaN or infinity among the floats of `t` (f32, f64, f16,
+/// bf16; as stored, in `raw_data` or the typed fields), None when all are finite.
+fn first_non_finite(t: &TensorProto) -> Option<(usize, f64)> {
+    const FLOAT: i32 = 1;
+    const FLOAT16: i32 = 10;
+    const DOUBLE: i32 = 11;
+    const BFLOAT16: i32 = 16;
+    let first = |it: &mut dyn Iterator<Item = f64>| it.enumerate().find(|(_, v)| !v.is_finite());
+    let raw = |w: usize| t.raw_data.chunks_exact(w);
+    match t.data_type {
+        FLOAT if !t.float_data.is_empty() => first(&mut t.float_data.iter().map(|&v| v.into())),
+        FLOAT => {
+            first(&mut raw(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")).into()))
+        }
+        DOUBLE if !t.double_data.is_empty() => first(&mut t.double_data.iter().copied()),
+        DOUBLE => first(&mut raw(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))),
+        FLOAT16 | BFLOAT16 => {
+            // 16 bits a value (in int32_data or raw_data): all exponent bits set is an
+            // infinity (mantissa 0) or a NaN.
+            let exponent: u16 = if t.data_type == FLOAT16 {
+                0x7c00
+            } else {
+                0x7f80
+            };
+            let bits: Box<dyn Iterator<Item = u16>> = if t.int32_data.is_empty() {
+                Box::new(raw(2).map(|c| u16::from_le_bytes(c.try_into().expect("2 bytes"))))
+            } else {
+                Box::new(t.int32_data.iter().map(|&v| v as u16))
+            };
+            let (i, b) = bits.enumerate().find(|(_, b)| b & exponent == exponent)?;
+            let nan = b & !(exponent | 0x8000) != 0;
+            let inf = if b & 0x8000 != 0 {
+                f64::NEG_INFINITY
+            } else {
+                f64::INFINITY
+            };
+            Some((i, if nan { f64::NAN } else { inf }))
+        }
+        _ => None,
+    }
+}
+
+fn non_finite(what: &str, i: usize, v: f64) -> String {
+    format!(
+        "{what} holds {v} at index {i}; a policy file's constants must be finite numbers (the \
+         runtimes disagree on NaN: tract's Max and Min skip it, onnxruntime's return it)"
+    )
 }
 
 /// Checks the declared sizes of `graph` and its subgraphs (see the module documentation).
@@ -133,6 +188,13 @@ pub fn check_declared(graph: &GraphProto) -> Result<(), String> {
             )
         };
         for a in &node.attribute {
+            let what = || format!("{} attribute {:?}", name(), crate::files::short(&a.name));
+            if !a.f.is_finite() {
+                return Err(non_finite(&what(), 0, a.f.into()));
+            }
+            if let Some((i, v)) = a.floats.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(non_finite(&what(), i, f64::from(*v)));
+            }
             if let Some(t) = &a.t {
                 check_tensor(name, t)?;
                 if node.op_type == "Constant" {

@@ -110,11 +110,11 @@ pub fn run(
     // Untimed pass: record the drive commands the env writes, so that raw physics can replay
     // the identical trajectory (same contacts, same solver work). The episode is not reset
     // at truncation (ManiSkill keeps stepping too), so both runs are one continuous rollout.
-    let nd = env.drives().save_len();
+    let nd = env.drives().targets_len();
     let mut targets = Vec::with_capacity(nd * steps);
     for i in 0..steps {
         env.step(&actions[i * dim..(i + 1) * dim])?;
-        env.drives().save(&mut targets);
+        env.drives().save_targets(&mut targets);
     }
     // Timed passes, alternating env and raw physics three times; the best of each counts.
     let (mut env_rate, mut mj_rate, mut replay_identical) = (0.0f64, 0.0f64, false);
@@ -132,7 +132,7 @@ pub fn run(
         let mut drives = env.drives().clone();
         let t = Instant::now();
         for i in 0..steps {
-            drives.load(&targets[i * nd..(i + 1) * nd]);
+            drives.load_targets(&targets[i * nd..(i + 1) * nd]);
             for _ in 0..substeps {
                 drives.step(&mut data);
             }

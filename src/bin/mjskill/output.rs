@@ -19,8 +19,11 @@
 //!   final name (a failed run removes its temporary file; the temporary files of killed runs,
 //!   which no process holds locked any more, are removed by the next rollout to the same
 //!   name).
-//! * The final name must be a regular file or not exist: a device, FIFO or socket there is
-//!   refused before anything is written.
+//! * The final name must be a regular file or not exist: a device, FIFO, socket or symbolic
+//!   link there (even a dangling one), or a name ending in `/`, is refused before anything is
+//!   simulated.
+//! * The lock file is never opened through a symbolic link (`O_NOFOLLOW`): a link at its path
+//!   is an error naming it, and the file it points to is left as it is.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::ErrorKind;
@@ -119,12 +122,23 @@ impl LockFile {
         // locking a file no one else can find: lock, then check that the name still leads
         // to the file locked, else try again.
         for _ in 0..10 {
-            let file = OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create(true)
-                .truncate(false)
-                .open(&path)?;
+            refuse_link(&path)?;
+            let mut opts = OpenOptions::new();
+            opts.read(true).write(true).create(true).truncate(false);
+            // Never through a symlink (one swapped in after the check fails to open).
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::OpenOptionsExt;
+                opts.custom_flags(libc::O_NOFOLLOW);
+            }
+            let file = match opts.open(&path) {
+                Ok(f) => f,
+                Err(e) if e.raw_os_error() == Some(libc::ELOOP) => {
+                    refuse_link(&path)?;
+                    return Err(e);
+                }
+                Err(e) => return Err(e),
+            };
             match file.try_lock() {
                 Ok(()) => {}
                 Err(TryLockError::WouldBlock) => return Ok(None),
@@ -157,6 +171,24 @@ impl LockFile {
         }
         write_pid(&file);
         Ok(Some(LockFile { path, file }))
+    }
+}
+
+/// An error when `path` is a symbolic link: the lock file is written (its holder's pid), and
+/// a link there would have that written into whatever file it points to.
+fn refuse_link(path: &Path) -> std::io::Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => {
+            let to = std::fs::read_link(path)
+                .map(|t| t.display().to_string())
+                .unwrap_or_else(|_| "?".into());
+            Err(std::io::Error::other(format!(
+                "its lock file {} is a symbolic link (to {to}), which mjskill never writes \
+                 through; remove the link",
+                path.display()
+            )))
+        }
+        _ => Ok(()),
     }
 }
 
@@ -200,6 +232,14 @@ impl Output {
         if out.is_dir() {
             return Err(format!("--out {} is a directory", out.display()));
         }
+        if out.as_os_str().as_encoded_bytes().ends_with(b"/") {
+            return Err(format!(
+                "--out {} ends with a slash, which names a directory; name the recording's \
+                 file (e.g. {}.mcap)",
+                out.display(),
+                out.display().to_string().trim_end_matches('/')
+            ));
+        }
         mjskill::files::check_not_special(out).map_err(|e| {
             format!(
                 "--out {}: {}; the recording is written to a temporary file and renamed into \
@@ -208,6 +248,17 @@ impl Output {
                 e.reason()
             )
         })?;
+        if std::fs::symlink_metadata(out).is_ok_and(|m| m.file_type().is_symlink()) {
+            let to = std::fs::read_link(out)
+                .map(|t| t.display().to_string())
+                .unwrap_or_else(|_| "?".into());
+            return Err(format!(
+                "--out {} is a symbolic link (to {to}); the recording is renamed into place, \
+                 which would replace the link rather than write its target: name the file \
+                 itself",
+                out.display()
+            ));
+        }
         let dir = match out.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),

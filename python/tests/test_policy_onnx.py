@@ -1,0 +1,144 @@
+"""examples/policy_onnx.py's edits (issue 48): floors refuse NaN, inf and malformed values,
+in-place edits are written beside the target and renamed (a failed write leaves the input
+whole), non-regular files are refused unread, duplicated metadata keys are refused, and a
+floored file can be floored again. Needs numpy and onnx only (not the mjskill package)."""
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SCRIPT = REPO / "examples" / "policy_onnx.py"
+WIDOWXAI = REPO / "models" / "policies" / "PickCube-v1__widowxai.onnx"
+
+onnx = pytest.importorskip("onnx")
+
+
+def load_module():
+    spec = importlib.util.spec_from_file_location("policy_onnx_under_test", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def small_policy(path, act_dim=8, obs_dim=5):
+    """A small MLP policy file (random weights) at ``path``."""
+    P = load_module()
+    r = np.random.default_rng(0)
+    layers = [(r.normal(size=(obs_dim, 4)), r.normal(size=4)),
+              (r.normal(size=(4, act_dim)), r.normal(size=act_dim))]
+    meta = dict(env_id="PickCube-v1", robot_uids="widowxai", control_mode="pd_joint_pos",
+                obs_mode="state", training_command="test")
+    P.write_mlp_policy(path, layers, np.zeros(obs_dim), np.ones(obs_dim), meta, obs_clip=10.0)
+    return path
+
+
+def cli(*args, timeout=60):
+    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def leftovers(d):
+    return sorted(p.name for p in Path(d).iterdir() if ".tmp-" in p.name)
+
+
+@pytest.mark.parametrize("action, message", [
+    ("7:nan", "finite number"),
+    ("7:inf", "finite number"),
+    ("7:-inf", "finite number"),
+    ("7:1e39", "float32's range"),
+    ("7:0.5:1", "expected INDEX:LEAST"),
+    ("seven:0.5", "expected INDEX:LEAST"),
+    ("-1:0.5", "is negative"),
+])
+def test_floor_refuses_non_finite_and_malformed_values(tmp_path, action, message):
+    src = small_policy(tmp_path / "in.onnx")
+    before = src.read_bytes()
+    r = cli("floor", src, tmp_path / "out.onnx", f"--action={action}")
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert message in r.stderr and action in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "out.onnx").exists()
+    assert src.read_bytes() == before
+
+
+def test_floor_refuses_an_index_given_twice(tmp_path):
+    src = small_policy(tmp_path / "in.onnx")
+    r = cli("floor", src, tmp_path / "out.onnx", "--action", "7:0.5", "--action", "7:0.25")
+    assert r.returncode == 2 and "given twice" in r.stderr, r.stderr
+    P = load_module()
+    with pytest.raises(ValueError, match="finite"):
+        P.floor_actions(src, tmp_path / "out.onnx", {7: float("nan")}, "note")
+    assert not (tmp_path / "out.onnx").exists()
+
+
+def test_an_in_place_edit_that_fails_to_write_leaves_the_input_whole(tmp_path, monkeypatch):
+    src = small_policy(tmp_path / "policy.onnx")
+    before = src.read_bytes()
+    P = load_module()
+    real_save = onnx.save
+
+    def full_disk(model, path, *a, **k):
+        real_save(model, path, *a, **k)
+        with open(path, "r+b") as f:  # what a full disk leaves: the start of the file
+            f.truncate(100)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(onnx, "save", full_disk)
+    for edit in (lambda: P.floor_actions(src, src, {7: 0.5}, "n"),
+                 lambda: P.retarget(src, src, "PickCubeWidowXAI-v1", "n"),
+                 lambda: P.hide_obs(src, src, [1], "n")):
+        with pytest.raises(OSError, match="No space"):
+            edit()
+        assert src.read_bytes() == before
+        assert leftovers(tmp_path) == []
+    monkeypatch.setattr(onnx, "save", real_save)
+    P.floor_actions(src, src, {7: 0.5}, "n")
+    assert src.read_bytes() != before and leftovers(tmp_path) == []
+
+
+def test_a_fifo_is_refused_never_read(tmp_path):
+    fifo = tmp_path / "policy.onnx"
+    os.mkfifo(fifo)
+    r = cli("retarget", fifo, tmp_path / "out.onnx", "--env-id", "PickCube-v1", timeout=30)
+    assert r.returncode == 1 and "FIFO" in r.stderr and str(fifo) in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_duplicated_metadata_keys_are_refused_not_merged(tmp_path):
+    src = small_policy(tmp_path / "in.onnx")
+    m = onnx.load(str(src))
+    m.metadata_props.add(key="control_mode", value="pd_joint_delta_pos")
+    onnx.save(m, str(src))
+    for args in (["retarget", src, tmp_path / "out.onnx", "--env-id", "PickCube-v1"],
+                 ["floor", src, tmp_path / "out.onnx", "--action", "7:0.5"],
+                 ["hide", src, tmp_path / "out.onnx", "--obs", "1"]):
+        r = cli(*args)
+        assert r.returncode == 1 and "'control_mode' more than once" in r.stderr, r.stderr
+        assert not (tmp_path / "out.onnx").exists()
+
+
+def test_a_floored_file_floors_again(tmp_path):
+    # The shipped WidowX AI policy was trained with --action-floor 7:-0.545.
+    out = tmp_path / "refloored.onnx"
+    r = cli("floor", WIDOWXAI, out, "--action", "7:-0.5", "--action", "6:0.1")
+    assert r.returncode == 0, r.stderr
+    from onnx import numpy_helper
+
+    m = onnx.load(str(out))
+    assert [n.op_type for n in m.graph.node].count("Max") == 1
+    lo = {t.name: numpy_helper.to_array(t) for t in m.graph.initializer}["action_floor"]
+    assert lo[7] == np.float32(-0.5) and lo[6] == np.float32(0.1)
+    assert lo[0] == np.finfo(np.float32).min
+    meta = {p.key: p.value for p in m.metadata_props}
+    assert "7 >= -0.5" in meta["derived"] and "--action-floor" in meta["derived"]
+    ort = pytest.importorskip("onnxruntime")
+    s = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    x = np.random.default_rng(0).normal(0, 100, (256, s.get_inputs()[0].shape[1]))
+    a = s.run(None, {s.get_inputs()[0].name: x.astype(np.float32)})[0]
+    assert a[:, 7].min() >= -0.5 and a[:, 6].min() >= np.float32(0.1)
