@@ -358,11 +358,13 @@ def replay_missing_obs(demos: Demos, make_env) -> None:
 
 
 def pretrain(actor, critic, obs, actions, value_obs, returns, epochs: int, batch: int = 512,
-             lr: float = 1e-3, seed: int = 0, log=print):
+             lr: float = 1e-3, seed: int = 0, obs_noise: float = 0.0, log=print):
     """Behaviour cloning of the actor's mean (mean squared error to the demo ``actions`` at
     ``obs``) and a fit of the critic to the demos' discounted ``returns`` at ``value_obs``,
-    ``epochs`` passes each (observations normalised, on the learner's device). Returns the
-    final (bc, value) mean squared errors."""
+    ``epochs`` passes each (observations normalised, on the learner's device), the actor's
+    inputs with Gaussian noise of std ``obs_noise`` (in normalised units: a cloned policy
+    that has seen states a little off the demos' recovers from them). Returns the final
+    (bc, value) mean squared errors."""
     import torch
 
     g = torch.Generator().manual_seed(seed)
@@ -378,7 +380,10 @@ def pretrain(actor, critic, obs, actions, value_obs, returns, epochs: int, batch
             total = 0.0
             for s in range(0, n, batch):
                 idx = perm[s:s + batch]
-                loss = ((net(x[idx]) - target[idx]) ** 2).mean()
+                xi = x[idx]
+                if net is actor and obs_noise > 0:
+                    xi = xi + obs_noise * torch.randn(xi.shape, generator=g).to(xi.device)
+                loss = ((net(xi) - target[idx]) ** 2).mean()
                 opt.zero_grad()
                 loss.backward()
                 opt.step()

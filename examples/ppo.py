@@ -192,14 +192,22 @@ def parse_args(argv=None, check=True):
                         "demonstrations'); only successful episodes are used")
     p.add_argument("--bc-epochs", type=positive, default=200,
                    help="passes over the demos of the warm start (actor and critic)")
+    p.add_argument("--bc-obs-noise", type=float, default=0.1,
+                   help="std of the Gaussian noise added to the (normalised) observations of "
+                        "the behaviour cloning")
     p.add_argument("--bc-coef", type=float, default=0.5,
                    help="weight of the behaviour-cloning term in PPO's loss at the start")
     p.add_argument("--bc-decay-steps", type=positive, default=500_000,
                    help="env steps over which the behaviour-cloning term falls linearly to 0")
-    p.add_argument("--critic-warmup-steps", type=non_negative, default=0,
+    p.add_argument("--critic-warmup-steps", type=non_negative, default=100_000,
                    help="with --demos: env steps at the start during which only the critic "
                         "learns (the cloned actor is held while the critic learns its returns)")
-    p.add_argument("--demo-logstd", type=float, default=-1.5,
+    p.add_argument("--lr-warmup-steps", type=non_negative, default=200_000,
+                   help="with --demos: env steps (after the critic's warm-up) over which the "
+                        "learning rate rises linearly from 0: Adam's first steps move every "
+                        "weight by about the learning rate, which a cloned actor does not "
+                        "survive")
+    p.add_argument("--demo-logstd", type=float, default=-2.5,
                    help="the sampling log std after the warm start (PPO's own start is -0.5; "
                         "a narrower one keeps the cloned behaviour while PPO begins)")
     p.add_argument("--resume", metavar="RUN_DIR", default=None,
@@ -231,7 +239,7 @@ def same_dir(a, b):
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
                 "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
-                "action_floor", "demos", "bc_epochs", "demo_logstd")
+                "action_floor", "demos", "bc_epochs", "bc_obs_noise", "demo_logstd")
 
 
 def int_at_least(least, what):
@@ -316,6 +324,10 @@ def maniskill_vec_env(env_id, num_envs, robot, control_mode):
             for j in c.joints}
     envs.gripper_qvel_obs = [len(active) + i for i, n in enumerate(active) if n in grip]
     return envs
+
+
+#: The least variance of an observation entry in statistics taken from demos (std 0.01).
+DEMO_VAR_FLOOR = 1e-4
 
 
 class RunningMeanStd:
@@ -714,17 +726,22 @@ def main(argv=None):
     if ckpt is not None:
         check_checkpoint_is_the_runs(out, command, robot, mode)
 
-    def mlp(n_out, last_std):
+    def mlp(n_out, last_std, orthogonal=True):
+        """tanh MLP; PPO's orthogonal initialisation (gain sqrt 2, the last layer
+        ``last_std``), or torch's default one (``orthogonal=False``), which behaviour cloning
+        generalises from far better (docs/training.md, 'Learning from demonstrations')."""
         layers, n_in = [], obs_dim
         for h in args.hidden:
             lin = nn.Linear(n_in, h)
-            nn.init.orthogonal_(lin.weight, np.sqrt(2))
-            nn.init.constant_(lin.bias, 0.0)
+            if orthogonal:
+                nn.init.orthogonal_(lin.weight, np.sqrt(2))
+                nn.init.constant_(lin.bias, 0.0)
             layers += [lin, nn.Tanh()]
             n_in = h
         lin = nn.Linear(n_in, n_out)
-        nn.init.orthogonal_(lin.weight, last_std)
-        nn.init.constant_(lin.bias, 0.0)
+        if orthogonal:
+            nn.init.orthogonal_(lin.weight, last_std)
+            nn.init.constant_(lin.bias, 0.0)
         return nn.Sequential(*layers, lin)
 
     # The actor's inputs: the normalised observation with the hidden entries zeroed.
@@ -739,7 +756,8 @@ def main(argv=None):
             return x * actor_keep
 
     # Initialised on the CPU (the same weights for every device), then moved.
-    actor = nn.Sequential(Hide(), *mlp(act_dim, 0.01 * np.sqrt(2))).to(dev)
+    actor = nn.Sequential(Hide(), *mlp(act_dim, 0.01 * np.sqrt(2),
+                                       orthogonal=demos is None)).to(dev)
     critic = mlp(1, 1.0).to(dev)
     logstd = nn.Parameter(torch.full((1, act_dim), -0.5, device=dev))
     params = list(actor.parameters()) + list(critic.parameters()) + [logstd]
@@ -858,8 +876,13 @@ def main(argv=None):
             t0 = clock()
             if not args.no_obs_norm:
                 rms.update(demo_obs.astype(np.float64))
+                # A floor under the demos' spread (std 0.01): an entry the demos never vary
+                # (Fetch's head joints, a velocity of 0) would otherwise turn the smallest
+                # deviation into a clipped ±10 input.
+                rms.var = np.maximum(rms.var, DEMO_VAR_FLOOR)
             pretrain(actor, critic, norm(demo_obs), demo_act, norm(demo_all_obs), demo_ret,
-                     args.bc_epochs, seed=args.seed, log=lambda m: print(m, flush=True))
+                     args.bc_epochs, seed=args.seed, obs_noise=args.bc_obs_noise,
+                     log=lambda m: print(m, flush=True))
             with torch.no_grad():
                 logstd.fill_(args.demo_logstd)
             print(f"warm start: {clock() - t0:.1f} s", flush=True)
@@ -987,6 +1010,9 @@ def main(argv=None):
                 break
         if args.anneal_lr:
             opt.param_groups[0]["lr"] = (1.0 - (it - 1.0) / iterations) * args.learning_rate
+        if demos is not None and args.lr_warmup_steps:
+            ramp = (global_step - args.critic_warmup_steps) / args.lr_warmup_steps
+            opt.param_groups[0]["lr"] = args.learning_rate * min(1.0, max(ramp, 0.05))
         # -- rollout ------------------------------------------------------------------------
         if native:
             # T steps in one call, the actor evaluated on the env threads; the log-probs and

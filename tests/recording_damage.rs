@@ -376,7 +376,7 @@ fn the_recorder_refuses_what_it_could_not_read_back() {
 #[test]
 fn fuzz_truncations_and_bit_flips() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(18);
-    let (mut flips, mut cuts, mut cli) = (0, 0, 0);
+    let (mut flips, mut cuts, mut cli, mut unused_bits) = (0, 0, 0, 0);
     for killed in [false, true] {
         let path = common::scratch(&format!("fuzz-{killed}.mcap"));
         record_file(&path, 2, 5, killed);
@@ -419,9 +419,17 @@ fn fuzz_truncations_and_bit_flips() {
                     cuts += 1;
                     assert!(!is_corrupt(e), "a cut at {at} read as damage: {e}");
                 }
+                (Ok(rec), false) if in_chunk(at) => {
+                    // A bit the compressed stream does not use (zstd's bitstream padding)
+                    // decodes to the same records, which the CRC of the uncompressed data
+                    // then vouches for: nothing read may differ, and such bits are rare.
+                    flips += 1;
+                    unused_bits += 1;
+                    assert_eq!(rec.meta, orig.meta, "flip at {at}");
+                    assert_eq!(rec.episodes, orig.episodes, "flip at {at}");
+                }
                 (Ok(rec), false) => {
                     flips += 1;
-                    assert!(!in_chunk(at), "flip at {at} inside a chunk went unseen");
                     assert!(killed, "flip at {at} of a closed file went unseen");
                     assert!(
                         unchecked.iter().any(|&(a, b)| (a..b).contains(&at)),
@@ -453,5 +461,9 @@ fn fuzz_truncations_and_bit_flips() {
         }
     }
     assert_eq!(flips + cuts, 1000);
+    assert!(
+        unused_bits <= 3,
+        "{unused_bits} flips inside chunks changed nothing read"
+    );
     assert_eq!(cli, 50);
 }

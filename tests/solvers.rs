@@ -33,15 +33,20 @@ fn policy_errors_name_the_problem() {
         e.contains("telepathy") && e.contains("solver, random, zero"),
         "{e}"
     );
+    // A mode the solver's actions cannot be converted to (velocities) names both modes and
+    // the part.
     let config = EnvConfig {
-        control_mode: Some("pd_joint_pos".into()),
+        control_mode: Some("pd_joint_vel".into()),
         ..Default::default()
     };
     let e = eval::evaluate("PickCube-v1", config, "solver", 1, 0)
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("pd_ee_delta_pos") && e.contains("pd_joint_pos"),
+        e.contains("pd_ee_delta_pos")
+            && e.contains("pd_joint_vel")
+            && e.contains("arm part")
+            && e.contains("pd_joint_delta_pos"),
         "{e}"
     );
     // An unknown mode is named as unknown, with the robot's valid modes.
@@ -405,4 +410,46 @@ fn policy_files_without_the_onnx_feature_name_it() {
     assert!(e.to_string().contains("policy.onnx"), "{e}");
     // Built-in names still parse.
     assert!(eval::PolicySpec::parse("solver").is_ok());
+}
+
+fn robot_in(robot: &str, mode: Option<&str>) -> EnvConfig {
+    EnvConfig {
+        robot: Some(robot.into()),
+        control_mode: mode.map(str::to_string),
+        ..Default::default()
+    }
+}
+
+/// `--control-mode` with the solver (solvers::ModeConverted, docs/solvers.md §8.1):
+/// `pd_joint_pos` takes the joint targets the solver's own controller set, so the episodes
+/// are the solver's own (returns equal to float32 rounding); a delta mode clips the moves to
+/// its bounds and still solves the Panda's PickCube.
+#[test]
+fn solvers_run_in_joint_modes_through_conversion() {
+    for (env, robot) in [("PickCube-v1", "panda"), ("PokeCube-v1", "fetch")] {
+        let own = eval::evaluate(env, robot_in(robot, None), "solver", 5, 0).unwrap();
+        let conv =
+            eval::evaluate(env, robot_in(robot, Some("pd_joint_pos")), "solver", 5, 0).unwrap();
+        assert_eq!(conv.control_mode, "pd_joint_pos");
+        assert_ne!(own.control_mode, conv.control_mode);
+        assert_eq!(
+            conv.successes, own.successes,
+            "{env} {robot}: {own:?} {conv:?}"
+        );
+        assert_eq!(own.successes, 5, "{own:?}");
+        assert!(
+            (conv.mean_return - own.mean_return).abs() < 1e-4,
+            "{env} {robot}: {own:?} {conv:?}"
+        );
+        assert_eq!(conv.mean_first_success_step, own.mean_first_success_step);
+    }
+    let delta = eval::evaluate(
+        "PickCube-v1",
+        robot_in("panda", Some("pd_joint_delta_pos")),
+        "solver",
+        10,
+        10000,
+    )
+    .unwrap();
+    assert!(delta.successes >= 8, "{delta:?}");
 }
