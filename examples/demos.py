@@ -40,6 +40,8 @@ class Episode:
     #: Steps up to and including the first success (all when it never succeeded): the
     #: steps the training env, which ends an episode at success, visits.
     n_until_success: int | None = None
+    #: Per step: the task's success after the step (None: not recorded).
+    successes: np.ndarray | None = None
 
     def __post_init__(self):
         if self.n_until_success is None:
@@ -77,17 +79,24 @@ class Demos:
         """The observations of every recorded step (after the first success too)."""
         return np.concatenate([e.obs for e in self.episodes]).astype(np.float32)
 
-    def returns(self, gamma: float) -> np.ndarray:
+    def returns(self, gamma: float, reward_mode: str = "normalized_dense") -> np.ndarray:
         """The discounted return of every recorded step (``all_obs``'s), the episode's end
         bootstrapped as if its last reward went on (r/(1-gamma)): ppo.py bootstraps the value
         of the final observation at every episode end, success included, so a success state
         is worth what holding it earns."""
         out = []
         for e in self.episodes:
-            r = np.zeros(len(e.rewards))
-            g = e.rewards[-1] / (1.0 - gamma) if gamma < 1 else 0.0
-            for t in reversed(range(len(e.rewards))):
-                g = e.rewards[t] + gamma * g
+            rewards = e.rewards
+            if reward_mode == "sparse":
+                # ManiSkill's sparse reward is the success flag.
+                rewards = np.asarray(e.successes, np.float64)
+            elif reward_mode != "normalized_dense":
+                raise DemoError(f"demo returns for reward mode {reward_mode!r}: the demos' "
+                                "rewards are normalized_dense; sparse is their success flag")
+            r = np.zeros(len(rewards))
+            g = rewards[-1] / (1.0 - gamma) if gamma < 1 else 0.0
+            for t in reversed(range(len(rewards))):
+                g = rewards[t] + gamma * g
                 r[t] = g
             out.append(r)
         return np.concatenate(out).astype(np.float32)
@@ -174,7 +183,7 @@ def read_mcap(path: str) -> tuple[dict, list[Episode]]:
         act = np.asarray(e["actions"], np.float64)
         rew = np.asarray([np.nan if r is None else r for r in e["rewards"]], np.float64)
         ok, n = _first_success(e["term"])
-        episodes.append(Episode(obs, act, rew, ok, e["seed"], n))
+        episodes.append(Episode(obs, act, rew, ok, e["seed"], n, np.asarray(e["term"], bool)))
     return meta, episodes
 
 
@@ -231,7 +240,7 @@ def read_h5(path: str) -> tuple[dict, list[Episode], list[tuple[int, np.ndarray]
                     np.zeros(len(act))
                 ok, n = _first_success(succ)
                 episodes.append(Episode(obs[:-1], act, rew, ok,
-                                        None if seed is None else int(seed), n))
+                                        None if seed is None else int(seed), n, succ))
     except DemoError:
         raise
     except Exception as e:
@@ -332,11 +341,12 @@ def replay_missing_obs(demos: Demos, make_env) -> None:
     try:
         for seed, act in demos.to_replay:
             obs, _ = env.reset(seed=seed)
-            o, r, first = [], [], None
+            o, r, first, su = [], [], None, []
             for a in act:
                 o.append(obs)
                 obs, rew, term, trunc, info = env.step(a.astype(np.float32))
                 r.append(rew)
+                su.append(bool(term) or bool(info.get("success", False)))
                 if first is None and (term or bool(info.get("success", False))):
                     first = len(o)
                 if term or trunc:
@@ -344,7 +354,8 @@ def replay_missing_obs(demos: Demos, make_env) -> None:
             n = len(o)
             if first is not None:
                 demos.episodes.append(Episode(np.asarray(o, np.float64), act[:n],
-                                              np.asarray(r, np.float64), True, seed, first))
+                                              np.asarray(r, np.float64), True, seed, first,
+                                              np.asarray(su, bool)))
             else:
                 demos.skipped_failed += 1
     finally:

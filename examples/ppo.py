@@ -149,6 +149,11 @@ def parse_args(argv=None, check=True):
     p.add_argument("--vf-coef", type=float, default=d["vf_coef"])
     p.add_argument("--max-grad-norm", type=float, default=d["max_grad_norm"])
     p.add_argument("--reward-scale", type=float, default=1.0)
+    p.add_argument("--reward-mode", choices=("normalized_dense", "sparse"),
+                   default="normalized_dense",
+                   help="the env's reward: ManiSkill's normalised dense reward, or sparse "
+                        "(1 at success): with --demos the cloned actor already succeeds, and "
+                        "a sparse reward pays only for that")
     p.add_argument("--hidden", type=positive, nargs="+", default=[256, 256, 256])
     p.add_argument("--no-obs-norm", action="store_true")
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
@@ -239,7 +244,8 @@ def same_dir(a, b):
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
                 "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
-                "action_floor", "demos", "bc_epochs", "bc_obs_noise", "demo_logstd")
+                "action_floor", "demos", "bc_epochs", "bc_obs_noise", "demo_logstd",
+                "reward_mode")
 
 
 def int_at_least(least, what):
@@ -296,7 +302,7 @@ def check_args(p, args):
                 "policy.onnx, best.onnx, checkpoints and log.csv")
 
 
-def maniskill_vec_env(env_id, num_envs, robot, control_mode):
+def maniskill_vec_env(env_id, num_envs, robot, control_mode, reward_mode="normalized_dense"):
     """ManiSkill's CPU envs (`sim_backend="physx_cpu"`, one per slot) as a gymnasium
     SyncVectorEnv with next-step autoreset and env i seeded s + i: the conventions of mjskill's
     native vector env, so the learner below runs unchanged on either simulator."""
@@ -304,7 +310,7 @@ def maniskill_vec_env(env_id, num_envs, robot, control_mode):
     from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 
     kw = dict(num_envs=1, obs_mode="state", control_mode=control_mode,
-              reward_mode="normalized_dense", sim_backend="physx_cpu", render_backend="none")
+              reward_mode=reward_mode, sim_backend="physx_cpu", render_backend="none")
     if robot is not None:
         kw["robot_uids"] = robot
 
@@ -661,16 +667,18 @@ def main(argv=None):
     if args.ray_workers and not native:
         sys.exit("--ray-workers runs native rollouts: leave --rollout at native")
     if args.simulator == "maniskill":
-        envs = maniskill_vec_env(args.env_id, args.num_envs, args.robot, args.control_mode)
+        envs = maniskill_vec_env(args.env_id, args.num_envs, args.robot, args.control_mode,
+                                 args.reward_mode)
         eval_envs = maniskill_vec_env(args.env_id, args.num_eval_envs, args.robot,
-                                      args.control_mode)
+                                      args.control_mode, args.reward_mode)
         robot, mode, max_steps = envs.robot_uids, envs.control_mode, envs.max_episode_steps
         version = ""
     else:
         import mjskill  # noqa: F401  (registers the envs)
 
         gid = f"mjskill/{args.env_id}"
-        kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state")
+        kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state",
+                  reward_mode=args.reward_mode)
         eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
                                  **kw)
         if demos is not None:
@@ -869,7 +877,8 @@ def main(argv=None):
         # used), actions and discounted returns.
         demo_obs, demo_all_obs = demos.obs, demos.all_obs
         demo_act = torch.as_tensor(demos.actions).to(dev)
-        demo_ret = torch.as_tensor(demos.returns(args.gamma) * args.reward_scale).to(dev)
+        demo_ret = torch.as_tensor(demos.returns(args.gamma, args.reward_mode)
+                                   * args.reward_scale).to(dev)
         if ckpt is None:
             # The warm start: observation statistics from the demos, the actor's mean cloned,
             # the critic fitted to the returns, the sampling std narrowed.
