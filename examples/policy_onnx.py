@@ -217,24 +217,33 @@ def load_policy(path):
     return model
 
 
+def atomic_write(path, write, tmp=None):
+    """Calls ``write(tmp)`` for a temporary file beside ``path`` (``tmp``, default
+    ``<path>.tmp-<pid>``), flushes it to disk and renames it over ``path``: a write that
+    fails or a process killed at any moment leaves the old file or the new one, never a
+    truncated one."""
+    tmp = tmp or f"{path}.tmp-{os.getpid()}"
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.lexists(tmp):
+            os.remove(tmp)
+        raise
+
+
 def save_atomic(model, dst):
-    """Writes ``model`` to ``dst`` through a temporary file beside it (flushed to disk, then
-    renamed over ``dst``): a failed write leaves ``dst`` as it was, even when it is the
-    file the model was read from."""
+    """Writes ``model`` to ``dst`` through a hidden temporary file beside it
+    (:func:`atomic_write`): a failed write leaves ``dst`` as it was, even when it is the file
+    the model was read from."""
     import onnx
 
     dst = str(dst)
     tmp = os.path.join(os.path.dirname(os.path.abspath(dst)),
                        f".{os.path.basename(dst)}.tmp-{os.getpid()}")
-    try:
-        onnx.save(model, tmp)
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, dst)
-    except BaseException:
-        if os.path.lexists(tmp):
-            os.remove(tmp)
-        raise
+    atomic_write(dst, lambda t: onnx.save(model, t), tmp)
 
 
 def save_derived(model, dst, note, **props):

@@ -66,7 +66,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from demos import pretrain  # noqa: E402
-from policy_onnx import floor_actions, load_policy, parse_floors, write_mlp_policy  # noqa: E402
+from policy_onnx import (  # noqa: E402
+    atomic_write, floor_actions, load_policy, parse_floors, write_mlp_policy)
 
 #: ManiSkill's ppo.py defaults (its Args dataclass).
 BASE = dict(
@@ -415,22 +416,6 @@ def without_option(argv, name):
         elif not a.startswith(name + "="):
             out.append(a)
     return out
-
-
-def atomic_write(path, write):
-    """Calls ``write(tmp)`` for a temporary file beside ``path``, flushes it to disk and renames
-    it over ``path``: a run killed at any moment leaves the old file or the new one, never a
-    truncated one."""
-    tmp = f"{path}.tmp-{os.getpid()}"
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
 
 
 #: The run directory's lock file: held (flock) by the ppo.py that writes the directory, and
