@@ -69,6 +69,9 @@ from demos import pretrain  # noqa: E402
 from policy_onnx import (  # noqa: E402
     atomic_write, floor_actions, load_policy, parse_floors, write_mlp_policy)
 
+#: The learning rate with --demos (measured, docs/training.md).
+DEMO_LEARNING_RATE = 5e-5
+
 #: ManiSkill's ppo.py defaults (its Args dataclass).
 BASE = dict(
     num_envs=512,
@@ -136,7 +139,9 @@ def parse_args(argv=None, check=True):
                    help="stop after this much wall time (the policy is saved)")
     p.add_argument("--stop-at-success", type=float, default=None,
                    help="stop once an evaluation's success rate reaches this (e.g. 0.9)")
-    p.add_argument("--learning-rate", type=float, default=d["learning_rate"])
+    p.add_argument("--learning-rate", type=float, default=None,
+                   help=f"Adam's learning rate (default {d['learning_rate']}; with --demos "
+                        f"{DEMO_LEARNING_RATE}: a cloned actor does not survive larger steps)")
     p.add_argument("--anneal-lr", action="store_true")
     p.add_argument("--gamma", type=float, default=d["gamma"])
     p.add_argument("--gae-lambda", type=float, default=d["gae_lambda"])
@@ -150,11 +155,10 @@ def parse_args(argv=None, check=True):
     p.add_argument("--vf-coef", type=float, default=d["vf_coef"])
     p.add_argument("--max-grad-norm", type=float, default=d["max_grad_norm"])
     p.add_argument("--reward-scale", type=float, default=1.0)
-    p.add_argument("--reward-mode", choices=("normalized_dense", "sparse"),
-                   default="normalized_dense",
-                   help="the env's reward: ManiSkill's normalised dense reward, or sparse "
-                        "(1 at success): with --demos the cloned actor already succeeds, and "
-                        "a sparse reward pays only for that")
+    p.add_argument("--reward-mode", choices=("normalized_dense", "sparse"), default=None,
+                   help="the env's reward: ManiSkill's normalised dense reward (the default), "
+                        "or sparse, 1 at success (the default with --demos: the cloned actor "
+                        "already succeeds, and the dense reward pays PPO for other things)")
     p.add_argument("--hidden", type=positive, nargs="+", default=[256, 256, 256])
     p.add_argument("--no-obs-norm", action="store_true")
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
@@ -222,6 +226,11 @@ def parse_args(argv=None, check=True):
                         "with its saved options; options given here override them, except "
                         f"those that define the run ({', '.join(RUN_DEFINING)})")
     args = p.parse_args(argv)
+    # Defaults that depend on --demos (docs/training.md, 'Learning from demonstrations').
+    if args.learning_rate is None:
+        args.learning_rate = DEMO_LEARNING_RATE if args.demos else d["learning_rate"]
+    if args.reward_mode is None:
+        args.reward_mode = "sparse" if args.demos else "normalized_dense"
     if check and args.resume is None:
         check_args(p, args)
     elif check and not os.path.isfile(os.path.join(args.resume, "checkpoint.pt")):
