@@ -673,8 +673,11 @@ def main(argv=None):
         gid = f"mjskill/{args.env_id}"
         kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state",
                   reward_mode=args.reward_mode)
-        eval_envs = gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
-                                 **kw)
+        def make_eval_envs():
+            return gym.make_vec(gid, num_envs=args.num_eval_envs,
+                                num_threads=args.num_threads, **kw)
+
+        eval_envs = make_eval_envs()
         if demos is not None:
             from demos import DemoError, replay_missing_obs
 
@@ -849,7 +852,16 @@ def main(argv=None):
         atomic_write(os.path.join(out, "checkpoint.pt"), lambda tmp: torch.save(state, tmp))
 
     def evaluate():
-        """One episode per eval env on fixed seeds, mean actions; (success rate, mean return)."""
+        """One episode per eval env on fixed seeds, mean actions; (success rate, mean return).
+        mjskill's eval envs are made afresh for every evaluation: the first observation after
+        a reset carries the last step's finger contacts (`is_grasped`, as in ManiSkill), so
+        reused envs would carry one evaluation's end into the next, and the same actor would
+        score differently."""
+        nonlocal eval_envs
+        if args.simulator == "mjskill" and evaluations[0] > 0:
+            eval_envs.close()
+            eval_envs = make_eval_envs()
+        evaluations[0] += 1
         obs, _ = eval_envs.reset(seed=args.eval_seed)
         n = args.num_eval_envs
         done = np.zeros(n, bool)
@@ -889,6 +901,8 @@ def main(argv=None):
             with torch.no_grad():
                 logstd.fill_(args.demo_logstd)
             print(f"warm start: {clock() - t0:.1f} s", flush=True)
+
+    evaluations = [0]
 
     def bc_weight(step):
         """The behaviour-cloning term's weight after ``step`` env steps."""
