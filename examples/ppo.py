@@ -853,15 +853,11 @@ def main(argv=None):
 
     def evaluate():
         """One episode per eval env on fixed seeds, mean actions; (success rate, mean return).
-        mjskill's eval envs are made afresh for every evaluation: the first observation after
+        mjskill's eval envs are made afresh after every evaluation: the first observation after
         a reset carries the last step's finger contacts (`is_grasped`, as in ManiSkill), so
         reused envs would carry one evaluation's end into the next, and the same actor would
         score differently."""
         nonlocal eval_envs
-        if args.simulator == "mjskill" and evaluations[0] > 0:
-            eval_envs.close()
-            eval_envs = make_eval_envs()
-        evaluations[0] += 1
         obs, _ = eval_envs.reset(seed=args.eval_seed)
         n = args.num_eval_envs
         done = np.zeros(n, bool)
@@ -876,6 +872,9 @@ def main(argv=None):
             done |= term | trunc
             if done.all():
                 break
+        if args.simulator == "mjskill":
+            eval_envs.close()
+            eval_envs = make_eval_envs()
         return float(success.mean()), float(ret.mean())
 
     if demos is not None:
@@ -901,8 +900,6 @@ def main(argv=None):
             with torch.no_grad():
                 logstd.fill_(args.demo_logstd)
             print(f"warm start: {clock() - t0:.1f} s", flush=True)
-
-    evaluations = [0]
 
     def bc_weight(step):
         """The behaviour-cloning term's weight after ``step`` env steps."""

@@ -313,7 +313,7 @@ pub trait PartController {
     /// The inverse of [`PartController::set_action`] for joint position parts: writes into
     /// `out` (the part's action slice) the action that sets each action joint `i` (ManiSkill
     /// index) to the position target `target(i)` given the measured positions `q`, clipped
-    /// to the action bounds. `false` (and `out` untouched) for parts whose action is not a
+    /// to the action bounds. `false` (with `out` unspecified) for parts whose action is not a
     /// joint position (velocities, EE poses, a base) or when a joint has no target.
     fn action_for_targets(
         &self,

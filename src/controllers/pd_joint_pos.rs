@@ -134,11 +134,10 @@ impl PartController for PdJointPos {
     ) -> bool {
         let cfg = &self.cfg;
         let core = &self.core;
-        if core.idx.iter().any(|&i| target(i).is_none()) {
-            return false;
-        }
         for (k, &i) in core.idx.iter().enumerate() {
-            let t = target(i).unwrap_or_default();
+            let Some(t) = target(i) else {
+                return false;
+            };
             let x = match (cfg.use_delta, cfg.use_target) {
                 (true, true) => t - core.target_q[k] as f64,
                 (true, false) => t - q[i],
