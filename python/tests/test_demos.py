@@ -6,14 +6,12 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import need
+from conftest import REPO, mjskill_bin, need
 
-REPO = Path(__file__).resolve().parents[2]
 PPO = REPO / "examples" / "ppo.py"
 sys.path.insert(0, str(REPO / "examples"))
 import demos as demos_mod  # noqa: E402
@@ -21,12 +19,6 @@ import demos as demos_mod  # noqa: E402
 SMALL = ["--num-envs", "6", "--num-steps", "8", "--num-minibatches", "2", "--num-eval-envs",
          "2", "--eval-freq", "2", "--num-threads", "1", "--torch-threads", "1", "--hidden",
          "16", "16", "--bc-epochs", "2", "--critic-warmup-steps", "48"]
-
-
-def mjskill_bin() -> str:
-    path = os.environ.get("MJSKILL_BIN", str(REPO / "target" / "release" / "mjskill"))
-    assert Path(path).exists(), f"{path} missing: run `cargo build --release` first"
-    return path
 
 
 def rollout(out, *args):
@@ -77,7 +69,7 @@ def test_a_recording_reads_back_as_its_episodes_up_to_their_first_success(demo_f
 def test_an_export_to_maniskill_h5_reads_back_the_same_steps(demo_files, tmp_path):
     need("h5py")
     h5 = tmp_path / "traj.h5"
-    r = subprocess.run([mjskill_bin(), "export", str(demo_files / "solver.mcap"), "--format",
+    r = subprocess.run([mjskill_bin("datasets"), "export", str(demo_files / "solver.mcap"), "--format",
                         "maniskill", "-o", str(h5), "--json", str(tmp_path / "traj.json")],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]

@@ -5,7 +5,6 @@ The policy tests need ``onnx`` (to make the file, examples/make_test_policy.py) 
 installs both and a missing one is a failure."""
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 
 import mjskill
-from conftest import ENV, need
+from conftest import ENV, mjskill_bin, need
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "examples" / "make_test_policy.py"
@@ -89,14 +88,9 @@ def test_onnx_policy_agrees_with_the_cli(tmp_path, dims):
             ret += float(r)
             done = trunc  # as `mjskill eval`: episodes run to truncation
         returns.append(ret)
-    exe = os.environ.get("MJSKILL_BIN", str(ROOT / "target" / "release" / "mjskill"))
-    if not os.path.exists(exe):
-        pytest.skip(f"{exe} is not built")
+    exe = mjskill_bin("onnx")
     run = subprocess.run([exe, "eval", "--episodes", "2", "--seed", "3", "--policy", str(f)],
                          capture_output=True, text=True)
-    if run.returncode != 0 and "`onnx` feature" in run.stderr:
-        # The quick start's build (README); .ci/run runs this with the default features' binary.
-        pytest.skip(f"{exe} is built without the onnx feature")
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report["robot"] == "panda" and report["control_mode"] == "pd_ee_delta_pos"

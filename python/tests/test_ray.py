@@ -3,23 +3,14 @@
 reads the shards as one dataset."""
 
 import json
-import os
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 import ray
 
 import mjskill.ray as mray
-
-REPO = Path(__file__).resolve().parents[2]
-
-
-def mjskill_bin() -> str:
-    path = os.environ.get("MJSKILL_BIN", str(REPO / "target" / "release" / "mjskill"))
-    assert Path(path).exists(), f"{path} missing: run `cargo build --release` first"
-    return path
+from conftest import mjskill_bin
 
 
 @pytest.fixture(scope="module")

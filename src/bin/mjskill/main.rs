@@ -289,6 +289,9 @@ pub enum Command {
     },
     /// List the registered envs with their robots, control modes, observation and reward modes (JSON).
     Envs,
+    /// Print this build's version and the Cargo features it was built with (JSON), so that a
+    /// script or test can tell what the binary can do before asking it.
+    Features,
     /// Compare mjskill's sensor camera images with ManiSkill's for the same states: loads
     /// each reference state dict, renders rgb+depth+segmentation and prints (one JSON line)
     /// per pair and overall: segmentation mean IoU and pixel accuracy, median depth error
@@ -430,7 +433,29 @@ fn run(cli: Cli) -> Result<(), CliError> {
             out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
         }
+        Command::Features => {
+            let report = serde_json::json!({
+                "version": env!("CARGO_PKG_VERSION"),
+                "features": built_features(),
+            });
+            out!("{report}");
+            Ok(())
+        }
     }
+}
+
+/// The optional Cargo features this binary was built with (docs/rust-api.md#features).
+fn built_features() -> Vec<&'static str> {
+    [
+        ("cli", cfg!(feature = "cli")),
+        ("datasets", cfg!(feature = "datasets")),
+        ("onnx", cfg!(feature = "onnx")),
+        ("video", cfg!(feature = "video")),
+        ("mesh-tools", cfg!(feature = "mesh-tools")),
+    ]
+    .into_iter()
+    .filter_map(|(name, on)| on.then_some(name))
+    .collect()
 }
 
 /// `mjskill bench`: times the env (a VecEnv with `--envs`/`--threads`) and prints the report.
