@@ -67,6 +67,8 @@ class Demos:
     episodes: list[Episode] = field(default_factory=list)
     files: list[str] = field(default_factory=list)
     skipped_failed: int = 0
+    #: Failed episodes kept (``load(..., keep_failed=True)``).
+    kept_failed: int = 0
     #: Episodes of ManiSkill h5 files without observations: (seed, actions) to replay.
     to_replay: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
@@ -305,9 +307,12 @@ def read_h5(path: str) -> tuple[dict, list[Episode], list[tuple[int, np.ndarray]
 
 
 def load(paths, env_id: str | None, robot: str | None, control_mode: str | None,
-         trainer: str = "ppo.py") -> Demos:
+         trainer: str = "ppo.py", keep_failed: bool = False) -> Demos:
     """Reads and checks every file; ``env_id``/``robot``/``control_mode`` None take the demos'
-    own (``trainer`` names the script in the advice on control modes)."""
+    own (``trainer`` names the script in the advice on control modes). Failed episodes are
+    left out and counted (``skipped_failed``), or with ``keep_failed`` kept too (counted in
+    ``kept_failed``): noise-injected demos label every visited state with the expert's
+    action, whatever the episode's outcome."""
     if not paths:
         raise DemoError("--demos needs at least one file")
     demos = None
@@ -366,8 +371,9 @@ def load(paths, env_id: str | None, robot: str | None, control_mode: str | None,
                                                   and np.isnan(e.labels).any()):
                 raise DemoError(f"--demos {path}: an episode (seed {e.seed}) has observations "
                                 f"of {e.obs.shape[1]} values or non-finite values")
-            if e.success:
+            if e.success or keep_failed:
                 demos.episodes.append(e)
+                demos.kept_failed += not e.success
             else:
                 demos.skipped_failed += 1
         for seed, act in to_replay:
