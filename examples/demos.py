@@ -1,8 +1,13 @@
-"""Demonstrations for examples/ppo.py ``--demos``: episodes recorded by ``mjskill rollout``
-(MCAP) and ManiSkill's trajectory format (``.h5`` with its ``.json``, as ``mjskill export
---format maniskill`` and ManiSkill write), read into flat arrays of (observation, action,
-discounted return) for the steps of successful episodes, up to and including their first
-success (mjskill's training env ends an episode there).
+"""Demonstrations for examples/ppo.py ``--demos`` and examples/imitate.py: episodes recorded by
+``mjskill rollout`` (MCAP) and ManiSkill's trajectory format (``.h5`` with its ``.json``, as
+``mjskill export --format maniskill`` and ManiSkill write), read into flat arrays of
+(observation, action, discounted return) for the steps of successful episodes, up to and
+including their first success (mjskill's training env ends an episode there).
+
+A recording of noise-injected demonstrations (``mjskill rollout --action-noise``) holds two
+actions per step: the one the env executed (``action``, which the states follow) and the
+expert's own (``expert_action``), the label to clone: ``Episode.labels`` and
+``Demos.labels``/``Demos.all_labels`` (the executed actions where a file has no labels).
 
 Every file is checked before any env is built: the env id, robot, observation mode and size,
 and control mode must agree across files and with the run; empty, damaged and failed-only
@@ -42,6 +47,9 @@ class Episode:
     n_until_success: int | None = None
     #: Per step: the task's success after the step (None: not recorded).
     successes: np.ndarray | None = None
+    #: (T, A): the expert's own action at each step, where ``actions`` holds the executed
+    #: one (recordings of ``mjskill rollout --action-noise``); None when not recorded.
+    labels: np.ndarray | None = None
 
     def __post_init__(self):
         if self.n_until_success is None:
@@ -59,6 +67,8 @@ class Demos:
     episodes: list[Episode] = field(default_factory=list)
     files: list[str] = field(default_factory=list)
     skipped_failed: int = 0
+    #: Failed episodes kept (``load(..., keep_failed=True)``).
+    kept_failed: int = 0
     #: Episodes of ManiSkill h5 files without observations: (seed, actions) to replay.
     to_replay: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
@@ -73,6 +83,28 @@ class Demos:
         """The actions of the steps up to each episode's first success."""
         return np.concatenate([e.actions[:e.n_until_success] for e in self.episodes]
                               ).astype(np.float32)
+
+    @property
+    def labels(self) -> np.ndarray:
+        """The labels to clone for the steps up to each episode's first success: the expert's
+        own actions where recorded (noise-injected demos), else the executed actions."""
+        return np.concatenate([_labels(e)[:e.n_until_success] for e in self.episodes]
+                              ).astype(np.float32)
+
+    @property
+    def all_labels(self) -> np.ndarray:
+        """``labels`` for every recorded step (after the first success too)."""
+        return np.concatenate([_labels(e) for e in self.episodes]).astype(np.float32)
+
+    @property
+    def labelled(self) -> int:
+        """How many episodes carry the expert's own labels."""
+        return sum(e.labels is not None for e in self.episodes)
+
+    @property
+    def seeds(self) -> set:
+        """The reset seeds of the episodes (those recorded)."""
+        return {e.seed for e in self.episodes if e.seed is not None}
 
     @property
     def all_obs(self) -> np.ndarray:
@@ -106,6 +138,10 @@ class Demos:
         return sum(e.n_until_success for e in self.episodes)
 
 
+def _labels(e: Episode) -> np.ndarray:
+    return e.actions if e.labels is None else e.labels
+
+
 def _check_path(path: str) -> None:
     try:
         st = os.stat(path)
@@ -133,7 +169,7 @@ def read_mcap(path: str) -> tuple[dict, list[Episode]]:
         from mcap.reader import make_reader
     except ImportError:
         raise DemoError(f"--demos {path}: reading MCAP recordings needs the `mcap` package "
-                        "(pip install mcap)") from None
+                        "(pip install mcap, or the extra mjskill[train])") from None
     meta = None
     eps: dict[int, dict] = {}
     try:
@@ -150,10 +186,11 @@ def read_mcap(path: str) -> tuple[dict, list[Episode]]:
                 k = int(m["episode"])
                 if channel.topic == "/episode":
                     eps[k] = dict(seed=m.get("seed"), obs=[m["obs"]], actions=[], rewards=[],
-                                  term=[], success=None)
+                                  term=[], success=None, labels=[])
                 elif k in eps and channel.topic == "/step":
                     e = eps[k]
                     e["actions"].append(m["action"])
+                    e["labels"].append(m.get("expert_action"))
                     e["rewards"].append(m["reward"])
                     e["term"].append(bool(m["terminated"]) or bool(m["info"].get("success")))
                     e["obs"].append(m["obs"])
@@ -183,7 +220,20 @@ def read_mcap(path: str) -> tuple[dict, list[Episode]]:
         act = np.asarray(e["actions"], np.float64)
         rew = np.asarray([np.nan if r is None else r for r in e["rewards"]], np.float64)
         ok, n = _first_success(e["term"])
-        episodes.append(Episode(obs, act, rew, ok, e["seed"], n, np.asarray(e["term"], bool)))
+        labelled = [x is not None for x in e["labels"]]
+        if any(labelled) and not all(labelled):
+            raise DemoError(f"--demos {path}: episode {k} (seed {e['seed']}) has an "
+                            f"expert_action on {sum(labelled)} of its {len(labelled)} steps; a "
+                            "recording labels every step or none")
+        labels = None
+        if all(labelled):
+            labels = np.asarray([[np.nan if v is None else v for v in a] for a in e["labels"]],
+                                np.float64)
+            if labels.shape != act.shape:
+                raise DemoError(f"--demos {path}: episode {k} (seed {e['seed']}) has labels "
+                                f"of shape {labels.shape} for actions of shape {act.shape}")
+        episodes.append(Episode(obs, act, rew, ok, e["seed"], n, np.asarray(e["term"], bool),
+                                labels))
     return meta, episodes
 
 
@@ -194,7 +244,7 @@ def read_h5(path: str) -> tuple[dict, list[Episode], list[tuple[int, np.ndarray]
         import h5py
     except ImportError:
         raise DemoError(f"--demos {path}: reading ManiSkill .h5 files needs `h5py` "
-                        "(pip install h5py)") from None
+                        "(pip install h5py, or the extra mjskill[train])") from None
     jpath = os.path.splitext(path)[0] + ".json"
     try:
         with open(jpath) as f:
@@ -256,8 +306,13 @@ def read_h5(path: str) -> tuple[dict, list[Episode], list[tuple[int, np.ndarray]
     return meta, episodes, to_replay
 
 
-def load(paths, env_id: str, robot: str | None, control_mode: str | None) -> Demos:
-    """Reads and checks every file; ``robot``/``control_mode`` None take the demos' own."""
+def load(paths, env_id: str | None, robot: str | None, control_mode: str | None,
+         trainer: str = "ppo.py", keep_failed: bool = False) -> Demos:
+    """Reads and checks every file; ``env_id``/``robot``/``control_mode`` None take the demos'
+    own (``trainer`` names the script in the advice on control modes). Failed episodes are
+    left out and counted (``skipped_failed``), or with ``keep_failed`` kept too (counted in
+    ``kept_failed``): noise-injected demos label every visited state with the expert's
+    action, whatever the episode's outcome."""
     if not paths:
         raise DemoError("--demos needs at least one file")
     demos = None
@@ -288,9 +343,10 @@ def load(paths, env_id: str, robot: str | None, control_mode: str | None) -> Dem
         else:
             raise DemoError(f"--demos {path}: neither an MCAP recording nor an HDF5 file "
                             f"(it starts with {head!r})")
-        if m["env_id"] != env_id:
+        want_env = env_id or (demos.env_id if demos else None)
+        if want_env is not None and m["env_id"] != want_env:
             raise DemoError(f"--demos {path}: episodes of {m['env_id']}, but this run trains "
-                            f"{env_id}")
+                            f"{want_env}")
         want_robot = robot or (demos.robot if demos else None)
         if want_robot is not None and m["robot"] is not None and m["robot"] != want_robot:
             raise DemoError(f"--demos {path}: episodes of robot {m['robot']}, but this run "
@@ -299,23 +355,25 @@ def load(paths, env_id: str, robot: str | None, control_mode: str | None) -> Dem
         if want_mode is not None and m["control_mode"] != want_mode:
             raise DemoError(
                 f"--demos {path}: actions in control mode {m['control_mode']}, but this run "
-                f"trains in {want_mode}; ppo.py does not convert actions: record the demos in "
+                f"trains in {want_mode}; {trainer} does not convert actions: record the demos in "
                 f"{want_mode} (`mjskill rollout --policy solver --control-mode {want_mode}` "
                 "converts the solver's actions as it runs) or leave --control-mode out to "
                 f"train in {m['control_mode']}")
         if demos is None:
-            demos = Demos(env_id, m["robot"] or robot, m["control_mode"], dim)
+            demos = Demos(m["env_id"], m["robot"] or robot, m["control_mode"], dim)
         elif dim is not None and demos.obs_dim is not None and dim != demos.obs_dim:
             raise DemoError(f"--demos {path}: observations of {dim} values, the other files' "
                             f"have {demos.obs_dim}")
         demos.obs_dim = demos.obs_dim or dim
         for e in eps:
             if e.obs.shape[1] != demos.obs_dim or np.isnan(e.obs).any() or \
-                    np.isnan(e.actions).any():
+                    np.isnan(e.actions).any() or (e.labels is not None
+                                                  and np.isnan(e.labels).any()):
                 raise DemoError(f"--demos {path}: an episode (seed {e.seed}) has observations "
                                 f"of {e.obs.shape[1]} values or non-finite values")
-            if e.success:
+            if e.success or keep_failed:
                 demos.episodes.append(e)
+                demos.kept_failed += not e.success
             else:
                 demos.skipped_failed += 1
         for seed, act in to_replay:

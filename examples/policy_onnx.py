@@ -25,7 +25,10 @@ into place once complete: OUT may be IN, and a failed write (a full disk) leaves
 
 The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
 clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
-last); output ``action`` (float32, [batch, act_dim]), the mean action.
+last); output ``action`` (float32, [batch, act_dim]), the mean action. With a residual (a
+network trained on targets relative to measured joint positions, examples/imitate.py
+--relative-labels), chosen raw observation entries are added to chosen action entries:
+``action[k] = x[k] + obs[residual[k]]``.
 """
 
 from __future__ import annotations
@@ -44,23 +47,42 @@ OPSET = 17
 IR_VERSION = 8
 
 
-def mlp_forward(obs, layers, obs_mean, obs_std, obs_clip):
+def mlp_forward(obs, layers, obs_mean, obs_std, obs_clip, residual=None):
     """The graph's computation in numpy (float64): the reference the tests compare against."""
-    x = (np.asarray(obs, np.float64) - obs_mean) / obs_std
+    raw = np.asarray(obs, np.float64)
+    x = (raw - obs_mean) / obs_std
     if obs_clip is not None:
         x = np.clip(x, -obs_clip, obs_clip)
     for k, (w, b) in enumerate(layers):
         x = x @ np.asarray(w, np.float64) + np.asarray(b, np.float64)
         if k + 1 < len(layers):
             x = np.tanh(x)
+    for k, i in enumerate(residual or ()):
+        if i is not None:
+            x[..., k] += raw[..., i]
     return x
 
 
-def write_mlp_policy(path, layers, obs_mean, obs_std, metadata, obs_clip=None):
+def check_residual(residual, obs_dim, act_dim):
+    """``residual`` (one entry per action entry: an observation index or None) as a list;
+    ValueError for another length or an index out of range."""
+    residual = list(residual)
+    if len(residual) != act_dim:
+        raise ValueError(f"residual has {len(residual)} entries for {act_dim} action entries")
+    bad = [i for i in residual if i is not None and not 0 <= int(i) < obs_dim]
+    if bad:
+        raise ValueError(f"residual observation indices {bad} out of range 0..{obs_dim - 1}")
+    return [None if i is None else int(i) for i in residual]
+
+
+def write_mlp_policy(path, layers, obs_mean, obs_std, metadata, obs_clip=None, residual=None):
     """Writes the MLP ``layers`` (a list of (W [in, out], b [out]) arrays) with the observation
     normalisation ``(obs - obs_mean) / obs_std`` (clipped to ±obs_clip unless None) as an ONNX
     policy file at ``path``, with ``metadata`` (a dict of str) as its metadata_props: it must
-    hold METADATA_KEYS. Returns the ModelProto."""
+    hold METADATA_KEYS. ``residual`` (optional, one entry per action entry: an observation
+    index or None) adds that raw observation entry to the action entry (``Gather``, then
+    ``Where`` where only some entries take one, and ``Add``: exact, no multiplication).
+    Returns the ModelProto."""
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
@@ -100,11 +122,26 @@ def write_mlp_policy(path, layers, obs_mean, obs_std, metadata, obs_clip=None):
         inits += [numpy_helper.from_array(w, f"w{k}"), numpy_helper.from_array(b, f"b{k}")]
         last = k + 1 == len(layers)
         nodes.append(helper.make_node("MatMul", [x, f"w{k}"], [f"mm{k}"]))
-        out = "action" if last else f"lin{k}"
+        out = "action" if last and residual is None else f"lin{k}"
         nodes.append(helper.make_node("Add", [f"mm{k}", f"b{k}"], [out]))
         if not last:
             nodes.append(helper.make_node("Tanh", [out], [f"h{k}"]))
             x = f"h{k}"
+    if residual is not None:
+        residual = check_residual(residual, obs_dim, act_dim)
+        idx = np.array([0 if i is None else i for i in residual], np.int64)
+        inits.append(numpy_helper.from_array(idx, "residual_obs"))
+        nodes.append(helper.make_node("Gather", ["obs", "residual_obs"], ["residual_all"],
+                                      axis=-1))
+        added = "residual_all"
+        if any(i is None for i in residual):
+            keep = np.array([i is not None for i in residual])
+            inits += [numpy_helper.from_array(keep, "residual_keep"),
+                      numpy_helper.from_array(np.array(0.0, np.float32), "residual_none")]
+            nodes.append(helper.make_node("Where", ["residual_keep", "residual_all",
+                                                    "residual_none"], ["residual"]))
+            added = "residual"
+        nodes.append(helper.make_node("Add", [f"lin{len(layers) - 1}", added], ["action"]))
     graph = helper.make_graph(
         nodes,
         "mjskill_policy",

@@ -2,7 +2,7 @@
 env; saves the policy as an ONNX policy file (docs/training.md) that `mjskill eval --policy`,
 `mjskill rollout --policy`, mjskill.policy.OnnxPolicy and examples/eval_in_maniskill.py run.
 
-    pip install torch                 # any build; the CPU one is enough
+    pip install 'mjskill[train]'      # torch (any build; the CPU one is enough), onnx, mcap, h5py
     python examples/ppo.py --env-id PickCube-v1 --robot panda
     python examples/plot_training.py runs/<run>/log.csv
 
@@ -54,10 +54,7 @@ thread's CPU time, a measure of cost that other processes on a busy machine do n
 from __future__ import annotations
 
 import argparse
-import csv
 import os
-import shlex
-import signal
 import sys
 import time
 
@@ -66,8 +63,18 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from demos import pretrain  # noqa: E402
-from policy_onnx import (  # noqa: E402
-    atomic_write, floor_actions, load_policy, parse_floors, write_mlp_policy)
+from policy_onnx import atomic_write, parse_floors  # noqa: E402, F401 (atomic_write: tests)
+from training import rundir  # noqa: E402
+from training.args import (  # noqa: E402
+    changed_options, command_line, non_negative, option_names, positive, same_dir,
+    without_option)
+from training.evaluate import run_episodes  # noqa: E402
+from training.export import metadata, save_policy  # noqa: E402
+from training.rundir import (  # noqa: E402, F401 (RUN_LOCK: tests)
+    RUN_LOCK, append_row, check_checkpoint_is_the_runs)
+
+#: How this script names itself in the shared modules' messages.
+SCRIPT = "examples/ppo.py"
 
 #: The learning rate with --demos (measured, docs/training.md).
 DEMO_LEARNING_RATE = 5e-5
@@ -242,38 +249,11 @@ def parse_args(argv=None, check=True):
     return args
 
 
-def same_dir(a, b):
-    """Whether paths ``a`` and ``b`` name the same directory (or, not existing, the same
-    path)."""
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.realpath(a) == os.path.realpath(b)
-
-
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
                 "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
                 "action_floor", "demos", "bc_epochs", "bc_obs_noise", "demo_logstd",
                 "reward_mode")
-
-
-def int_at_least(least, what):
-    """argparse type: an integer >= ``least`` (``what`` says which in the error)."""
-    def parse(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if v < least:
-            raise argparse.ArgumentTypeError(f"{v} {what}")
-        return v
-    return parse
-
-
-#: argparse types: integers >= 1 and >= 0.
-positive = int_at_least(1, "is not a positive integer (>= 1)")
-non_negative = int_at_least(0, "is negative")
 
 
 def check_args(p, args):
@@ -394,102 +374,23 @@ def resumed_args(argv):
     if saved_floors is not None:
         saved.action_floor = saved_floors
 
-    def differs(k):
-        a, b = getattr(args, k), getattr(saved, k)
+    def differs(k, a, b):
         if k == "action_floor":  # the same floors, in any order or spelling
             return parse_floors(a) != parse_floors(b)
         return a != b
 
-    changed = [k for k in RUN_DEFINING if differs(k)]
+    changed = changed_options(args, saved, RUN_DEFINING, differs)
     if changed:
-        sys.exit(f"error: --resume {given.resume}: {', '.join('--' + k.replace('_', '-') for k in changed)} "
+        sys.exit(f"error: --resume {given.resume}: {', '.join(changed)} "
                  "cannot change when a run continues (they define its networks, data or envs)")
     args.resume = given.resume
     args.out = given.resume  # a resumed run continues in its own directory
     return args, ckpt
 
 
-def option_names(argv):
-    """The option names in ``argv`` (``--x`` of ``--x V`` and ``--x=V``)."""
-    return [a.split("=", 1)[0] for a in argv if a.startswith("--")]
-
-
-def without_option(argv, name):
-    """``argv`` without the option ``name`` (``name V`` and ``name=V``)."""
-    out, skip = [], False
-    for a in argv:
-        if skip:
-            skip = False
-        elif a == name:
-            skip = True
-        elif not a.startswith(name + "="):
-            out.append(a)
-    return out
-
-
-#: The run directory's lock file: held (flock) by the ppo.py that writes the directory, and
-#: naming its pid.
-RUN_LOCK = ".ppo.lock"
-
-
 def hold_run_dir(out):
-    """Makes the run directory ``out`` and takes its lock (RUN_LOCK, never through a
-    symlink), so that one ppo.py at a time writes there: a second one, new or --resume,
-    exits with an error naming the holder's pid. Returns the open lock file; the lock lasts
-    as long as this process (or until the file is closed). Then removes the temporary files
-    (``*.tmp-PID``) that runs killed while saving left there."""
-    import errno
-    import fcntl
-
-    os.makedirs(out, exist_ok=True)
-    path = os.path.join(out, RUN_LOCK)
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-    except OSError as e:
-        if e.errno == errno.ELOOP:
-            sys.exit(f"error: run directory {out}: its lock file {path} is a symbolic link, "
-                     "which ppo.py never writes through; remove the link")
-        sys.exit(f"error: run directory {out}: cannot create its lock file {path}: {e}")
-    f = os.fdopen(fd, "r+")
-    holder = None
-    try:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = f.read().strip() or "unknown"
-    except OSError:
-        # No locks on this file system: the pid in the file, if its process runs, holds it.
-        pid = f.read().strip()
-        if pid.isdigit() and int(pid) != os.getpid() and process_alive(int(pid)):
-            holder = pid
-    if holder is not None:
-        f.close()
-        sys.exit(f"error: run directory {out} is in use by another examples/ppo.py (pid "
-                 f"{holder}, which holds {path}); wait for it to finish or stop it, or train "
-                 "into another --out")
-    f.seek(0)
-    f.truncate()
-    f.write(f"{os.getpid()}\n")
-    f.flush()
-    os.fsync(f.fileno())
-    for name in os.listdir(out):
-        tail = name.rpartition(".tmp-")[2]
-        path = os.path.join(out, name)
-        if (".tmp-" in name and tail.isdigit() and int(tail) != os.getpid()
-                and not process_alive(int(tail)) and os.path.isfile(path)
-                and not os.path.islink(path)):
-            os.remove(path)
-    return f
-
-
-def process_alive(pid):
-    """Whether process ``pid`` exists."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    """rundir.hold_run_dir for this script: one writer per run directory."""
+    return rundir.hold_run_dir(out, SCRIPT)
 
 
 #: What a checkpoint of this script holds.
@@ -501,44 +402,7 @@ CHECKPOINT_KEYS = ("actor", "critic", "logstd", "optimizer", "obs_mean", "obs_va
 def load_checkpoint(run):
     """The checkpoint of run directory ``run``; exits with an error naming the file when it
     cannot be read (damaged, cut short, not this script's)."""
-    import torch
-
-    path = os.path.join(run, "checkpoint.pt")
-    why = None
-    try:
-        ckpt = torch.load(path, weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file
-        why = f"it cannot be read ({type(e).__name__})"
-    else:
-        missing = ([k for k in CHECKPOINT_KEYS if k not in ckpt] if isinstance(ckpt, dict)
-                   else list(CHECKPOINT_KEYS))
-        if missing:
-            why = f"it lacks {', '.join(missing)}"
-    if why:
-        sys.exit(f"error: --resume {run}: {path} is not a checkpoint of examples/ppo.py: {why}; "
-                 "it is damaged (a full disk, a copy cut short) or another file. The run's "
-                 "policies are still in policy.onnx and best.onnx there")
-    return ckpt
-
-
-def check_checkpoint_is_the_runs(out, command, robot, mode):
-    """--resume: refuses a checkpoint of another run (a copy from another directory), whose
-    training command, robot or control mode differ from those of the run directory's
-    policy.onnx (written with the checkpoints; its env id may be retargeted)."""
-    path = os.path.join(out, "policy.onnx")
-    if not os.path.isfile(path):
-        return
-    try:
-        meta = {p.key: p.value for p in load_policy(path).metadata_props}
-    except Exception:  # noqa: BLE001 - an unreadable file has nothing to compare
-        return
-    mine = dict(training_command=command, robot_uids=robot, control_mode=mode)
-    diff = [k for k, v in mine.items() if k in meta and meta[k] != v]
-    if diff:
-        sys.exit(f"error: --resume {out}: checkpoint.pt is not this run's: its "
-                 + "; ".join(f"{k} is {mine[k]!r}, the run's policy.onnx has {meta[k]!r}"
-                             for k in diff)
-                 + ". Resume the directory the checkpoint came from")
+    return rundir.load_checkpoint(run, CHECKPOINT_KEYS, SCRIPT)
 
 
 #: log.csv's columns.
@@ -548,53 +412,10 @@ LOG_HEADER = ["iteration", "env_steps", "wall_time", "sim_time", "learner_time",
 
 
 def start_log(log_path, resume_at=None):
-    """Opens the run's log.csv for appending; returns (file, csv writer). A new run starts
-    it with the header. A resumed run (``resume_at``: the (iteration, env steps) its
-    checkpoint continues from) keeps the rows the checkpoint counts; rows after it (written
-    after the checkpoint by a run then killed) and a row cut short are dropped. The log is
-    never rewritten in place: a new one is written beside it and renamed over it, so a
-    failing write (a full disk) leaves the log as it was."""
-    def write(rows):
-        def w(tmp):
-            with open(tmp, "w", newline="") as f:
-                csv.writer(f).writerows(rows)
-        atomic_write(log_path, w)
-
-    if resume_at is None or not os.path.exists(log_path):
-        write([LOG_HEADER])
-    else:
-        first_it, global_step = resume_at
-        with open(log_path, newline="") as f:
-            text = f.read()
-        rows = list(csv.reader(text.splitlines()))
-        if not rows or rows[0] != LOG_HEADER:
-            sys.exit(f"error: {log_path} does not start with ppo.py's header "
-                     f"({','.join(LOG_HEADER)}); it is not this script's log")
-        body = rows[1:]
-        if text and not text.endswith("\n") and body:
-            body = body[:-1]  # cut short by a kill
-
-        def counted(r):
-            try:
-                return (len(r) == len(LOG_HEADER) and int(r[0]) < first_it
-                        and int(r[1]) <= global_step)
-            except ValueError:
-                return False
-
-        kept = [r for r in body if counted(r)]
-        if len(kept) != len(rows) - 1:
-            print(f"{log_path}: {len(rows) - 1 - len(kept)} row(s) after the checkpoint or cut "
-                  "short dropped", flush=True)
-            write([LOG_HEADER] + kept)
-    log = open(log_path, "a", newline="")
-    return log, csv.writer(log)
-
-
-def append_row(log, writer, row):
-    """Appends ``row`` to the log and flushes it to disk (before any checkpoint counts it)."""
-    writer.writerow(row)
-    log.flush()
-    os.fsync(log.fileno())
+    """rundir.start_log with this script's columns: a new log, or a resumed run's (``resume_at``:
+    the (iteration, env steps) its checkpoint continues from) with the rows after the
+    checkpoint dropped."""
+    return rundir.start_log(log_path, LOG_HEADER, resume_at, "ppo.py")
 
 
 def default_num_threads(args):
@@ -726,8 +547,7 @@ def main(argv=None):
     # keeps) and the options it was parsed from.
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
         sys.argv[1:] if argv is None else argv)
-    command = ckpt["command"] if ckpt is not None else (
-        "python " + " ".join(shlex.quote(a) for a in [sys.argv[0], *run_argv]))
+    command = ckpt["command"] if ckpt is not None else command_line(run_argv)
     if ckpt is not None:
         check_checkpoint_is_the_runs(out, command, robot, mode)
 
@@ -794,39 +614,21 @@ def main(argv=None):
 
     def save(tag, eval_success):
         p = policy_params()
-        layers, mean, std = p["layers"], p["obs_mean"], p["obs_std"]
-        meta = {
-            "env_id": args.env_id,
-            "robot_uids": robot,
-            "control_mode": mode,
-            "obs_mode": "state",
-            "training_command": command,
-            "algorithm": "ppo (examples/ppo.py)" if demos is None else
-                         "ppo with a behaviour-cloning warm start and term (examples/ppo.py "
-                         "--demos)",
-            "env_steps": str(global_step),
-            "eval_success": "" if eval_success is None else f"{eval_success:.4f}",
-            "mjskill_version": version,
-            "hidden_obs": ",".join(str(i) for i in hidden),
-        }
+        extra = {}
         if demos is not None:
-            meta["demos"] = (f"{len(demos.episodes)} episodes, {demos.steps} steps: "
-                             + " ".join(os.path.basename(f) for f in demos.files))
+            extra["demos"] = (f"{len(demos.episodes)} episodes, {demos.steps} steps: "
+                              + " ".join(os.path.basename(f) for f in demos.files))
         if args.simulator != "mjskill":
-            meta["simulator"] = args.simulator
-        if resumes:
-            meta["resumed"] = ",".join(str(s) for s in resumes)
-            meta["resume_commands"] = " ; ".join(resume_commands)
-        path = os.path.join(out, f"{tag}.onnx")
-        def write(tmp):
-            write_mlp_policy(tmp, layers, mean, std, meta,
-                             obs_clip=None if args.no_obs_norm else 10.0)
-            if floors:
-                floor_actions(tmp, tmp, floors, "trained with --action-floor " +
-                              " ".join(args.action_floor))
-
-        atomic_write(path, write)
-        atomic_write(os.path.join(out, f"{tag}.pt"), lambda tmp: torch.save(weights(), tmp))
+            extra["simulator"] = args.simulator
+        meta = metadata(
+            args.env_id, robot, mode, command,
+            "ppo (examples/ppo.py)" if demos is None else
+            "ppo with a behaviour-cloning warm start and term (examples/ppo.py --demos)",
+            global_step, eval_success, version, hidden, resumes, resume_commands, **extra)
+        path = save_policy(out, tag, p["layers"], p["obs_mean"], p["obs_std"], meta,
+                           obs_clip=None if args.no_obs_norm else 10.0, floors=floors,
+                           floor_note="trained with --action-floor " + " ".join(args.action_floor))
+        rundir.save_torch(os.path.join(out, f"{tag}.pt"), weights())
         return path
 
     def weights():
@@ -849,7 +651,7 @@ def main(argv=None):
             torch_rng=torch.get_rng_state(),
             cuda_rng=torch.cuda.get_rng_state() if dev.type == "cuda" else None,
         )
-        atomic_write(os.path.join(out, "checkpoint.pt"), lambda tmp: torch.save(state, tmp))
+        rundir.save_torch(os.path.join(out, "checkpoint.pt"), state)
 
     def evaluate():
         """One episode per eval env on fixed seeds, mean actions; (success rate, mean return).
@@ -858,30 +660,23 @@ def main(argv=None):
         reused envs would carry one evaluation's end into the next, and the same actor would
         score differently."""
         nonlocal eval_envs
-        obs, _ = eval_envs.reset(seed=args.eval_seed)
-        n = args.num_eval_envs
-        done = np.zeros(n, bool)
-        success = np.zeros(n, bool)
-        ret = np.zeros(n)
-        for _ in range(max_steps):
+
+        def act(obs):
             with torch.no_grad():
-                a = torch.clamp(actor(norm(obs)), low, high).cpu().numpy()
-            obs, r, term, trunc, _ = eval_envs.step(a)
-            ret += np.where(done, 0.0, r)
-            success |= term & ~done
-            done |= term | trunc
-            if done.all():
-                break
+                return torch.clamp(actor(norm(obs)), low, high).cpu().numpy()
+
+        result = run_episodes(eval_envs, act, args.eval_seed, max_steps)
         if args.simulator == "mjskill":
             eval_envs.close()
             eval_envs = make_eval_envs()
-        return float(success.mean()), float(ret.mean())
+        return result
 
     if demos is not None:
         # The demos' steps: raw observations (normalised with the running statistics where
         # used), actions and discounted returns.
         demo_obs, demo_all_obs = demos.obs, demos.all_obs
-        demo_act = torch.as_tensor(demos.actions).to(dev)
+        # (The expert's own labels where the demos carry them: noise-injected demos.)
+        demo_act = torch.as_tensor(demos.labels).to(dev)
         demo_ret = torch.as_tensor(demos.returns(args.gamma, args.reward_mode)
                                    * args.reward_scale).to(dev)
         if ckpt is None:
@@ -944,7 +739,7 @@ def main(argv=None):
         first_it, global_step, best = int(ckpt["iteration"]), int(ckpt["global_step"]), ckpt["best"]
         resumes = list(ckpt["resumes"]) + [global_step]
         resume_commands = list(ckpt.get("resume_commands", [])) + [
-            "python " + " ".join(shlex.quote(a) for a in sys.argv)]
+            command_line()]
         tm = ckpt["times"]
         sim_time, infer_time, gae_time = tm["sim"], tm["infer"], tm["gae"]
         update_time, eval_time = tm["update"], tm["eval"]
@@ -985,18 +780,7 @@ def main(argv=None):
     ep_ret = np.zeros(N)
     # SIGINT or SIGTERM ends the run after the current iteration, with the final evaluation
     # and saves; a second one stops at once.
-    stopping = []
-
-    def on_signal(signum, frame):
-        if stopping:
-            signal.signal(signum, signal.SIG_DFL)
-            raise KeyboardInterrupt
-        stopping.append(signum)
-        print(f"signal {signum}: stopping after this iteration (again to stop at once)",
-              flush=True)
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, on_signal)
+    stopping = rundir.stop_on_signals()
     it = next_it = first_it
     for it in range(first_it, iterations + 1):
         if (it % args.eval_freq == 1 or args.eval_freq == 1) and not (ckpt and it == first_it):

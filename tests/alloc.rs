@@ -166,5 +166,25 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
         0,
         "rgb+depth+segmentation VecEnv step allocated"
     );
+    // A noise-injected step (rollout --action-noise): the noise is drawn into the caller's
+    // buffer, and the env steps the noisy action.
+    let mut env = mjskill::make("PickCube-v1", mjskill::EnvConfig::default()).unwrap();
+    let mut noise = mjskill::solvers::ActionNoise::parse("arm=0.05,gripper=0", &env, 3).unwrap();
+    let label = vec![0.1f32; env.action_space().shape[0]];
+    let mut action = label.clone();
+    noise.reset(7);
+    noise.apply(&label, &mut action);
+    env.step(&action).unwrap();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    let mut moved = 0.0f32;
+    for _ in 0..20 {
+        noise.apply(&label, &mut action);
+        moved += (action[0] - label[0]).abs();
+        env.step(&action).unwrap();
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(ALLOCS.load(Ordering::SeqCst), 0, "a noisy step allocated");
+    assert!(moved > 0.0, "the noise moved the actions");
     std::hint::black_box(sum);
 }

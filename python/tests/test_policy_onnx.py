@@ -142,3 +142,33 @@ def test_a_floored_file_floors_again(tmp_path):
     x = np.random.default_rng(0).normal(0, 100, (256, s.get_inputs()[0].shape[1]))
     a = s.run(None, {s.get_inputs()[0].name: x.astype(np.float32)})[0]
     assert a[:, 7].min() >= -0.5 and a[:, 6].min() >= np.float32(0.1)
+
+
+def test_a_residual_adds_raw_observation_entries_to_chosen_actions(tmp_path):
+    """examples/imitate.py --relative-labels: ``action[k] = mlp(obs)[k] + obs[residual[k]]``
+    for the entries with an index, the others the MLP's alone; the graph matches numpy's
+    reference, and floors still apply to its output."""
+    ort = pytest.importorskip("onnxruntime")
+    P = load_module()
+    r = np.random.default_rng(1)
+    layers = [(r.normal(size=(6, 4)), r.normal(size=4)), (r.normal(size=(4, 3)), r.normal(size=3))]
+    mean, std = r.normal(size=6), r.uniform(0.5, 2.0, size=6)
+    meta = dict(env_id="PickCube-v1", robot_uids="so100", control_mode="pd_joint_pos",
+                obs_mode="state", training_command="test")
+    x = r.normal(0, 3, size=(16, 6)).astype(np.float32)
+    residual = [4, None, 0]
+    path = tmp_path / "res.onnx"
+    P.write_mlp_policy(path, layers, mean, std, meta, obs_clip=10.0, residual=residual)
+    s = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got = s.run(None, {"obs": x})[0]
+    plain = P.mlp_forward(x, layers, mean, std, 10.0)
+    np.testing.assert_allclose(got, P.mlp_forward(x, layers, mean, std, 10.0, residual),
+                               atol=1e-5)
+    np.testing.assert_allclose(got[:, 0] - plain[:, 0], x[:, 4], atol=1e-5)
+    np.testing.assert_allclose(got[:, 1], plain[:, 1], atol=1e-5)
+    P.floor_actions(path, path, {1: 0.25}, "test")
+    s = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    assert s.run(None, {"obs": x})[0][:, 1].min() >= 0.25
+    for bad, message in (([4, None], "2 entries for 3"), ([6, None, 0], "out of range 0..5")):
+        with pytest.raises(ValueError, match=message):
+            P.write_mlp_policy(tmp_path / "bad.onnx", layers, mean, std, meta, residual=bad)

@@ -404,6 +404,11 @@ struct StepMsgOut<'a> {
     step: u32,
     #[serde(serialize_with = "num::f32s::serialize")]
     action: &'a [f32],
+    #[serde(
+        serialize_with = "num::f32s::serialize_some",
+        skip_serializing_if = "Option::is_none"
+    )]
+    expert_action: Option<&'a [f32]>,
     #[serde(serialize_with = "num::f32s::serialize")]
     obs: &'a [f32],
     #[serde(with = "num::f32n")]
@@ -421,6 +426,8 @@ struct StepMsgIn {
     step: u32,
     #[serde(with = "num::f32s")]
     action: Vec<f32>,
+    #[serde(default, deserialize_with = "num::f32s::deserialize_some")]
+    expert_action: Option<Vec<f32>>,
     #[serde(with = "num::f32s")]
     obs: Vec<f32>,
     #[serde(with = "num::f32n")]
@@ -451,6 +458,14 @@ struct Channels {
     episode_end: u16,
     tf: u16,
     scene: u16,
+}
+
+/// What a step returned: reward and flags.
+#[derive(Debug, Clone, Copy)]
+struct Outcome {
+    reward: f32,
+    terminated: bool,
+    truncated: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -760,6 +775,59 @@ impl Recorder {
         truncated: bool,
         state_before: &EnvState,
     ) -> Result<(), RecordError> {
+        let step = Outcome {
+            reward,
+            terminated,
+            truncated,
+        };
+        self.write_step(env, action, None, step, state_before)
+    }
+
+    /// As [`Recorder::record_step`], with the expert's label of the step: `expert_action`,
+    /// the action the expert chose for the state before the step, where `action` is the one
+    /// the env executed (e.g. the label plus noise, [`crate::solvers::ActionNoise`]). It is
+    /// written as the step's `expert_action` field; both have the action's length.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_labelled_step(
+        &mut self,
+        env: &Env,
+        action: &[f32],
+        expert_action: &[f32],
+        reward: f32,
+        terminated: bool,
+        truncated: bool,
+        state_before: &EnvState,
+    ) -> Result<(), RecordError> {
+        if expert_action.len() != action.len() {
+            return Err(RecordError::Usage {
+                path: self.path.clone(),
+                msg: format!(
+                    "an expert action of {} values for an action of {}",
+                    expert_action.len(),
+                    action.len()
+                ),
+            });
+        }
+        let step = Outcome {
+            reward,
+            terminated,
+            truncated,
+        };
+        self.write_step(env, action, Some(expert_action), step, state_before)
+    }
+
+    fn write_step(
+        &mut self,
+        env: &Env,
+        action: &[f32],
+        expert_action: Option<&[f32]>,
+        Outcome {
+            reward,
+            terminated,
+            truncated,
+        }: Outcome,
+        state_before: &EnvState,
+    ) -> Result<(), RecordError> {
         let Some(mut open) = self.open else {
             return Err(RecordError::Usage {
                 path: self.path.clone(),
@@ -785,6 +853,7 @@ impl Recorder {
             episode: open.index,
             step: open.steps,
             action,
+            expert_action,
             obs: env.obs(),
             reward,
             terminated,
@@ -824,6 +893,24 @@ impl Recorder {
         })?;
         let out = (s.reward, s.terminated, s.truncated);
         self.record_step(env, action, out.0, out.1, out.2, &before)?;
+        Ok(out)
+    }
+
+    /// As [`Recorder::step`], recording `expert_action` as the step's label
+    /// ([`Recorder::record_labelled_step`]); the env executes `action`.
+    pub fn step_labelled(
+        &mut self,
+        env: &mut Env,
+        action: &[f32],
+        expert_action: &[f32],
+    ) -> Result<(f32, bool, bool), RecordError> {
+        let before = env.get_state();
+        let s = env.step(action).map_err(|source| RecordError::Env {
+            path: self.path.clone(),
+            source,
+        })?;
+        let out = (s.reward, s.terminated, s.truncated);
+        self.record_labelled_step(env, action, expert_action, out.0, out.1, out.2, &before)?;
         Ok(out)
     }
 

@@ -34,6 +34,21 @@ pub(crate) mod f32s {
         let v = Vec::<Option<f32>>::deserialize(d)?;
         Ok(v.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
     }
+
+    /// An optional field written only when present (with `skip_serializing_if`).
+    pub(crate) fn serialize_some<S: Serializer>(
+        v: &Option<&[f32]>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        serialize(v.unwrap_or(&[]), s)
+    }
+
+    /// An optional field: present, it reads as [`deserialize`] does.
+    pub(crate) fn deserialize_some<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<Vec<f32>>, D::Error> {
+        deserialize(d).map(Some)
+    }
 }
 
 /// `f32` ↔ `number | null`.

@@ -20,8 +20,11 @@ use crate::env::EnvState;
 /// One recorded step.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepRec {
-    /// Action.
+    /// Action (the one the env executed).
     pub action: Vec<f32>,
+    /// The expert's label of the step, when the recording has one (`mjskill rollout
+    /// --action-noise`: the policy's own action, where `action` adds noise to it).
+    pub expert_action: Option<Vec<f32>>,
     /// Observation after the step.
     pub obs: Vec<f32>,
     /// Reward.
@@ -321,6 +324,18 @@ impl Decoder<'_> {
                     )
                     .into()));
                 }
+                if let Some(label) = &s.expert_action {
+                    if label.len() != s.action.len() {
+                        return Err(bad(format!(
+                            "step {} of episode {}: expert_action has {} values, action {}",
+                            s.step,
+                            s.episode,
+                            label.len(),
+                            s.action.len()
+                        )
+                        .into()));
+                    }
+                }
                 self.open = Some((s.episode, n + 1));
                 Self::visit(
                     self.path,
@@ -329,6 +344,7 @@ impl Decoder<'_> {
                         s.step,
                         StepRec {
                             action: s.action,
+                            expert_action: s.expert_action,
                             obs: s.obs,
                             reward: s.reward,
                             terminated: s.terminated,

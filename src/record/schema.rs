@@ -147,6 +147,13 @@ pub(crate) fn step() -> Value {
             "episode": { "type": "integer", "minimum": 0 },
             "step": { "type": "integer", "minimum": 0 },
             "action": num_array(),
+            "expert_action": {
+                "type": "array",
+                "items": num_or_null(),
+                "description": "the expert's own action for the state before the step, where \
+                                action is the one executed (rollout --action-noise: the \
+                                policy's action plus noise); only in labelled recordings"
+            },
             "obs": num_array(),
             "reward": num_or_null(),
             "terminated": { "type": "boolean" },

@@ -14,6 +14,7 @@ pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
 pub mod mlp;
+pub mod noise;
 #[cfg(feature = "onnx")]
 pub mod onnx;
 #[cfg(feature = "onnx")]
@@ -29,6 +30,7 @@ pub use evaluate::{
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
 pub use mlp::{GaussianMlp, MlpError, MAX_LAYER_ELEMENTS};
+pub use noise::{ActionNoise, NoiseError};
 #[cfg(feature = "onnx")]
 pub use onnx::{OnnxPolicy, PolicyFile, PolicyFileError, PolicyMeta};
 

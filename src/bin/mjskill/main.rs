@@ -173,6 +173,17 @@ pub enum Command {
         /// Do not write the PNG of the first episode's last frame next to the recording.
         #[arg(long)]
         no_frame: bool,
+        /// Noise-injected demonstrations (DART): the env executes the policy's action plus
+        /// seeded Gaussian noise, clipped to the action space, and every step records the
+        /// policy's own action as its expert_action. SPEC: one σ for every action entry
+        /// (0.05), one per action part of the control mode (arm=0.02,gripper=0: every part
+        /// named), or one per action entry (0.02,0.02,0.02,0).
+        #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+        action_noise: Option<String>,
+        /// Seed of --action-noise's noise (0..=4294967295); each episode's noise also depends
+        /// on its reset seed.
+        #[arg(long, default_value_t = 0, requires = "action_noise", value_parser = args::seed, allow_hyphen_values = true)]
+        noise_seed: u64,
     },
     /// Summarise a recording or a directory of recordings (JSON); says whether it was cut short. A damaged file (a CRC or
     /// structure check fails) is an error naming the byte offset and chunk.
@@ -368,10 +379,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
             video,
             cameras,
             no_frame,
+            action_noise,
+            noise_seed,
         } => rollout_command(
             target,
             (obs_mode, reward_mode),
-            &policy,
+            (&policy, action_noise, noise_seed),
             episodes,
             seed,
             out,
@@ -483,12 +496,13 @@ fn bench_command(
     Ok(())
 }
 
-/// `mjskill rollout`: records `episodes` episodes of `policy` from `seed` on into `out`, with
-/// `--obs-mode` and `--reward-mode`, and `--video`, `--camera`s and whether to frame the video.
+/// `mjskill rollout`: records `episodes` episodes of `policy` (with `--action-noise` and
+/// `--noise-seed`) from `seed` on into `out`, with `--obs-mode` and `--reward-mode`, and
+/// `--video`, `--camera`s and whether to frame the video.
 fn rollout_command(
     target: EnvArgs,
     (obs_mode, reward_mode): (Option<String>, String),
-    policy: &str,
+    (policy, action_noise, noise_seed): (&str, Option<String>, u64),
     episodes: usize,
     seed: u64,
     out: PathBuf,
@@ -513,6 +527,7 @@ fn rollout_command(
         video,
         cameras,
         frame,
+        noise: action_noise.map(|spec| (spec, noise_seed)),
     };
     let summary = rollout::rollout(&args)?;
     out!("{}", serde_json::to_string(&summary)?);

@@ -9,7 +9,7 @@ use crate::CliError;
 use mjskill::record::image::write_png;
 use mjskill::record::RecordError;
 use mjskill::record::{stream, EpisodeEnd, EpisodeStart, Recorder, StepRec, Visitor};
-use mjskill::solvers::{check_seed_range, EvalError, Policy, PolicySpec};
+use mjskill::solvers::{check_seed_range, ActionNoise, EvalError, Policy, PolicySpec};
 use mjskill::{Env, EnvConfig};
 
 /// The one-line JSON summary of a rollout.
@@ -41,6 +41,12 @@ pub struct RolloutSummary {
     /// Camera frames recorded (H.264, `/render_camera/video` with `--video` and
     /// `/<camera>/video` with `--camera`), all cameras together.
     pub video_frames: u64,
+    /// With `--action-noise`: the σ of every action entry (absent without).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub action_noise: Option<Vec<f32>>,
+    /// With `--action-noise`: the noise seed (absent without).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_seed: Option<u64>,
 }
 
 /// What `rollout` runs.
@@ -67,6 +73,9 @@ pub struct RolloutArgs {
     pub cameras: Vec<String>,
     /// Write the first episode's last human-camera frame next to `out` ([`frame_path`]).
     pub frame: bool,
+    /// `--action-noise SPEC` and `--noise-seed`: execute the policy's action plus this noise
+    /// and record the policy's own action as each step's label ([`ActionNoise`]).
+    pub noise: Option<(String, u64)>,
 }
 
 /// The PNG written next to a recording: `rollout.mcap` → `rollout.png`.
@@ -130,6 +139,10 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
     }
     let mut env = a.policy.make_env(&a.env, a.config.clone())?;
     let mut policy = a.policy.make_policy(&env, a.seed)?;
+    let mut noise = match &a.noise {
+        Some((spec, seed)) => Some(ActionNoise::parse(spec, &env, *seed)?),
+        None => None,
+    };
     let frame_png = check_frame_path(&a.out, a.frame)?;
     let (render_w, render_h) = env.render_size();
     let camera = env.cameras().1.name;
@@ -166,7 +179,7 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
         record_all(
             a,
             &mut env,
-            policy.as_mut(),
+            (policy.as_mut(), noise.as_mut()),
             &mut rec,
             &mut output,
             &mut run,
@@ -213,6 +226,8 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
         steps_per_s: run.steps as f64 / t0.elapsed().as_secs_f64(),
         frame: run.frame,
         video_frames,
+        action_noise: noise.as_ref().map(|n| n.sigma().to_vec()),
+        noise_seed: noise.as_ref().map(|n| n.seed()),
     })
 }
 
@@ -282,7 +297,7 @@ struct Run {
 fn record_all(
     a: &RolloutArgs,
     env: &mut Env,
-    policy: &mut dyn Policy,
+    (policy, mut noise): (&mut dyn Policy, Option<&mut ActionNoise>),
     rec: &mut Recorder,
     output: &mut Output,
     run: &mut Run,
@@ -307,11 +322,16 @@ fn record_all(
         "{bar:40} {pos}/{len} episodes {msg} [{elapsed} < {eta}]",
     )?);
     let mut action = vec![0.0f32; env.action_space().shape[0]];
+    // With noise: the policy's own action (the label); `action` is then the executed one.
+    let mut label = action.clone();
     for k in 0..a.episodes as u64 {
         let seed = a.seed + k;
         run.episode = k;
         env.try_reset(Some(seed))?;
         policy.reset(env);
+        if let Some(n) = noise.as_deref_mut() {
+            n.reset(seed);
+        }
         rec.begin_episode(env, Some(seed))?;
         if a.video {
             let rgb = env.render()?;
@@ -320,8 +340,18 @@ fn record_all(
         record_sensors(env, rec, &a.cameras, &sensors)?;
         let (mut ret, mut success) = (0.0f64, false);
         loop {
-            policy.try_act(env, &mut action)?;
-            let (reward, terminated, truncated) = rec.step(env, &action).map_err(|e| match e {
+            let stepped = match noise.as_deref_mut() {
+                None => {
+                    policy.try_act(env, &mut action)?;
+                    rec.step(env, &action)
+                }
+                Some(n) => {
+                    policy.try_act(env, &mut label)?;
+                    n.apply(&label, &mut action);
+                    rec.step_labelled(env, &action, &label)
+                }
+            };
+            let (reward, terminated, truncated) = stepped.map_err(|e| match e {
                 // A rejected action reads as the env's own error, naming the policy.
                 RecordError::Env { source, .. } => EvalError::Env(source)
                     .in_episode(&a.policy, k, seed)

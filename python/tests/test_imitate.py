@@ -1,0 +1,214 @@
+"""examples/imitate.py and noise-injected demonstrations: a recording of `mjskill rollout
+--action-noise` reads back with the expert's labels beside the executed actions, a tiny cloning
+run writes a policy file that `mjskill eval` runs, relative labels are folded back into the
+file's absolute targets, and a stopped run continues with --resume. The torch tests skip
+without torch, as test_ppo.py's do."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import need
+
+REPO = Path(__file__).resolve().parents[2]
+IMITATE = REPO / "examples" / "imitate.py"
+sys.path.insert(0, str(REPO / "examples"))
+import demos as demos_mod  # noqa: E402
+
+#: Successes of the SO100's episodes under σ 0.04 (the fixture's so100_hard.mcap).
+HARD = {}
+#: A run small enough for a test.
+SMALL = ["--hidden", "32", "32", "--batch-size", "64", "--num-eval-envs", "2", "--num-threads",
+         "1", "--torch-threads", "1"]
+
+
+def binary():
+    """The `mjskill` command line of this checkout ($MJSKILL_BIN, else target/release)."""
+    path = os.environ.get("MJSKILL_BIN", str(REPO / "target" / "release" / "mjskill"))
+    assert Path(path).exists(), f"{path} missing: run `cargo build --release` first"
+    return path
+
+
+def rollout(out, *args):
+    r = subprocess.run([binary(), "rollout", "--out", str(out), "--no-frame", *args],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def imitate(*args, timeout=300):
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    return subprocess.run([sys.executable, str(IMITATE), *args], capture_output=True,
+                          text=True, timeout=timeout, env=env)
+
+
+def log_rows(out):
+    with open(out / "log.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def metadata(path):
+    onnx = need("onnx")
+    return {p.key: p.value for p in onnx.load(str(path)).metadata_props}
+
+
+@pytest.fixture(scope="module")
+def demo_files(tmp_path_factory):
+    need("mcap")
+    d = tmp_path_factory.mktemp("noisy")
+    s = rollout(d / "panda.mcap", "--env", "PickCube-v1", "--episodes", "3",
+                "--action-noise", "arm=0.05,gripper=0")
+    assert s["action_noise"] == [0.05, 0.05, 0.05, 0.0], s
+    rollout(d / "plain.mcap", "--env", "PickCube-v1", "--episodes", "1")
+    rollout(d / "so100.mcap", "--env", "PickCubeSO100-v1", "--episodes", "1",
+            "--action-noise", "0.02")
+    # Noise the SO100's solver does not always survive (it drops or misses the cube).
+    s = rollout(d / "so100_hard.mcap", "--env", "PickCubeSO100-v1", "--episodes", "4",
+                "--action-noise", "0.04")
+    assert 0 < s["successes"] < 4, s
+    HARD["successes"] = s["successes"]
+    return d
+
+
+def test_a_noisy_recording_reads_back_with_the_expert_labels(demo_files):
+    d = demos_mod.load([str(demo_files / "panda.mcap")], None, None, None)
+    assert (d.env_id, d.robot, d.control_mode) == ("PickCube-v1", "panda", "pd_ee_delta_pos")
+    assert d.labelled == len(d.episodes) == 3
+    for e in d.episodes:
+        assert e.labels.shape == e.actions.shape == (50, 4)
+        # The arm's entries were executed with noise (unless clipped at a bound), the
+        # gripper's as labelled.
+        moved = e.labels[:, :3] != e.actions[:, :3]
+        assert np.all(moved | (np.abs(e.actions[:, :3]) == 1.0)) and moved.mean() > 0.8
+        np.testing.assert_array_equal(e.labels[:, 3], e.actions[:, 3])
+    assert d.all_labels.shape == d.all_obs.shape[:1] + (4,)
+    assert not np.array_equal(d.labels, d.actions)
+    # A recording without noise has no labels: its actions are the labels.
+    plain = demos_mod.load([str(demo_files / "plain.mcap")], "PickCube-v1", None, None)
+    assert plain.labelled == 0 and plain.episodes[0].labels is None
+    np.testing.assert_array_equal(plain.labels, plain.actions)
+
+
+def test_failed_episodes_are_kept_on_request(demo_files):
+    path = str(demo_files / "so100_hard.mcap")
+    ok = HARD["successes"]
+    d = demos_mod.load([path], None, None, None)
+    assert (len(d.episodes), d.skipped_failed, d.kept_failed) == (ok, 4 - ok, 0)
+    d = demos_mod.load([path], None, None, None, keep_failed=True)
+    assert (len(d.episodes), d.skipped_failed, d.kept_failed) == (4, 0, 4 - ok)
+    assert d.all_labels.shape == (200, 6) and d.labelled == 4
+
+
+def test_cloning_writes_a_policy_file_that_mjskill_eval_runs(demo_files, tmp_path):
+    pytest.importorskip("torch")
+    out = tmp_path / "run"
+    r = imitate(*SMALL, "--demos", str(demo_files / "panda.mcap"), "--epochs", "3",
+                "--eval-every", "2", "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "3 episodes (0 of them failed; 3 with expert labels)" in r.stdout, r.stdout[-2000:]
+    rows = log_rows(out)
+    assert [(x["epoch"], x["eval_success"] != "") for x in rows] == [
+        ("1", False), ("2", False), ("2", True), ("3", False), ("3", True)], rows
+    losses = [float(x["train_loss"]) for x in rows if x["train_loss"]]
+    assert losses[-1] < losses[0], losses
+    meta = metadata(out / "policy.onnx")
+    assert (meta["env_id"], meta["robot_uids"], meta["control_mode"], meta["obs_mode"]) == (
+        "PickCube-v1", "panda", "pd_ee_delta_pos", "state")
+    assert "imitate.py" in meta["training_command"] and "--demos" in meta["training_command"]
+    assert meta["algorithm"].startswith("behaviour cloning")
+    assert meta["demos"].startswith("3 episodes (0 failed, 3 with expert labels), 150 steps")
+    assert (meta["expert_labels"], meta["env_steps"], meta["epochs"]) == ("150", "150", "3")
+    assert meta["hidden_obs"] == "16,17"  # the Panda's finger velocities, as ppo.py hides them
+    for name in ("policy.onnx", "best.onnx", "policy.pt", "best.pt", "checkpoint.pt"):
+        assert (out / name).is_file(), name
+    e = subprocess.run([binary(), "eval", "--policy", str(out / "policy.onnx"), "--episodes",
+                        "2", "--seed", "10000"], capture_output=True, text=True, timeout=300)
+    assert e.returncode == 0, e.stderr[-2000:]
+    report = json.loads(e.stdout)
+    assert (report["episodes"], report["control_mode"]) == (2, "pd_ee_delta_pos")
+
+
+def test_relative_labels_are_folded_back_into_absolute_targets(demo_files, tmp_path):
+    pytest.importorskip("torch")
+    ort = need("onnxruntime")
+    out = tmp_path / "run"
+    so100 = str(demo_files / "so100.mcap")
+    # One episode learned almost by heart: the file must give its absolute joint targets.
+    r = imitate(*SMALL, "--demos", so100, "--relative-labels", "--epochs", "300",
+                "--eval-every", "300", "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "relative labels on action entries [0, 1, 2, 3, 4, 5]" in r.stdout, r.stdout[-2000:]
+    assert "relative" in metadata(out / "policy.onnx")["algorithm"]
+    d = demos_mod.load([so100], None, None, None)
+    obs, labels = d.all_obs, d.all_labels
+    s = ort.InferenceSession(str(out / "policy.onnx"), providers=["CPUExecutionProvider"])
+    got = s.run(None, {s.get_inputs()[0].name: obs})[0]
+    err = np.abs(got - labels).mean()
+    # A file that dropped the measured positions would miss by the targets' size (about a
+    # radian); one that learned nothing would do no better than "stay where the joints are".
+    stay = np.abs(labels - obs[:, :6]).mean()
+    assert err < 0.1 * np.abs(labels).mean() and err < stay, (err, stay)
+    e = subprocess.run([binary(), "eval", "--policy", str(out / "best.onnx"), "--episodes",
+                        "1", "--seed", "10000"], capture_output=True, text=True, timeout=300)
+    assert e.returncode == 0, e.stderr[-2000:]
+    assert json.loads(e.stdout)["control_mode"] == "pd_joint_pos"
+
+
+def test_relative_labels_in_a_mode_without_absolute_joint_targets_are_refused(demo_files,
+                                                                               tmp_path):
+    pytest.importorskip("torch")
+    r = imitate(*SMALL, "--demos", str(demo_files / "panda.mcap"), "--relative-labels",
+                "--out", str(tmp_path / "run"))
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "no action entry of panda in pd_ee_delta_pos is a joint's absolute" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_a_stopped_cloning_run_continues_with_resume(demo_files, tmp_path):
+    torch = pytest.importorskip("torch")
+    out = tmp_path / "run"
+    demos = str(demo_files / "panda.mcap")
+    r = imitate(*SMALL, "--demos", demos, "--epochs", "2", "--eval-every", "1", "--out",
+                str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    first = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert int(first["epoch"]) == 3
+    r = imitate("--resume", str(out), "--hidden", "8")
+    assert r.returncode == 1 and "--hidden cannot change" in r.stderr, r.stderr[-2000:]
+    r = imitate("--resume", str(out), "--epochs", "4")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "resumed at epoch 3" in r.stdout, r.stdout[-2000:]
+    last = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert (int(last["epoch"]), list(last["resumes"])) == (5, [2])
+    assert last["command"] == first["command"]
+    assert [int(x["epoch"]) for x in log_rows(out) if not x["eval_success"]] == [1, 2, 3, 4]
+    assert not torch.equal(first["net"]["0.weight"], last["net"]["0.weight"])
+    meta = metadata(out / "policy.onnx")
+    assert meta["resumed"] == "2" and "--resume" in meta["resume_commands"]
+    assert "--resume" not in meta["training_command"]
+
+
+@pytest.mark.parametrize("args, message", [
+    ([], "--demos is required"),
+    (["--demos", "x.mcap", "--epochs", "0"], "0 is not a positive integer"),
+    (["--demos", "x.mcap", "--learning-rate", "nan"], "must be a finite number"),
+    (["--demos", "x.mcap", "--eval-seed", "-1"], "evaluation seeds must lie in"),
+])
+def test_settings_that_cannot_train_are_refused(args, message):
+    r = imitate(*args)
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert message in r.stderr, r.stderr[-2000:]
+
+
+def test_an_evaluation_on_the_demos_seeds_is_refused(demo_files, tmp_path):
+    r = imitate("--demos", str(demo_files / "panda.mcap"), "--eval-seed", "1",
+                "--out", str(tmp_path / "run"))
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "evaluates on seeds the demos were recorded with (1, 2)" in r.stderr, r.stderr
+    assert not (tmp_path / "run" / "log.csv").exists()
