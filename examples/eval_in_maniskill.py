@@ -56,6 +56,9 @@ def main():
     p.add_argument("--sim-backend", default="cpu", help="ManiSkill sim_backend (cpu or gpu)")
     p.add_argument("--reward-mode", default="normalized_dense")
     p.add_argument("--mjskill", help="mjskill binary: also run `mjskill eval --policy` on the seeds")
+    p.add_argument("--per-episode", action="store_true",
+                   help="also report each episode (seed, success at any step, at the end, "
+                        "return) under `per_episode`")
     a = p.parse_args()
 
     sess, inp, rank, meta = load(a.policy)
@@ -79,7 +82,7 @@ def main():
         sys.exit(f"policy file {a.policy} takes observations of {declared} values, but "
                  f"ManiSkill's {meta['env_id']} gives {obs_dim}")
     successes = at_end = 0
-    returns, first = [], []
+    returns, first, episodes = [], [], []
     for k in range(a.episodes):
         obs, _ = env.reset(seed=a.seed + k)
         ret, ever, t = 0.0, False, 0
@@ -99,6 +102,8 @@ def main():
         successes += ever
         at_end += success
         returns.append(ret)
+        episodes.append({"seed": a.seed + k, "success": ever, "success_at_end": success,
+                         "return": ret})
     report = {
         "simulator": "maniskill",
         "env": meta["env_id"],
@@ -113,6 +118,8 @@ def main():
         "mean_return": float(np.mean(returns)),
         "mean_first_success_step": float(np.mean(first)) if first else None,
     }
+    if a.per_episode:
+        report["per_episode"] = episodes
     if a.mjskill:
         out = subprocess.run([a.mjskill, "eval", "--policy", a.policy, "--episodes",
                               str(a.episodes), "--seed", str(a.seed)],

@@ -1,0 +1,258 @@
+"""Runs one policy file in ManiSkill 3 and in mjskill on the same seeds and reports, per
+episode, where the two simulators part: the first step and the quantity (arm joints, gripper,
+TCP, object, a task flag) whose difference passes its tolerance.
+
+    pip install mani_skill onnxruntime             # where ManiSkill runs, plus mjskill's wheel
+    python examples/compare_in_maniskill.py policy.onnx --episodes 10 --seed 10000
+
+ManiSkill runs the policy closed loop on its own observations. mjskill then takes the same
+seed three ways:
+
+* closed: the policy closed loop on mjskill's observations, as `mjskill eval` runs it; its
+  success and the first step where its state parts from ManiSkill's. This is what a user
+  who moves a policy between the two simulators sees.
+* open: ManiSkill's actions replayed open loop; the first parting step with no policy
+  feedback, so the physics alone.
+* resync: before every step mjskill takes ManiSkill's state (poses, velocities, the drive
+  targets PhysX holds) and the same action; the largest arm-joint error after that one step,
+  split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
+
+Prints one JSON line per episode and a summary line (`"summary": true`): successes in both,
+agreement of the final outcome, the median first parting step and its most common quantity,
+and the median one-step arm error (first step from the seeded state, and over all steps).
+`--json FILE` also writes every line to FILE. Needs numpy, onnxruntime, mani_skill and the
+mjskill Python package in one environment.
+"""
+
+import argparse
+import collections
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from eval_in_maniskill import FIXED_ROBOT, load, to_numpy  # noqa: E402
+
+#: Tolerances of "the states have parted", per quantity: joint positions in rad (or m for
+#: prismatic joints), positions in m. About ten times the one-step errors of docs/agreement.md.
+TOLERANCES = {"arm_qpos": 0.01, "gripper_qpos": 0.002, "tcp_pos": 0.005, "obj_pos": 0.005}
+#: The task flags compared step by step (those the env's `info` has).
+FLAGS = ("is_grasped", "is_obj_grasped", "is_robot_static", "is_cube_placed",
+         "is_obj_placed", "is_obj_on_goal", "success")
+
+
+def ms_scalar(x):
+    return to_numpy(x).reshape(-1)[0]
+
+
+def ms_state_dict(env):
+    """ManiSkill's state dict without the batch dimension, plus the drive targets PhysX
+    keeps across steps (mjskill's `drive` entry)."""
+    u = env.unwrapped
+    sd = u.get_state_dict()
+    out = {"actors": {k: to_numpy(v)[0] for k, v in sd["actors"].items()},
+           "articulations": {k: to_numpy(v)[0] for k, v in sd["articulations"].items()}}
+    if "controller" in sd:
+        out["controller"] = {k: to_numpy(v)[0] for k, v in sd["controller"].items()
+                             if to_numpy(v).size}
+    robot = u.agent.robot
+    out["drive"] = {"target_qpos": to_numpy(robot.get_drive_targets())[0],
+                    "target_qvel": to_numpy(robot.get_drive_velocities())[0]}
+    return out
+
+
+class Snapshot:
+    """The compared quantities of one simulator after a step."""
+
+    def __init__(self, qpos, tcp, obj, info):
+        self.qpos, self.tcp, self.obj = np.asarray(qpos, float), tcp, obj
+        self.flags = {k: bool(v) for k, v in info.items() if k in FLAGS}
+
+
+def ms_snapshot(env, obs, info, obj_name, tcp):
+    u = env.unwrapped
+    qpos = to_numpy(u.agent.robot.get_qpos())[0]
+    obj = to_numpy(u.get_state_dict()["actors"][obj_name])[0][:3] if obj_name else None
+    tcp_pos = to_numpy(obs).reshape(-1)[tcp] if tcp else None
+    return Snapshot(qpos, tcp_pos, obj, {k: ms_scalar(v) for k, v in info.items()})
+
+
+def mj_snapshot(env, obs, info, obj_name, tcp):
+    sd = env.unwrapped.get_state_dict()
+    art = np.asarray(next(iter(sd["articulations"].values())))
+    n = (len(art) - 13) // 2
+    obj = np.asarray(sd["actors"][obj_name])[:3] if obj_name else None
+    tcp_pos = np.asarray(obs).reshape(-1)[tcp] if tcp else None
+    return Snapshot(art[13:13 + n], tcp_pos, obj, info)
+
+
+def robot_key(env):
+    return next(iter(env.unwrapped.get_state_dict()["articulations"]))
+
+
+def differences(a, b, arm):
+    """{quantity: size} of the differences between two snapshots."""
+    d = {"arm_qpos": float(np.max(np.abs(a.qpos[arm] - b.qpos[arm])))}
+    grip = [i for i in range(len(a.qpos)) if i not in set(arm)]
+    if grip:
+        d["gripper_qpos"] = float(np.max(np.abs(a.qpos[grip] - b.qpos[grip])))
+    if a.tcp is not None and b.tcp is not None:
+        d["tcp_pos"] = float(np.linalg.norm(a.tcp - b.tcp))
+    if a.obj is not None and b.obj is not None:
+        d["obj_pos"] = float(np.linalg.norm(a.obj - b.obj))
+    return d
+
+
+def first_part(ms_snaps, mj_snaps, arm):
+    """(step, quantity, value) of the first step (1-based) at which the two runs part."""
+    for t, (a, b) in enumerate(zip(ms_snaps, mj_snaps), start=1):
+        for q, v in differences(a, b, arm).items():
+            if v > TOLERANCES[q]:
+                return {"step": t, "quantity": q, "value": round(v, 6)}
+        for k in sorted(set(a.flags) & set(b.flags)):
+            if a.flags[k] != b.flags[k]:
+                return {"step": t, "quantity": k, "maniskill": a.flags[k],
+                        "mjskill": b.flags[k]}
+    return None
+
+
+def run_maniskill(env, policy, seed, low, high, obj_name, tcp):
+    sess, inp, rank = policy
+    obs, _ = env.reset(seed=seed)
+    states, actions, snaps = [], [], []
+    while True:
+        states.append(ms_state_dict(env))
+        o = to_numpy(obs).astype(np.float32).reshape(1, -1)
+        (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
+        act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
+        obs, _, _, trunc, info = env.step(act[None])
+        actions.append(act)
+        snaps.append(ms_snapshot(env, obs, info, obj_name, tcp))
+        if bool(ms_scalar(trunc)):
+            return states, actions, snaps
+
+
+def run_mjskill(env, seed, actions, policy, obj_name, tcp, low, high):
+    """Closed loop when `policy` is given, else the actions open loop."""
+    obs, _ = env.reset(seed=seed)
+    snaps = []
+    for t in range(len(actions)):
+        if policy is not None:
+            sess, inp, rank = policy
+            o = np.asarray(obs, np.float32).reshape(1, -1)
+            (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
+            act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
+        else:
+            act = actions[t]
+        obs, _, _, _, info = env.step(act)
+        snaps.append(mj_snapshot(env, obs, info, obj_name, tcp))
+    return snaps
+
+
+def resync_errors(env, seed, states, actions, ms_snaps, arm):
+    """The largest arm-joint error after one step from each of ManiSkill's states."""
+    env.reset(seed=seed)
+    errs, held = [], []
+    for sd, act, target in zip(states, actions, ms_snaps):
+        env.unwrapped.set_state_dict(sd)
+        env.step(act)
+        after = mj_snapshot(env, None, {}, None, None)
+        errs.append(float(np.max(np.abs(after.qpos[arm] - target.qpos[arm]))))
+        held.append(bool(target.flags.get("is_grasped", target.flags.get("is_obj_grasped"))))
+    return errs, held
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("policy", help="ONNX policy file (mjskill's, with its metadata)")
+    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--seed", type=int, default=10000, help="seed of the first episode")
+    p.add_argument("--json", help="also write the JSON lines to this file")
+    a = p.parse_args()
+    if a.episodes < 1:
+        sys.exit(f"--episodes must be at least 1, not {a.episodes}")
+
+    sess, inp, rank, meta = load(a.policy)
+    policy = (sess, inp, rank)
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401  (registers ManiSkill's envs)
+    import mjskill  # noqa: F401  (registers mjskill's envs)
+
+    env_id, robot = meta["env_id"], meta["robot_uids"]
+    kw = dict(obs_mode="state", control_mode=meta["control_mode"])
+    ms_robot = {} if env_id in FIXED_ROBOT else dict(robot_uids=robot)
+    ms = gym.make(env_id, num_envs=1, sim_backend="physx_cpu", render_backend="none",
+                  **ms_robot, **kw)
+    mj = gym.make(f"mjskill/{env_id}", robot_uids=robot, **kw)
+    space = ms.unwrapped.single_action_space
+    low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
+    obj_name = next((k for k in ("cube", "obj", "sphere") if k in
+                     ms.unwrapped.get_state_dict()["actors"]), None)
+    spec = mj.unwrapped._native.spec()
+    n_joints = len(mj.unwrapped.get_state_dict()["articulations"][robot_key(mj)]) - 13
+    arm = [i for i in range(n_joints // 2) if i not in set(spec["gripper_joints"])]
+    # The TCP position: the first 3 entries of the state observation's tcp_pose.
+    tcp = next((slice(a, a + 3) for name, a, _ in spec["obs_layout"] if "tcp_pose" in name),
+               None)
+
+    lines, out = [], open(a.json, "w") if a.json else None
+    for k in range(a.episodes):
+        seed = a.seed + k
+        states, actions, ms_snaps = run_maniskill(ms, policy, seed, low, high, obj_name, tcp)
+        closed = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high)
+        open_ = run_mjskill(mj, seed, actions, None, obj_name, tcp, low, high)
+        errs, held = resync_errors(mj, seed, states, actions, ms_snaps, arm)
+        line = {
+            "seed": seed,
+            "maniskill_success": ms_snaps[-1].flags.get("success"),
+            "mjskill_success": closed[-1].flags.get("success"),
+            "open_loop_success": open_[-1].flags.get("success"),
+            "closed_first_part": first_part(ms_snaps, closed, arm),
+            "open_first_part": first_part(ms_snaps, open_, arm),
+            "one_step_arm_error_first": errs[0],
+            "one_step_arm_error_median": float(np.median(errs)),
+            "one_step_arm_error_held_median": float(np.median([e for e, h in zip(errs, held)
+                                                               if h])) if any(held) else None,
+        }
+        lines.append(line)
+        print(json.dumps(line), flush=True)
+        if out:
+            out.write(json.dumps(line) + "\n")
+
+    def median_step(key):
+        steps = [ln[key]["step"] for ln in lines if ln[key]]
+        return float(np.median(steps)) if steps else None
+
+    def most_common(key):
+        c = collections.Counter(ln[key]["quantity"] for ln in lines if ln[key])
+        return c.most_common(1)[0][0] if c else None
+
+    summary = {
+        "summary": True, "policy": a.policy, "env": env_id, "robot": robot,
+        "control_mode": meta["control_mode"], "episodes": a.episodes, "seed": a.seed,
+        "maniskill_successes": sum(bool(ln["maniskill_success"]) for ln in lines),
+        "mjskill_successes": sum(bool(ln["mjskill_success"]) for ln in lines),
+        "same_outcome": sum(bool(ln["maniskill_success"]) == bool(ln["mjskill_success"])
+                            for ln in lines),
+        "open_loop_same_outcome": sum(bool(ln["maniskill_success"]) ==
+                                      bool(ln["open_loop_success"]) for ln in lines),
+        "closed_median_first_part_step": median_step("closed_first_part"),
+        "closed_most_common_quantity": most_common("closed_first_part"),
+        "open_median_first_part_step": median_step("open_first_part"),
+        "open_most_common_quantity": most_common("open_first_part"),
+        "one_step_arm_error_first_median": float(np.median(
+            [ln["one_step_arm_error_first"] for ln in lines])),
+        "one_step_arm_error_median": float(np.median(
+            [ln["one_step_arm_error_median"] for ln in lines])),
+    }
+    print(json.dumps(summary))
+    if out:
+        out.write(json.dumps(summary) + "\n")
+        out.close()
+
+
+if __name__ == "__main__":
+    main()
