@@ -67,8 +67,8 @@ const EXPECTED: [Expected; 4] = [
     (
         "PokeCube-v1/trajectory.h5",
         [
-            (true, true, true, None),
-            (true, true, true, Some(110)),
+            (true, true, true, Some(123)),
+            (true, true, true, Some(113)),
             (true, true, true, None),
         ],
     ),

@@ -10,63 +10,65 @@ use std::process::Command;
 use mjskill::solvers::PolicyFile;
 
 /// (file, env id, robot, control mode, success rate of `mjskill eval --policy FILE --episodes
-/// 100 --seed 10000` measured when the file was shipped).
+/// 100 --seed 10000`, measured on 29 November 2026 after the drives became PhysX's sequential
+/// impulses: PokeCube's fell from 0.92 to 0.80, ManiSkill's being 0.86, and the xArm6's rose
+/// from 0.92 to 0.95; tests/policy_agreement.rs).
 const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
         "PickCube-v1",
         "panda",
         "pd_joint_delta_pos",
-        0.95,
+        0.98,
     ),
     (
         "PlaceSphere-v1__panda.onnx",
         "PlaceSphere-v1",
         "panda",
         "pd_joint_delta_pos",
-        0.93,
+        0.94,
     ),
     (
         "PokeCube-v1__panda.onnx",
         "PokeCube-v1",
         "panda",
         "pd_ee_delta_pose",
-        0.92,
+        0.80,
     ),
     (
         "PickCubeSO100-v1__so100.onnx",
         "PickCubeSO100-v1",
         "so100",
         "pd_joint_target_delta_pos",
-        0.93,
+        0.92,
     ),
     (
         "PickCube-v1__so100.onnx",
         "PickCube-v1",
         "so100",
         "pd_joint_target_delta_pos",
-        0.93,
+        0.92,
     ),
     (
         "PickCubeWidowXAI-v1__widowxai.onnx",
         "PickCubeWidowXAI-v1",
         "widowxai",
         "pd_joint_delta_pos",
-        0.97,
+        0.98,
     ),
     (
         "PickCube-v1__widowxai.onnx",
         "PickCube-v1",
         "widowxai",
         "pd_joint_delta_pos",
-        0.97,
+        0.98,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
         "PickCube-v1",
         "xarm6_robotiq",
         "pd_ee_delta_pose",
-        0.92,
+        0.95,
     ),
 ];
 

@@ -13,15 +13,22 @@
 //! where `W` is the articulation's joint-space response (the drives' block of `M⁻¹`).
 //!
 //! [`Drives::apply`] computes the forces for one MuJoCo substep of length `h`:
-//! * **Micro-steps.** PhysX's TGS solver integrates positions within its 10 ms step (15
-//!   position iterations); a single implicit step of 10 ms would lag the drive's slow mode.
-//!   The drive dynamics `q̈ = a₀ + W F` (with the unconstrained acceleration `a₀` of the
-//!   arm, frozen over the substep) are therefore integrated in [`MICRO_STEPS`] implicit
-//!   micro-steps; the substep applies their mean force, so MuJoCo's explicit Euler step
-//!   ends at the micro-integrated velocity.
-//! * **Coupling.** Within a micro-step the drives of one articulation are solved together
-//!   by projected Gauss–Seidel on `W` ([`SWEEPS`] sweeps; the first sweep is exactly
-//!   PhysX's per-dof formula), each force clamped to its limit.
+//! * **Micro-steps.** PhysX's TGS solver integrates positions within its 10 ms step, in as
+//!   many sub-steps as ManiSkill's `solver_position_iterations` (15); a single implicit step
+//!   of 10 ms would lag the drive's slow mode. The drive dynamics `q̈ = a₀ + W F` (with the
+//!   unconstrained acceleration `a₀` of the arm, frozen over the substep) are therefore
+//!   integrated in [`MICRO_STEPS`] implicit micro-steps; the substep applies their mean
+//!   force, so MuJoCo's explicit Euler step ends at the micro-integrated velocity.
+//! * **Coupling.** Within a micro-step the drives of one articulation are solved as PhysX
+//!   solves them: one pass in joint order, each drive's impulse computed with its own
+//!   response `W_ii` from the velocity the drives before it left, then applied to every
+//!   joint through `W` (sequential impulses). This is not the coupled implicit solution: with
+//!   two nearly parallel joint axes (the Panda's joints 1 and 3 near a stretched elbow) the
+//!   coupled solve moves joint 1 half as far again as PhysX in the first 50 ms
+//!   (docs/physics.md, "Coupled drives"). The force limit bounds the impulse accumulated
+//!   over the substep's micro-steps (`F h`), as PhysX clamps a drive's accumulated impulse:
+//!   a saturated drive delivers its whole impulse early in the substep, and moves a few per
+//!   cent further than under a force clamped at every instant.
 //! * **Constraints.** Constraints that move an undriven joint (equalities on the WidowX AI's
 //!   mimic carriage or the Robotiq linkage) or that a gripper pushes against (the contacts
 //!   of a closing finger) are folded into `W` with MuJoCo's own compliance:
@@ -46,10 +53,9 @@ use nalgebra::DMatrix;
 use super::desc::Drive;
 use crate::mujoco::{Data, Model, ObjType};
 
-/// Implicit micro-steps of the drive dynamics per physics substep.
-pub const MICRO_STEPS: usize = 10;
-/// Gauss–Seidel sweeps over the coupled drive equations per micro-step.
-pub const SWEEPS: usize = 2;
+/// Implicit micro-steps of the drive dynamics per physics substep: ManiSkill's
+/// `solver_position_iterations` (15), PhysX TGS's sub-steps of its 10 ms step.
+pub const MICRO_STEPS: usize = 15;
 /// Substeps in a row a gripper must be sunk deeper than its release depth into an object before
 /// it lets go (one control step at ManiSkill's 100 Hz physics and 20 Hz control).
 pub const RELEASE_SUBSTEPS: u32 = 5;
@@ -355,30 +361,36 @@ impl Drives {
                 0.0
             };
         }
+        // PhysX's position iterations: one pass over the drives in joint order, each drive's
+        // implicit impulse computed from the velocity that the passes before it left
+        // (sequential impulses, not a converged coupled solve: where two joints' axes are
+        // nearly parallel, as the Panda's joints 1 and 3 often are, the two differ by a third
+        // of joint 1's motion in a step).
         for _ in 0..MICRO_STEPS {
-            for _ in 0..SWEEPS {
-                for (i, d) in self.dofs.iter().enumerate() {
-                    if self.pinching[i] {
-                        continue;
-                    }
+            for i in 0..n {
+                self.mv[i] += dt * self.acc[i];
+            }
+            for (i, d) in self.dofs.iter().enumerate() {
+                let row = &self.w[i * n..(i + 1) * n];
+                let f = if self.pinching[i] {
+                    self.micro_force[i]
+                } else {
                     let g = dt * d.kp + d.kd;
                     let c = d.kp * (self.target_q[i] - self.mq[i]) + d.kd * self.target_v[i];
-                    let row = &self.w[i * n..(i + 1) * n];
-                    let wf: f64 = row.iter().zip(&self.micro_force).map(|(w, f)| w * f).sum();
-                    let v1 = self.mv[i] + dt * (self.acc[i] + wf);
-                    let residual = c - g * v1 - self.micro_force[i];
-                    let f = self.micro_force[i] + residual / (1.0 + dt * g * row[i]);
-                    self.micro_force[i] = f.clamp(-d.force_limit, d.force_limit);
+                    // PhysX clamps the impulse accumulated over the step's iterations to
+                    // F·h, not each iteration's: a saturated drive spends more of it early.
+                    let cap = d.force_limit * MICRO_STEPS as f64;
+                    ((c - g * self.mv[i]) / (1.0 + dt * g * row[i]))
+                        .clamp(-cap - self.force_sum[i], cap - self.force_sum[i])
+                };
+                // W is symmetric: column i is row i.
+                for (v, w) in self.mv.iter_mut().zip(row) {
+                    *v += dt * w * f;
                 }
-            }
-            for i in 0..n {
-                let row = &self.w[i * n..(i + 1) * n];
-                let wf: f64 = row.iter().zip(&self.micro_force).map(|(w, f)| w * f).sum();
-                self.mv[i] += dt * (self.acc[i] + wf);
+                self.force_sum[i] += f;
             }
             for i in 0..n {
                 self.mq[i] += dt * self.mv[i];
-                self.force_sum[i] += self.micro_force[i];
             }
         }
         for (i, d) in self.dofs.iter().enumerate() {

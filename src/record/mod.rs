@@ -785,7 +785,7 @@ impl Recorder {
 
     /// As [`Recorder::record_step`], with the expert's label of the step: `expert_action`,
     /// the action the expert chose for the state before the step, where `action` is the one
-    /// the env executed (e.g. the label plus noise, [`crate::solvers::ActionNoise`]). It is
+    /// the env executed (e.g. the label plus noise: `mjskill rollout --action-noise`). It is
     /// written as the step's `expert_action` field; both have the action's length.
     #[allow(clippy::too_many_arguments)]
     pub fn record_labelled_step(
