@@ -42,7 +42,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from training import rundir  # noqa: E402
 from training.args import (  # noqa: E402
-    changed_options, command_line, positive, same_dir)
+    changed_options, command_line, positive, same_dir, without_option)
 from training.evaluate import run_episodes  # noqa: E402
 from training.export import metadata, save_policy  # noqa: E402
 
@@ -166,15 +166,8 @@ def resumed_args(argv):
     given = parse_args(argv)
     ckpt = rundir.load_checkpoint(given.resume, CHECKPOINT_KEYS, SCRIPT)
     saved_argv = list(ckpt["argv"])
-    now = list(sys.argv[1:] if argv is None else argv)
-    rest, skip = [], False
-    for a in now:
-        if skip:
-            skip = False
-        elif a == "--resume":
-            skip = True
-        elif not a.startswith("--resume="):
-            rest.append(a)
+    # The options given now, without --resume DIR (or --resume=DIR).
+    rest = without_option(list(sys.argv[1:] if argv is None else argv), "--resume")
     args = parse_args(saved_argv + rest, check=False)
     saved = parse_args(saved_argv, check=False)
     changed = changed_options(args, saved, RUN_DEFINING)

@@ -351,16 +351,8 @@ def resumed_args(argv):
     given = parse_args(argv)
     ckpt = load_checkpoint(given.resume)
     saved_argv = list(ckpt["argv"])
-    now = list(sys.argv[1:] if argv is None else argv)
-    # Drop --resume DIR (or --resume=DIR) from the options given now.
-    rest, skip = [], False
-    for a in now:
-        if skip:
-            skip = False
-        elif a == "--resume":
-            skip = True
-        elif not a.startswith("--resume="):
-            rest.append(a)
+    # The options given now, without --resume DIR (or --resume=DIR).
+    rest = without_option(list(sys.argv[1:] if argv is None else argv), "--resume")
     if "--action-floor" in option_names(rest):
         # Given again, the floors replace the saved ones (then compared with them below).
         saved_argv = without_option(saved_argv, "--action-floor")

@@ -886,14 +886,7 @@ impl Recorder {
         env: &mut Env,
         action: &[f32],
     ) -> Result<(f32, bool, bool), RecordError> {
-        let before = env.get_state();
-        let s = env.step(action).map_err(|source| RecordError::Env {
-            path: self.path.clone(),
-            source,
-        })?;
-        let out = (s.reward, s.terminated, s.truncated);
-        self.record_step(env, action, out.0, out.1, out.2, &before)?;
-        Ok(out)
+        self.step_with(env, action, None)
     }
 
     /// As [`Recorder::step`], recording `expert_action` as the step's label
@@ -904,13 +897,25 @@ impl Recorder {
         action: &[f32],
         expert_action: &[f32],
     ) -> Result<(f32, bool, bool), RecordError> {
+        self.step_with(env, action, Some(expert_action))
+    }
+
+    fn step_with(
+        &mut self,
+        env: &mut Env,
+        action: &[f32],
+        expert_action: Option<&[f32]>,
+    ) -> Result<(f32, bool, bool), RecordError> {
         let before = env.get_state();
         let s = env.step(action).map_err(|source| RecordError::Env {
             path: self.path.clone(),
             source,
         })?;
         let out = (s.reward, s.terminated, s.truncated);
-        self.record_labelled_step(env, action, expert_action, out.0, out.1, out.2, &before)?;
+        match expert_action {
+            None => self.record_step(env, action, out.0, out.1, out.2, &before)?,
+            Some(e) => self.record_labelled_step(env, action, e, out.0, out.1, out.2, &before)?,
+        }
         Ok(out)
     }
 
