@@ -270,6 +270,14 @@ fn labelled_steps_follow_the_step_schema_and_a_label_of_another_length_is_refuse
         e.contains("an expert action of 1 values for an action of 8"),
         "{e}"
     );
+    // Stepping with a bad label is refused before the env steps: env and file stay in step.
+    let elapsed = env.info().elapsed_steps;
+    let e = rec
+        .step_labelled(&mut env, &action, &[0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("an expert action of 1 values"), "{e}");
+    assert_eq!(env.info().elapsed_steps, elapsed, "the env stepped");
     rec.end_episode(false).unwrap();
     rec.finish().unwrap();
     assert!(read(&path).unwrap().episodes[0].steps.is_empty());

@@ -798,16 +798,7 @@ impl Recorder {
         truncated: bool,
         state_before: &EnvState,
     ) -> Result<(), RecordError> {
-        if expert_action.len() != action.len() {
-            return Err(RecordError::Usage {
-                path: self.path.clone(),
-                msg: format!(
-                    "an expert action of {} values for an action of {}",
-                    expert_action.len(),
-                    action.len()
-                ),
-            });
-        }
+        self.check_label(action, expert_action)?;
         let step = Outcome {
             reward,
             terminated,
@@ -900,12 +891,31 @@ impl Recorder {
         self.step_with(env, action, Some(expert_action))
     }
 
+    /// A label must have the action's length.
+    fn check_label(&self, action: &[f32], expert_action: &[f32]) -> Result<(), RecordError> {
+        if expert_action.len() == action.len() {
+            return Ok(());
+        }
+        Err(RecordError::Usage {
+            path: self.path.clone(),
+            msg: format!(
+                "an expert action of {} values for an action of {}",
+                expert_action.len(),
+                action.len()
+            ),
+        })
+    }
+
     fn step_with(
         &mut self,
         env: &mut Env,
         action: &[f32],
         expert_action: Option<&[f32]>,
     ) -> Result<(f32, bool, bool), RecordError> {
+        // A bad label is refused before the env steps, so the env and the file stay in step.
+        if let Some(e) = expert_action {
+            self.check_label(action, e)?;
+        }
         let before = env.get_state();
         let s = env.step(action).map_err(|source| RecordError::Env {
             path: self.path.clone(),
