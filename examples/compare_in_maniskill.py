@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from eval_in_maniskill import FIXED_ROBOT, load, to_numpy  # noqa: E402
+from eval_in_maniskill import FIXED_ROBOT, act, load, to_numpy  # noqa: E402
 
 #: Tolerances of "the states have parted", per quantity: joint positions in rad (or m for
 #: prismatic joints), positions in m. About ten times the one-step errors of docs/agreement.md.
@@ -124,11 +124,9 @@ def run_maniskill(env, policy, seed, low, high, obj_name, tcp):
     states, actions, snaps = [], [], []
     while True:
         states.append(ms_state_dict(env))
-        o = to_numpy(obs).astype(np.float32).reshape(1, -1)
-        (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
-        act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
-        obs, _, _, trunc, info = env.step(act[None])
-        actions.append(act)
+        a = act(sess, inp, rank, obs, low, high)
+        obs, _, _, trunc, info = env.step(a[None])
+        actions.append(a)
         snaps.append(ms_snapshot(env, obs, info, obj_name, tcp))
         if bool(ms_scalar(trunc)):
             return states, actions, snaps
@@ -139,14 +137,8 @@ def run_mjskill(env, seed, actions, policy, obj_name, tcp, low, high):
     obs, _ = env.reset(seed=seed)
     snaps = []
     for t in range(len(actions)):
-        if policy is not None:
-            sess, inp, rank = policy
-            o = np.asarray(obs, np.float32).reshape(1, -1)
-            (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
-            act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
-        else:
-            act = actions[t]
-        obs, _, _, _, info = env.step(act)
+        a = act(*policy, obs, low, high) if policy is not None else actions[t]
+        obs, _, _, _, info = env.step(a)
         snaps.append(mj_snapshot(env, obs, info, obj_name, tcp))
     return snaps
 
@@ -155,9 +147,9 @@ def resync_errors(env, seed, states, actions, ms_snaps, arm):
     """The largest arm-joint error after one step from each of ManiSkill's states."""
     env.reset(seed=seed)
     errs, held = [], []
-    for sd, act, target in zip(states, actions, ms_snaps):
+    for sd, a, target in zip(states, actions, ms_snaps):
         env.unwrapped.set_state_dict(sd)
-        env.step(act)
+        env.step(a)
         after = mj_snapshot(env, None, {}, None, None)
         errs.append(float(np.max(np.abs(after.qpos[arm] - target.qpos[arm]))))
         held.append(bool(target.flags.get("is_grasped", target.flags.get("is_obj_grasped"))))

@@ -47,6 +47,14 @@ def to_numpy(x):
     return np.asarray(x)
 
 
+def act(sess, inp, rank, obs, low, high):
+    """The policy file's action for one observation (numpy or torch, any batch shape of one),
+    clipped to the action space."""
+    o = to_numpy(obs).astype(np.float32).reshape(1, -1)
+    (a,) = sess.run(None, {inp: o if rank == 2 else o[0]})
+    return np.clip(np.asarray(a, np.float32).reshape(-1), low, high)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -87,10 +95,7 @@ def main():
         obs, _ = env.reset(seed=a.seed + k)
         ret, ever, t = 0.0, False, 0
         while True:
-            o = to_numpy(obs).astype(np.float32).reshape(1, -1)
-            (act,) = sess.run(None, {inp: o if rank == 2 else o[0]})
-            act = np.clip(np.asarray(act, np.float32).reshape(-1), low, high)
-            obs, r, term, trunc, info = env.step(act[None])
+            obs, r, term, trunc, info = env.step(act(sess, inp, rank, obs, low, high)[None])
             t += 1
             ret += float(to_numpy(r).reshape(-1)[0])
             success = bool(to_numpy(info["success"]).reshape(-1)[0])

@@ -101,8 +101,9 @@ pub struct Drives {
     minv: Vec<f64>,
     /// The drives' response block W (n × n, row-major).
     w: Vec<f64>,
-    /// Micro-step state: position, velocity, unconstrained acceleration, force, force sum,
-    /// position correction (n each).
+    /// Micro-step state: position, velocity, unconstrained acceleration, the explicit force
+    /// of a pinching gripper drive (held over the micro-steps), force sum, position correction
+    /// (n each).
     mq: Vec<f64>,
     mv: Vec<f64>,
     acc: Vec<f64>,
