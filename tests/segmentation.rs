@@ -56,8 +56,9 @@ fn segmentation_ids_equal_maniskills_id_map_for_every_pair() {
 #[test]
 fn every_geom_a_sensor_camera_draws_has_an_id() {
     for (id, robot) in pairs() {
-        let e = env(id, robot, ObsMode::State);
-        let m = e.model();
+        // The render model: the physics model (`Env::model`) leaves out the drawn-only geoms.
+        let e = env(id, robot, ObsMode::Rgb);
+        let m = e.render_model().expect("an rgb env draws");
         let labels = e.geom_segmentation_ids();
         assert_eq!(labels.len(), m.ngeom());
         let max = e.segmentation_id_map().len() as i16;

@@ -46,9 +46,51 @@ impl Env {
         self.seg_ids.id_map()
     }
 
-    /// The segmentation id of every model geom (0: none), as the renderer labels pixels.
+    /// The segmentation id of every geom (0: none), as the renderer labels pixels: of
+    /// [`Env::render_model`]'s geoms once the env has a renderer, else of [`Env::model`]'s.
     pub fn geom_segmentation_ids(&self) -> &[i16] {
-        &self.seg_ids.geom_labels
+        match &self.vision {
+            Some(v) => v.labels(),
+            None => &self.seg_ids.geom_labels,
+        }
+    }
+
+    /// The model the renderer draws: [`Env::model`] plus the geoms that only draw (visual
+    /// meshes, markers), which the physics model leaves out (docs/speed.md). Its bodies,
+    /// joints, mocap bodies and cameras are the physics model's. `None` until the env has a
+    /// renderer (a visual obs mode, or after the first [`Env::render`]).
+    pub fn render_model(&self) -> Option<&std::sync::Arc<crate::mujoco::Model>> {
+        self.vision.as_ref().map(|v| v.model())
+    }
+
+    /// Buffer and stack bytes of the render model's state (0, 0 without a renderer).
+    pub(crate) fn render_data_bytes(&self) -> (usize, usize) {
+        self.vision
+            .as_ref()
+            .map_or((0, 0), |v| v.data().memory_bytes())
+    }
+
+    /// Compiles the scene with every geom (see [`Env::render_model`]) and its geoms'
+    /// segmentation ids.
+    fn compile_render_model(
+        &self,
+    ) -> Result<(std::sync::Arc<crate::mujoco::Model>, Vec<i16>), EnvError> {
+        let spec = super::registry::env_spec(self.id)?;
+        let scene = super::registry::build_scene(
+            spec,
+            self.sim.spec,
+            self.control_mode(),
+            self.config.sim,
+            self.sim.task.as_ref(),
+        )?;
+        let model = std::sync::Arc::new(scene.render_model().map_err(EnvError::Robot)?);
+        let labels = super::segmentation::SegmentationIds::new(
+            &model,
+            &self.sim.robot.link_bodies,
+            self.sim.task.actor_names(),
+        )
+        .geom_labels;
+        Ok((model, labels))
     }
 
     /// Names of the sensor cameras of a visual obs mode, as [`Env::image`] takes them: the
@@ -70,21 +112,22 @@ impl Env {
     /// non-visual obs mode creates its renderer; an error says what to install.
     pub fn render(&mut self) -> Result<&[u8], EnvError> {
         if self.vision.is_none() {
+            let (model, labels) = self.compile_render_model()?;
             self.vision = Some(
                 render::Vision::new(
-                    &self.sim.model,
+                    &model,
                     self.sim.task.cameras(),
                     self.sim.spec.cameras,
                     Default::default(),
                     false,
-                    self.seg_ids.geom_labels.clone(),
+                    labels,
                     self.render_options,
                 )
                 .map_err(EnvError::from)?,
             );
         }
         let v = self.vision.as_mut().expect("created above");
-        v.render_human(&mut self.sim.data).map_err(EnvError::from)
+        v.render_human(&self.sim.data).map_err(EnvError::from)
     }
 
     /// Size (width, height) of [`Env::render`]'s frames.
@@ -103,15 +146,15 @@ impl Env {
         &mut self,
         options: crate::mujoco::render::RenderOptions,
     ) -> Result<(), EnvError> {
-        if self.vision.is_some() {
+        if let Some(old) = &self.vision {
             // Build the new renderer first: on error the env keeps the old one.
             let new = render::Vision::new(
-                &self.sim.model,
+                old.model(),
                 self.sim.task.cameras(),
                 self.sim.spec.cameras,
                 self.config.obs_mode.textures(),
                 self.config.obs_mode.is_point_cloud(),
-                self.seg_ids.geom_labels.clone(),
+                old.labels().to_vec(),
                 options,
             )
             .map_err(EnvError::from)?;

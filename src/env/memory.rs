@@ -16,14 +16,18 @@ pub const ENV_OVERHEAD_BYTES: u64 = 512 << 10;
 pub const RENDER_CONTEXT_BYTES: u64 = 18 << 20;
 
 /// Estimated memory of one env like `env` (bytes): its MuJoCo model and data (buffer and
-/// stack), a render context if it renders, `image_bytes` of images and buffers, and
+/// stack), a render context, the render model and its data if it renders, `image_bytes` of images and buffers, and
 /// [`ENV_OVERHEAD_BYTES`].
 pub(crate) fn env_bytes(env: &Env, image_bytes: u64) -> u64 {
     let (buffer, stack) = env.data().memory_bytes();
-    let render = if env.config().obs_mode.is_visual() {
-        RENDER_CONTEXT_BYTES
-    } else {
-        0
+    // A rendering env also holds the render model (every geom) and its own state.
+    let render = match env.render_model() {
+        Some(m) => {
+            let (b, s) = env.render_data_bytes();
+            RENDER_CONTEXT_BYTES + m.memory_bytes() as u64 + b as u64 + s as u64
+        }
+        None if env.config().obs_mode.is_visual() => RENDER_CONTEXT_BYTES,
+        None => 0,
     };
     env.model().memory_bytes() as u64
         + buffer as u64

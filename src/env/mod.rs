@@ -136,13 +136,20 @@ impl Env {
         checks::check_qpos_noise(config.robot_init_qpos_noise)?;
         config.sim.validate()?;
         let mut task = (spec.make_task)(rs.id);
+        let scene = build_scene(spec, rs, &mode, config.sim, task.as_ref())?;
+        // A visual obs mode draws from the start: its render model is compiled now (any other
+        // env compiles one at its first `render`).
+        let render_model = match config.obs_mode.is_visual() {
+            true => Some(Arc::new(scene.render_model().map_err(EnvError::Robot)?)),
+            false => None,
+        };
         let TableScene {
             model,
             ids: robot,
             controller,
             drives,
             ..
-        } = build_scene(spec, rs, &mode, config.sim, task.as_ref())?;
+        } = scene;
         let data = Data::new(model.clone())?;
         task.resolve(&model)?;
         let actors = state_dict::resolve_actors(&model, task.actor_names())?;
@@ -187,18 +194,25 @@ impl Env {
         let render_options = crate::mujoco::render::RenderOptions::default();
         let seg_ids =
             segmentation::SegmentationIds::new(model, &sim.robot.link_bodies, task.actor_names());
-        let vision = if config.obs_mode.is_visual() {
-            Some(render::Vision::new(
-                model,
-                task.cameras(),
-                rs.cameras,
-                config.obs_mode.textures(),
-                config.obs_mode.is_point_cloud(),
-                seg_ids.geom_labels.clone(),
-                render_options,
-            )?)
-        } else {
-            None
+        let vision = match render_model {
+            Some(render_model) => {
+                let labels = segmentation::SegmentationIds::new(
+                    &render_model,
+                    &sim.robot.link_bodies,
+                    task.actor_names(),
+                )
+                .geom_labels;
+                Some(render::Vision::new(
+                    &render_model,
+                    task.cameras(),
+                    rs.cameras,
+                    config.obs_mode.textures(),
+                    config.obs_mode.is_point_cloud(),
+                    labels,
+                    render_options,
+                )?)
+            }
+            None => None,
         };
         let mut env = Env {
             id: spec.id.id(),
@@ -573,7 +587,7 @@ impl Env {
     /// driver).
     fn render_sensors(&mut self) {
         if let Some(v) = self.vision.as_mut() {
-            if let Err(e) = v.render_sensor(&mut self.sim.data) {
+            if let Err(e) = v.render_sensor(&self.sim.data) {
                 panic!("rendering the sensor camera failed after the renderer was created: {e}");
             }
         }

@@ -97,6 +97,9 @@ struct SensorCam {
 /// segmentation are the images themselves.
 pub(crate) struct Vision {
     renderer: Renderer,
+    /// The render model's state: the physics state copied in before each frame
+    /// ([`Vision::sync`]).
+    data: Data,
     cams: Vec<SensorCam>,
     human: Cam,
     /// Textures rendered for the sensor cameras.
@@ -136,8 +139,9 @@ fn sized<T: Clone + Default>(on: bool, n: usize) -> Vec<T> {
 impl Vision {
     /// A renderer for the task's two cameras and the robot's mounted cameras; `tex` selects
     /// the sensor textures (of the task's sensor camera and the mounted ones), `point_cloud`
-    /// adds the fused point cloud (which needs all three). `labels` is the segmentation id of
-    /// every model geom.
+    /// adds the fused point cloud (which needs all three). `model` is the render model (every
+    /// geom; its bodies, joints and cameras are the physics model's) and `labels` the
+    /// segmentation id of each of its geoms.
     pub(crate) fn new(
         model: &Arc<Model>,
         cams: (CameraDef, CameraDef),
@@ -180,6 +184,7 @@ impl Vision {
         let w = sizes().map(|s| s.0).max().unwrap_or(1);
         let h = sizes().map(|s| s.1).max().unwrap_or(1);
         let renderer = Renderer::new(model.clone(), (w, h), options)?;
+        let data = Data::new(model.clone()).map_err(|e| RenderError::Invalid(e.to_string()))?;
         let (hw, hh) = human.def.size;
         let tex = if point_cloud {
             Textures {
@@ -192,6 +197,7 @@ impl Vision {
         };
         Ok(Vision {
             renderer,
+            data,
             cams: sensors,
             human,
             tex,
@@ -209,18 +215,50 @@ impl Vision {
         })
     }
 
+    /// The render model (every geom).
+    pub(crate) fn model(&self) -> &Arc<Model> {
+        self.data.model()
+    }
+
+    /// The render model's state (as of the last frame).
+    pub(crate) fn data(&self) -> &Data {
+        &self.data
+    }
+
+    /// The segmentation id of every geom of the render model.
+    pub(crate) fn labels(&self) -> &[i16] {
+        &self.labels
+    }
+
     /// Marks the human frame stale (the state changed).
     pub(crate) fn invalidate(&mut self) {
         self.human_fresh = false;
     }
 
-    /// Renders the sensor cameras into the observation buffers (and the point cloud).
-    /// Allocates nothing after the first call.
-    pub(crate) fn render_sensor(&mut self, data: &mut Data) -> Result<(), RenderError> {
+    /// Copies the physics state (`physics`, of the physics model) into the render model's
+    /// state: joint positions, mocap poses and time, then the poses of bodies, geoms, cameras
+    /// and lights. No allocation.
+    fn sync(&mut self, physics: &Data) {
+        self.data.qpos_mut().copy_from_slice(physics.qpos());
+        self.data
+            .mocap_pos_mut()
+            .copy_from_slice(physics.mocap_pos());
+        self.data
+            .mocap_quat_mut()
+            .copy_from_slice(physics.mocap_quat());
+        self.data.set_time(physics.time());
+        self.data.update_kinematics();
+    }
+
+    /// Renders the sensor cameras of the physics state `physics` into the observation
+    /// buffers (and the point cloud). Allocates nothing after the first call.
+    pub(crate) fn render_sensor(&mut self, physics: &Data) -> Result<(), RenderError> {
         self.human_fresh = false;
         if !self.tex.any() {
             return Ok(());
         }
+        self.sync(physics);
+        let data = &mut self.data;
         let t = self.tex;
         for c in &self.cams {
             let (w, h) = c.size;
@@ -250,11 +288,13 @@ impl Vision {
         Ok(())
     }
 
-    /// Renders the human camera (once per state) and returns its RGB frame.
-    pub(crate) fn render_human(&mut self, data: &mut Data) -> Result<&[u8], RenderError> {
+    /// Renders the human camera of the physics state `physics` (once per state) and returns
+    /// its RGB frame.
+    pub(crate) fn render_human(&mut self, physics: &Data) -> Result<&[u8], RenderError> {
         if !self.human_fresh {
+            self.sync(physics);
             self.renderer.render(
-                data,
+                &mut self.data,
                 self.human.id,
                 self.human.def.size,
                 human_groups(),

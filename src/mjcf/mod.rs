@@ -190,6 +190,10 @@ pub struct RobotOptions {
     pub extra_excludes: Vec<(String, String)>,
     /// Links that never collide with the ground plane (e.g. Fetch's wheels).
     pub no_ground_contact: Vec<String>,
+    /// Links that cannot reach the table or the floor at any joint position: their contacts
+    /// with the world body's geoms are excluded, which spares the broad phase those pairs
+    /// (docs/speed.md, "Cuts").
+    pub clear_of_world: Vec<String>,
     /// Loop closures.
     pub connects: Vec<Connect>,
     /// Whether the joint equalities made from URDF `<mimic>` tags get [`stiff_solref`] and
@@ -229,6 +233,7 @@ impl Default for RobotOptions {
             sites: Vec::new(),
             extra_excludes: Vec::new(),
             no_ground_contact: Vec::new(),
+            clear_of_world: Vec::new(),
             connects: Vec::new(),
             stiff_mimic: false,
             stiff_connect: false,
@@ -434,6 +439,16 @@ impl Scene {
             }
             self.section("contact")
                 .push(Element::new("exclude").attr("body1", &a).attr("body2", &b));
+        }
+        for l in &opts.clear_of_world {
+            if robot.link(l).is_none() {
+                return Err(SceneError::UnknownExcludedLink("world".into(), l.clone()));
+            }
+            self.section("contact").push(
+                Element::new("exclude")
+                    .attr("body1", "world")
+                    .attr("body2", l),
+            );
         }
         // Mimic joints → joint equality q_follower = offset + multiplier · q_leader.
         for j in &robot.joints {
@@ -776,6 +791,108 @@ impl Scene {
             xml: self.root.to_xml(),
             assets: self.assets,
         }
+    }
+
+    /// The scene as [`Scene::finish`] writes it, and its physics model: the same document
+    /// without the geoms that only draw (`contype` and `conaffinity` 0, named in no
+    /// `<pair>`) and without the meshes, materials and textures only they used. Bodies,
+    /// joints, cameras and sites, and so every id but the geoms', are the same in both.
+    /// MuJoCo 2.2's broad phase visits every geom of a body, colliding or not, so the
+    /// robots' visual meshes cost a tenth of a physics step (docs/speed.md).
+    pub fn finish_with_physics(self) -> (Mjcf, Mjcf) {
+        let mut physics = self.root.clone();
+        let mut paired = Vec::new();
+        collect_pair_geoms(&physics, &mut paired);
+        strip_visual_geoms(&mut physics, &paired);
+        // What the remaining geoms use: meshes and materials, then the materials' textures.
+        let mut used = Vec::new();
+        collect_geom_refs(&physics, &mut used);
+        let mut files = Vec::new();
+        if let Some(asset) = physics.children.iter_mut().find(|c| c.name == "asset") {
+            asset.children.retain(|a| match a.name.as_str() {
+                "mesh" | "material" => {
+                    attr(a, "name").is_some_and(|n| used.contains(&n.to_string()))
+                }
+                _ => true,
+            });
+            let textures: Vec<String> = asset
+                .children
+                .iter()
+                .filter(|a| a.name == "material")
+                .filter_map(|a| attr(a, "texture").map(str::to_string))
+                .collect();
+            asset.children.retain(|a| {
+                a.name != "texture"
+                    || attr(a, "name").is_some_and(|n| textures.contains(&n.to_string()))
+            });
+            files.extend(
+                asset
+                    .children
+                    .iter()
+                    .filter_map(|a| attr(a, "file").map(str::to_string)),
+            );
+        }
+        let physics = Mjcf {
+            xml: physics.to_xml(),
+            assets: self
+                .assets
+                .iter()
+                .filter(|(name, _)| files.contains(name))
+                .cloned()
+                .collect(),
+        };
+        (self.finish(), physics)
+    }
+}
+
+/// Attribute `k` of `e`.
+fn attr<'a>(e: &'a Element, k: &str) -> Option<&'a str> {
+    e.attrs
+        .iter()
+        .find(|(kk, _)| kk == k)
+        .map(|(_, v)| v.as_str())
+}
+
+/// The geom names of every `<pair>` below `e`.
+fn collect_pair_geoms(e: &Element, out: &mut Vec<String>) {
+    if e.name == "pair" {
+        out.extend(
+            ["geom1", "geom2"]
+                .iter()
+                .filter_map(|k| attr(e, k).map(str::to_string)),
+        );
+    }
+    for c in &e.children {
+        collect_pair_geoms(c, out);
+    }
+}
+
+/// Removes, below `e`, every geom that only draws: `contype` and `conaffinity` both "0" and
+/// its name not in `paired`.
+fn strip_visual_geoms(e: &mut Element, paired: &[String]) {
+    e.children.retain(|c| {
+        let drawn_only = c.name == "geom"
+            && attr(c, "contype") == Some("0")
+            && attr(c, "conaffinity") == Some("0")
+            && !attr(c, "name").is_some_and(|n| paired.iter().any(|p| p == n));
+        !drawn_only
+    });
+    for c in &mut e.children {
+        strip_visual_geoms(c, paired);
+    }
+}
+
+/// The mesh and material names the geoms below `e` use (the default class's too).
+fn collect_geom_refs(e: &Element, out: &mut Vec<String>) {
+    if e.name == "geom" {
+        out.extend(
+            ["mesh", "material"]
+                .iter()
+                .filter_map(|k| attr(e, k).map(str::to_string)),
+        );
+    }
+    for c in &e.children {
+        collect_geom_refs(c, out);
     }
 }
 

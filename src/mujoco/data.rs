@@ -139,6 +139,8 @@ data_arrays! {
     qfrc_bias = |m: &sys::mjModel| m.nv;
     /// Unconstrained accelerations (`mj_fwdAcceleration`).
     qacc_smooth = |m: &sys::mjModel| m.nv;
+    /// Passive forces (springs, damping) of the current state (`mj_fwdVelocity`).
+    qfrc_passive = |m: &sys::mjModel| m.nv;
     /// Actuator forces of the last step.
     actuator_force = |m: &sys::mjModel| m.nu;
 }
@@ -318,6 +320,32 @@ impl Data {
     pub fn efc_r(&self, n: usize) -> &[f64] {
         let d = self.raw();
         view!(d.efc_R, n.min(d.nefc as usize))
+    }
+
+    /// Stage `t`'s accumulated time since the timers were last cleared (all zero unless
+    /// [`super::timer::enable_timers`] was called).
+    pub fn timer(&self, t: super::timer::Timer) -> super::timer::TimerStat {
+        let stat = &self.raw().timer[t.index()];
+        super::timer::TimerStat {
+            seconds: stat.duration,
+            calls: stat.number.max(0) as u64,
+        }
+    }
+
+    /// Iterations the constraint solver took in the last step (`mjData.solver_iter`).
+    pub fn solver_iterations(&self) -> usize {
+        self.raw().solver_iter.max(0) as usize
+    }
+
+    /// Clears every stage timer ([`Data::timer`]).
+    pub fn clear_timers(&mut self) {
+        // SAFETY: self.ptr is a valid mjData owned by self; `timer` is a fixed-size array
+        // inside it, written here while no MuJoCo call runs on this Data.
+        let d = unsafe { &mut *self.ptr };
+        for stat in d.timer.iter_mut() {
+            stat.duration = 0.0;
+            stat.number = 0;
+        }
     }
 
     /// Number of constraint rows in the current constraint set (`mjData.nefc`).

@@ -12,6 +12,7 @@
 
 pub(crate) mod limits;
 pub mod render;
+pub mod timer;
 
 use std::ffi::{CStr, CString};
 use std::os::raw::{c_char, c_int};
@@ -416,6 +417,8 @@ model_arrays! {
     geom_conaffinity: c_int = |m: &sys::mjModel| m.ngeom;
     /// Visual group of every geom.
     geom_group: c_int = |m: &sys::mjModel| m.ngeom;
+    /// Radius of every geom's bounding sphere (0 for planes).
+    geom_rbound: f64 = |m: &sys::mjModel| m.ngeom;
     /// Geom sizes, 3 per geom (MuJoCo's type-dependent meaning).
     geom_size: f64 = |m: &sys::mjModel| m.ngeom * 3;
     /// Geom colours, 4 per geom.

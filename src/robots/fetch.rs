@@ -201,4 +201,5 @@ pub static FETCH: RobotSpec = RobotSpec {
     parts,
     cameras: &CAMERAS,
     customize,
+    clear_of_world: &[],
 };

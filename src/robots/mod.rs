@@ -330,6 +330,10 @@ pub struct RobotSpec {
     /// closures, extra collision exclusions, links that ignore the ground, per-joint armature
     /// or damping of undriven joints.
     pub customize: fn(&mut RobotOptions),
+    /// Links that cannot come within 2 cm of the table top or the floor at any joint position
+    /// in range (checked by sampling, `src/tests/clearance.rs`): their contacts with the world
+    /// are excluded ([`RobotOptions::clear_of_world`]).
+    pub clear_of_world: &'static [&'static str],
 }
 
 impl RobotSpec {
@@ -412,6 +416,7 @@ impl RobotSpec {
                 .collect(),
             ..RobotOptions::default()
         };
+        opts.clear_of_world = self.clear_of_world.iter().map(|l| l.to_string()).collect();
         (self.customize)(&mut opts);
         for j in self.gripper_joints {
             if !opts.armature.iter().any(|(n, _)| n == j) {
@@ -602,11 +607,13 @@ impl RobotIds {
 /// `export-mjcf` all use it).
 #[derive(Debug)]
 pub struct TableScene {
-    /// The compiled model.
+    /// The compiled physics model: the scene without its drawn-only geoms
+    /// ([`crate::mjcf::Scene::finish_with_physics`]).
     pub model: Arc<Model>,
     /// Resolved ids.
     pub ids: RobotIds,
-    /// The generated MJCF.
+    /// The generated MJCF, every geom included (what `export-mjcf` writes and the renderer
+    /// draws; [`TableScene::render_model`] compiles it).
     pub mjcf: crate::mjcf::Mjcf,
     /// The controller of the scene's control mode.
     pub controller: Controller,
@@ -637,8 +644,8 @@ impl TableScene {
             crate::models::file_near(spec.urdf, file).map(<[u8]>::to_vec)
         })?;
         extra(&mut scene);
-        let mjcf = scene.finish();
-        let model = Arc::new(mjcf.compile()?);
+        let (mjcf, physics) = scene.finish_with_physics();
+        let model = Arc::new(physics.compile()?);
         let ids = RobotIds::resolve(&model, &desc, spec)?;
         let drives = Drives::new(
             &model,
@@ -654,6 +661,27 @@ impl TableScene {
             controller,
             drives,
         })
+    }
+}
+
+impl TableScene {
+    /// Compiles [`TableScene::mjcf`], the scene with every geom: the model a renderer draws.
+    /// Its bodies, joints, mocap bodies and cameras are the physics model's, so a physics
+    /// state carries over to it (qpos, mocap poses); its geoms are a superset.
+    pub fn render_model(&self) -> Result<Model, RobotError> {
+        let render = self.mjcf.compile()?;
+        let m = &self.model;
+        let same = render.nbody() == m.nbody()
+            && render.nq() == m.nq()
+            && render.nmocap() == m.nmocap()
+            && render.ncam() == m.ncam();
+        if !same {
+            return Err(RobotError::Mujoco(MjError::Invalid(
+                "the render model's bodies, joints or cameras differ from the physics model's"
+                    .to_string(),
+            )));
+        }
+        Ok(render)
     }
 }
 

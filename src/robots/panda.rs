@@ -91,4 +91,5 @@ pub static PANDA: RobotSpec = RobotSpec {
     parts,
     cameras: &[],
     customize: |_| {},
+    clear_of_world: &["panda_link1", "panda_link2", "panda_link3"],
 };

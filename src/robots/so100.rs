@@ -105,6 +105,7 @@ pub static SO100: RobotSpec = RobotSpec {
     control_modes: &CONTROL_MODES,
     parts,
     cameras: &[],
+    clear_of_world: &["Upper_Arm"],
     customize: |o| {
         o.armature.push(("gripper".to_string(), JAW_ARMATURE));
         for jaw in ["Fixed_Jaw", "Moving_Jaw"] {

@@ -80,4 +80,5 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     // solref, standing in for the PhysX tendon of 1e5 N/m that alone holds the undriven right
     // carriage against the grasp force.
     customize: |o| o.stiff_mimic = true,
+    clear_of_world: &[],
 };

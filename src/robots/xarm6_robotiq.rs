@@ -195,4 +195,5 @@ pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
     parts,
     cameras: &[],
     customize,
+    clear_of_world: &["link1"],
 };

@@ -2,6 +2,7 @@
 //! controllers and IK against an independent URDF forward kinematics, tasks with constructed
 //! states): they use `pub(crate)` items, so they live inside the crate. Tests of the public
 //! API and of the command line are in `tests/`.
+mod clearance;
 mod common;
 mod fetch;
 mod fetch_tasks;

@@ -152,13 +152,23 @@ fn scene_has_upstream_masses_and_a_visible_flat_target() {
         assert!((got - want).abs() < 1e-9, "{i:?}");
     }
     // Five cylinders, none colliding, all in the group sensor cameras draw (0), lying flat:
-    // the world z extent of each is its (tiny) half length.
+    // the world z extent of each is its (tiny) half length. They only draw, so they are in
+    // the render model, not in the physics model.
     let goal = body("goal_region");
-    let geoms: Vec<usize> = (0..m.ngeom())
-        .filter(|&g| m.geom_bodyid()[g] as usize == goal)
-        .collect();
+    let of_goal = |m: &crate::mujoco::Model| -> Vec<usize> {
+        (0..m.ngeom())
+            .filter(|&g| m.geom_bodyid()[g] as usize == goal)
+            .collect()
+    };
+    assert!(of_goal(&m).is_empty());
+    let mut e = e;
+    e.render().unwrap();
+    let m = e.render_model().unwrap().clone();
+    let geoms = of_goal(&m);
     assert_eq!(geoms.len(), 5);
     let d = e.data();
+    // The body's orientation from the physics state, the geoms' own from the render model.
+    let body_mat = &d.xmat()[9 * goal..9 * goal + 9];
     for (k, &g) in geoms.iter().enumerate() {
         assert_eq!(m.geom_contype()[g], 0);
         assert_eq!(m.geom_conaffinity()[g], 0);
@@ -167,8 +177,14 @@ fn scene_has_upstream_masses_and_a_visible_flat_target() {
         assert!((size[0] - 0.05 * (5 - k) as f64 / 5.0).abs() < 1e-12);
         assert!((size[1] - (0.5e-5 + k as f64 * 1e-5)).abs() < 1e-15);
         // Cylinder axis (local z column of the geom frame) points along world ±z.
-        let xmat = &d.geom_xmat()[9 * g..9 * g + 9];
-        assert!(xmat[8].abs() > 1.0 - 1e-6, "ring {k} not flat: {xmat:?}");
+        let q = &m.geom_quat()[4 * g..4 * g + 4];
+        let axis = [
+            2.0 * (q[1] * q[3] + q[0] * q[2]),
+            2.0 * (q[2] * q[3] - q[0] * q[1]),
+            1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]),
+        ];
+        let world_z: f64 = (0..3).map(|c| body_mat[6 + c] * axis[c]).sum();
+        assert!(world_z.abs() > 1.0 - 1e-6, "ring {k} not flat: {axis:?}");
     }
 }
 

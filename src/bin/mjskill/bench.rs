@@ -50,10 +50,121 @@ pub struct BenchReport {
     /// Size of those frames.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub render_size: Option<(usize, usize)>,
+    /// Where a physics substep's time goes (with `--profile`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub profile: Option<Profile>,
     /// env_steps_per_s / physics_steps_per_s.
     pub ratio: f64,
     /// Env overhead on top of physics, in percent: (1/ratio − 1)·100.
     pub overhead_percent: f64,
+}
+
+/// Where a physics substep's time goes: one more raw replay of the timed steps with
+/// MuJoCo's stage timers on (`mjData.timer`, [`mjskill::mujoco::timer`]). The timers' own
+/// clock reads make this replay slower than the timed ones; the shares are what compares.
+#[derive(Debug, Clone, Serialize)]
+pub struct Profile {
+    /// Wall time of one substep in this replay (drives, `mj_step1`, `mj_step2`), µs.
+    pub substep_us: f64,
+    /// Per MuJoCo stage that ran: µs per substep, share of the substep, calls per substep.
+    /// `position` holds the `pos_*` stages; `actuation` and `acceleration` include the
+    /// drives' own calls (their unconstrained acceleration).
+    pub stages: std::collections::BTreeMap<String, Stage>,
+    /// The substep's time outside MuJoCo's timed stages (the drives' own arithmetic, the
+    /// integration, the kinematics update after each env step), µs and share.
+    pub rest_us: f64,
+    /// rest_us / substep_us.
+    pub rest_share: f64,
+    /// Mean contacts per substep.
+    pub contacts: f64,
+    /// Mean constraint rows (`nefc`) per substep.
+    pub constraint_rows: f64,
+    /// Mean constraint-solver iterations per substep (MuJoCo's limit: 100).
+    pub solver_iterations: f64,
+    /// Most solver iterations in one substep.
+    pub solver_iterations_max: usize,
+}
+
+/// One MuJoCo stage in a [`Profile`].
+#[derive(Debug, Clone, Serialize)]
+pub struct Stage {
+    /// µs per substep.
+    pub us: f64,
+    /// Share of the substep's wall time.
+    pub share: f64,
+    /// Calls per substep.
+    pub calls: f64,
+}
+
+/// Replays `targets` (the drive targets of `steps` env steps) from `start` on a copy of the
+/// env's physics with MuJoCo's timers on, and splits the time by stage.
+fn profile(
+    env: &mut mjskill::Env,
+    start: &mjskill::EnvState,
+    targets: &[f64],
+    steps: usize,
+) -> Result<Profile, CliError> {
+    use mjskill::mujoco::timer::{enable_timers, Timer};
+    enable_timers();
+    let substeps = env.substeps();
+    let nd = env.drives().targets_len();
+    env.set_state(start)?;
+    let mut data: Data = env.data().clone();
+    let mut drives = env.drives().clone();
+    data.clear_timers();
+    let (mut contacts, mut rows, mut iters, mut iters_max) = (0usize, 0usize, 0usize, 0usize);
+    let t = Instant::now();
+    for i in 0..steps {
+        drives.load_targets(&targets[i * nd..(i + 1) * nd]);
+        for _ in 0..substeps {
+            drives.step(&mut data);
+            contacts += data.ncon();
+            rows += data.nefc();
+            iters += data.solver_iterations();
+            iters_max = iters_max.max(data.solver_iterations());
+        }
+        data.update_kinematics();
+    }
+    let n = (steps * substeps) as f64;
+    let substep_us = t.elapsed().as_secs_f64() * 1e6 / n;
+    let mut stages = std::collections::BTreeMap::new();
+    let mut top = 0.0;
+    for timer in Timer::ALL {
+        let stat = data.timer(timer);
+        if stat.calls == 0 {
+            continue;
+        }
+        let us = stat.seconds * 1e6 / n;
+        if matches!(
+            timer,
+            Timer::Position
+                | Timer::Velocity
+                | Timer::Actuation
+                | Timer::Acceleration
+                | Timer::Constraint
+        ) {
+            top += us;
+        }
+        stages.insert(
+            timer.name().to_string(),
+            Stage {
+                us,
+                share: us / substep_us,
+                calls: stat.calls as f64 / n,
+            },
+        );
+    }
+    let rest_us = (substep_us - top).max(0.0);
+    Ok(Profile {
+        substep_us,
+        stages,
+        rest_us,
+        rest_share: rest_us / substep_us,
+        contacts: contacts as f64 / n,
+        constraint_rows: rows as f64 / n,
+        solver_iterations: iters as f64 / n,
+        solver_iterations_max: iters_max,
+    })
 }
 
 /// Largest `--steps`: the timed actions and drive commands are held in memory
@@ -80,6 +191,7 @@ pub fn run(
     steps: usize,
     vec: Option<(usize, usize)>,
     render_frames: Option<usize>,
+    with_profile: bool,
 ) -> Result<BenchReport, CliError> {
     check_count("--steps", steps, MAX_STEPS)?;
     if let Some((n, t)) = vec {
@@ -199,6 +311,10 @@ pub fn run(
             Some(best)
         }
     };
+    let profile = match with_profile {
+        true => Some(profile(&mut env, &start, &targets, steps)?),
+        false => None,
+    };
     let ratio = env_rate / phys;
     Ok(BenchReport {
         env: env_id.to_string(),
@@ -217,6 +333,7 @@ pub fn run(
         scaling: vec_rate.map(|r| r / env_rate),
         render_frames_per_s: render_rate,
         render_size: render_rate.map(|_| env.render_size()),
+        profile,
         ratio,
         overhead_percent: (1.0 / ratio - 1.0) * 100.0,
     })
@@ -235,11 +352,52 @@ mod tests {
             100_000,
             Some((0, 1)),
             None,
+            false,
         )
         .unwrap_err();
         assert!(
             e.to_string().contains("--envs") && t.elapsed() < Duration::from_secs(5),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_profile_splits_a_substep_by_mujocos_stages() {
+        let r = super::run("PokeCube-v1", Default::default(), 50, None, None, true).unwrap();
+        let p = r.profile.expect("--profile reports a profile");
+        assert!(p.substep_us > 0.0 && p.contacts > 0.0 && p.constraint_rows > 0.0);
+        assert!(p.solver_iterations >= 1.0 && p.solver_iterations_max >= 1);
+        // Every substep runs the position stages once, and the drives add one call of
+        // actuation and acceleration to step2's.
+        for (stage, calls) in [
+            ("pos_collision", 1.0),
+            ("constraint", 1.0),
+            ("acceleration", 2.0),
+        ] {
+            let s = &p.stages[stage];
+            assert_eq!(s.calls, calls, "{stage}");
+            assert!(
+                s.us > 0.0 && s.share > 0.0 && s.share < 1.0,
+                "{stage}: {s:?}"
+            );
+        }
+        // The top-level stages and the rest make up the substep.
+        let top: f64 = [
+            "position",
+            "velocity",
+            "actuation",
+            "acceleration",
+            "constraint",
+        ]
+        .iter()
+        .map(|k| p.stages[*k].us)
+        .sum();
+        assert!(
+            (top + p.rest_us - p.substep_us).abs() < 1e-6 * p.substep_us.max(1.0)
+                || p.rest_us == 0.0
+        );
+        // Without --profile there is none.
+        let r = super::run("PokeCube-v1", Default::default(), 5, None, None, false).unwrap();
+        assert!(r.profile.is_none());
     }
 }

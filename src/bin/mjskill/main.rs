@@ -113,6 +113,10 @@ pub enum Command {
         /// render_frames_per_s.
         #[arg(long, value_parser = args::render_frames, allow_hyphen_values = true)]
         render: Option<usize>,
+        /// Also replay the physics once more with MuJoCo's stage timers on (`mjData.timer`)
+        /// and report where a substep's time goes: `profile` (docs/speed.md).
+        #[arg(long)]
+        profile: bool,
     },
     /// Run a policy over seeded episodes; prints success rate and mean return (JSON).
     Eval {
@@ -355,7 +359,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             threads,
             obs_mode,
             render,
-        } => bench_command(target, steps, envs, threads, &obs_mode, render),
+            profile,
+        } => bench_command(target, steps, envs, threads, &obs_mode, render, profile),
         Command::Eval {
             target,
             policy,
@@ -479,6 +484,7 @@ fn bench_command(
     threads: Option<usize>,
     obs_mode: &str,
     render: Option<usize>,
+    profile: bool,
 ) -> Result<(), CliError> {
     let cores = std::thread::available_parallelism()
         .map(|n| n.get())
@@ -491,7 +497,7 @@ fn bench_command(
         obs_mode: mjskill::ObsMode::parse(obs_mode)?,
         ..target.config()
     };
-    let report = bench::run(target.env_id(), config, steps, vec, render)?;
+    let report = bench::run(target.env_id(), config, steps, vec, render, profile)?;
     out!("{}", serde_json::to_string(&report)?);
     Ok(())
 }
