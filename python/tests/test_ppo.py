@@ -46,6 +46,15 @@ def run(*args, timeout=300):
     (["--action-floor", "7:0.5:1"], "expected INDEX:LEAST"),
     (["--action-floor", "7:1e39"], "float32's range"),
     (["--action-floor", "7:nan"], "finite number"),
+    # (--out /dev/null: a run that accepted the value would stop there, untrained.)
+    (["--bc-obs-noise", "nan", "--out", "/dev/null"], "nan must be a finite number >= 0"),
+    (["--bc-obs-noise", "-0.1", "--out", "/dev/null"], "-0.1 must be a finite number >= 0"),
+    (["--bc-obs-noise", "inf", "--out", "/dev/null"], "inf must be a finite number >= 0"),
+    (["--demo-logstd", "50", "--out", "/dev/null"], "50.0 is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "1e30", "--out", "/dev/null"], "is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "-100", "--out", "/dev/null"], "-100.0 is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "nan", "--out", "/dev/null"], "nan is out of range: -7.0 .. 1.0"),
+    (["--out", "", "--total-timesteps", "10"], "argument --out: '' is empty; give a directory"),
 ])
 def test_ppo_refuses_settings_that_cannot_train(args, message):
     r = run(*args)
