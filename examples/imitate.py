@@ -42,7 +42,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from training import rundir  # noqa: E402
 from training.args import (  # noqa: E402
-    changed_options, command_line, positive, same_dir, without_option)
+    changed_options, command_line, finite_at_least_zero, finite_positive, nonempty, positive,
+    same_dir, with_values, without_option)
 from training.evaluate import run_episodes  # noqa: E402
 from training.export import metadata, save_policy  # noqa: E402
 
@@ -70,25 +71,6 @@ LOG_HEADER = ["epoch", "samples", "wall_time", "train_loss", "eval_success", "ev
 CHECKPOINT_KEYS = ("net", "optimizer", "obs_mean", "obs_std", "label_mean", "label_std",
                    "residual", "hidden_obs", "argv", "command", "epoch", "samples", "best",
                    "resumes", "resume_commands", "times", "torch_rng")
-
-
-def finite_at_least_zero(text):
-    """argparse type: a finite float >= 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (np.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"{v} must be a finite number >= 0")
-    return v
-
-
-def finite_positive(text):
-    """argparse type: a finite float > 0."""
-    v = finite_at_least_zero(text)
-    if v == 0:
-        raise argparse.ArgumentTypeError("0 must be > 0")
-    return v
 
 
 def parse_args(argv=None, check=True):
@@ -132,7 +114,7 @@ def parse_args(argv=None, check=True):
     p.add_argument("--torch-threads", type=positive, default=os.cpu_count() or 1)
     p.add_argument("--max-minutes", type=finite_positive, default=None,
                    help="stop after this much wall time (the policy is evaluated and saved)")
-    p.add_argument("--out", default=None,
+    p.add_argument("--out", type=nonempty, default=None,
                    help="run directory (default runs/<env>__<robot>__<mode>__imitate<seed>)")
     p.add_argument("--resume", metavar="RUN_DIR", default=None,
                    help="continue the run in RUN_DIR from its checkpoint.pt with its saved "
@@ -170,7 +152,13 @@ def resumed_args(argv):
     rest = without_option(list(sys.argv[1:] if argv is None else argv), "--resume")
     args = parse_args(saved_argv + rest, check=False)
     saved = parse_args(saved_argv, check=False)
-    changed = changed_options(args, saved, RUN_DEFINING)
+
+    def differs(k, a, b):
+        if k == "demos" and a and b:  # the same files, relative or absolute
+            return [os.path.abspath(x) for x in a] != [os.path.abspath(x) for x in b]
+        return a != b
+
+    changed = changed_options(args, saved, RUN_DEFINING, differs)
     if changed:
         sys.exit(f"error: --resume {given.resume}: {', '.join(changed)} cannot change when a "
                  "run continues (they define its network or its data)")
@@ -219,13 +207,23 @@ def main(argv=None):
                 if (args.resume or args.out) else None)
     if args.resume is not None:
         args, ckpt = resumed_args(argv)
-    from demos import DemoError, load
+    from demos import DemoError, check_unchanged, fingerprints, load, mjskill_spaces
 
     try:
+        if ckpt is not None and ckpt.get("demo_files"):
+            # The files the run started with, unchanged (a checkpoint written before
+            # fingerprints were kept has none: its files are taken as they are).
+            check_unchanged(ckpt["demo_files"], args.resume)
+        # Every file is read and checked before the evaluation's envs are built (one env is
+        # made for the spaces the demos must fit).
         demos = load(args.demos, args.env_id, args.robot, args.control_mode,
-                     trainer="imitate.py", keep_failed=args.include_failed)
+                     trainer="imitate.py", keep_failed=args.include_failed,
+                     spaces=mjskill_spaces)
+        demo_files = fingerprints(args.demos)
     except DemoError as e:
         sys.exit(f"error: {e}")
+    for note in demos.notes:
+        print(f"note: {note}", flush=True)
     args.env_id = demos.env_id
     args.robot = args.robot or demos.robot
     args.control_mode = args.control_mode or demos.control_mode
@@ -285,6 +283,9 @@ def main(argv=None):
         run_lock = rundir.hold_run_dir(out, SCRIPT)
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
         sys.argv[1:] if argv is None else argv)
+    if ckpt is None:
+        # The demo files by absolute path: a resume from another directory finds them.
+        run_argv = with_values(run_argv, "--demos", [os.path.abspath(f) for f in args.demos])
     command = ckpt["command"] if ckpt is not None else command_line(run_argv)
     if ckpt is not None:
         rundir.check_checkpoint_is_the_runs(out, command, robot, mode)
@@ -388,6 +389,7 @@ def main(argv=None):
     def checkpoint(next_epoch):
         state = weights()
         state.update(optimizer=opt.state_dict(), argv=run_argv, command=command,
+                     demo_files=demo_files,
                      epoch=next_epoch, samples=samples, best=best, resumes=resumes,
                      resume_commands=resume_commands,
                      times=dict(wall=time.perf_counter() - t_start, eval=eval_time),

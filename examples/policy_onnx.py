@@ -20,8 +20,12 @@ those of the same components, the others are kept):
     python examples/policy_onnx.py floor IN.onnx OUT.onnx --action 7:-0.545
 
 Every edit reads a regular file only (a FIFO or device is refused, never read), refuses a file
-whose metadata names a key twice, and writes OUT beside itself under a temporary name, renamed
-into place once complete: OUT may be IN, and a failed write (a full disk) leaves it as it was.
+whose metadata names a key twice, and writes OUT beside itself under a short temporary name
+(``.mjskill-PID-XXXXXXXX.tmp``, created exclusively, never through a link), renamed into
+place once complete, with the mode of the file it replaces: OUT may be IN, and a failed
+write (a full disk) leaves it as it was. OUT may not be a symbolic link (refused, naming its
+target): the rename would replace the link rather than edit the file it points to, so give
+the target itself.
 
 The graph: input ``obs`` (float32, [batch, obs_dim]); ``x = clip((obs - mean) / std, -clip,
 clip)``; then for every layer ``x = x @ W + b``, with ``tanh`` between layers (not after the
@@ -36,8 +40,13 @@ from __future__ import annotations
 import json
 import os
 import stat
+import sys
 
 import numpy as np
+
+# examples/ holds the shared training package (also when this file is run as a script).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from training.files import atomic_write  # noqa: E402, F401 (atomic_write: the trainers')
 
 #: The metadata_props every policy file carries (docs/training.md).
 METADATA_KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode", "training_command")
@@ -254,33 +263,15 @@ def load_policy(path):
     return model
 
 
-def atomic_write(path, write, tmp=None):
-    """Calls ``write(tmp)`` for a temporary file beside ``path`` (``tmp``, default
-    ``<path>.tmp-<pid>``), flushes it to disk and renames it over ``path``: a write that
-    fails or a process killed at any moment leaves the old file or the new one, never a
-    truncated one."""
-    tmp = tmp or f"{path}.tmp-{os.getpid()}"
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.lexists(tmp):
-            os.remove(tmp)
-        raise
-
-
 def save_atomic(model, dst):
-    """Writes ``model`` to ``dst`` through a hidden temporary file beside it
-    (:func:`atomic_write`): a failed write leaves ``dst`` as it was, even when it is the file
-    the model was read from."""
+    """Writes ``model`` to ``dst`` through a temporary file beside it
+    (training.files.atomic_write: created exclusively, never through a link, with the mode
+    of the file it replaces): a failed write leaves ``dst`` as it was, even when it is the
+    file the model was read from. A symbolic link as ``dst`` is refused (ValueError): the
+    rename would replace the link, not edit its target."""
     import onnx
 
-    dst = str(dst)
-    tmp = os.path.join(os.path.dirname(os.path.abspath(dst)),
-                       f".{os.path.basename(dst)}.tmp-{os.getpid()}")
-    atomic_write(dst, lambda t: onnx.save(model, t), tmp)
+    atomic_write(str(dst), lambda t: onnx.save(model, t))
 
 
 def save_derived(model, dst, note, **props):

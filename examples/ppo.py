@@ -66,8 +66,8 @@ from demos import pretrain  # noqa: E402
 from policy_onnx import atomic_write, parse_floors  # noqa: E402, F401 (atomic_write: tests)
 from training import rundir  # noqa: E402
 from training.args import (  # noqa: E402
-    changed_options, command_line, non_negative, option_names, positive, same_dir,
-    without_option)
+    changed_options, command_line, finite_at_least_zero, non_negative, nonempty, number_in,
+    option_names, positive, same_dir, with_values, without_option)
 from training.evaluate import run_episodes  # noqa: E402
 from training.export import metadata, save_policy  # noqa: E402
 from training.rundir import (  # noqa: E402, F401 (RUN_LOCK: tests)
@@ -78,6 +78,10 @@ SCRIPT = "examples/ppo.py"
 
 #: The learning rate with --demos (measured, docs/training.md).
 DEMO_LEARNING_RATE = 5e-5
+
+#: --demo-logstd's range: a sampling std from 0.0009 to 2.7 (the action spaces' bounds are
+#: about ±1). Outside it the Gaussian's log-probabilities overflow or underflow float32.
+DEMO_LOGSTD_RANGE = (-7.0, 1.0)
 
 #: ManiSkill's ppo.py defaults (its Args dataclass).
 BASE = dict(
@@ -181,7 +185,8 @@ def parse_args(argv=None, check=True):
                         "time (time.thread_time), which waiting for other processes does not "
                         "count: with --num-threads 1 --torch-threads 1 every computation runs "
                         "on this thread, so it measures the run's cost on a busy machine")
-    p.add_argument("--out", default=None, help="run directory (default runs/<env>__<robot>__<seed>)")
+    p.add_argument("--out", type=nonempty, default=None,
+                   help="run directory (default runs/<env>__<robot>__<seed>)")
     p.add_argument("--rollout", choices=["native", "torch"], default=None,
                    help="native: the actor runs inside the vector env's threads, T steps per "
                         "call, log-probs and values in one batched pass afterwards (the "
@@ -209,7 +214,7 @@ def parse_args(argv=None, check=True):
                         "demonstrations'); only successful episodes are used")
     p.add_argument("--bc-epochs", type=positive, default=200,
                    help="passes over the demos of the warm start (actor and critic)")
-    p.add_argument("--bc-obs-noise", type=float, default=0.1,
+    p.add_argument("--bc-obs-noise", type=finite_at_least_zero, default=0.1,
                    help="std of the Gaussian noise added to the (normalised) observations of "
                         "the behaviour cloning")
     p.add_argument("--bc-coef", type=float, default=0.5,
@@ -224,9 +229,10 @@ def parse_args(argv=None, check=True):
                         "learning rate rises linearly from 0: Adam's first steps move every "
                         "weight by about the learning rate, which a cloned actor does not "
                         "survive")
-    p.add_argument("--demo-logstd", type=float, default=-2.5,
-                   help="the sampling log std after the warm start (PPO's own start is -0.5; "
-                        "a narrower one keeps the cloned behaviour while PPO begins)")
+    p.add_argument("--demo-logstd", type=number_in(
+                       *DEMO_LOGSTD_RANGE, " (a sampling std from 0.0009 to 2.7)"), default=-2.5,
+                   help="the sampling log std after the warm start, -7 to 1 (PPO's own start "
+                        "is -0.5; a narrower one keeps the cloned behaviour while PPO begins)")
     p.add_argument("--resume", metavar="RUN_DIR", default=None,
                    help="continue the run in RUN_DIR from its last checkpoint (checkpoint.pt: "
                         "weights, optimiser, observation statistics, step count, random state) "
@@ -277,8 +283,6 @@ def check_args(p, args):
         p.error(f"--action-floor {e}")
     if args.action_floor and (args.rollout == "native" or args.ray_workers):
         p.error("--action-floor works with torch rollouts (--rollout torch)")
-    if not np.isfinite(args.demo_logstd):
-        p.error(f"--demo-logstd {args.demo_logstd} must be finite")
     if args.demos and args.simulator != "mjskill":
         p.error("--demos trains on mjskill (--simulator mjskill)")
     if args.learning_rate == 0:
@@ -369,6 +373,8 @@ def resumed_args(argv):
     def differs(k, a, b):
         if k == "action_floor":  # the same floors, in any order or spelling
             return parse_floors(a) != parse_floors(b)
+        if k == "demos" and a and b:  # the same files, relative or absolute
+            return [os.path.abspath(x) for x in a] != [os.path.abspath(x) for x in b]
         return a != b
 
     changed = changed_options(args, saved, RUN_DEFINING, differs)
@@ -434,14 +440,24 @@ def main(argv=None):
     if args.resume is not None:
         args, ckpt = resumed_args(argv)
     demos = None
+    demo_files = None
     if args.demos:
-        # Every file is read and checked before any env is built.
-        from demos import DemoError, load
+        # Every file is read and checked before the run's envs are built (one env is made
+        # for the spaces the demos must fit).
+        from demos import DemoError, check_unchanged, fingerprints, load, mjskill_spaces
 
         try:
-            demos = load(args.demos, args.env_id, args.robot, args.control_mode)
+            if ckpt is not None and ckpt.get("demo_files"):
+                # The files the run started with, unchanged (a checkpoint written before
+                # fingerprints were kept has none: its files are taken as they are).
+                check_unchanged(ckpt["demo_files"], args.resume)
+            demos = load(args.demos, args.env_id, args.robot, args.control_mode,
+                         spaces=mjskill_spaces if args.simulator == "mjskill" else None)
+            demo_files = fingerprints(args.demos)
         except DemoError as e:
             sys.exit(f"error: {e}")
+        for note in demos.notes:
+            print(f"note: {note}", flush=True)
         args.robot = args.robot or demos.robot
         args.control_mode = args.control_mode or demos.control_mode
     if args.control_mode is None:
@@ -539,6 +555,9 @@ def main(argv=None):
     # keeps) and the options it was parsed from.
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
         sys.argv[1:] if argv is None else argv)
+    if ckpt is None and args.demos:
+        # The demo files by absolute path: a resume from another directory finds them.
+        run_argv = with_values(run_argv, "--demos", [os.path.abspath(f) for f in args.demos])
     command = ckpt["command"] if ckpt is not None else command_line(run_argv)
     if ckpt is not None:
         check_checkpoint_is_the_runs(out, command, robot, mode)
@@ -636,6 +655,7 @@ def main(argv=None):
         state = weights()
         state.update(
             optimizer=opt.state_dict(), argv=run_argv, command=command, iteration=next_iteration,
+            demo_files=demo_files,
             global_step=global_step, best=best, resumes=resumes,
             resume_commands=resume_commands,
             times=dict(wall=clock() - t_start, sim=sim_time, infer=infer_time, gae=gae_time,

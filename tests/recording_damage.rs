@@ -467,3 +467,138 @@ fn fuzz_truncations_and_bit_flips() {
     );
     assert_eq!(cli, 50);
 }
+
+/// Writes `raw` (read by `record::read_raw`) again as an MCAP file at `path`, every CRC
+/// written, each message's JSON passed through `edit(topic, message)`: the episode metadata
+/// records before their `/episode` messages, as the recorder writes them.
+fn rewrite(raw: &record::RawRecording, path: &Path, edit: impl Fn(&str, &mut serde_json::Value)) {
+    use mcap::records::{MessageHeader, Metadata};
+    use std::collections::BTreeMap;
+    let f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut w = mcap::WriteOptions::new()
+        .profile(&raw.profile)
+        .library(&raw.library)
+        .create(f)
+        .unwrap();
+    w.write_metadata(&Metadata {
+        name: "mjskill".into(),
+        metadata: raw.metadata.clone(),
+    })
+    .unwrap();
+    let mut channels = BTreeMap::new();
+    let mut episode = 0;
+    for (seq, m) in raw.messages.iter().enumerate() {
+        if m.topic == "/episode" {
+            w.write_metadata(&Metadata {
+                name: format!("episode-{episode}"),
+                metadata: raw.episode_metadata[episode].clone(),
+            })
+            .unwrap();
+            episode += 1;
+        }
+        if !channels.contains_key(&m.topic) {
+            let sid = w.add_schema(&m.schema, "jsonschema", b"{}").unwrap();
+            let ch = w
+                .add_channel(sid, &m.topic, &m.encoding, &BTreeMap::new())
+                .unwrap();
+            channels.insert(m.topic.clone(), ch);
+        }
+        let mut v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        edit(&m.topic, &mut v);
+        let header = MessageHeader {
+            channel_id: channels[&m.topic],
+            sequence: seq as u32,
+            log_time: m.log_time,
+            publish_time: m.log_time,
+        };
+        w.write_to_known_channel(&header, &serde_json::to_vec(&v).unwrap())
+            .unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// The SO100's jaw release counters in a recorded state (issue 57): `mjskill info` and
+/// `mjskill replay` refuse a recording whose counters `set_state` refuses (−3, 2^40), naming
+/// the episode, the step and the value, as they read the recording it was made from; the
+/// recorder never writes such a state.
+#[test]
+fn recorded_jaw_release_counters_are_checked_as_set_state_checks_them() {
+    let path = common::scratch("so100_counters.mcap");
+    let mut env = make("PickCubeSO100-v1", EnvConfig::default()).unwrap();
+    let mut rec = Recorder::create(&path, &env).unwrap();
+    rec.reset(&mut env, Some(3)).unwrap();
+    let dim = env.action_space().shape[0];
+    for t in 0..4 {
+        rec.step(&mut env, &vec![0.1 * t as f32; dim]).unwrap();
+    }
+    rec.end_episode(false).unwrap();
+    let n_ctl = env.get_state().controller.len();
+    let counter = n_ctl - env.drives().len();
+    // The recorder refuses a state whose counter set_state refuses; nothing is written.
+    let mut state = env.get_state();
+    state.controller[counter] = -3.0;
+    rec.reset(&mut env, Some(4)).unwrap();
+    let s = env.step(&vec![0.0; dim]).unwrap();
+    let (reward, term, trunc) = (s.reward, s.terminated, s.truncated);
+    let e = rec
+        .record_step(&env, &vec![0.0; dim], reward, term, trunc, &state)
+        .unwrap_err();
+    assert!(
+        e.to_string().contains("jaw release count") && e.to_string().contains("= -3"),
+        "{e}"
+    );
+    rec.end_episode(false).unwrap();
+    rec.finish().unwrap();
+    let raw = record::read_raw(&path).unwrap();
+    let run = |cmd: &str, p: &Path| mjskill().arg(cmd).arg(p).output().unwrap();
+    // The file as recorded, and written again unchanged: both read and replay.
+    let same = common::scratch("so100_counters_same.mcap");
+    rewrite(&raw, &same, |_, _| {});
+    for p in [&path, &same] {
+        for cmd in ["info", "replay"] {
+            let o = run(cmd, p);
+            assert!(
+                o.status.success(),
+                "{cmd}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+        }
+    }
+    for bad in [-3.0, 2f64.powi(40), 0.5] {
+        let cases = [
+            (
+                "/step",
+                "episode 0, the state before step 2",
+                "recorded state before step 2",
+            ),
+            (
+                "/episode",
+                "episode 0, its initial state",
+                "recorded initial state",
+            ),
+        ];
+        for (topic, info_at, replay_at) in cases {
+            let out = common::scratch(&format!("so100_counter_{bad}_{}.mcap", &topic[1..]));
+            rewrite(&raw, &out, |t, v| {
+                if t == topic && v["episode"] == 0 && (t == "/episode" || v["step"] == 2) {
+                    let key = if t == "/step" {
+                        "state_before"
+                    } else {
+                        "state"
+                    };
+                    v[key]["controller"][counter] = serde_json::json!(bad);
+                }
+            });
+            for cmd in ["info", "replay"] {
+                let e = common::fails(&run(cmd, &out));
+                let want = format!("controller[{counter}] = {bad} is not a jaw release count");
+                assert!(e.contains(&want), "{cmd} {topic} {bad}: {e}");
+                let at = if cmd == "info" { info_at } else { replay_at };
+                assert!(
+                    e.contains("episode 0") && e.contains(at),
+                    "{cmd} {topic}: {e}"
+                );
+            }
+        }
+    }
+}

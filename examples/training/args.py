@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import re
 import shlex
 import sys
 
@@ -24,6 +26,47 @@ def int_at_least(least, what):
 #: argparse types: integers >= 1 and >= 0.
 positive = int_at_least(1, "is not a positive integer (>= 1)")
 non_negative = int_at_least(0, "is negative")
+
+
+def _number(text):
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def finite_at_least_zero(text):
+    """argparse type: a finite float >= 0."""
+    v = _number(text)
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"{v} must be a finite number >= 0")
+    return v
+
+
+def finite_positive(text):
+    """argparse type: a finite float > 0."""
+    v = finite_at_least_zero(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError("0 must be > 0")
+    return v
+
+
+def number_in(low, high, what=""):
+    """argparse type: a float from ``low`` to ``high`` (``what`` says what the range means,
+    in the error)."""
+    def parse(text):
+        v = _number(text)
+        if not low <= v <= high:  # NaN too
+            raise argparse.ArgumentTypeError(f"{v} is out of range: {low} .. {high}{what}")
+        return v
+    return parse
+
+
+def nonempty(text):
+    """argparse type: a path that is not the empty string."""
+    if text == "":
+        raise argparse.ArgumentTypeError("'' is empty; give a directory")
+    return text
 
 
 def same_dir(a, b):
@@ -51,6 +94,25 @@ def without_option(argv, name):
         elif not a.startswith(name + "="):
             out.append(a)
     return out
+
+
+#: A token argparse takes as a value, not an option, though it starts with "-".
+_NEGATIVE_NUMBER = re.compile(r"-\d+\Z|-\d*\.\d+\Z")
+
+
+def with_values(argv, name, values):
+    """``argv`` with the option ``name`` (``nargs="+"``: ``name V...`` and ``name=V``, every
+    occurrence) replaced by ``name`` with ``values``, at the end."""
+    out, skip = [], False
+    for a in argv:
+        if skip and not (a.startswith("-") and not _NEGATIVE_NUMBER.match(a)):
+            continue
+        skip = False
+        if a == name:
+            skip = True
+        elif not a.startswith(name + "="):
+            out.append(a)
+    return out + [name, *values]
 
 
 def command_line(argv=None):

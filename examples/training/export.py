@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import os
 
-from policy_onnx import atomic_write, floor_actions, write_mlp_policy
+from policy_onnx import floor_actions, write_mlp_policy
+from training.files import atomic_write
 
 
 def metadata(env_id, robot, mode, command, algorithm, env_steps, eval_success, version,

@@ -1,7 +1,8 @@
 """Run directories (docs/training.md, "Stopping, continuing"): one writer at a time (a lock
 file naming its pid), a ``log.csv`` appended to and flushed row by row and never rewritten in
 place, checkpoints checked when read, and SIGINT/SIGTERM as a request to stop after the
-current iteration. Every file is replaced whole (policy_onnx.atomic_write)."""
+current iteration. Every file is replaced whole (training.files.atomic_write), and the cleanup
+removes only the temporary files that writer makes."""
 
 from __future__ import annotations
 
@@ -9,9 +10,11 @@ import csv
 import errno
 import os
 import signal
+import stat
 import sys
 
-from policy_onnx import atomic_write, load_policy
+from policy_onnx import load_policy
+from training.files import atomic_write, kind, process_alive, remove_stale_temps  # noqa: F401
 
 #: The run directory's lock file: held (flock) by the trainer that writes the directory, and
 #: naming its pid. One name for every trainer, so that one run at a time writes a directory.
@@ -23,28 +26,36 @@ def hold_run_dir(out, script):
     symlink), so that one trainer at a time writes there: a second one, new or --resume,
     exits with an error naming the holder's pid (``script`` names the trainer in messages).
     Returns the open lock file; the lock lasts as long as this process (or until the file is
-    closed). Then removes the temporary files (``*.tmp-PID``) that runs killed while saving
-    left there."""
+    closed). Then removes the temporary files that runs killed while saving left there
+    (training.files.remove_stale_temps: only its own ``.mjskill-PID-XXXXXXXX.tmp`` names, of
+    pids that run no process)."""
     import fcntl
 
     os.makedirs(out, exist_ok=True)
     path = os.path.join(out, RUN_LOCK)
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        # O_NONBLOCK: a FIFO planted under the name is refused below, never waited on.
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as e:
         if e.errno == errno.ELOOP:
             sys.exit(f"error: run directory {out}: its lock file {path} is a symbolic link, "
                      f"which {script} never writes through; remove the link")
         sys.exit(f"error: run directory {out}: cannot create its lock file {path}: {e}")
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        sys.exit(f"error: run directory {out}: its lock file {path} is {kind(mode)}, not a "
+                 f"regular file; {script} neither reads nor locks it: remove it")
+    os.set_blocking(fd, True)
     f = os.fdopen(fd, "r+")
     holder = None
     try:
         fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        holder = f.read().strip() or "unknown"
+        holder = f.read(64).strip() or "unknown"
     except OSError:
         # No locks on this file system: the pid in the file, if its process runs, holds it.
-        pid = f.read().strip()
+        pid = f.read(64).strip()
         if pid.isdigit() and int(pid) != os.getpid() and process_alive(int(pid)):
             holder = pid
     if holder is not None:
@@ -57,25 +68,8 @@ def hold_run_dir(out, script):
     f.write(f"{os.getpid()}\n")
     f.flush()
     os.fsync(f.fileno())
-    for name in os.listdir(out):
-        tail = name.rpartition(".tmp-")[2]
-        path = os.path.join(out, name)
-        if (".tmp-" in name and tail.isdigit() and int(tail) != os.getpid()
-                and not process_alive(int(tail)) and os.path.isfile(path)
-                and not os.path.islink(path)):
-            os.remove(path)
+    remove_stale_temps(out)
     return f
-
-
-def process_alive(pid):
-    """Whether process ``pid`` exists."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def load_checkpoint(run, keys, script):

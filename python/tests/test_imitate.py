@@ -212,3 +212,10 @@ def test_an_evaluation_on_the_demos_seeds_is_refused(demo_files, tmp_path):
     assert r.returncode == 1, r.stderr[-2000:]
     assert "evaluates on seeds the demos were recorded with (1, 2)" in r.stderr, r.stderr
     assert not (tmp_path / "run" / "log.csv").exists()
+
+
+def test_an_empty_out_is_refused():
+    """``--out ''`` is refused (it used to train into runs/...)."""
+    r = imitate("--demos", "x.mcap", "--out", "")
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert "argument --out: '' is empty; give a directory" in r.stderr, r.stderr[-2000:]

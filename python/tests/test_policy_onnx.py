@@ -44,7 +44,7 @@ def cli(*args, timeout=60):
 
 
 def leftovers(d):
-    return sorted(p.name for p in Path(d).iterdir() if ".tmp-" in p.name)
+    return sorted(p.name for p in Path(d).iterdir() if ".tmp" in p.name)
 
 
 @pytest.mark.parametrize("action, message", [
@@ -172,3 +172,48 @@ def test_a_residual_adds_raw_observation_entries_to_chosen_actions(tmp_path):
     for bad, message in (([4, None], "2 entries for 3"), ([6, None, 0], "out of range 0..5")):
         with pytest.raises(ValueError, match=message):
             P.write_mlp_policy(tmp_path / "bad.onnx", layers, mean, std, meta, residual=bad)
+
+
+# -- issue 57: the edit's file keeps its mode, a symlink OUT is refused, long names work -------
+
+def test_an_in_place_edit_keeps_the_files_mode(tmp_path):
+    import stat
+
+    src = small_policy(tmp_path / "policy.onnx")
+    os.chmod(src, 0o640)  # group-private
+    r = cli("hide", src, src, "--obs", "1")
+    assert r.returncode == 0, r.stderr
+    assert stat.S_IMODE(os.stat(src).st_mode) == 0o640
+    # A new OUT gets a new file's mode: 0666 less the umask.
+    mask = os.umask(0o022)
+    os.umask(mask)
+    r = cli("retarget", src, tmp_path / "new.onnx", "--env-id", "PickCubeWidowXAI-v1")
+    assert r.returncode == 0, r.stderr
+    assert stat.S_IMODE(os.stat(tmp_path / "new.onnx").st_mode) == 0o666 & ~mask
+    assert leftovers(tmp_path) == []
+
+
+def test_a_symlink_out_is_refused_and_left_as_it_is(tmp_path):
+    """OUT a link: refused, naming its target (renaming the new file over OUT would replace
+    the link, not edit the file it points to); the link and its target stay as they were."""
+    real = small_policy(tmp_path / "real.onnx")
+    before = real.read_bytes()
+    link = tmp_path / "link.onnx"
+    link.symlink_to(real)
+    for args in (["hide", link, link, "--obs", "1"], ["floor", real, link, "--action", "7:0.5"]):
+        r = cli(*args)
+        assert r.returncode == 1, (args, r.stderr)
+        assert f"{link} is a symbolic link" in r.stderr and str(real) in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
+        assert link.is_symlink() and real.read_bytes() == before
+        assert leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("length", [246, 255])
+def test_out_names_up_to_the_file_systems_limit_are_written(tmp_path, length):
+    src = small_policy(tmp_path / "in.onnx")
+    out = tmp_path / ("p" * (length - len(".onnx")) + ".onnx")
+    r = cli("retarget", src, out, "--env-id", "PickCubeWidowXAI-v1")
+    assert r.returncode == 0, r.stderr
+    meta = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    assert meta["env_id"] == "PickCubeWidowXAI-v1" and leftovers(tmp_path) == []

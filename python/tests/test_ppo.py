@@ -46,6 +46,15 @@ def run(*args, timeout=300):
     (["--action-floor", "7:0.5:1"], "expected INDEX:LEAST"),
     (["--action-floor", "7:1e39"], "float32's range"),
     (["--action-floor", "7:nan"], "finite number"),
+    # (--out /dev/null: a run that accepted the value would stop there, untrained.)
+    (["--bc-obs-noise", "nan", "--out", "/dev/null"], "nan must be a finite number >= 0"),
+    (["--bc-obs-noise", "-0.1", "--out", "/dev/null"], "-0.1 must be a finite number >= 0"),
+    (["--bc-obs-noise", "inf", "--out", "/dev/null"], "inf must be a finite number >= 0"),
+    (["--demo-logstd", "50", "--out", "/dev/null"], "50.0 is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "1e30", "--out", "/dev/null"], "is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "-100", "--out", "/dev/null"], "-100.0 is out of range: -7.0 .. 1.0"),
+    (["--demo-logstd", "nan", "--out", "/dev/null"], "nan is out of range: -7.0 .. 1.0"),
+    (["--out", "", "--total-timesteps", "10"], "argument --out: '' is empty; give a directory"),
 ])
 def test_ppo_refuses_settings_that_cannot_train(args, message):
     r = run(*args)
@@ -110,7 +119,7 @@ def test_ppo_resume_continues_a_stopped_run(tmp_path):
     # The policy files and checkpoints load without pickled code.
     for name in ("policy.pt", "best.pt"):
         torch.load(out / name, weights_only=True)
-    assert not [p for p in out.iterdir() if ".tmp-" in p.name]
+    assert not [p for p in out.iterdir() if ".tmp" in p.name]
 
     # A run-defining option cannot change.
     r = run("--resume", str(out), "--num-envs", "7")
@@ -223,18 +232,87 @@ def test_the_run_lock_never_writes_through_a_symlink(tmp_path):
     assert victim.read_text() == "precious"
 
 
-def test_stale_temporary_files_of_killed_runs_are_removed(tmp_path):
+def dead_pid():
+    """The pid of a process that has exited."""
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_the_cleanup_removes_only_the_temporary_files_of_dead_writers(tmp_path, monkeypatch):
+    """hold_run_dir removes the temporary files (training.files.atomic_write's own
+    ``.mjskill-PID-XXXXXXXX.tmp``) that runs killed while saving left, and nothing else:
+    a user's ``results.tmp-PID``, a name with an impossible pid, a link."""
     ppo = load_ppo_module()
-    dead = subprocess.Popen([sys.executable, "-c", "pass"])
-    dead.wait()
+    dead = dead_pid()
     run_dir = tmp_path / "run"
     run_dir.mkdir()
-    for name in (f"checkpoint.pt.tmp-{dead.pid}", f"policy.onnx.tmp-{dead.pid}",
-                 f"mine.tmp-{os.getpid()}", "notes.tmp-x"):
+    removed = [f".mjskill-{dead}-0123abcd.tmp", f".mjskill-{dead}-ffffffff.tmp"]
+    kept = [f".mjskill-{os.getpid()}-0123abcd.tmp",  # a live writer's
+            f".mjskill-{dead}-0123abcd.tmp.bak", f".mjskill-{dead}-0123ABCD.tmp",
+            ".mjskill-99999999999-0123abcd.tmp", f"results.tmp-{dead}",
+            f"checkpoint.pt.tmp-{dead}", "x.tmp-99999999999999999999", "notes.tmp-x"]
+    for name in removed + kept:
         (run_dir / name).write_text("x")
+    (run_dir / f".mjskill-{dead}-aaaaaaaa.tmp").symlink_to(run_dir / "notes.tmp-x")
+    kept.append(f".mjskill-{dead}-aaaaaaaa.tmp")
     ppo.hold_run_dir(str(run_dir)).close()
     left = sorted(p.name for p in run_dir.iterdir())
-    assert left == sorted([ppo.RUN_LOCK, f"mine.tmp-{os.getpid()}", "notes.tmp-x"]), left
+    assert left == sorted([ppo.RUN_LOCK, *kept]), left
+    # --out . : the working directory's files are as safe.
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / f"thesis.tex.tmp-{dead}").write_text("chapter 1")
+    monkeypatch.chdir(work)
+    ppo.hold_run_dir(".").close()
+    assert (work / f"thesis.tex.tmp-{dead}").read_text() == "chapter 1"
+
+
+def test_atomic_write_never_writes_through_a_link_planted_at_a_temporary_name(tmp_path):
+    """Links planted under the names a writer of this pid could pick (the old
+    ``<file>.tmp-PID`` and ``.<file>.tmp-PID`` among them): their targets stay as they were,
+    and the file is written."""
+    ppo = load_ppo_module()
+    victim = tmp_path / "victim.pt"
+    victim.write_bytes(b"a precious checkpoint")
+    target = tmp_path / "policy.onnx"
+    for name in (f"policy.onnx.tmp-{os.getpid()}", f".policy.onnx.tmp-{os.getpid()}"):
+        (tmp_path / name).symlink_to(victim)
+    ppo.atomic_write(str(target), lambda tmp: Path(tmp).write_bytes(b"new policy"))
+    assert victim.read_bytes() == b"a precious checkpoint"
+    assert target.read_bytes() == b"new policy" and not target.is_symlink()
+
+
+def test_temporary_files_are_created_exclusively_skipping_a_planted_name(tmp_path, monkeypatch):
+    """training.files.temp_beside creates its file with O_EXCL | O_NOFOLLOW: a link (or any
+    file) already under the name it draws is never opened; it draws another name."""
+    sys.path.insert(0, str(PPO.parent))
+    from training import files
+
+    victim = tmp_path / "victim"
+    victim.write_text("keep")
+    first = tmp_path / f".mjskill-{os.getpid()}-aaaaaaaa.tmp"
+    first.symlink_to(victim)
+    tags = iter(["aaaaaaaa", "bbbbbbbb"])
+    monkeypatch.setattr(files, "_tag", lambda: next(tags))
+    files.atomic_write(str(tmp_path / "out.csv"), lambda t: Path(t).write_text("rows"))
+    assert victim.read_text() == "keep" and first.is_symlink()
+    assert (tmp_path / "out.csv").read_text() == "rows"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([first.name, "out.csv",
+                                                                 "victim"])
+
+
+def test_a_fifo_as_the_run_lock_is_a_clear_error(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    os.mkfifo(run_dir / ".run.lock")
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import ppo; "
+            "ppo.hold_run_dir(sys.argv[2])")
+    r = subprocess.run([sys.executable, "-c", code, str(PPO.parent), str(run_dir)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "is a FIFO, not a regular file" in r.stderr and "Traceback" not in r.stderr, \
+        r.stderr[-2000:]
 
 
 def test_resume_refuses_another_out(tmp_path):
@@ -274,7 +352,7 @@ def test_resume_keeps_the_counted_rows_and_drops_later_and_torn_ones(tmp_path):
     rows = log_rows(tmp_path)
     assert [(r["iteration"], r["env_steps"]) for r in rows] == [
         ("0", "0"), ("1", "48"), ("2", "96"), ("2", "96"), ("3", "144")]
-    assert not [p for p in tmp_path.iterdir() if ".tmp-" in p.name]
+    assert not [p for p in tmp_path.iterdir() if ".tmp" in p.name]
     # Nothing to drop: the log is appended to, not rewritten.
     ino = os.stat(log_path).st_ino
     log, writer = ppo.start_log(str(log_path), (4, 144))

@@ -623,10 +623,32 @@ impl Env {
     }
 
     /// Restores a state from [`Env::get_state`]; the following steps equal the original
-    /// trajectory bitwise. A state of another env, robot or control mode, or with a
-    /// non-finite or out-of-range value (checked by `checks::check_state_values`: the error names the
-    /// field), is an error and the env is left unchanged.
+    /// trajectory bitwise. A state that [`Env::check_state`] refuses is an error and the env
+    /// is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
+        self.check_state(s)?;
+        self.sim
+            .data
+            .set_state(&s.physics)
+            .map_err(|e| EnvError::BadState(e.to_string()))?;
+        let k = self.sim.controller.load(&s.controller);
+        self.sim.drives.load(&s.controller[k..]);
+        self.elapsed_steps = s.elapsed_steps;
+        self.sim.finger_forces = s.finger_forces;
+        self.numpy = s.numpy.clone();
+        self.torch_global = s.torch_global.clone();
+        (self.main_seed, self.episode_seed) = s.seeds;
+        self.update_outputs();
+        Ok(())
+    }
+
+    /// Whether [`Env::set_state`] takes `s`, without applying it: a state of another env,
+    /// robot or control mode, of other sizes, with a non-finite or out-of-range value
+    /// (`checks::check_state_values`), or with an SO100 jaw release counter that is not a
+    /// whole number of substeps from 0 to `u32::MAX` is an error naming the field and value.
+    /// Every state [`Env::get_state`] returns passes; readers of recordings (`mjskill info`,
+    /// `mjskill replay`) check recorded states with it.
+    pub fn check_state(&self, s: &EnvState) -> Result<(), EnvError> {
         let mine = (self.id, self.sim.spec.uid(), self.sim.controller.mode());
         if (s.env_id.as_str(), s.robot.as_str(), s.control_mode.as_str()) != mine {
             return Err(EnvError::BadState(format!(
@@ -658,18 +680,6 @@ impl Env {
                 ctl + i
             )));
         }
-        self.sim
-            .data
-            .set_state(&s.physics)
-            .map_err(|e| EnvError::BadState(e.to_string()))?;
-        let k = self.sim.controller.load(&s.controller);
-        self.sim.drives.load(&s.controller[k..]);
-        self.elapsed_steps = s.elapsed_steps;
-        self.sim.finger_forces = s.finger_forces;
-        self.numpy = s.numpy.clone();
-        self.torch_global = s.torch_global.clone();
-        (self.main_seed, self.episode_seed) = s.seeds;
-        self.update_outputs();
         Ok(())
     }
 

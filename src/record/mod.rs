@@ -686,8 +686,9 @@ impl Recorder {
         self.write(channel_id, ns, &data)
     }
 
-    /// Refuses a state with a non-finite number (it could not be restored with
-    /// [`Env::set_state`]) or body poses that are not finite (the Foxglove schema needs
+    /// Refuses a state with a non-finite number, or any other that [`Env::check_state`]
+    /// refuses (it could not be restored with [`Env::set_state`], and `mjskill info` and
+    /// `replay` refuse it), or body poses that are not finite (the Foxglove schema needs
     /// numbers), before anything of the step is written.
     fn check_finite(&self, state: &EnvState, name: &str, env: &Env) -> Result<(), RecordError> {
         let refuse = |what: String| {
@@ -700,6 +701,12 @@ impl Recorder {
             return refuse(format!(
                 "{name}.{field} = {value}: recorded states must be finite (the env has \
                  diverged; nothing of this step was written)"
+            ));
+        }
+        if let Err(e) = env.check_state(state) {
+            return refuse(format!(
+                "{name}: {e}: recorded states must restore with `set_state` (readers check \
+                 them; nothing of this step was written)"
             ));
         }
         let d = env.data();

@@ -163,11 +163,15 @@ impl Replayer {
             index: s.index,
             ..Default::default()
         };
+        // The recorded state is checked as `set_state` checks it, also where the episode
+        // replays from its seed: a recording whose states could not be restored is refused.
         let r = match s.seed {
-            Some(seed) => {
-                env.reset(Some(seed));
-                Ok(())
-            }
+            Some(seed) => env
+                .check_state(&s.state)
+                .map_err(|e| recorded_state("the recorded initial state", e))
+                .map(|()| {
+                    env.reset(Some(seed));
+                }),
             None => env.set_state(&s.state),
         };
         match r {
@@ -183,6 +187,11 @@ impl Replayer {
             return Err(ReplayError::Order("a step outside an episode"));
         };
         if dev.error.is_some() {
+            return Ok(());
+        }
+        if let Err(e) = env.check_state(&st.state) {
+            let what = format!("the recorded state before step {}", dev.steps);
+            dev.error = Some(recorded_state(&what, e));
             return Ok(());
         }
         let s = match env.step(&st.action) {
@@ -234,6 +243,14 @@ impl Replayer {
         r.steps += dev.steps;
         r.episodes += 1;
         Ok(())
+    }
+}
+
+/// A recorded state that [`Env::check_state`] refuses, saying which (`what`).
+fn recorded_state(what: &str, e: EnvError) -> EnvError {
+    match e {
+        EnvError::BadState(why) => EnvError::BadState(format!("{what}: {why}")),
+        other => other,
     }
 }
 

@@ -427,7 +427,11 @@ pub struct InfoSummary {
     pub damage: Option<String>,
 }
 
-/// Counts what `info` reports, episode by episode.
+/// Counts what `info` reports, episode by episode, and checks every recorded state as
+/// `set_state` would ([`Env::check_state`], in an env made from the file's metadata), so that
+/// a recording whose states could not be restored is refused, naming the episode, step and
+/// value. (A file whose env cannot be made here, say of another mjskill version, is counted
+/// without that check: `mjskill replay` says why it cannot be made.)
 #[derive(Default)]
 struct Count {
     episodes: usize,
@@ -436,14 +440,51 @@ struct Count {
     returns: f64,
     /// Steps of the episode begun last, while it is open.
     open: Option<usize>,
+    /// The env of the file's metadata, which checks the recorded states.
+    env: Option<Env>,
+}
+
+impl Count {
+    fn check(
+        &self,
+        what: impl FnOnce() -> String,
+        state: &mjskill::EnvState,
+    ) -> Result<(), String> {
+        match &self.env {
+            Some(env) => env
+                .check_state(state)
+                .map_err(|e| format!("{}: {e}", what())),
+            None => Ok(()),
+        }
+    }
 }
 
 impl Visitor for Count {
-    fn episode_start(&mut self, _: EpisodeStart) -> Result<(), mjskill::record::BoxError> {
+    fn meta(&mut self, m: &mjskill::record::Meta) -> Result<(), mjskill::record::BoxError> {
+        self.env = m
+            .config()
+            .ok()
+            .and_then(|c| mjskill::make(&m.env_id, c).ok());
+        Ok(())
+    }
+    fn episode_start(&mut self, s: EpisodeStart) -> Result<(), mjskill::record::BoxError> {
+        self.check(
+            || format!("episode {}, its initial state", s.index),
+            &s.state,
+        )?;
         self.open = Some(0);
         Ok(())
     }
-    fn step(&mut self, _: u64, _: u32, _: StepRec) -> Result<(), mjskill::record::BoxError> {
+    fn step(
+        &mut self,
+        episode: u64,
+        index: u32,
+        st: StepRec,
+    ) -> Result<(), mjskill::record::BoxError> {
+        self.check(
+            || format!("episode {episode}, the state before step {index}"),
+            &st.state,
+        )?;
         if let Some(n) = self.open.as_mut() {
             *n += 1;
         }
