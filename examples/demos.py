@@ -110,6 +110,9 @@ class Demos:
     #: What the trainer tells the user about the files (a recording cut short, read up to
     #: the cut).
     notes: list[str] = field(default_factory=list)
+    #: The commands that recorded the files, where a recording keeps one (``mjskill rollout``
+    #: writes its own, without ``--out``, into the metadata key ``command``).
+    commands: list[str] = field(default_factory=list)
 
     @property
     def obs(self) -> np.ndarray:
@@ -660,8 +663,10 @@ def load(paths, env_id: str | None, robot: str | None, control_mode: str | None,
             mcap = recording.MAGIC.startswith(head)
             if mcap:
                 meta, eps, cut = read_mcap(path, f, st.st_size)
+        command = None
         if mcap:
             to_replay = []
+            command = meta.get("command")
             dim, act_dim = meta["obs_dim"], len(meta["act_low"])
             for e in eps:
                 _check_values(path, e, meta["act_low"], meta["act_high"])
@@ -735,6 +740,8 @@ def load(paths, env_id: str | None, robot: str | None, control_mode: str | None,
                 demos.to_replay.append((seed, act))
                 replays.append((path, name, act))
         demos.files.append(path)
+        if command:
+            demos.commands.append(command)
     if spaces is not None:
         _check_spaces(demos, spaces, read, replays)
     if not demos.episodes and not demos.to_replay:

@@ -380,7 +380,10 @@ def main(argv=None):
                    + " ".join(os.path.basename(f) for f in demos.files)),
             epochs=str(epoch),
             expert_labels=str(sum(len(e.actions) for e in demos.episodes
-                                  if e.labels is not None)))
+                                  if e.labels is not None)),
+            # How the demos were recorded (each file's own command, where it keeps one): with
+            # training_command, the whole recipe of the file.
+            **({"demos_command": " ; ".join(demos.commands)} if demos.commands else {}))
         path = save_policy(out, tag, exported_layers(), obs_mean, obs_std, meta,
                            obs_clip=OBS_CLIP, residual=residual)
         rundir.save_torch(os.path.join(out, f"{tag}.pt"), weights())

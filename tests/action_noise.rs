@@ -163,6 +163,25 @@ fn the_same_command_records_the_same_bytes_and_the_noise_seed_changes_the_noise(
     // The same first state, so the same label; other noise, so another executed action.
     assert_eq!(sa.expert_action, sc.expert_action);
     assert_ne!(sa.action, sc.action);
+    // The metadata keeps the command that recorded the file, without its --out; an argument
+    // a shell would split is quoted.
+    let meta_command = |p: &Path| read(p).unwrap().meta.command.expect("a rollout's command");
+    let command = meta_command(&a);
+    assert_eq!(
+        command,
+        "mjskill rollout --no-frame --env PickCube-v1 --episodes 2 --seed 40 --action-noise 0.05"
+    );
+    assert_eq!(meta_command(&c), format!("{command} --noise-seed 1"));
+    let spaced = common::scratch("spaced.mcap");
+    rollout(
+        &spaced,
+        &["--episodes", "1", "--action-noise", "arm=0.05, gripper=0"],
+    );
+    assert!(
+        meta_command(&spaced).ends_with("--action-noise 'arm=0.05, gripper=0'"),
+        "{}",
+        meta_command(&spaced)
+    );
     // Without --action-noise the steps carry no label.
     let plain = common::scratch("plain.mcap");
     rollout(&plain, &["--episodes", "1"]);

@@ -123,6 +123,10 @@ def test_cloning_writes_a_policy_file_that_mjskill_eval_runs(demo_files, tmp_pat
     assert "imitate.py" in meta["training_command"] and "--demos" in meta["training_command"]
     assert meta["algorithm"].startswith("behaviour cloning")
     assert meta["demos"].startswith("3 episodes (0 failed, 3 with expert labels), 150 steps")
+    # The demos' own recording command (rollout keeps it, without --out, in the file).
+    assert meta["demos_command"].startswith("mjskill rollout "), meta["demos_command"]
+    assert "--action-noise arm=0.05,gripper=0" in meta["demos_command"]
+    assert "--out" not in meta["demos_command"]
     assert (meta["expert_labels"], meta["env_steps"], meta["epochs"]) == ("150", "150", "3")
     assert meta["hidden_obs"] == "16,17"  # the Panda's finger velocities, as ppo.py hides them
     for name in ("policy.onnx", "best.onnx", "policy.pt", "best.pt", "checkpoint.pt"):

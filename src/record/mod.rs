@@ -268,6 +268,10 @@ pub struct Meta {
     pub observation_space: Space,
     /// Observation layout.
     pub obs_layout: Vec<ObsSlice>,
+    /// The command that wrote the file (`mjskill rollout ...`), where the writer gave one: how
+    /// to record the same demonstrations again. Absent in files of other writers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command: Option<String>,
 }
 
 const STRING_KEYS: &[&str] = &[
@@ -277,6 +281,7 @@ const STRING_KEYS: &[&str] = &[
     "reward_mode",
     "control_mode",
     "version",
+    "command",
 ];
 
 impl Meta {
@@ -311,6 +316,7 @@ impl Meta {
                     end: r.end,
                 })
                 .collect(),
+            command: None,
         }
     }
 
@@ -497,6 +503,8 @@ pub struct Recorder {
     open: Option<Open>,
     info_buf: Vec<(String, f64)>,
     videos: Vec<Video>,
+    /// [`Meta::command`] of the file, repeated in every episode's metadata record.
+    command: Option<String>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -523,6 +531,17 @@ impl Recorder {
     /// Like [`Recorder::create`], into a file already open for writing (e.g. a temporary file
     /// the caller renames later, or one it holds a lock on); `path` names it in errors.
     pub fn from_file(file: File, path: &Path, env: &Env) -> Result<Recorder, RecordError> {
+        Recorder::from_file_with_command(file, path, env, None)
+    }
+
+    /// Like [`Recorder::from_file`], with the command that writes the file in its metadata
+    /// ([`Meta::command`]).
+    pub fn from_file_with_command(
+        file: File,
+        path: &Path,
+        env: &Env,
+        command: Option<&str>,
+    ) -> Result<Recorder, RecordError> {
         let io = |source| RecordError::Io {
             path: path.to_path_buf(),
             source,
@@ -546,7 +565,10 @@ impl Recorder {
         let mut writer = opts
             .create(BufWriter::new(guard::UnwindGuard(file)))
             .map_err(mcap_err)?;
-        let meta = Meta::of(env);
+        let meta = Meta {
+            command: command.map(str::to_string),
+            ..Meta::of(env)
+        };
         writer
             .write_metadata(&Metadata {
                 name: METADATA_NAME.to_string(),
@@ -590,6 +612,7 @@ impl Recorder {
             open: None,
             info_buf: Vec::new(),
             videos: Vec::new(),
+            command: meta.command,
         };
         rec.sync()?;
         Ok(rec)
@@ -747,7 +770,11 @@ impl Recorder {
         });
         // A metadata record per episode: the file's metadata plus the episode index and seed,
         // so a tool reading only metadata (e.g. `mcap info`) sees how each episode started.
-        let mut meta = Meta::of(env).to_map();
+        let mut meta = Meta {
+            command: self.command.clone(),
+            ..Meta::of(env)
+        }
+        .to_map();
         meta.insert("episode".into(), index.to_string());
         meta.insert("seed".into(), seed.map_or("null".into(), |s| s.to_string()));
         self.writer

@@ -158,13 +158,15 @@ pub fn rollout(a: &RolloutArgs) -> Result<RolloutSummary, CliError> {
             return Err(format!("cannot write the frame PNG: {e}; pass --no-frame").into());
         }
     }
-    let mut rec = match Recorder::from_file(file, output.current(), &env) {
-        Ok(r) => r,
-        Err(e) => {
-            output.discard();
-            return Err(e.into());
-        }
-    };
+    let command = command_line(without_out(std::env::args().skip(1)));
+    let mut rec =
+        match Recorder::from_file_with_command(file, output.current(), &env, Some(&command)) {
+            Ok(r) => r,
+            Err(e) => {
+                output.discard();
+                return Err(e.into());
+            }
+        };
     let mut run = Run {
         successes: 0,
         total_return: 0.0,
@@ -527,4 +529,39 @@ pub fn info(path: &Path, salvage: bool) -> Result<InfoSummary, CliError> {
         unfinished_steps: c.open,
         damage: end.damage.map(|e| e.to_string()),
     })
+}
+
+/// `args` without `--out FILE` (or `--out=FILE`): the same command writes the same bytes to
+/// any file.
+fn without_out(args: impl Iterator<Item = String>) -> impl Iterator<Item = String> {
+    let mut skip_next = false;
+    args.filter(move |a| {
+        if std::mem::take(&mut skip_next) {
+            return false;
+        }
+        if a == "--out" {
+            skip_next = true;
+            return false;
+        }
+        !a.starts_with("--out=")
+    })
+}
+
+/// The command line `args` (without the program) as `mjskill ARGS`, each argument quoted for
+/// a POSIX shell where it needs it: what a recording's metadata keeps as its `command`.
+pub fn command_line(args: impl Iterator<Item = String>) -> String {
+    let quote = |a: String| {
+        let plain = !a.is_empty()
+            && a.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_./=:,+-@%".contains(c));
+        if plain {
+            a
+        } else {
+            format!("'{}'", a.replace('\'', "'\\''"))
+        }
+    };
+    std::iter::once("mjskill".to_string())
+        .chain(args.map(quote))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
