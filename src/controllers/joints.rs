@@ -16,6 +16,9 @@ pub struct JointMap {
     pub names: Vec<String>,
     /// Joint limits (±inf for continuous joints).
     pub limits: Vec<(f64, f64)>,
+    /// Whether each joint is continuous (an unlimited revolute joint: targets 2π apart are
+    /// the same pose).
+    pub continuous: Vec<bool>,
     /// Drive actuator of each joint (None if undriven).
     pub actuator: Vec<Option<usize>>,
 }
@@ -28,6 +31,7 @@ impl JointMap {
             dof_adr: Vec::new(),
             names: Vec::new(),
             limits: Vec::new(),
+            continuous: Vec::new(),
             actuator: Vec::new(),
         };
         for j in robot.active_joints() {
@@ -37,6 +41,8 @@ impl JointMap {
             m.dof_adr.push(model.jnt_dofadr()[id] as usize);
             m.names.push(jd.name.clone());
             m.limits.push(jd.limits);
+            m.continuous
+                .push(jd.kind == super::desc::JointKind::Continuous);
             m.actuator
                 .push(model.id(ObjType::Actuator, &actuator_name(&jd.name)));
         }

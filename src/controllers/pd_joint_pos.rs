@@ -3,6 +3,7 @@
 //! `pd_joint_pos`, `pd_joint_delta_pos` and `pd_joint_target_delta_pos` arm modes and every
 //! gripper — with mimic followers that track `multiplier · control + offset`.
 use super::{clip_scale, Drives, JointMap, PartController, PartCore, Target};
+use std::f64::consts::PI;
 
 /// Configuration of a joint position part.
 #[derive(Debug, Clone, PartialEq)]
@@ -138,6 +139,14 @@ impl PartController for PdJointPos {
             let Some(t) = target(i) else {
                 return false;
             };
+            // A continuous joint's target is taken within half a turn of the joint: the same
+            // pose, reached the short way (an IK that wandered off by thousands of radians
+            // would otherwise spin the joint for seconds).
+            let t = if joints.continuous[i] {
+                q[i] + (t - q[i] + PI).rem_euclid(2.0 * PI) - PI
+            } else {
+                t
+            };
             let x = match (cfg.use_delta, cfg.use_target) {
                 (true, true) => t - core.target_q[k] as f64,
                 (true, false) => t - q[i],
@@ -163,5 +172,63 @@ impl PartController for PdJointPos {
             drives.set_joint_target(i, self.core.target_q[k] as f64, 0.0);
         }
         self.drive_followers(drives);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::PI;
+
+    use super::{JointPosConfig, PartController, PdJointPos};
+    use crate::controllers::JointMap;
+
+    /// Joint 0 continuous, joint 1 a limited revolute joint.
+    fn joints() -> JointMap {
+        JointMap {
+            qpos_adr: vec![0, 1],
+            dof_adr: vec![0, 1],
+            names: vec!["roll".into(), "flex".into()],
+            limits: vec![(f64::NEG_INFINITY, f64::INFINITY), (-2.0, 2.0)],
+            continuous: vec![true, false],
+            actuator: vec![None, None],
+        }
+    }
+
+    fn part(use_delta: bool) -> PdJointPos {
+        let cfg = JointPosConfig {
+            use_delta,
+            use_target: false,
+            normalize: false,
+            low: use_delta.then(|| vec![-1e3, -1e3]),
+            high: use_delta.then(|| vec![1e3, 1e3]),
+        };
+        let limits = |i: usize| {
+            let (lo, hi) = joints().limits[i];
+            (lo as f32, hi as f32)
+        };
+        PdJointPos::new(cfg, vec![0, 1], Vec::new(), limits)
+    }
+
+    #[test]
+    fn a_continuous_joints_target_is_converted_within_half_a_turn_of_the_joint() {
+        let q = [0.3, 0.3];
+        // An IK that wandered off: 1.3e5 rad on both joints.
+        let wild = 132228.81;
+        let target = |_: usize| Some(wild);
+        let mut out = [0.0f32; 2];
+        assert!(part(false).action_for_targets(&target, &joints(), &q, &mut out));
+        let same_pose = (wild - out[0] as f64).rem_euclid(2.0 * PI);
+        assert!(
+            (out[0] as f64 - q[0]).abs() <= PI && (same_pose.min(2.0 * PI - same_pose)) < 1e-2,
+            "{out:?}"
+        );
+        // A limited joint's target is what the source set (clipped to its bounds, as before).
+        assert_eq!(out[1], 2.0);
+        // A target within half a turn is kept as it is; deltas are taken the short way too.
+        let near = |_: usize| Some(0.3 + 3.0);
+        assert!(part(false).action_for_targets(&near, &joints(), &q, &mut out));
+        assert!((out[0] as f64 - 3.3).abs() < 1e-6, "{out:?}");
+        assert!(part(true).action_for_targets(&target, &joints(), &q, &mut out));
+        assert!((out[0] as f64).abs() <= PI, "{out:?}");
     }
 }

@@ -14,9 +14,11 @@ pub const MAX_SEED: u64 = u32::MAX as u64;
 /// beyond it the initial joint positions leave every joint range many times over.
 pub const MAX_QPOS_NOISE: f64 = 1.0;
 
-/// Largest magnitude of a restored physics value (all but `ctrl`). MuJoCo treats positions,
-/// velocities and accelerations beyond 1e10 as diverged (`mjMAXVAL`) and resets, so no state
-/// of a running env exceeds it.
+/// Largest magnitude of a restored physics value (all but `ctrl` and `qfrc_applied`). MuJoCo
+/// treats positions, velocities and accelerations beyond 1e10 as diverged (`mjMAXVAL`) and
+/// resets, so no state of a running env exceeds it. Forces are not bounded by MuJoCo: `ctrl`
+/// (gain × target) and `qfrc_applied` (the drives' position correction, `M c / h²`, which a
+/// target thousands of radians off drives past 1e10 for a step) only have to be finite.
 pub const MAX_STATE_VALUE: f64 = 1e10;
 
 /// Largest magnitude of a restored controller target: the largest f32, as actions are f32
@@ -84,8 +86,8 @@ pub fn first_non_finite(s: &EnvState) -> Option<(String, f64)> {
 }
 
 /// Checks the values of a state before [`super::Env::set_state`] applies it (its ids and
-/// sizes are checked there): every number finite; physics values (but `ctrl`) and finger
-/// forces within ±[`MAX_STATE_VALUE`], controller targets within ±[`MAX_TARGET_VALUE`];
+/// sizes are checked there): every number finite; physics values (but `ctrl` and
+/// `qfrc_applied`) and finger forces within ±[`MAX_STATE_VALUE`], controller targets within ±[`MAX_TARGET_VALUE`];
 /// time ≥ 0; `elapsed_steps` below `u32::MAX` (the next step adds one); neither RNG stream in
 /// the all-zero state MT19937 never leaves. Every state [`super::Env::get_state`] returns
 /// passes.
@@ -96,11 +98,13 @@ pub fn check_state_values(model: &Model, s: &EnvState) -> Result<(), EnvError> {
     let range = |max: f64| format!("is out of range (|value| ≤ {max:e})");
     let ctrl = 1 + model.nq() + model.nv() + model.na();
     let ctrl = ctrl..ctrl + model.nu();
+    let applied = ctrl.end + model.nv();
+    let applied = applied..applied + model.nv();
     for (i, &x) in s.physics.iter().enumerate() {
         if !x.is_finite() {
             return bad(physics_field(model, i), x, "is not finite".into());
         }
-        if x.abs() > MAX_STATE_VALUE && !ctrl.contains(&i) {
+        if x.abs() > MAX_STATE_VALUE && !ctrl.contains(&i) && !applied.contains(&i) {
             return bad(physics_field(model, i), x, range(MAX_STATE_VALUE));
         }
     }
@@ -144,4 +148,43 @@ pub fn check_state_values(model: &Model, s: &EnvState) -> Result<(), EnvError> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::env::{make, EnvConfig};
+
+    #[test]
+    fn applied_forces_past_1e10_restore_and_diverged_positions_do_not() {
+        // A converted Fetch solver's target 1.3e5 rad off (seed 958 of a noisy recording)
+        // drove the base's position correction to 1.28e10 for one step; the env ran on, so the
+        // state must restore. A position that large is MuJoCo's divergence and is refused.
+        let mut e = make(
+            "PickCube-v1",
+            EnvConfig {
+                robot: Some("fetch".into()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let m = e.model().clone();
+        let applied = 1 + m.nq() + m.nv() + m.na() + m.nu() + m.nv();
+        let mut s = e.get_state();
+        s.physics[applied + 2] = 1.2802614361197283e10;
+        e.set_state(&s).unwrap();
+        assert_eq!(e.get_state().physics[applied + 2], 1.2802614361197283e10);
+        s.physics[applied + 2] = f64::INFINITY;
+        assert!(e
+            .set_state(&s)
+            .unwrap_err()
+            .to_string()
+            .contains("qfrc_applied[2]"));
+        let mut s = e.get_state();
+        s.physics[1] = 1.28e10;
+        let err = e.set_state(&s).unwrap_err().to_string();
+        assert!(
+            err.contains("qpos[0]") && err.contains("out of range"),
+            "{err}"
+        );
+    }
 }
