@@ -1,0 +1,251 @@
+//! Scripted PushCube-v1 and PullCube-v1 solvers: ManiSkill's motion-planning solutions
+//! (`push_cube.py`, `pull_cube.py`) ported to EE-space phases. Pulling is pushing from the
+//! cube's far side, so one planner ([`Slide`]) serves both tasks, with the slide direction
+//! `+x` (push) or `−x` (pull):
+//!
+//! 0. with the gripper closed, above the start point: `gap` behind the cube (on the side
+//!    away from the goal), [`APPROACH_HEIGHT`] above the slide height;
+//! 1. down to the start point;
+//! 2. slide along x until the TCP is `contact` short of the goal centre, at the cube's y
+//!    (read every step, so a cube that drifts sideways stays in front of the fingers), with
+//!    the action limited to [`SLIDE_LIMIT`] (a fast push launches the cube); then hold.
+//!
+//! ManiSkill's solutions reach `obj ∓ 0.05` at the cube's height in one screw motion and then
+//! move the TCP to `goal − 0.12` (push) or `goal + 0.05` (pull). The push's end point leaves
+//! the cube's centre about 9 cm from the goal centre, 1 cm inside the 10 cm success radius,
+//! so the port aims the cube at the goal centre instead; it also approaches from above, so
+//! that the closed fingers never sweep over the cube.
+//!
+//! The Panda ([`PandaSlide`], `pd_ee_delta_pos`) slides with its TCP at the cube's centre
+//! height. The Fetch ([`FetchSlide`], `pd_ee_delta_pose`) holds its gripper at a fixed pitch
+//! below the horizontal through [`FetchArm`]: its fingers reach 3 cm ahead of `gripper_link`
+//! (its `agent.tcp`), so its gaps are larger and its TCP stays high enough that fingers and
+//! palm clear the table ([`min_tcp_height`]).
+//!
+//! Measured (0.01 s step, `mjskill eval --episodes 50 --seed 5000`): docs/solvers.md §7.6.
+use nalgebra::Vector3;
+
+use super::body_id;
+use super::fetch_arm::{
+    descended_tilted, min_tcp_height, pitch_for_x, ArmCommand, FetchArm, PITCH_FAR,
+};
+use super::{
+    body_xyz, ee_action, tcp_link_xyz, Phases, Policy, SolverError, APPROACH_HEIGHT,
+    APPROACH_TOL, DESCEND_TOL,
+};
+use crate::env::Env;
+use crate::mujoco::BodyId;
+use crate::tasks::push_cube::CUBE_HALF_SIZE;
+
+/// Action limit while sliding the cube.
+const SLIDE_LIMIT: f64 = 0.2;
+
+
+/// Where the TCP goes relative to the cube, per robot and task.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SlideGeometry {
+    /// Start point: TCP-to-cube-centre distance along the slide direction (m).
+    pub gap: f64,
+    /// Slide end: the TCP stops this far short of the goal centre (m), so that the cube in
+    /// front of the fingers ends at the centre.
+    pub contact: f64,
+    /// TCP height while sliding (m).
+    pub height: f64,
+}
+
+/// Panda, both tasks: ManiSkill's 5 cm start gap; the closed fingertips (2 cm across in x)
+/// touch the cube with the TCP 3 cm from its centre; the TCP at the cube's centre height.
+const PANDA_GEOMETRY: SlideGeometry = SlideGeometry {
+    gap: 0.05,
+    contact: CUBE_HALF_SIZE + 0.01,
+    height: CUBE_HALF_SIZE,
+};
+
+/// Panda gripper action while sliding: finger targets 1.5 cm each side of the TCP (the
+/// action maps −1…1 to −0.01…0.04 m), so both fingers touch the cube's 4 cm face and the
+/// cube slides straight instead of turning about a single contact.
+const PANDA_PUSH_GRIP: f32 = 0.0;
+
+/// The phases of the module docs for one episode.
+#[derive(Debug)]
+pub(crate) struct Slide {
+    cube: BodyId,
+    goal: BodyId,
+    /// +1 pushes the cube along +x (PushCube), −1 pulls it along −x (PullCube).
+    dir: f64,
+    geometry: SlideGeometry,
+    phases: Phases,
+    /// The cube's y when the slide began (the slide's line).
+    start_y: Option<f64>,
+}
+
+impl Slide {
+    /// Resolves the cube and goal of a PushCube or PullCube env.
+    pub fn new(env: &Env, geometry: SlideGeometry) -> Result<Self, SolverError> {
+        let dir = match env.id() {
+            "PullCube-v1" => -1.0,
+            _ => 1.0,
+        };
+        Ok(Slide {
+            cube: body_id(env.model(), "cube")?,
+            goal: body_id(env.model(), "goal_region")?,
+            dir,
+            geometry,
+            phases: Phases::default(),
+            start_y: None,
+        })
+    }
+
+    /// Back to phase 0 (episode start).
+    pub fn reset(&mut self) {
+        self.phases.reset();
+        self.start_y = None;
+    }
+
+    /// The TCP target and position action limit for this step (phases advance with
+    /// fall-through); `ready`: whether the robot may leave the approach (e.g. its gripper is
+    /// turned); `descended(target, tcp)` ends the descent.
+    pub fn plan(
+        &mut self,
+        env: &Env,
+        tcp: Vector3<f64>,
+        ready: bool,
+        descended: fn(Vector3<f64>, Vector3<f64>) -> bool,
+    ) -> (Vector3<f64>, f64) {
+        let (cube, goal) = (body_xyz(env, self.cube), body_xyz(env, self.goal));
+        let SlideGeometry {
+            gap,
+            contact,
+            height,
+        } = self.geometry;
+        let start = Vector3::new(cube.x - self.dir * gap, cube.y, height);
+        let y0 = *self.start_y.get_or_insert(cube.y);
+        let end = Vector3::new(goal.x - self.dir * contact, y0, height);
+        self.phases.run(|phase, _| match phase {
+            0 => {
+                let t = start + Vector3::new(0.0, 0.0, APPROACH_HEIGHT);
+                ((t, 1.0), ready && (t - tcp).norm() < APPROACH_TOL)
+            }
+            1 => ((start, 1.0), descended(start, tcp)),
+            _ => ((end, SLIDE_LIMIT), false),
+        })
+    }
+}
+
+/// The descent is done within [`DESCEND_TOL`].
+fn descended(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+    (target - tcp).norm() < DESCEND_TOL
+}
+
+/// PushCube / PullCube with the Panda (`pd_ee_delta_pos`).
+#[derive(Debug)]
+pub struct PandaSlide {
+    slide: Slide,
+}
+
+impl PandaSlide {
+    /// Resolves the bodies of a PushCube or PullCube env.
+    pub fn new(env: &Env) -> Result<Self, SolverError> {
+        Ok(PandaSlide {
+            slide: Slide::new(env, PANDA_GEOMETRY)?,
+        })
+    }
+}
+
+impl Policy for PandaSlide {
+    fn reset(&mut self, _env: &Env) {
+        self.slide.reset();
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let (target, limit) = self.slide.plan(env, tcp, true, descended);
+        ee_action(target, tcp, limit, PANDA_PUSH_GRIP, action);
+    }
+}
+
+/// Fetch: the fingers' front reaches this far ahead of `gripper_link` at the pitches used
+/// (m, along x; models/fetch/fetch.urdf's finger box front corner, 3.1 cm, tilted).
+const FETCH_FINGER_REACH: f64 = 0.031;
+/// Fetch: free space between the fingers and the cube at the start point (m).
+const FETCH_START_CLEARANCE: f64 = 0.02;
+/// Fetch gripper action while sliding: finger targets 1.5 cm each side of the TCP (the
+/// action maps −1…1 to −0.01…0.05 m), as the Panda's ([`PANDA_PUSH_GRIP`]).
+const FETCH_PUSH_GRIP: f32 = -1.0 / 6.0;
+/// Fetch: torso height while sliding (m; the table pose has 0.386): low, for the reach along
+/// the table.
+const FETCH_TORSO: f64 = 0.22;
+/// Fetch: torso command per unit error.
+const FETCH_TORSO_GAIN: f64 = 0.5;
+/// Fetch: orientation tolerance before leaving the approach (rad).
+const FETCH_ROT_TOL: f64 = 0.1;
+
+/// PushCube / PullCube with the Fetch (`pd_ee_delta_pose`).
+#[derive(Debug)]
+pub struct FetchSlide {
+    slide: Slide,
+    arm: FetchArm,
+    cube: BodyId,
+    pitch: f64,
+}
+
+impl FetchSlide {
+    /// Resolves the bodies of a PushCube or PullCube env with Fetch.
+    pub fn new(env: &Env) -> Result<Self, SolverError> {
+        let geometry = SlideGeometry {
+            gap: 0.0,
+            contact: 0.0,
+            height: 0.0,
+        };
+        Ok(FetchSlide {
+            slide: Slide::new(env, geometry)?,
+            arm: FetchArm::new(env)?,
+            cube: body_id(env.model(), "cube")?,
+            pitch: PITCH_FAR,
+        })
+    }
+
+    /// The geometry at gripper pitch `pitch`: pushing, the fingers' front touches the cube's
+    /// back face; pulling, the fingers straddle nothing and hook the far face with their back.
+    fn geometry(dir: f64, pitch: f64) -> SlideGeometry {
+        let reach = FETCH_FINGER_REACH * pitch.cos();
+        let (gap, contact) = if dir > 0.0 {
+            let contact = CUBE_HALF_SIZE + reach;
+            (contact + FETCH_START_CLEARANCE, contact)
+        } else {
+            let contact = CUBE_HALF_SIZE - reach + FETCH_START_CLEARANCE;
+            (contact + reach + FETCH_START_CLEARANCE, contact)
+        };
+        SlideGeometry {
+            gap,
+            contact,
+            height: min_tcp_height(pitch),
+        }
+    }
+}
+
+impl Policy for FetchSlide {
+    fn reset(&mut self, env: &Env) {
+        self.slide.reset();
+        let cube = body_xyz(env, self.cube);
+        self.pitch = pitch_for_x(cube.x, PITCH_FAR);
+        self.slide.geometry = Self::geometry(self.slide.dir, self.pitch);
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = self.arm.gripper_xyz(env);
+        let ready = self.arm.rot_err(env, self.pitch) < FETCH_ROT_TOL;
+        let (target, limit) = self.slide.plan(env, tcp, ready, descended_tilted);
+        let cmd = ArmCommand {
+            target,
+            tcp,
+            pitch: self.pitch,
+            torso: FETCH_TORSO,
+            torso_gain: FETCH_TORSO_GAIN,
+            grip: FETCH_PUSH_GRIP,
+            limit,
+            min_step: 0.0,
+        };
+        self.arm.drive(env, cmd, action);
+    }
+}
