@@ -246,7 +246,8 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PokeCube-v1", "panda") => boxed(poke_cube::PokeCubeSolver::new(env, PANDA_GRIPPER)),
         ("PokeCube-v1", "fetch") => boxed(fetch_tasks::FetchPokeCube::new(env)),
         ("PushCube-v1" | "PullCube-v1", "panda") => boxed(push_cube::PandaSlide::new(env)),
-        ("PushCube-v1" | "PullCube-v1", "fetch") => boxed(push_cube::FetchSlide::new(env)),
+        ("PushCube-v1", "fetch") => boxed(push_cube::FetchPush::new(env)),
+        ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,

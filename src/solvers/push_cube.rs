@@ -1,45 +1,51 @@
 //! Scripted PushCube-v1 and PullCube-v1 solvers: ManiSkill's motion-planning solutions
 //! (`push_cube.py`, `pull_cube.py`) ported to EE-space phases. Pulling is pushing from the
-//! cube's far side, so one planner ([`Slide`]) serves both tasks, with the slide direction
-//! `+x` (push) or `−x` (pull):
+//! cube's far side, so one planner ([`Slide`]) serves both tasks with the Panda, sliding
+//! along `+x` (push) or `−x` (pull):
 //!
-//! 0. with the gripper closed, above the start point: `gap` behind the cube (on the side
-//!    away from the goal), [`APPROACH_HEIGHT`] above the slide height;
+//! 0. above the start point: `gap` behind the cube (on the side away from the goal),
+//!    [`APPROACH_HEIGHT`] above the slide height;
 //! 1. down to the start point;
-//! 2. slide along x until the TCP is `contact` short of the goal centre, at the cube's y
-//!    (read every step, so a cube that drifts sideways stays in front of the fingers), with
-//!    the action limited to [`SLIDE_LIMIT`] (a fast push launches the cube); then hold.
+//! 2. slide along x, on the line of the cube's initial y, until the TCP is `contact` short of
+//!    the goal centre, the action limited (a fast push launches the cube); then hold.
+//!
+//! The gripper is half open while sliding ([`PANDA_PUSH_GRIP`]): both fingers touch the
+//! cube's face, and the cube slides straight. With closed fingers (ManiSkill's solutions
+//! close the gripper) the single contact turned the cube by up to 40° and it drifted 5–10 cm
+//! sideways, out of the goal, in 12 of 50 episodes.
 //!
 //! ManiSkill's solutions reach `obj ∓ 0.05` at the cube's height in one screw motion and then
 //! move the TCP to `goal − 0.12` (push) or `goal + 0.05` (pull). The push's end point leaves
 //! the cube's centre about 9 cm from the goal centre, 1 cm inside the 10 cm success radius,
 //! so the port aims the cube at the goal centre instead; it also approaches from above, so
-//! that the closed fingers never sweep over the cube.
+//! that the fingers never sweep over the cube.
 //!
 //! The Panda ([`PandaSlide`], `pd_ee_delta_pos`) slides with its TCP at the cube's centre
-//! height. The Fetch ([`FetchSlide`], `pd_ee_delta_pose`) holds its gripper at a fixed pitch
-//! below the horizontal through [`FetchArm`]: its fingers reach 3 cm ahead of `gripper_link`
-//! (its `agent.tcp`), so its gaps are larger and its TCP stays high enough that fingers and
-//! palm clear the table ([`min_tcp_height`]).
+//! height. The Fetch (`pd_ee_delta_pose`, through [`FetchArm`]) reaches only x ≈ 0.10 with
+//! its TCP at the table ([`FETCH_CUBE_REACH_X`]): [`FetchPush`] pushes with the fingers' front
+//! and flings the cube towards the farthest goals; [`FetchPull`] cannot get its fingers behind
+//! most cubes, so it grasps the cube (as its PickCube solver does) and draws it back.
 //!
-//! Measured (0.01 s step, `mjskill eval --episodes 50 --seed 5000`): docs/solvers.md §7.6.
+//! Measured (0.01 s step, `mjskill eval --episodes 50 --seed 5000`): Panda PushCube 50/50 and
+//! PullCube 50/50 (all successful at step 50); Fetch PushCube 47/50 (46 at step 50; the misses
+//! are cubes near x = 0.1 whose goals lie beyond the fling) and PullCube 50/50.
 use nalgebra::Vector3;
 
 use super::body_id;
+use super::fetch::{approached_tilted, GRASP, PICK_PITCH_FAR, ROT_TOL, TORSO_PICK};
 use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, ArmCommand, FetchArm, PITCH_FAR,
 };
 use super::{
-    body_xyz, ee_action, tcp_link_xyz, Phases, Policy, SolverError, APPROACH_HEIGHT,
-    APPROACH_TOL, DESCEND_TOL,
+    body_xyz, ee_action, tcp_link_xyz, Phases, Policy, SolverError, APPROACH_HEIGHT, APPROACH_TOL,
+    DESCEND_TOL,
 };
 use crate::env::Env;
 use crate::mujoco::BodyId;
-use crate::tasks::push_cube::CUBE_HALF_SIZE;
+use crate::tasks::push_cube::{CUBE_HALF_SIZE, GOAL_RADIUS};
 
 /// Action limit while sliding the cube.
 const SLIDE_LIMIT: f64 = 0.2;
-
 
 /// Where the TCP goes relative to the cube, per robot and task.
 #[derive(Debug, Clone, Copy)]
@@ -51,6 +57,8 @@ pub(crate) struct SlideGeometry {
     pub contact: f64,
     /// TCP height while sliding (m).
     pub height: f64,
+    /// Action limit while sliding.
+    pub limit: f64,
 }
 
 /// Panda, both tasks: ManiSkill's 5 cm start gap; the closed fingertips (2 cm across in x)
@@ -59,6 +67,7 @@ const PANDA_GEOMETRY: SlideGeometry = SlideGeometry {
     gap: 0.05,
     contact: CUBE_HALF_SIZE + 0.01,
     height: CUBE_HALF_SIZE,
+    limit: SLIDE_LIMIT,
 };
 
 /// Panda gripper action while sliding: finger targets 1.5 cm each side of the TCP (the
@@ -117,6 +126,7 @@ impl Slide {
             gap,
             contact,
             height,
+            limit,
         } = self.geometry;
         let start = Vector3::new(cube.x - self.dir * gap, cube.y, height);
         let y0 = *self.start_y.get_or_insert(cube.y);
@@ -127,7 +137,7 @@ impl Slide {
                 ((t, 1.0), ready && (t - tcp).norm() < APPROACH_TOL)
             }
             1 => ((start, 1.0), descended(start, tcp)),
-            _ => ((end, SLIDE_LIMIT), false),
+            _ => ((end, limit), false),
         })
     }
 }
@@ -172,6 +182,17 @@ const FETCH_START_CLEARANCE: f64 = 0.02;
 /// Fetch gripper action while sliding: finger targets 1.5 cm each side of the TCP (the
 /// action maps −1…1 to −0.01…0.05 m), as the Panda's ([`PANDA_PUSH_GRIP`]).
 const FETCH_PUSH_GRIP: f32 = -1.0 / 6.0;
+/// Fetch: action limit while sliding.
+const FETCH_SLIDE_LIMIT: f64 = 0.7;
+/// Fetch: action limit while sliding a cube whose goal lies beyond
+/// [`FETCH_CUBE_REACH_X`]: the cube is flung and slides on.
+const FETCH_FLICK_LIMIT: f64 = 0.85;
+/// Fetch: the farthest x to which its fingers push the cube's centre (m): its TCP reaches
+/// x ≈ 0.10 at the table (the shoulder 0.867 m behind the table centre, the arm's 0.666 m and
+/// the gripper's 0.305 m held level), the fingers 3 cm further, the cube's centre 2 cm more.
+const FETCH_CUBE_REACH_X: f64 = 0.14;
+/// Fetch: how far inside the goal radius the cube must get (m) for a push without a flick.
+const FETCH_FLICK_MARGIN: f64 = 0.03;
 /// Fetch: torso height while sliding (m; the table pose has 0.386): low, for the reach along
 /// the table.
 const FETCH_TORSO: f64 = 0.22;
@@ -180,56 +201,53 @@ const FETCH_TORSO_GAIN: f64 = 0.5;
 /// Fetch: orientation tolerance before leaving the approach (rad).
 const FETCH_ROT_TOL: f64 = 0.1;
 
-/// PushCube / PullCube with the Fetch (`pd_ee_delta_pose`).
+/// PushCube with the Fetch (`pd_ee_delta_pose`): the gripper held at the pitch for the cube's
+/// distance, the torso lowered once the approach is done, the fingers' front pushing the
+/// cube's back face; a goal beyond [`FETCH_CUBE_REACH_X`] gets a faster slide
+/// ([`FETCH_FLICK_LIMIT`]) and the cube slides on by itself.
 #[derive(Debug)]
-pub struct FetchSlide {
+pub struct FetchPush {
     slide: Slide,
     arm: FetchArm,
     cube: BodyId,
     pitch: f64,
 }
 
-impl FetchSlide {
-    /// Resolves the bodies of a PushCube or PullCube env with Fetch.
+impl FetchPush {
+    /// Resolves the bodies of a PushCube env with Fetch.
     pub fn new(env: &Env) -> Result<Self, SolverError> {
-        let geometry = SlideGeometry {
-            gap: 0.0,
-            contact: 0.0,
-            height: 0.0,
-        };
-        Ok(FetchSlide {
-            slide: Slide::new(env, geometry)?,
+        Ok(FetchPush {
+            slide: Slide::new(env, Self::geometry(PITCH_FAR))?,
             arm: FetchArm::new(env)?,
             cube: body_id(env.model(), "cube")?,
             pitch: PITCH_FAR,
         })
     }
 
-    /// The geometry at gripper pitch `pitch`: pushing, the fingers' front touches the cube's
-    /// back face; pulling, the fingers straddle nothing and hook the far face with their back.
-    fn geometry(dir: f64, pitch: f64) -> SlideGeometry {
-        let reach = FETCH_FINGER_REACH * pitch.cos();
-        let (gap, contact) = if dir > 0.0 {
-            let contact = CUBE_HALF_SIZE + reach;
-            (contact + FETCH_START_CLEARANCE, contact)
-        } else {
-            let contact = CUBE_HALF_SIZE - reach + FETCH_START_CLEARANCE;
-            (contact + reach + FETCH_START_CLEARANCE, contact)
-        };
+    /// The geometry at gripper pitch `pitch`: the fingers' front touches the cube's back face.
+    fn geometry(pitch: f64) -> SlideGeometry {
+        let contact = CUBE_HALF_SIZE + FETCH_FINGER_REACH * pitch.cos();
         SlideGeometry {
-            gap,
+            gap: contact + FETCH_START_CLEARANCE,
             contact,
             height: min_tcp_height(pitch),
+            limit: FETCH_SLIDE_LIMIT,
         }
     }
 }
 
-impl Policy for FetchSlide {
+impl Policy for FetchPush {
     fn reset(&mut self, env: &Env) {
         self.slide.reset();
         let cube = body_xyz(env, self.cube);
         self.pitch = pitch_for_x(cube.x, PITCH_FAR);
-        self.slide.geometry = Self::geometry(self.slide.dir, self.pitch);
+        self.slide.geometry = Self::geometry(self.pitch);
+        // A goal whose radius (less a margin) starts beyond where the fingers can push the
+        // cube: the cube has to slide the rest of the way on its own.
+        let goal = body_xyz(env, self.slide.goal);
+        if goal.x - GOAL_RADIUS + FETCH_FLICK_MARGIN > FETCH_CUBE_REACH_X {
+            self.slide.geometry.limit = FETCH_FLICK_LIMIT;
+        }
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
@@ -240,10 +258,91 @@ impl Policy for FetchSlide {
             target,
             tcp,
             pitch: self.pitch,
-            torso: FETCH_TORSO,
+            torso: if self.slide.phases.phase == 0 {
+                self.arm.torso(env)
+            } else {
+                FETCH_TORSO
+            },
             torso_gain: FETCH_TORSO_GAIN,
             grip: FETCH_PUSH_GRIP,
             limit,
+            min_step: 0.0,
+        };
+        self.arm.drive(env, cmd, action);
+    }
+}
+
+/// Fetch, PullCube: the cube's centre is carried this far above the table while it is drawn
+/// back (m), so that it does not drag.
+const FETCH_PULL_LIFT: f64 = 0.01;
+
+/// PullCube with the Fetch (`pd_ee_delta_pose`): its TCP reaches x ≈ 0.10 at the table
+/// ([`FETCH_CUBE_REACH_X`]), too short to hook its fingers behind most cubes, so it grasps
+/// the cube as its PickCube solver does (`fetch.rs`: the tilted gripper's pitch for the cube's
+/// distance, the lowered torso) and draws it back to the goal centre, just above the table.
+#[derive(Debug)]
+pub struct FetchPull {
+    cube: BodyId,
+    goal: BodyId,
+    arm: FetchArm,
+    phases: Phases,
+    pitch: f64,
+    grasp_height: f64,
+    /// TCP − cube centre when the grasp closed (carried to the goal).
+    hold_offset: Vector3<f64>,
+}
+
+impl FetchPull {
+    /// Resolves the bodies of a PullCube env with Fetch.
+    pub fn new(env: &Env) -> Result<Self, SolverError> {
+        Ok(FetchPull {
+            cube: body_id(env.model(), "cube")?,
+            goal: body_id(env.model(), "goal_region")?,
+            arm: FetchArm::new(env)?,
+            phases: Phases::default(),
+            pitch: PITCH_FAR,
+            grasp_height: 0.0,
+            hold_offset: Vector3::zeros(),
+        })
+    }
+}
+
+impl Policy for FetchPull {
+    fn reset(&mut self, env: &Env) {
+        self.phases.reset();
+        let cube = body_xyz(env, self.cube);
+        self.pitch = pitch_for_x(cube.x, PICK_PITCH_FAR);
+        self.grasp_height = (min_tcp_height(self.pitch) - cube.z).max(0.0);
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = self.arm.gripper_xyz(env);
+        let (cube, goal) = (body_xyz(env, self.cube), body_xyz(env, self.goal));
+        let grasp = cube + Vector3::new(0.0, 0.0, self.grasp_height);
+        let ready = self.arm.rot_err(env, self.pitch) < ROT_TOL;
+        let hold_offset = &mut self.hold_offset;
+        let carry = Vector3::new(goal.x, goal.y, CUBE_HALF_SIZE + FETCH_PULL_LIFT);
+        let (target, grip) = self.phases.run(|phase, steps| match phase {
+            0..=2 => {
+                let (t, grip, mut done) = GRASP.phase(phase, steps, grasp, tcp, ready);
+                if phase == 0 {
+                    done = ready && approached_tilted(t, tcp);
+                }
+                if phase == 2 && done {
+                    *hold_offset = tcp - cube;
+                }
+                ((t, grip), done)
+            }
+            _ => ((carry + *hold_offset, GRASP.gripper.close), false),
+        });
+        let cmd = ArmCommand {
+            target,
+            tcp,
+            pitch: self.pitch,
+            torso: TORSO_PICK,
+            torso_gain: 1.0,
+            grip,
+            limit: 1.0,
             min_step: 0.0,
         };
         self.arm.drive(env, cmd, action);
