@@ -156,7 +156,7 @@ fn closeness(d: f64) -> f64 {
     1.0 - (5.0 * d).tanh()
 }
 
-/// The dense reward recomputed independently from the observation (docs/tasks.md §4.5, §5.5).
+/// The dense reward recomputed independently from the observation (docs/tasks.md §6.5, §7.5).
 fn spec_dense_reward(e: &Env) -> f64 {
     let push = e.id() == "PushCube-v1";
     let (tcp, goal, cube) = (

@@ -1,4 +1,4 @@
-//! PullCube-v1 (docs/tasks.md §5): pull a blue cube back (−x, towards the robot) into a
+//! PullCube-v1 (docs/tasks.md §7): pull a blue cube back (−x, towards the robot) into a
 //! red/white goal region lying on the table; the gripper hooks the cube from its far side.
 //!
 //! The scene and the spawn draw are PushCube-v1's ([`add_cube`], [`spawn_cube`]); the goal lies
@@ -21,7 +21,7 @@ use crate::mjcf::Scene;
 use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
-// ---- constants (docs/tasks.md §5) ---------------------------------------------------------------
+// ---- constants (docs/tasks.md §7) ---------------------------------------------------------------
 /// Maximum dense reward.
 pub const MAX_REWARD: f64 = 3.0;
 /// Distance along −x from the cube's spawn point to the goal's centre (m): `0.1 + goal_radius`.

@@ -1,4 +1,4 @@
-//! PushCube-v1 (docs/tasks.md §4): push a blue cube forward (+x, away from the robot) into a
+//! PushCube-v1 (docs/tasks.md §6): push a blue cube forward (+x, away from the robot) into a
 //! red/white goal region lying on the table.
 //!
 //! Robot-generic, as upstream (panda and fetch share every constant): `agent.tcp` is the
@@ -25,7 +25,7 @@ use crate::mjcf::Scene;
 use crate::mujoco::{BodyId, Data, MjError, Model};
 use crate::rng::TorchGenerator;
 
-// ---- constants (docs/tasks.md §4) ---------------------------------------------------------------
+// ---- constants (docs/tasks.md §6) ---------------------------------------------------------------
 /// Maximum dense reward.
 pub const MAX_REWARD: f64 = 4.0;
 /// Cube half edge (m).
