@@ -69,6 +69,10 @@ SOLVER_PAIRS = [
     ("PlaceSphere-v1", "fetch", "pd_joint_pos"),
     ("PokeCube-v1", "panda", None),
     ("PokeCube-v1", "fetch", "pd_joint_pos"),
+    ("PushCube-v1", "panda", None),
+    ("PushCube-v1", "fetch", "pd_joint_pos"),
+    ("PullCube-v1", "panda", None),
+    ("PullCube-v1", "fetch", "pd_joint_pos"),
 ]
 
 # (env id, robot, ManiSkill's motion-planning module) of every motion-planning solution
@@ -78,6 +82,8 @@ DEMO_PAIRS = [
     ("PlaceSphere-v1", "panda", "panda"),
     ("PickCube-v1", "xarm6_robotiq", "xarm6"),
     ("PickCubeSO100-v1", "so100", "so100"),
+    ("PushCube-v1", "panda", "panda"),
+    ("PullCube-v1", "panda", "panda"),
 ]
 
 # Envs whose robot is fixed by the env id (passing robot_uids again is a TypeError).

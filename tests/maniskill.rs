@@ -30,7 +30,7 @@ fn files() -> Vec<RefFile> {
             out.push(RefFile::open(&p).unwrap_or_else(|err| panic!("{err}")));
         }
     }
-    assert_eq!(out.len(), 11, "one file per registered pair");
+    assert_eq!(out.len(), 15, "one file per registered pair");
     out
 }
 
@@ -196,7 +196,7 @@ fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
 /// 26–50, then the one-step (re-synchronised every step) joint, TCP and object errors. A
 /// pair passes when every figure is within 30 % of what was measured — tight enough that a
 /// wrong drive gain, limit, armature or law shows (docs/physics.md; docs/agreement.md).
-const MEASURED: [(&str, [f64; 12]); 11] = [
+const MEASURED: [(&str, [f64; 12]); 15] = [
     (
         "PickCube-v1__fetch",
         [
@@ -272,6 +272,34 @@ const MEASURED: [(&str, [f64; 12]); 11] = [
         [
             1.34e-04, 5.27e-04, 2.09e-03, 6.49e-05, 3.34e-04, 6.08e-04, 1.09e-06, 1.18e-06,
             7.70e-05, 1.18e-03, 2.90e-04, 3.57e-04,
+        ],
+    ), // PushCube and PullCube: 2026-11-29, from tests/data/maniskill/record_push_pull.py's files.
+    (
+        "PushCube-v1__fetch",
+        [
+            1.39e-03, 6.20e-03, 2.75e-02, 3.87e-04, 3.79e-03, 1.46e-02, 9.22e-07, 9.89e-07,
+            9.88e-07, 2.86e-03, 7.64e-04, 5.05e-07,
+        ],
+    ),
+    (
+        "PushCube-v1__panda",
+        [
+            1.37e-04, 5.86e-04, 2.01e-03, 6.49e-05, 3.27e-04, 5.80e-04, 9.20e-07, 9.88e-07,
+            3.40e-04, 9.49e-04, 2.94e-04, 6.25e-04,
+        ],
+    ),
+    (
+        "PullCube-v1__fetch",
+        [
+            1.39e-03, 6.20e-03, 2.75e-02, 3.87e-04, 3.79e-03, 1.46e-02, 9.22e-07, 9.89e-07,
+            9.88e-07, 2.86e-03, 7.64e-04, 5.05e-07,
+        ],
+    ),
+    (
+        "PullCube-v1__panda",
+        [
+            1.37e-04, 5.86e-04, 3.46e-03, 6.49e-05, 3.27e-04, 1.72e-03, 9.20e-07, 9.88e-07,
+            2.78e-03, 1.46e-03, 5.54e-04, 1.03e-03,
         ],
     ),
 ];
@@ -369,7 +397,22 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
                 continue;
             }
             let ctx = format!("{} seed {}", f.env_id, ep.seed);
-            if f.env_id == "PlaceSphere-v1" {
+            if f.env_id == "PushCube-v1" {
+                // ManiSkill's own push solution stops the TCP 12 cm short of the goal centre:
+                // its cube ends 8.2–9.4 cm from the centre, within 2 cm of the 10 cm success
+                // radius, so the 2–3 cm by which the two simulators' pushed cubes part decide
+                // the outcome (mjskill: 1 of the 4 episodes succeeds; docs/outcome-physics.md).
+                // Compared here: the cube never strays more than the measured 6.3 cm.
+                let last = ep.steps.last().unwrap();
+                let (c, g) = (last.actors["cube"], last.actors["goal_region"]);
+                let margin = 0.1 - (c[0] - g[0]).hypot(c[1] - g[1]);
+                assert!(
+                    (0.0..0.02).contains(&margin),
+                    "{ctx}: ManiSkill's margin {margin}"
+                );
+                let worst = e.per_step.iter().map(|s| s.obj_pos).fold(0.0, f64::max);
+                assert!(worst < 0.07, "{ctx}: the cubes part by {worst} m");
+            } else if f.env_id == "PlaceSphere-v1" {
                 // PlaceSphere's `success` also needs the released sphere to be still. In
                 // ManiSkill it stops within a step of landing between the bin's wall edges;
                 // in MuJoCo it can keep rocking there for a while (docs/physics.md), so for
@@ -392,7 +435,7 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
 /// drive targets of the action that led to it, states (of all) whose grasp flag differs,
 /// the largest dense-reward difference over all states). With a plain `set_state_dict`
 /// (no drive targets) mjskill's flag was false on every one of the held states.
-const HELD: [(&str, usize, usize, usize, f64); 11] = [
+const HELD: [(&str, usize, usize, usize, f64); 15] = [
     ("PickCube-v1__fetch", 0, 0, 0, 1.75e-6),
     ("PickCube-v1__panda", 130, 130, 0, 2.01e-6),
     ("PickCube-v1__so100", 0, 0, 0, 6.44e-7),
@@ -405,6 +448,11 @@ const HELD: [(&str, usize, usize, usize, f64); 11] = [
     ("PlaceSphere-v1__panda", 232, 232, 0, 3.89e-6),
     ("PokeCube-v1__fetch", 0, 0, 0, 3.09e-6),
     ("PokeCube-v1__panda", 1865, 1865, 0, 6.04e-6),
+    // PushCube and PullCube report no grasp flag; the rewards of every state.
+    ("PushCube-v1__fetch", 0, 0, 0, 2.06e-6),
+    ("PushCube-v1__panda", 0, 0, 0, 1.81e-6),
+    ("PullCube-v1__fetch", 0, 0, 0, 1.46e-6),
+    ("PullCube-v1__panda", 0, 0, 0, 2.25e-6),
 ];
 
 /// ManiSkill's recorded states lack the drive targets that PhysX keeps from the last action;

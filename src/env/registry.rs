@@ -20,16 +20,22 @@ pub enum EnvId {
     PlaceSphere,
     /// `PokeCube-v1`.
     PokeCube,
+    /// `PushCube-v1`.
+    PushCube,
+    /// `PullCube-v1`.
+    PullCube,
 }
 
 impl EnvId {
     /// Every env, in the registry's order.
-    pub const ALL: [EnvId; 5] = [
+    pub const ALL: [EnvId; 7] = [
         EnvId::PickCube,
         EnvId::PickCubeSo100,
         EnvId::PickCubeWidowxAi,
         EnvId::PlaceSphere,
         EnvId::PokeCube,
+        EnvId::PushCube,
+        EnvId::PullCube,
     ];
 
     /// The id as ManiSkill registers it.
@@ -40,6 +46,8 @@ impl EnvId {
             EnvId::PickCubeWidowxAi => "PickCubeWidowXAI-v1",
             EnvId::PlaceSphere => "PlaceSphere-v1",
             EnvId::PokeCube => "PokeCube-v1",
+            EnvId::PushCube => "PushCube-v1",
+            EnvId::PullCube => "PullCube-v1",
         }
     }
 
@@ -100,7 +108,15 @@ fn poke_cube(_robot: RobotId) -> Box<dyn Task> {
     Box::new(crate::tasks::poke_cube::PokeCube::new())
 }
 
-static REGISTRY: [EnvSpec; 5] = [
+fn push_cube(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::push_cube::PushCube::new())
+}
+
+fn pull_cube(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::pull_cube::PullCube::new())
+}
+
+static REGISTRY: [EnvSpec; 7] = [
     EnvSpec {
         id: EnvId::PickCube,
         robots: &RobotId::ALL,
@@ -130,6 +146,18 @@ static REGISTRY: [EnvSpec; 5] = [
         robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: poke_cube,
+    },
+    EnvSpec {
+        id: EnvId::PushCube,
+        robots: &[RobotId::Panda, RobotId::Fetch],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: push_cube,
+    },
+    EnvSpec {
+        id: EnvId::PullCube,
+        robots: &[RobotId::Panda, RobotId::Fetch],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: pull_cube,
     },
 ];
 
@@ -237,7 +265,7 @@ mod tests {
         assert_eq!(
             EnvId::parse("PickCube-v2").unwrap_err().to_string(),
             "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
-             PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1"
+             PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1"
         );
     }
 }

@@ -43,20 +43,20 @@ use crate::mujoco::BodyId;
 /// Gripper pitch for the farthest cubes (rad below the horizontal). With the other tasks'
 /// 5° the stretched arm's forearm rests on the table top and holds the gripper ≈ 1 cm above
 /// its grasp point; 10° raises the wrist clear of it at the cost of < 2 mm of reach.
-const PICK_PITCH_FAR: f64 = 10.0 * std::f64::consts::PI / 180.0;
+pub(super) const PICK_PITCH_FAR: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// Orientation tolerance before descending (rad).
-const ROT_TOL: f64 = 0.05;
+pub(super) const ROT_TOL: f64 = 0.05;
 /// The grasp phases with the tilted gripper's descent check: along the fingers (≈ x) a
 /// shortfall does not matter, the 6 cm fingers still straddle the cube when the arm stops at
 /// the edge of its reach.
-const GRASP: Grasp = Grasp {
+pub(super) const GRASP: Grasp = Grasp {
     gripper: FETCH_GRIPPER,
     descended: descended_tilted,
     hold: CLOSE_STEPS,
 };
 /// Torso height while picking and while carrying (m; the table pose has 0.386, the limit
 /// is 0.38615): low to reach down to the table, high to reach up to the goal.
-const TORSO_PICK: f64 = 0.25;
+pub(super) const TORSO_PICK: f64 = 0.25;
 const TORSO_CARRY: f64 = 0.386;
 /// Torso command per unit error while carrying (1 while picking: the whole error in one
 /// step). At the 0.01 s step the torso raised at full speed overshoots, sags back under the
@@ -67,7 +67,7 @@ const CARRY_TORSO_GAIN: f64 = 0.5;
 /// The approach above the cube is done: within [`APPROACH_TOL`] across the fingers (y, z),
 /// [`APPROACH_TOL_ALONG`] along them (x): above the farthest cubes the arm stops short at
 /// the edge of its reach, and the descent's own along-finger tolerance covers the rest.
-fn approached_tilted(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+pub(super) fn approached_tilted(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
     let e = target - tcp;
     e.y.hypot(e.z) < APPROACH_TOL && e.x.abs() < APPROACH_TOL_ALONG
 }

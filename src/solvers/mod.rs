@@ -22,6 +22,7 @@ pub(crate) mod onnx_guard;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
+pub(crate) mod push_cube;
 pub(crate) mod xarm6;
 
 pub use convert::ModeConverted;
@@ -189,7 +190,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 11] = [
+pub const SOLVED: [(&str, &str); 15] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -201,6 +202,10 @@ pub const SOLVED: [(&str, &str); 11] = [
     ("PlaceSphere-v1", "fetch"),
     ("PokeCube-v1", "panda"),
     ("PokeCube-v1", "fetch"),
+    ("PushCube-v1", "panda"),
+    ("PushCube-v1", "fetch"),
+    ("PullCube-v1", "panda"),
+    ("PullCube-v1", "fetch"),
 ];
 
 /// Boxes a freshly built solver.
@@ -240,6 +245,9 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PlaceSphere-v1", "fetch") => boxed(fetch_tasks::FetchPlaceSphere::new(env)),
         ("PokeCube-v1", "panda") => boxed(poke_cube::PokeCubeSolver::new(env, PANDA_GRIPPER)),
         ("PokeCube-v1", "fetch") => boxed(fetch_tasks::FetchPokeCube::new(env)),
+        ("PushCube-v1" | "PullCube-v1", "panda") => boxed(push_cube::PandaSlide::new(env)),
+        ("PushCube-v1", "fetch") => boxed(push_cube::FetchPush::new(env)),
+        ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,

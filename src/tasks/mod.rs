@@ -81,9 +81,12 @@ impl InfoValue for f64 {
 pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;
+pub mod pull_cube;
+pub mod push_cube;
 
 use nalgebra::{UnitQuaternion, Vector3};
 
+use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
 use crate::mujoco::{BodyId, Data, MjError, Model, Pose};
 pub use crate::obs::ObsWriter;
@@ -101,6 +104,42 @@ pub const REWARD_SCALE: f64 = 5.0;
 #[inline]
 pub fn closeness(d: f64) -> f64 {
     1.0 - (REWARD_SCALE * d).tanh()
+}
+
+/// Red of ManiSkill's `build_red_white_target`: (194, 19, 22)/255.
+pub const TARGET_RED: Rgba = [194.0 / 255.0, 19.0 / 255.0, 22.0 / 255.0, 1.0];
+/// White of ManiSkill's `build_red_white_target`.
+pub const TARGET_WHITE: Rgba = [1.0, 1.0, 1.0, 1.0];
+/// Thickness the tasks pass to `build_red_white_target` (m): the outermost ring's half
+/// thickness is half of it, each inner ring is [`TARGET_RING_STEP`] thicker.
+pub const TARGET_THICKNESS: f64 = 1e-5;
+/// Half-thickness increment of each inner ring of the red/white target (m).
+const TARGET_RING_STEP: f64 = 1e-5;
+/// Height at which the tasks place their red/white target's frame, "a little bit above 0 so
+/// the target is sitting on the table" (m).
+pub const TARGET_Z: f64 = 1e-3;
+/// The red/white target's quaternion `euler2quat(0, π/2, 0)` = (√½, 0, √½, 0) (w, x, y, z): it
+/// turns the target's x-axis cylinders vertical (`Scene::add_marker_target`).
+pub const TARGET_QUAT: [f64; 4] = [
+    std::f64::consts::FRAC_1_SQRT_2,
+    0.0,
+    std::f64::consts::FRAC_1_SQRT_2,
+    0.0,
+];
+
+/// The rings `(radius, half thickness, colour)` of ManiSkill's `build_red_white_target` of
+/// radius `radius`, outermost first: radii `radius`·{1, 4/5, 3/5, 2/5, 1/5}, alternating red
+/// and white, each inner ring 1e-5 thicker so that it shows above the one below.
+pub fn red_white_target(radius: f64) -> [(f64, f64, Rgba); 5] {
+    std::array::from_fn(|k| {
+        let r = radius * (5 - k) as f64 / 5.0;
+        let colour = if k % 2 == 0 { TARGET_RED } else { TARGET_WHITE };
+        (
+            r,
+            TARGET_THICKNESS / 2.0 + k as f64 * TARGET_RING_STEP,
+            colour,
+        )
+    })
 }
 
 /// Vertical field of view of the tasks' sensor camera `base_camera` (90°).
@@ -198,6 +237,14 @@ impl TaskCtx<'_> {
             .tcp_body
             .map(|b| body_pos(self.data, b))
             .unwrap_or_else(|| Vector3::from(self.tcp_pos))
+    }
+    /// `agent.tcp.pose`: the TCP link's position and raw quaternion (w, x, y, z); the
+    /// `tcp_pose` of the robot where it has no TCP link (so100).
+    pub fn tcp_link_pose(&self) -> (Vector3<f64>, [f64; 4]) {
+        match self.robot.tcp_body {
+            Some(b) => (self.body_pos(b), self.body_quat(b)),
+            None => (Vector3::from(self.tcp_pos), self.tcp_quat),
+        }
     }
     /// Linear and angular velocity (world) of a free body.
     pub fn body_velocity(&self, body: BodyId) -> (Vector3<f64>, Vector3<f64>) {

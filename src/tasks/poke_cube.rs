@@ -10,18 +10,19 @@
 //! peg); `angle_diff` is the unwrapped difference of the two yaw angles.
 //!
 //! The goal region is a mocap body whose pose is upstream's exactly: position
-//! (cube.x + 0.1, cube.y, 0.001) and quaternion [`GOAL_QUAT`] = `euler2quat(0, π/2, 0)`.
+//! (cube.x + 0.1, cube.y, [`TARGET_Z`]) and quaternion [`TARGET_QUAT`] = `euler2quat(0, π/2, 0)`.
 //! Its cylinders are built with their axis along the body's local x, as SAPIEN's cylinders
 //! are (MuJoCo's are along local z; `Scene::add_marker_target` rotates each geom), so that
 //! quaternion turns them vertical and the target lies flat, as upstream. Only the goal's
 //! position enters observations, `evaluate()` and the reward.
-use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_3, FRAC_PI_6};
+use std::f64::consts::{FRAC_PI_3, FRAC_PI_6};
 
 use nalgebra::Vector3;
 
 use super::{
-    add_cameras, body_id, closeness, free_joint_qpos, set_free_pose, set_mocap_pose,
-    tabletop_cameras, yaw_quat_f32, CameraDef, ObsWriter, Task, TaskCtx,
+    add_cameras, body_id, closeness, free_joint_qpos, red_white_target, set_free_pose,
+    set_mocap_pose, tabletop_cameras, yaw_quat_f32, CameraDef, ObsWriter, Task, TaskCtx,
+    TARGET_QUAT, TARGET_Z,
 };
 use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
@@ -39,20 +40,10 @@ pub const PEG_HALF_WIDTH: f64 = 0.025;
 pub const PEG_HALF_LENGTH: f64 = 0.12;
 /// Radius of the goal region (and of `is_cube_placed`).
 pub const GOAL_RADIUS: f64 = 0.05;
-/// Height of the goal region's frame.
-pub const GOAL_Z: f64 = 0.001;
-/// The goal region's quaternion `euler2quat(0, π/2, 0)` = (√½, 0, √½, 0) (w, x, y, z).
-pub const GOAL_QUAT: [f64; 4] = [FRAC_1_SQRT_2, 0.0, FRAC_1_SQRT_2, 0.0];
 /// Cube colour.
 pub const CUBE_RGBA: Rgba = [1.0, 0.0, 0.0, 1.0];
 /// Peg colour (both halves): (12, 42, 160)/255.
 pub const PEG_RGBA: Rgba = [12.0 / 255.0, 42.0 / 255.0, 160.0 / 255.0, 1.0];
-/// Red of the target: (194, 19, 22)/255.
-pub const TARGET_RED: Rgba = [194.0 / 255.0, 19.0 / 255.0, 22.0 / 255.0, 1.0];
-/// White of the target.
-pub const TARGET_WHITE: Rgba = [1.0, 1.0, 1.0, 1.0];
-/// Half thickness of the target's outermost ring; each inner ring is 1e-5 thicker.
-const TARGET_HALF_THICKNESS: f64 = 0.5e-5;
 /// `is_peg_cube_fit`: angle tolerance (rad).
 const FIT_ANGLE: f64 = 0.05;
 /// `is_peg_cube_fit`: head-to-cube distance tolerance (cube half size + 5 mm).
@@ -78,16 +69,6 @@ evaluation! {
         /// Peg-head-to-cube distance in xy (m).
         head_to_cube_dist: f64,
     }
-}
-
-/// The target's rings `(radius, half thickness, colour)`, outermost first:
-/// radii 0.05·{1, 4/5, 3/5, 2/5, 1/5}, alternating red and white.
-pub fn target_rings() -> [(f64, f64, Rgba); 5] {
-    std::array::from_fn(|k| {
-        let r = GOAL_RADIUS * (5 - k) as f64 / 5.0;
-        let colour = if k % 2 == 0 { TARGET_RED } else { TARGET_WHITE };
-        (r, TARGET_HALF_THICKNESS + k as f64 * 1e-5, colour)
-    })
 }
 
 /// The peg head offset `peg_head_offsets.p` (world axes, not rotated: upstream quirk).
@@ -118,14 +99,6 @@ impl PokeCube {
     /// The task (panda and fetch share every constant).
     pub fn new() -> Self {
         Self::default()
-    }
-
-    /// `agent.tcp.pose`: the TCP link's position and raw quaternion.
-    fn tcp(&self, ctx: &TaskCtx) -> (Vector3<f64>, [f64; 4]) {
-        match ctx.robot.tcp_body {
-            Some(b) => (ctx.body_pos(b), ctx.body_quat(b)),
-            None => (Vector3::from(ctx.tcp_pos), ctx.tcp_quat),
-        }
     }
 
     /// `evaluate()`, typed.
@@ -164,7 +137,7 @@ impl Task for PokeCube {
         let w = PEG_HALF_WIDTH;
         scene.add_peg("peg", PEG_HALF_LENGTH, w, PEG_RGBA, [0.0, 0.0, w]);
         // Not hidden: the sensor camera sees the target.
-        scene.add_marker_target("goal_region", &target_rings());
+        scene.add_marker_target("goal_region", &red_white_target(GOAL_RADIUS));
         add_cameras(scene, self.cameras());
     }
 
@@ -204,14 +177,14 @@ impl Task for PokeCube {
         let goal = [
             cube[0] + (GOAL_RADIUS + 0.05) as f32,
             cube[1],
-            GOAL_Z as f32,
+            TARGET_Z as f32,
         ];
 
         let f64s = |v: [f32; 3]| v.map(|x| x as f64);
         set_free_pose(data, self.peg_qadr, f64s(peg), [1.0, 0.0, 0.0, 0.0]);
         set_free_pose(data, self.cube_qadr, f64s(cube), yaw_quat_f32(yaw));
         let model = data.model().clone();
-        set_mocap_pose(&model, data, self.goal, f64s(goal), GOAL_QUAT);
+        set_mocap_pose(&model, data, self.goal, f64s(goal), TARGET_QUAT);
     }
 
     // ---- evaluate ------------------------------------------------------------------------
@@ -225,7 +198,7 @@ impl Task for PokeCube {
 
     // ---- observation extras ------------------------------------------------------------------
     fn observe_extra(&self, ctx: &TaskCtx, _info: &[f64], state: bool, out: &mut ObsWriter) {
-        let (tcp, tcp_q) = self.tcp(ctx);
+        let (tcp, tcp_q) = ctx.tcp_link_pose();
         out.pose("tcp_pose", tcp, tcp_q);
         if state {
             let (cube, peg, goal) = (
@@ -249,7 +222,7 @@ impl Task for PokeCube {
         if e.success {
             return MAX_REWARD;
         }
-        let (tcp, _) = self.tcp(ctx);
+        let (tcp, _) = ctx.tcp_link_pose();
         let (cube, peg, goal) = (
             ctx.body_pos(self.cube),
             ctx.body_pos(self.peg),

@@ -136,6 +136,8 @@ pub fn task_description(env_id: &str) -> String {
         }
         "PokeCube-v1" => "Grasp the peg and push the cube with it into the goal region.".into(),
         "PlaceSphere-v1" => "Pick up the sphere and place it in the bin.".into(),
+        "PushCube-v1" => "Push the cube to the goal region in front of it.".into(),
+        "PullCube-v1" => "Pull the cube onto the target.".into(),
         other => other.to_string(),
     }
 }
