@@ -555,10 +555,13 @@ def main(argv=None):
     # keeps) and the options it was parsed from.
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
         sys.argv[1:] if argv is None else argv)
+    # The policy files' training_command is the command as typed (relative demo paths
+    # included); the checkpoint's argv, which --resume runs again, names the demos by
+    # absolute path.
+    command = ckpt["command"] if ckpt is not None else command_line(run_argv)
     if ckpt is None and args.demos:
         # The demo files by absolute path: a resume from another directory finds them.
         run_argv = with_values(run_argv, "--demos", [os.path.abspath(f) for f in args.demos])
-    command = ckpt["command"] if ckpt is not None else command_line(run_argv)
     if ckpt is not None:
         check_checkpoint_is_the_runs(out, command, robot, mode)
 

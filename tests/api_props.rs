@@ -261,12 +261,15 @@ proptest! {
             }
         }
         s.elapsed_steps = steps;
-        // The documented bounds: physics within 1e10 but ctrl (finite), targets within f32.
+        // The documented bounds: physics within 1e10 but ctrl and qfrc_applied (finite),
+        // targets within f32.
         let m = env.model();
         let c0 = 1 + m.nq() + m.nv() + m.na();
         let ctrl = c0..c0 + m.nu();
+        let applied = ctrl.end + m.nv()..ctrl.end + 2 * m.nv();
         let valid = s.physics.iter().enumerate()
-                .all(|(i, x)| x.is_finite() && (x.abs() <= 1e10 || ctrl.contains(&i)))
+                .all(|(i, x)| x.is_finite()
+                    && (x.abs() <= 1e10 || ctrl.contains(&i) || applied.contains(&i)))
             && s.controller.iter().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64)
             && s.finger_forces.as_flattened().iter().all(|x| x.is_finite() && x.abs() <= 1e10)
             && s.physics[0] >= 0.0 && steps != u32::MAX;

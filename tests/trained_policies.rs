@@ -11,8 +11,8 @@ use mjskill::solvers::PolicyFile;
 
 /// (file, env id, robot, control mode, success rate of `mjskill eval --policy FILE --episodes
 /// 100 --seed 10000`, measured on 29 November 2026 after the drives became PhysX's sequential
-/// impulses; the Panda's three are cloned from the solvers' noise-injected episodes,
-/// docs/training.md).
+/// impulses; the Panda's three and the Fetch's two are cloned from the solvers'
+/// noise-injected episodes, docs/training.md).
 const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
@@ -62,6 +62,20 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "widowxai",
         "pd_joint_delta_pos",
         0.98,
+    ),
+    (
+        "PickCube-v1__fetch.onnx",
+        "PickCube-v1",
+        "fetch",
+        "pd_joint_pos",
+        0.91,
+    ),
+    (
+        "PokeCube-v1__fetch.onnx",
+        "PokeCube-v1",
+        "fetch",
+        "pd_joint_pos",
+        1.00,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
@@ -125,6 +139,16 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
                 m.training_command
             );
             assert!(m.props.iter().any(|(k, _)| k == "demos"), "{file}");
+            // Files cloned since recordings keep their command also carry how their demos
+            // were recorded (the Panda's three predate it).
+            if let Some((_, c)) = m.props.iter().find(|(k, _)| k == "demos_command") {
+                assert!(
+                    c.starts_with(&format!("mjskill rollout --env {env_id} --robot {robot} ")),
+                    "{file}: {c}"
+                );
+            } else {
+                assert_eq!(robot, "panda", "{file}: no demos_command");
+            }
         } else {
             assert!(
                 m.training_command
