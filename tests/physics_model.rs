@@ -5,7 +5,7 @@
 //! full model gives the same trajectory, bit for bit.
 
 use mjskill::mujoco::{Data, ObjType};
-use mjskill::{make, registry, EnvConfig};
+use mjskill::{make, registry, Env, EnvConfig};
 use rand::{Rng, SeedableRng};
 
 /// Every (env id, robot) pair of the registry.
@@ -16,17 +16,22 @@ fn pairs() -> Vec<(&'static str, &'static str)> {
         .collect()
 }
 
+/// The env of a pair, state observations.
+fn env(id: &str, robot: &str) -> Env {
+    make(
+        id,
+        EnvConfig {
+            robot: Some(robot.into()),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 #[test]
 fn the_physics_model_has_no_drawn_only_geom_and_the_render_model_has_them_all() {
     for (id, robot) in pairs() {
-        let mut e = make(
-            id,
-            EnvConfig {
-                robot: Some(robot.into()),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut e = env(id, robot);
         assert!(e.render_model().is_none(), "{id}/{robot}: no renderer yet");
         e.render()
             .expect("rendering must be available (bash .ci/setup installs EGL/Mesa)");
@@ -78,14 +83,7 @@ fn the_physics_model_has_no_drawn_only_geom_and_the_render_model_has_them_all() 
 #[test]
 fn the_full_model_steps_the_same_trajectory_bit_for_bit() {
     for (id, robot) in pairs() {
-        let mut e = make(
-            id,
-            EnvConfig {
-                robot: Some(robot.into()),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut e = env(id, robot);
         e.render().unwrap();
         let full = e.render_model().unwrap().clone();
         e.reset(Some(7));

@@ -184,6 +184,42 @@ fn check_count(flag: &str, n: usize, max: usize) -> Result<(), CliError> {
     Ok(())
 }
 
+/// VecEnv steps per second summed over its envs (best of three timed passes after a
+/// warm-up), every env following the single env's action sequence `actions` (`steps` rows of
+/// `dim`), so that the workload per env step is the single env's.
+fn vec_env_rate(
+    v: &mut mjskill::VecEnv,
+    actions: &[f32],
+    dim: usize,
+    steps: usize,
+) -> Result<f64, CliError> {
+    let n = v.num_envs();
+    let vsteps = (steps / n).max(1);
+    let mut acts = vec![0.0f32; n * dim];
+    let fill = |t: usize, acts: &mut [f32]| {
+        let row = &actions[(t % steps) * dim..(t % steps + 1) * dim];
+        for chunk in acts.chunks_mut(dim) {
+            chunk.copy_from_slice(row);
+        }
+    };
+    v.reset(Some(0));
+    for t in 0..vsteps / 10 + 1 {
+        fill(t, &mut acts);
+        v.step(&acts)?;
+    }
+    let mut best = 0.0f64;
+    for _ in 0..3 {
+        v.reset(Some(0));
+        let t0 = Instant::now();
+        for t in 0..vsteps {
+            fill(t, &mut acts);
+            v.step(&acts)?;
+        }
+        best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
 /// Runs the benchmark. Every argument is checked (and the VecEnv built) before any timing.
 pub fn run(
     env_id: &str,
@@ -257,34 +293,7 @@ pub fn run(
     let phys = mj_rate / substeps as f64;
     let vec_rate = match vec_env.as_mut() {
         None => None,
-        Some(v) => {
-            let n = v.num_envs();
-            // Every env follows the single env's action sequence (same workload per env step).
-            let vsteps = (steps / n).max(1);
-            let mut acts = vec![0.0f32; n * dim];
-            let fill = |t: usize, acts: &mut [f32]| {
-                let row = &actions[(t % steps) * dim..(t % steps + 1) * dim];
-                for chunk in acts.chunks_mut(dim) {
-                    chunk.copy_from_slice(row);
-                }
-            };
-            v.reset(Some(0));
-            for t in 0..vsteps / 10 + 1 {
-                fill(t, &mut acts);
-                v.step(&acts)?;
-            }
-            let mut best = 0.0f64;
-            for _ in 0..3 {
-                v.reset(Some(0));
-                let t0 = Instant::now();
-                for t in 0..vsteps {
-                    fill(t, &mut acts);
-                    v.step(&acts)?;
-                }
-                best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());
-            }
-            Some(best)
-        }
+        Some(v) => Some(vec_env_rate(v, &actions, dim, steps)?),
     };
     let render_rate = match render_frames {
         None => None,
