@@ -43,7 +43,7 @@ use crate::mujoco::BodyId;
 /// Gripper pitch for the farthest cubes (rad below the horizontal). With the other tasks'
 /// 5° the stretched arm's forearm rests on the table top and holds the gripper ≈ 1 cm above
 /// its grasp point; 10° raises the wrist clear of it at the cost of < 2 mm of reach.
-pub(super) const PICK_PITCH_FAR: f64 = 10.0 * std::f64::consts::PI / 180.0;
+const PICK_PITCH_FAR: f64 = 10.0 * std::f64::consts::PI / 180.0;
 /// Orientation tolerance before descending (rad).
 pub(super) const ROT_TOL: f64 = 0.05;
 /// The grasp phases with the tilted gripper's descent check: along the fingers (≈ x) a
@@ -89,6 +89,14 @@ pub struct FetchPickCube {
     hold_offset: Vector3<f64>,
 }
 
+/// The gripper pitch for picking a cube at `cube` (flatter for far cubes) and how far above
+/// the cube centre the grasp point is raised so that the tilted fingers and palm stay clear
+/// of the table: the pick of PickCube's and PullCube's Fetch solvers.
+pub(super) fn pick_pitch_and_height(cube: Vector3<f64>) -> (f64, f64) {
+    let pitch = pitch_for_x(cube.x, PICK_PITCH_FAR);
+    (pitch, (min_tcp_height(pitch) - cube.z).max(0.0))
+}
+
 impl FetchPickCube {
     /// Resolves the bodies of a PickCube env with Fetch.
     pub fn new(env: &Env) -> Result<Self, super::SolverError> {
@@ -108,8 +116,7 @@ impl Policy for FetchPickCube {
     fn reset(&mut self, env: &Env) {
         self.phases.reset();
         let cube = body_xyz(env, self.cube);
-        self.pitch = pitch_for_x(cube.x, PICK_PITCH_FAR);
-        self.grasp_height = (min_tcp_height(self.pitch) - cube.z).max(0.0);
+        (self.pitch, self.grasp_height) = pick_pitch_and_height(cube);
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {

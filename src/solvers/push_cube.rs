@@ -37,7 +37,7 @@
 use nalgebra::Vector3;
 
 use super::body_id;
-use super::fetch::{approached_tilted, GRASP, PICK_PITCH_FAR, ROT_TOL, TORSO_PICK};
+use super::fetch::{approached_tilted, pick_pitch_and_height, GRASP, ROT_TOL, TORSO_PICK};
 use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, ArmCommand, FetchArm, PITCH_FAR,
 };
@@ -337,8 +337,7 @@ impl Policy for FetchPull {
     fn reset(&mut self, env: &Env) {
         self.phases.reset();
         let cube = body_xyz(env, self.cube);
-        self.pitch = pitch_for_x(cube.x, PICK_PITCH_FAR);
-        self.grasp_height = (min_tcp_height(self.pitch) - cube.z).max(0.0);
+        (self.pitch, self.grasp_height) = pick_pitch_and_height(cube);
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
