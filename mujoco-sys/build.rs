@@ -2,6 +2,9 @@
 //!
 //! Debian ships the headers in `libmujoco-dev` (as `/usr/include/mujoco/mujoco.h`) and no
 //! pkg-config file, so the library is linked by name. bindgen needs libclang (`libclang-dev`).
+//!
+//! `MUJOCO_INCLUDE_DIR` and `MUJOCO_LIB_DIR` point the build at another MuJoCo 2.2.2: the
+//! manylinux wheel builds against one compiled for glibc 2.28 (python/build_mujoco.sh).
 use std::env;
 use std::path::PathBuf;
 
@@ -24,6 +27,13 @@ fn main() {
         fail(&format!("MuJoCo headers not found at {}", header.display()));
     }
     println!("cargo:rerun-if-changed={}", header.display());
+    println!("cargo:rerun-if-env-changed=MUJOCO_LIB_DIR");
+    if let Ok(lib_dir) = env::var("MUJOCO_LIB_DIR") {
+        if !PathBuf::from(&lib_dir).join("libmujoco.so").exists() {
+            fail(&format!("MUJOCO_LIB_DIR={lib_dir} has no libmujoco.so"));
+        }
+        println!("cargo:rustc-link-search=native={lib_dir}");
+    }
     println!("cargo:rustc-link-lib=dylib=mujoco");
 
     // bindgen panics when libclang cannot be loaded; turn that into the one-line message.

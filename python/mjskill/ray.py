@@ -265,6 +265,12 @@ class _RolloutActor:
         """The actor's process id."""
         return os.getpid()
 
+    def node(self) -> tuple[str, str]:
+        """The Ray node the actor runs on: ``(node id, node IP address)``."""
+        import ray
+
+        return ray.get_runtime_context().get_node_id(), ray.util.get_node_ip_address()
+
     def spaces(self):
         v = self.vec
         return v.single_observation_space, v.single_action_space, v.max_episode_steps, {
@@ -290,7 +296,9 @@ class RayVectorEnv:
     :class:`~mjskill.MjskillVectorEnv` of ``num_envs`` envs gives (env ``i`` is seeded with
     ``seed + i`` and samples its actions from its own stream, whichever actor holds it).
     Ray is initialised with ``address`` (default: ``RAY_ADDRESS`` or a local Ray) unless it
-    already is; the actors go wherever the cluster has CPUs.
+    already is. With ``spread`` (the default) Ray places the actors on as many nodes as it
+    can (its ``SPREAD`` scheduling strategy), so that a cluster's nodes share the work rather
+    than the first node filling up; :meth:`nodes` tells where each went.
 
     ``workers × num_threads`` CPUs must fit in the cluster (``ray.cluster_resources()``, the
     CPUs of the nodes up now: an autoscaling cluster's nodes must be started first), or this
@@ -301,7 +309,7 @@ class RayVectorEnv:
 
     def __init__(self, env_id: str, num_envs: int, workers: int, num_threads: int = 1,
                  address: str | None = None, timeout: float | None = 600.0,
-                 **env_kwargs: Any):
+                 spread: bool = True, **env_kwargs: Any):
         import ray
 
         num_envs = _native.check_count(num_envs, "num_envs")
@@ -324,7 +332,10 @@ class RayVectorEnv:
                 "(ray.cluster_resources()['CPU']), so its actors would never start; use fewer "
                 f"workers or num_threads (at most {int(cpus)} CPUs in all)"
             )
-        actor = ray.remote(num_cpus=num_threads)(_RolloutActor)
+        if not isinstance(spread, bool):
+            raise TypeError(f"spread must be True or False, not {spread!r}")
+        actor = ray.remote(num_cpus=num_threads,
+                           scheduling_strategy="SPREAD" if spread else "DEFAULT")(_RolloutActor)
         self._actors = [actor.remote(env_id, f, n, num_threads, env_kwargs)
                         for f, n in self.shares]
         obs_space, act_space, steps, attrs = self._get(
@@ -351,6 +362,11 @@ class RayVectorEnv:
                 "starved of CPUs); the timeout is RayVectorEnv(timeout=...)"
             )
         return ray.get(refs)
+
+    def nodes(self) -> list[tuple[str, str]]:
+        """Where each actor runs: ``(Ray node id, node IP address)`` per actor, in the order of
+        :attr:`shares`."""
+        return self._get([a.node.remote() for a in self._live()], "nodes")
 
     def _live(self) -> list:
         """The actors, or a ``RuntimeError`` once :meth:`close` has ended them."""

@@ -13,28 +13,9 @@ import pytest
 import mjskill
 from mjskill import GaussianMlp, MjskillVectorEnv
 
+from rollout_case import KW, params, ppo_args, rollout
+
 REPO = Path(__file__).resolve().parents[2]
-KW = dict(max_episode_steps=6)
-
-
-def params(obs_dim, act_dim, seed=0, hidden=16):
-    """GaussianMlp keyword arguments with seeded weights (numpy only)."""
-    r = np.random.default_rng(seed)
-    layers = [
-        (r.normal(0, 0.4, (obs_dim, hidden)).astype(np.float32),
-         r.normal(0, 0.1, hidden).astype(np.float32)),
-        (r.normal(0, 1.5, (hidden, act_dim)).astype(np.float32),
-         r.normal(0, 0.1, act_dim).astype(np.float32)),
-    ]
-    return dict(layers=layers, obs_mean=r.normal(0, 0.1, obs_dim),
-                obs_std=r.uniform(0.5, 2.0, obs_dim), obs_clip=10.0,
-                std=np.full(act_dim, 0.3, np.float32), seed=7)
-
-
-def rollout(vec, p, steps, first_step=0, env_offset=0):
-    buf = vec.rollout_buffers(steps)
-    last = vec.rollout(GaussianMlp(**p, env_offset=env_offset), first_step, buf)
-    return buf, last
 
 
 def test_rollout_steps_with_the_clipped_sampled_actions():
@@ -139,6 +120,9 @@ def test_ray_shards_roll_out_bit_for_bit_as_one_vector_env(local_ray):
     local = MjskillVectorEnv("PickCube-v1", num_envs=n, num_threads=2, **KW)
     remote = RayVectorEnv("PickCube-v1", n, workers=2, **KW)
     assert remote.shares == [(0, 3), (3, 2)]
+    # One node here: both actors on it (test_ray_cluster.py puts them on two).
+    where = remote.nodes()
+    assert len(where) == 2 and len({node for node, _ in where}) == 1, where
     obs_dim = local.single_observation_space.shape[0]
     act_dim = local.single_action_space.shape[0]
     np.testing.assert_array_equal(remote.reset(seed=9), local.reset(seed=9)[0])
@@ -191,15 +175,13 @@ def test_ray_env_refuses_what_the_local_env_refuses_before_stepping(local_ray):
         remote.rollout(p, 0, good)
     with pytest.raises(ValueError, match="timeout must be"):
         RayVectorEnv("PickCube-v1", 1, workers=1, timeout=float("nan"), **KW)
+    with pytest.raises(TypeError, match="spread must be True or False, not 'yes'"):
+        RayVectorEnv("PickCube-v1", 1, workers=1, spread="yes", **KW)
 
 
 def ppo(tmp_path, name, *extra):
     out = tmp_path / name
-    cmd = [sys.executable, str(REPO / "examples" / "ppo.py"), "--env-id", "PickCube-v1",
-           "--num-envs", "6", "--num-steps", "8", "--num-minibatches", "2",
-           "--total-timesteps", "96", "--num-eval-envs", "2", "--eval-freq", "100",
-           "--num-threads", "1", "--torch-threads", "1", "--hidden", "32", "32",
-           "--rollout", "native", "--out", str(out), *extra]
+    cmd = [sys.executable, str(REPO / "examples" / "ppo.py"), *ppo_args(out), *extra]
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}  # a local Ray
     subprocess.run(cmd, check=True, env=env, capture_output=True, timeout=600)
     return out
