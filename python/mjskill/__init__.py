@@ -29,8 +29,12 @@ __all__ = [
     "make_env",
     "make_vector_env",
     "registered",
+    "STATE_EXPERTS",
 ]
 __version__ = _native.__version__
+#: The (env id, robot, the expert's own control mode) pairs whose envs have
+#: :meth:`MjskillEnv.expert_action`: labels that are a function of the state (DAgger).
+STATE_EXPERTS: tuple[tuple[str, str, str], ...] = tuple(_native.state_experts())
 
 
 def registered() -> list[tuple[str, str]]:

@@ -131,6 +131,13 @@ class MjskillEnv(gym.Env):
         _check_finite(state_dict, "")
         self._native.set_state_dict(json.dumps(state_dict, default=_jsonable))
 
+    def expert_action(self) -> np.ndarray:
+        """The state expert's action for the current state (issue 55's DAgger labels): a
+        function of the state alone, so it can label any state a learner reaches, in this
+        env's control mode (converted from the expert's own). Pairs: ``mjskill.STATE_EXPERTS``;
+        any other is a ``ValueError`` naming the pair and those that have one."""
+        return self._native.expert_action()
+
     @property
     def elapsed_steps(self) -> int:
         return self._native.elapsed_steps()

@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
+use mjskill::solvers::{state_expert, StateExpert};
 use mjskill::VecEnv;
 use mjskill::{Env, EnvConfig, EnvError, EnvState};
 use numpy::ndarray::ArrayView2;
@@ -234,6 +235,8 @@ fn point_cloud_dict<'py, 'a>(
 #[pyclass(module = "mjskill._native", name = "Env")]
 struct PyEnv {
     env: Mutex<Env>,
+    /// The state expert (`expert_action`), built on first use.
+    expert: Mutex<Option<Box<dyn StateExpert>>>,
 }
 
 impl PyEnv {
@@ -254,7 +257,27 @@ impl PyEnv {
             .map_err(value_err)?;
         Ok(PyEnv {
             env: Mutex::new(env),
+            expert: Mutex::new(None),
         })
+    }
+
+    /// The state expert's action for the current state (`mjskill.solvers::state_expert`):
+    /// a function of the state alone, for DAgger labels. A pair without an expert, or a mode
+    /// its actions cannot be converted to, is a `ValueError` naming it.
+    fn expert_action<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let env = self.lock(py)?;
+        let mut expert = lock_without_gil(py, &self.expert)?;
+        // One physics step at most (a converted mode's shadow env): the GIL stays held.
+        let action = (|| {
+            if expert.is_none() {
+                *expert = Some(state_expert(&env)?);
+            }
+            let mut a = vec![0.0f32; env.action_space().shape[0]];
+            expert.as_mut().map_or(Ok(()), |e| e.label(&env, &mut a))?;
+            Ok::<_, mjskill::solvers::SolverError>(a)
+        })();
+        let action = action.map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(PyArray1::from_vec(py, action))
     }
 
     /// The env's static description (ids, modes, space bounds, observation layout,
@@ -827,6 +850,12 @@ fn check_count(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize> {
 }
 
 /// The `mjskill._native` module.
+/// The pairs with a state expert (`Env.expert_action`): `[(env_id, robot, its own mode)]`.
+#[pyfunction]
+fn state_experts() -> Vec<(&'static str, &'static str, &'static str)> {
+    mjskill::solvers::STATE_EXPERTS.to_vec()
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyEnv>()?;
@@ -836,6 +865,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(record_episodes, m)?)?;
     m.add_function(wrap_pyfunction!(registry, m)?)?;
     m.add_function(wrap_pyfunction!(control_modes, m)?)?;
+    m.add_function(wrap_pyfunction!(state_experts, m)?)?;
     m.add_function(wrap_pyfunction!(check_seed, m)?)?;
     m.add_function(wrap_pyfunction!(check_count, m)?)?;
     m.add("ENV_KWARGS", env_kwargs_defaults(m.py())?)?;

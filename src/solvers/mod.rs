@@ -9,6 +9,7 @@
 
 mod convert;
 mod evaluate;
+pub mod expert;
 pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
@@ -30,6 +31,7 @@ pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
+pub use expert::{state_expert, StateExpert, STATE_EXPERTS};
 pub use mlp::{GaussianMlp, MlpError, MAX_LAYER_ELEMENTS};
 pub use noise::{ActionNoise, NoiseError};
 #[cfg(feature = "onnx")]
@@ -81,6 +83,16 @@ pub enum SolverError {
         /// The solved pairs.
         available: String,
     },
+    /// No state expert ([`expert`]) for this (env, robot) pair.
+    #[error("no state expert for {env} with {robot}; available: {available}")]
+    NoStateExpert {
+        /// The env id.
+        env: &'static str,
+        /// The robot.
+        robot: &'static str,
+        /// The pairs that have one.
+        available: String,
+    },
     /// The Fetch solvers need the 15-dof Fetch.
     #[error("the Fetch solvers need the 15-dof Fetch")]
     FetchDof,
@@ -112,7 +124,7 @@ pub enum SolverError {
 pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
 
 /// A policy: fills an action for the env's current state.
-pub trait Policy: std::fmt::Debug {
+pub trait Policy: std::fmt::Debug + Send {
     /// Called after every reset.
     fn reset(&mut self, env: &Env);
     /// Writes the next action into `action` (length = the env's action dimension).

@@ -1,0 +1,51 @@
+"""MjskillEnv.expert_action: the state expert's label for the current state (issue 55's
+DAgger labels), a function of the state, in the env's control mode."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import mjskill
+
+
+def run(env, seed, random_steps=0):
+    """``random_steps`` random actions, then the expert; success at any expert step."""
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    success = False
+    for t in range(50):
+        a = env.action_space.sample() if t < random_steps else env.unwrapped.expert_action()
+        _, _, terminated, _, _ = env.step(a)
+        success |= t >= random_steps and bool(terminated)
+    return success
+
+
+def test_the_experts_are_listed_and_solve_their_pairs():
+    assert ("PickCube-v1", "panda", "pd_ee_delta_pos") in mjskill.STATE_EXPERTS
+    for env_id, robot, mode in mjskill.STATE_EXPERTS:
+        env = gym.make(f"mjskill/{env_id}", robot_uids=robot, control_mode=mode,
+                       max_episode_steps=None)
+        assert sum(run(env, s) for s in range(7300, 7310)) >= 9, env_id
+        # From wherever five random actions left the arm.
+        assert sum(run(env, s, random_steps=5) for s in range(7310, 7320)) >= 8, env_id
+
+
+def test_a_label_is_the_same_for_the_same_state_and_in_the_env_mode():
+    a = gym.make("mjskill/PickCube-v1", control_mode="pd_joint_pos")
+    b = gym.make("mjskill/PickCube-v1", control_mode="pd_joint_pos")
+    a.reset(seed=5)
+    b.reset(seed=6)
+    for _ in range(12):
+        label = a.unwrapped.expert_action()
+        assert label.dtype == np.float32 and label.shape == a.action_space.shape
+        b.unwrapped.set_state(a.unwrapped.get_state())
+        np.testing.assert_array_equal(b.unwrapped.expert_action(), label)
+        a.step(label)
+
+
+def test_a_pair_without_an_expert_is_a_value_error_naming_it():
+    env = gym.make("mjskill/PokeCube-v1", robot_uids="fetch")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch; "
+                                         "available: PickCube-v1 with panda"):
+        env.unwrapped.expert_action()

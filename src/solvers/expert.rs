@@ -1,0 +1,274 @@
+//! Experts that label any state, for DAgger (issue 55): the action depends on the env's
+//! current state alone, never on what the expert did before.
+//!
+//! The scripted solvers (`--policy solver`, [`super::make_policy`]) run phases whose
+//! "k steps" count their own actions and never go back, so asked along a learner's path they
+//! label the phase their history says, not the one the state shows.
+//! An expert here reads its phase off the state each time: whether the object is grasped
+//! (the task's own grasp flag), where the TCP is against the object, how far the gripper is
+//! open, where the object is against its goal. Any state, reached by anyone, gets the action
+//! that continues the task from it, so [`StateExpert::label`] can be asked along a learner's
+//! path, in any order, any number of times.
+//!
+//! In another control mode of the robot the expert's actions are converted as the solvers'
+//! are ([`super::ModeConverted`], a shadow env synced to the state each call, so still a
+//! function of the state): joint position targets come out within π of the current angle on
+//! continuous joints.
+//!
+//! Pairs: PickCube-v1 and PlaceSphere-v1 with the Panda ([`STATE_EXPERTS`]); any other is a
+//! clear error naming the pair and the ones that have an expert.
+use nalgebra::Vector3;
+
+use super::{
+    body_id, body_xyz, ee_action, tcp_link_xyz, tcp_xyz, Gripper, ModeConverted, Policy,
+    SolverError, APPROACH_HEIGHT, PANDA_GRIPPER,
+};
+use crate::env::Env;
+use crate::mujoco::BodyId;
+use crate::tasks::place_sphere::{RADIUS, SHORT_SIDE_HALF};
+
+/// The (env id, robot) pairs that have a state expert, in its own control mode.
+pub const STATE_EXPERTS: [(&str, &str, &str); 2] = [
+    ("PickCube-v1", "panda", "pd_ee_delta_pos"),
+    ("PlaceSphere-v1", "panda", "pd_ee_delta_pos"),
+];
+
+/// The TCP is over the object within this (m, horizontal): the descent may start.
+const OVER_XY: f64 = 0.01;
+/// The TCP is at the grasp point within this (m): the gripper closes.
+const AT_GRASP: f64 = 0.006;
+/// Panda: the fingers are open enough to descend around a 4 cm object (m, finger gap).
+const OPEN_GAP: f64 = 0.06;
+/// Panda: a gap below this without a grasp closed on nothing (m): open again.
+const MISSED_GAP: f64 = 0.03;
+/// A grasped object is held once the fingers close slower than this (m/s, the gap's rate);
+/// until then the gripper goes on closing where it is (the solvers' three closing steps,
+/// read off the fingers' motion: a cube grasped across its diagonal stops them at 5.7 cm).
+const HELD_SPEED: f64 = 0.02;
+
+/// An expert that labels any state with the action that continues the task from it.
+pub trait StateExpert: std::fmt::Debug + Send {
+    /// Writes the expert's action for `env`'s current state into `action` (the env's action
+    /// dimension). A function of the state: the same state gives the same action, bit for bit.
+    fn label(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError>;
+}
+
+/// The state expert of `env`'s (env, robot) pair, in `env`'s control mode (converted from the
+/// expert's own where they differ).
+pub fn state_expert(env: &Env) -> Result<Box<dyn StateExpert>, SolverError> {
+    let robot = env.robot_spec().uid();
+    let Some(&(_, _, mode)) = STATE_EXPERTS
+        .iter()
+        .find(|(e, r, _)| *e == env.id() && *r == robot)
+    else {
+        return Err(SolverError::NoStateExpert {
+            env: env.id(),
+            robot,
+            available: STATE_EXPERTS
+                .iter()
+                .map(|(e, r, _)| format!("{e} with {r}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    };
+    if env.control_mode() == mode {
+        return native(env).map(|p| Box::new(Labeller(p)) as Box<dyn StateExpert>);
+    }
+    let converted = ModeConverted::new(env, mode, native)?;
+    Ok(Box::new(Labeller(Box::new(converted))))
+}
+
+/// The expert of `env`'s pair in its own mode, as a [`Policy`] whose `act` reads only the state.
+fn native(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
+    match env.id() {
+        "PickCube-v1" => Ok(Box::new(PickCubeExpert::new(env, PANDA_GRIPPER)?)),
+        _ => Ok(Box::new(PlaceSphereExpert::new(env, PANDA_GRIPPER)?)),
+    }
+}
+
+/// A history-free policy as a [`StateExpert`].
+#[derive(Debug)]
+struct Labeller(Box<dyn Policy>);
+
+impl StateExpert for Labeller {
+    fn label(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError> {
+        self.0.try_act(env, action)
+    }
+}
+
+/// What every grasping expert reads off the state: the TCP, the gripper's gap, the grasp flag.
+#[derive(Debug, Clone, Copy)]
+struct Grip {
+    gripper: Gripper,
+    /// qpos addresses of the two finger joints (their sum is the gap).
+    fingers: [usize; 2],
+    /// Their dof addresses (the gap's rate).
+    finger_dofs: [usize; 2],
+}
+
+impl Grip {
+    fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
+        let joints = &env.robot().joints;
+        let spec = env.robot_spec();
+        let ks: Vec<usize> = (0..joints.len())
+            .filter(|&k| spec.gripper_joints.contains(&joints.names[k].as_str()))
+            .collect();
+        let [k0, k1] = <[usize; 2]>::try_from(ks).map_err(|k| SolverError::NoStateExpert {
+            env: env.id(),
+            robot: spec.uid(),
+            available: format!("robots with two finger joints (this one has {})", k.len()),
+        })?;
+        Ok(Grip {
+            gripper,
+            fingers: [joints.qpos_adr[k0], joints.qpos_adr[k1]],
+            finger_dofs: [joints.dof_adr[k0], joints.dof_adr[k1]],
+        })
+    }
+
+    fn gap(&self, env: &Env) -> f64 {
+        let q = env.data().qpos();
+        q[self.fingers[0]] + q[self.fingers[1]]
+    }
+
+    /// The object is grasped (the task's flag) and the gripper has closed on it.
+    fn holds(&self, env: &Env) -> bool {
+        let v = env.data().qvel();
+        let closing = -(v[self.finger_dofs[0]] + v[self.finger_dofs[1]]);
+        env.info().flag(env.grasp_info_key()) && closing < HELD_SPEED
+    }
+
+    /// The TCP target and gripper action that bring an open gripper onto the grasp point
+    /// `point` and close it there, from wherever the TCP and gripper are.
+    fn grasp(&self, env: &Env, point: Vector3<f64>, tcp: Vector3<f64>) -> (Vector3<f64>, f32) {
+        let Gripper { open, close } = self.gripper;
+        let gap = self.gap(env);
+        let over = (tcp.xy() - point.xy()).norm() < OVER_XY;
+        if gap < MISSED_GAP {
+            // Closed on nothing: open, rising to the approach height.
+            (point + Vector3::new(0.0, 0.0, APPROACH_HEIGHT), open)
+        } else if over && (tcp - point).norm() < AT_GRASP {
+            (point, close)
+        } else if over && gap > OPEN_GAP {
+            (point, open)
+        } else {
+            (point + Vector3::new(0.0, 0.0, APPROACH_HEIGHT), open)
+        }
+    }
+}
+
+/// PickCube: grasp the cube from above, carry it to the goal.
+#[derive(Debug)]
+pub(crate) struct PickCubeExpert {
+    cube: BodyId,
+    goal: BodyId,
+    grip: Grip,
+}
+
+impl PickCubeExpert {
+    /// Resolves the cube, goal and finger joints of a PickCube env.
+    pub(crate) fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
+        Ok(PickCubeExpert {
+            cube: body_id(env.model(), "cube")?,
+            goal: body_id(env.model(), "goal_site")?,
+            grip: Grip::new(env, gripper)?,
+        })
+    }
+}
+
+impl Policy for PickCubeExpert {
+    fn reset(&mut self, _env: &Env) {}
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_xyz(env);
+        let cube = body_xyz(env, self.cube);
+        let (target, grip) = if self.grip.holds(env) {
+            (body_xyz(env, self.goal), self.grip.gripper.close)
+        } else {
+            self.grip.grasp(env, cube, tcp)
+        };
+        ee_action(target, tcp, 1.0, grip, action);
+    }
+}
+
+/// PlaceSphere: grasp the sphere, lift it clear of the bin's walls, carry it over the bin,
+/// lower it onto the floor, let go and hold still.
+#[derive(Debug)]
+pub(crate) struct PlaceSphereExpert {
+    sphere: BodyId,
+    bin: BodyId,
+    grip: Grip,
+}
+
+/// Carrying height of the sphere centre over the bin origin (m).
+const CARRY_ABOVE_BIN: f64 = 0.06;
+/// Carrying height tolerance (m).
+const LIFT_TOL: f64 = 0.01;
+/// The sphere is carried at least this high before it moves sideways (m over the bin origin).
+const CLEAR_ABOVE_BIN: f64 = 0.045;
+/// The sphere is over the bin within this (m, horizontal): lowering starts.
+const OVER_BIN_XY: f64 = 0.003;
+/// Once lowered into the bin's mouth, lowering goes on (and the release happens) within this
+/// (m, horizontal; the bin leaves 5 mm around the sphere).
+const LOWERING_XY: f64 = 0.006;
+/// Lowering target of the sphere centre over the bin origin (m), and the height below which
+/// it is let go.
+const LOWER_TO: f64 = 0.0255;
+const RELEASE_BELOW: f64 = 0.0285;
+/// The sphere rests in the bin (not grasped): horizontal and vertical tolerances (m), the
+/// task's `is_obj_on_bin`, widened so that a sphere settling after the release counts.
+const IN_BIN_XY: f64 = 0.01;
+const IN_BIN_Z: f64 = 0.01;
+
+impl PlaceSphereExpert {
+    /// Resolves the sphere, bin and finger joints of a PlaceSphere env.
+    pub(crate) fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
+        Ok(PlaceSphereExpert {
+            sphere: body_id(env.model(), "sphere")?,
+            bin: body_id(env.model(), "bin")?,
+            grip: Grip::new(env, gripper)?,
+        })
+    }
+}
+
+impl Policy for PlaceSphereExpert {
+    fn reset(&mut self, _env: &Env) {}
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let sphere = body_xyz(env, self.sphere);
+        let bin = body_xyz(env, self.bin);
+        let Gripper { open, close } = self.grip.gripper;
+        let rel = sphere - bin;
+        let xy = rel.xy().norm();
+        let lowering = xy < LOWERING_XY && rel.z < CARRY_ABOVE_BIN - LIFT_TOL;
+        let (target, grip) = if self.grip.holds(env) {
+            if xy < LOWERING_XY && rel.z < RELEASE_BELOW {
+                (tcp, open)
+            } else if xy < OVER_BIN_XY || lowering {
+                (
+                    tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
+                    close,
+                )
+            } else if rel.z < CLEAR_ABOVE_BIN {
+                (
+                    Vector3::new(tcp.x, tcp.y, tcp.z + (CARRY_ABOVE_BIN - rel.z)),
+                    close,
+                )
+            } else {
+                let mut offset = tcp - sphere;
+                offset.z = 0.0;
+                (
+                    bin + Vector3::new(0.0, 0.0, CARRY_ABOVE_BIN) + offset,
+                    close,
+                )
+            }
+        } else if rel.xy().norm() < IN_BIN_XY && (rel.z - RADIUS - SHORT_SIDE_HALF).abs() < IN_BIN_Z
+        {
+            // Placed: let go and hold still.
+            (tcp, open)
+        } else {
+            self.grip.grasp(env, sphere, tcp)
+        };
+        ee_action(target, tcp, 1.0, grip, action);
+    }
+}

@@ -1,0 +1,147 @@
+//! The state experts (`solvers::state_expert`, issue 55): labels that are a function of the
+//! state, that finish the task from states off their own path, in the expert's mode and
+//! converted to a joint mode, and a clear error for a pair without one.
+
+use mjskill::solvers::{evaluate, state_expert, StateExpert};
+use mjskill::{make, Env, EnvConfig};
+use rand::{Rng, SeedableRng};
+
+const MAX_STEPS: usize = 50;
+/// The experts' own control mode (Panda).
+const OWN_MODE: &str = "pd_ee_delta_pos";
+
+fn env(id: &str, mode: Option<&str>) -> Env {
+    make(
+        id,
+        EnvConfig {
+            control_mode: mode.map(str::to_string),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+/// Runs `random_steps` uniform random actions, then the expert, for the rest of the episode;
+/// whether the task succeeded at any step the expert drove.
+fn episode(env: &mut Env, expert: &mut dyn StateExpert, seed: u64, random_steps: usize) -> bool {
+    env.reset(Some(seed));
+    let dim = env.action_space().shape[0];
+    let (low, high) = (
+        env.action_space().low.clone(),
+        env.action_space().high.clone(),
+    );
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut a = vec![0.0f32; dim];
+    let mut success = false;
+    for t in 0..MAX_STEPS {
+        if t < random_steps {
+            for (k, x) in a.iter_mut().enumerate() {
+                *x = rng.random_range(low[k].max(-1.0)..high[k].min(1.0));
+            }
+        } else {
+            expert.label(env, &mut a).unwrap();
+        }
+        let step = env.step(&a).unwrap();
+        success |= t >= random_steps && step.terminated;
+    }
+    success
+}
+
+fn successes(
+    id: &str,
+    mode: Option<&str>,
+    seeds: std::ops::Range<u64>,
+    random_steps: usize,
+) -> usize {
+    let mut e = env(id, Some(mode.unwrap_or(OWN_MODE)));
+    let mut expert = state_expert(&e).unwrap();
+    seeds
+        .filter(|&s| episode(&mut e, expert.as_mut(), s, random_steps))
+        .count()
+}
+
+#[test]
+fn the_experts_solve_their_tasks_from_the_reset() {
+    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+        let n = successes(id, None, 7000..7030, 0);
+        assert!(n >= 29, "{id}: {n}/30");
+    }
+}
+
+#[test]
+fn the_experts_finish_the_task_from_states_off_their_path() {
+    // Ten uniform random actions first: the arm is anywhere, the gripper half shut, the cube
+    // or sphere sometimes pushed; a scripted solver's phase counters would be meaningless.
+    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+        let n = successes(id, None, 7100..7130, 10);
+        assert!(n >= 25, "{id}: {n}/30");
+    }
+}
+
+#[test]
+fn a_label_is_a_function_of_the_state() {
+    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+        let mut a = env(id, None);
+        let mut b = env(id, None);
+        let mut ea = state_expert(&a).unwrap();
+        let mut eb = state_expert(&b).unwrap();
+        let dim = a.action_space().shape[0];
+        let (mut la, mut lb) = (vec![0.0f32; dim], vec![0.0f32; dim]);
+        a.reset(Some(3));
+        // b reaches the same states by being set to them, with no history of its own, and
+        // is asked in the reverse order too.
+        b.reset(Some(99));
+        let mut states = Vec::new();
+        for _ in 0..30 {
+            ea.label(&a, &mut la).unwrap();
+            states.push((a.get_state(), la.clone()));
+            a.step(&la).unwrap();
+        }
+        for (state, label) in states.iter().rev() {
+            b.set_state(state).unwrap();
+            eb.label(&b, &mut lb).unwrap();
+            assert_eq!(&lb, label, "{id}");
+            eb.label(&b, &mut lb).unwrap();
+            assert_eq!(&lb, label, "{id}: asked twice");
+        }
+    }
+}
+
+#[test]
+fn converted_to_joint_modes_the_expert_does_as_the_solver_does() {
+    let n = successes("PickCube-v1", Some("pd_joint_pos"), 7200..7220, 0);
+    assert!(n >= 19, "{n}/20");
+    // A delta mode clips each joint's change (docs/solvers.md, "In another control mode"),
+    // which slows the solver too (15/20 on these seeds): the expert is no worse than it.
+    let config = EnvConfig {
+        control_mode: Some("pd_joint_delta_pos".into()),
+        ..Default::default()
+    };
+    let solver = evaluate("PickCube-v1", config, "solver", 20, 7200)
+        .unwrap()
+        .successes;
+    let n = successes("PickCube-v1", Some("pd_joint_delta_pos"), 7200..7220, 0);
+    assert!(
+        n + 3 >= solver && n >= 10,
+        "expert {n}/20, solver {solver}/20"
+    );
+}
+
+#[test]
+fn a_pair_without_an_expert_is_named_with_those_that_have_one() {
+    let e = make(
+        "PokeCube-v1",
+        EnvConfig {
+            robot: Some("fetch".into()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let err = state_expert(&e).unwrap_err().to_string();
+    assert!(
+        err.contains("PokeCube-v1 with fetch")
+            && err.contains("PickCube-v1 with panda")
+            && err.contains("PlaceSphere-v1 with panda"),
+        "{err}"
+    );
+}
