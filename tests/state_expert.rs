@@ -62,7 +62,7 @@ fn successes(
 
 #[test]
 fn the_experts_solve_their_tasks_from_the_reset() {
-    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+    for id in ["PickCube-v1", "PlaceSphere-v1", "PokeCube-v1"] {
         let n = successes(id, None, 7000..7030, 0);
         assert!(n >= 29, "{id}: {n}/30");
     }
@@ -72,7 +72,7 @@ fn the_experts_solve_their_tasks_from_the_reset() {
 fn the_experts_finish_the_task_from_states_off_their_path() {
     // Ten uniform random actions first: the arm is anywhere, the gripper half shut, the cube
     // or sphere sometimes pushed; a scripted solver's phase counters would be meaningless.
-    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+    for id in ["PickCube-v1", "PlaceSphere-v1", "PokeCube-v1"] {
         let n = successes(id, None, 7100..7130, 10);
         assert!(n >= 25, "{id}: {n}/30");
     }
@@ -80,7 +80,7 @@ fn the_experts_finish_the_task_from_states_off_their_path() {
 
 #[test]
 fn a_label_is_a_function_of_the_state() {
-    for id in ["PickCube-v1", "PlaceSphere-v1"] {
+    for id in ["PickCube-v1", "PlaceSphere-v1", "PokeCube-v1"] {
         let mut a = env(id, None);
         let mut b = env(id, None);
         let mut ea = state_expert(&a).unwrap();

@@ -15,8 +15,8 @@
 //! function of the state): joint position targets come out within π of the current angle on
 //! continuous joints.
 //!
-//! Pairs: PickCube-v1 and PlaceSphere-v1 with the Panda ([`STATE_EXPERTS`]); any other is a
-//! clear error naming the pair and the ones that have an expert.
+//! Pairs: PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda ([`STATE_EXPERTS`]); any
+//! other is a clear error naming the pair and the ones that have an expert.
 use nalgebra::Vector3;
 
 use super::{
@@ -26,11 +26,13 @@ use super::{
 use crate::env::Env;
 use crate::mujoco::BodyId;
 use crate::tasks::place_sphere::{RADIUS, SHORT_SIDE_HALF};
+use crate::tasks::poke_cube::{peg_head, GOAL_RADIUS};
 
 /// The (env id, robot) pairs that have a state expert, in its own control mode.
-pub const STATE_EXPERTS: [(&str, &str, &str); 2] = [
+pub const STATE_EXPERTS: [(&str, &str, &str); 3] = [
     ("PickCube-v1", "panda", "pd_ee_delta_pos"),
     ("PlaceSphere-v1", "panda", "pd_ee_delta_pos"),
+    ("PokeCube-v1", "panda", "pd_ee_delta_pos"),
 ];
 
 /// The TCP is over the object within this (m, horizontal): the descent may start.
@@ -82,6 +84,7 @@ pub fn state_expert(env: &Env) -> Result<Box<dyn StateExpert>, SolverError> {
 fn native(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     match env.id() {
         "PickCube-v1" => Ok(Box::new(PickCubeExpert::new(env, PANDA_GRIPPER)?)),
+        "PokeCube-v1" => Ok(Box::new(PokeCubeExpert::new(env, PANDA_GRIPPER)?)),
         _ => Ok(Box::new(PlaceSphereExpert::new(env, PANDA_GRIPPER)?)),
     }
 }
@@ -270,5 +273,84 @@ impl Policy for PlaceSphereExpert {
             self.grip.grasp(env, sphere, tcp)
         };
         ee_action(target, tcp, 1.0, grip, action);
+    }
+}
+
+/// PokeCube: grasp the peg 8 cm behind its centre, bring its head just behind the cube, push
+/// the cube into the goal region along x, and hold still there.
+#[derive(Debug)]
+pub(crate) struct PokeCubeExpert {
+    cube: BodyId,
+    peg: BodyId,
+    goal: BodyId,
+    grip: Grip,
+}
+
+/// Grasp point relative to the peg centre (m, world x; the peg lies along x).
+const PEG_GRASP_X: f64 = -0.08;
+/// Half diagonal of the cube's footprint (m): the head clears the cube at any yaw.
+const CUBE_HALF_DIAGONAL: f64 = 0.0283;
+/// Gap between the head and the cube before the push (m).
+const PRE_PUSH_GAP: f64 = 0.015;
+/// The head is lined up with the cube (m, along y) and close behind it (m, along x, past the
+/// pre-push point): the push goes on.
+const PUSH_LINE_Y: f64 = 0.006;
+const PUSH_BEHIND_TOL: f64 = 0.006;
+/// The push aims the head this far short of the goal centre (m) at this action limit (a
+/// fast push launches the cube).
+const PUSH_SHORT_OF_GOAL: f64 = 0.02;
+const PUSH_LIMIT: f64 = 0.3;
+/// The cube is this far inside the goal region (m) before the arm stops pushing and holds
+/// still (success needs it static).
+const GOAL_MARGIN: f64 = 0.02;
+
+impl PokeCubeExpert {
+    /// Resolves the cube, peg, goal and finger joints of a PokeCube env.
+    pub(crate) fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
+        Ok(PokeCubeExpert {
+            cube: body_id(env.model(), "cube")?,
+            peg: body_id(env.model(), "peg")?,
+            goal: body_id(env.model(), "goal_region")?,
+            grip: Grip::new(env, gripper)?,
+        })
+    }
+}
+
+impl Policy for PokeCubeExpert {
+    fn reset(&mut self, _env: &Env) {}
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let tcp = tcp_link_xyz(env);
+        let (cube, peg, goal) = (
+            body_xyz(env, self.cube),
+            body_xyz(env, self.peg),
+            body_xyz(env, self.goal),
+        );
+        if !self.grip.holds(env) {
+            let (target, grip) =
+                self.grip
+                    .grasp(env, peg + Vector3::new(PEG_GRASP_X, 0.0, 0.0), tcp);
+            ee_action(target, tcp, 1.0, grip, action);
+            return;
+        }
+        let close = self.grip.gripper.close;
+        let head = peg_head(peg);
+        let pre_x = cube.x - CUBE_HALF_DIAGONAL - PRE_PUSH_GAP;
+        let lined_up = (head.y - cube.y).abs() < PUSH_LINE_Y
+            && head.x > pre_x - PUSH_BEHIND_TOL
+            && head.x < cube.x;
+        let (want, limit) = if (cube.xy() - goal.xy()).norm() < GOAL_RADIUS - GOAL_MARGIN {
+            (head, 1.0)
+        } else if lined_up {
+            (
+                Vector3::new(goal.x - PUSH_SHORT_OF_GOAL, cube.y, head.z),
+                PUSH_LIMIT,
+            )
+        } else {
+            (Vector3::new(pre_x, cube.y, head.z), 1.0)
+        };
+        // Move the TCP horizontally by the head's error: the grasp holds the peg rigidly.
+        let target = Vector3::new(tcp.x + want.x - head.x, tcp.y + want.y - head.y, tcp.z);
+        ee_action(target, tcp, limit, close, action);
     }
 }
