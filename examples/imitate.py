@@ -21,6 +21,16 @@ entry), and the exported graph adds that position back, so the file still return
 absolute targets. Which action entries are a joint's absolute target is measured on the env:
 after one step, the joint's drive target is the action entry itself.
 
+``--dagger-rounds R`` (DAgger): after the cloning epochs, each round runs the policy on
+``--dagger-episodes`` episodes (seeds from ``--dagger-seed``, held out from the evaluation),
+asks the env's state expert for its action at every state the policy visits
+(``env.unwrapped.expert_action()``: a function of the state, docs/solvers.md §8.2), adds
+those (state, label) pairs to the data and trains ``--dagger-epochs`` more epochs on all of
+it. With ``--dagger-beta B`` the expert's own action is executed instead of the policy's
+with probability B^round. The normalisation keeps the demos' statistics. A resumed run goes
+on with the next round (a round stopped during its epochs keeps its data, not the epochs it
+had left).
+
 The run directory (``--out``, default runs/<env>__<robot>__<mode>__imitate<seed>) holds, as
 ppo.py's: policy.onnx (the latest), best.onnx (the best evaluation), their weights (.pt),
 checkpoint.pt (for ``--resume``) and log.csv, one row per epoch (epoch, samples so far,
@@ -42,8 +52,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from training import rundir  # noqa: E402
 from training.args import (  # noqa: E402
-    changed_options, command_line, finite_at_least_zero, finite_positive, nonempty, positive,
-    same_dir, with_values, without_option)
+    changed_options, command_line, finite_at_least_zero, finite_positive, non_negative,
+    nonempty, number_in, positive, same_dir, with_values, without_option)
 from training.evaluate import run_episodes  # noqa: E402
 from training.export import metadata, save_policy  # noqa: E402
 
@@ -61,7 +71,8 @@ OBS_CLIP = 10.0
 
 #: Options a resumed run cannot change: they define the network or its data.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "hidden", "demos",
-                "include_failed", "relative_labels", "gripper_qvel", "batch_size", "obs_noise")
+                "include_failed", "relative_labels", "gripper_qvel", "batch_size", "obs_noise",
+                "dagger_episodes", "dagger_beta", "dagger_seed")
 
 #: log.csv's columns.
 LOG_HEADER = ["epoch", "samples", "wall_time", "train_loss", "eval_success", "eval_return",
@@ -102,6 +113,20 @@ def parse_args(argv=None, check=True):
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
                    help="hide the gripper joints' velocities from the policy (default; "
                         "PhysX reports a residual there, docs/outcome-physics.md) or observe them")
+    p.add_argument("--dagger-rounds", type=non_negative, default=0,
+                   help="DAgger rounds after the cloning epochs (0: cloning only); each runs "
+                        "the policy, labels its states with the env's state expert and trains "
+                        "on everything so far")
+    p.add_argument("--dagger-episodes", type=positive, default=100,
+                   help="episodes the policy runs per DAgger round")
+    p.add_argument("--dagger-epochs", type=positive, default=25,
+                   help="epochs over all the data after each DAgger round")
+    p.add_argument("--dagger-beta", type=number_in(0.0, 1.0, " (a probability)"), default=0.0,
+                   help="round r executes the expert's action instead of the policy's with "
+                        "probability beta^r (0: the policy's always)")
+    p.add_argument("--dagger-seed", type=int, default=2**30,
+                   help="seed of the first DAgger episode (round r, episode i: seed + (r - 1) "
+                        "x --dagger-episodes + i); held out from the evaluation")
     p.add_argument("--eval-every", type=positive, default=25,
                    help="evaluate every N epochs (and after the last)")
     p.add_argument("--num-eval-envs", type=positive, default=100,
@@ -136,6 +161,16 @@ def parse_args(argv=None, check=True):
     if not 0 <= args.eval_seed or args.eval_seed + args.num_eval_envs - 1 > 2**32 - 1:
         p.error(f"--eval-seed {args.eval_seed} with --num-eval-envs {args.num_eval_envs}: "
                 "evaluation seeds must lie in 0..=4294967295")
+    dagger_end = args.dagger_seed + args.dagger_rounds * args.dagger_episodes
+    if args.dagger_rounds and not (0 <= args.dagger_seed and dagger_end - 1 <= 2**32 - 1):
+        p.error(f"--dagger-seed {args.dagger_seed} with {args.dagger_rounds} rounds of "
+                f"{args.dagger_episodes} episodes: DAgger seeds must lie in 0..=4294967295")
+    if args.dagger_rounds and (args.dagger_seed < args.eval_seed + args.num_eval_envs
+                               and args.eval_seed < dagger_end):
+        p.error(f"--dagger-seed {args.dagger_seed}: the DAgger episodes' seeds "
+                f"({args.dagger_seed}..{dagger_end - 1}) overlap the evaluation's "
+                f"({args.eval_seed}..{args.eval_seed + args.num_eval_envs - 1}); the "
+                "evaluation must be held out")
     if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
         p.error(f"--out {args.out} exists and is not a directory; the run directory holds "
                 "policy.onnx, best.onnx, checkpoints and log.csv")
@@ -200,6 +235,30 @@ def absolute_joint_targets(env):
     return out
 
 
+def collect_dagger(make_env, act, first_seed, episodes, max_steps, beta, rng):
+    """One DAgger round: ``episodes`` episodes (seeds ``first_seed``, ``first_seed + 1``,
+    ...), each until its first success or ``max_steps``, executing ``act``'s action (with
+    probability ``beta`` the expert's instead, drawn from ``rng``) and recording every visited
+    state with the state expert's label for it. Returns (observations, labels, successes)."""
+    env = make_env()
+    obs_seen, labels, successes = [], [], 0
+    try:
+        for e in range(episodes):
+            obs, _ = env.reset(seed=first_seed + e)
+            for _ in range(max_steps):
+                label = env.unwrapped.expert_action()
+                obs_seen.append(np.asarray(obs, np.float64))
+                labels.append(np.asarray(label, np.float64))
+                a = label if rng.random() < beta else act(np.asarray(obs)[None])[0]
+                obs, _, terminated, truncated, _ = env.step(a)
+                if terminated or truncated:
+                    successes += bool(terminated)
+                    break
+    finally:
+        env.close()
+    return np.array(obs_seen), np.array(labels), successes
+
+
 def main(argv=None):
     args = parse_args(argv)
     ckpt = None
@@ -259,6 +318,12 @@ def main(argv=None):
         high = probe_env.action_space.high.astype(np.float32)
         grip = list(base.gripper_qvel_obs)
         residual = None
+        if args.dagger_rounds:
+            probe_env.reset(seed=0)
+            try:
+                probe_env.unwrapped.expert_action()
+            except ValueError as e:
+                sys.exit(f"error: --dagger-rounds {args.dagger_rounds}: {e}")
         if args.relative_labels and ckpt is None:
             residual = absolute_joint_targets(probe_env)
             if all(i is None for i in residual):
@@ -318,9 +383,34 @@ def main(argv=None):
                     y[:, k] -= x_raw[:, i]
     keep = torch.ones(obs_dim)
     keep[hidden] = 0.0
-    x = torch.as_tensor(np.clip((x_raw - obs_mean) / obs_std, -OBS_CLIP, OBS_CLIP),
-                        dtype=torch.float32) * keep
-    t = torch.as_tensor((y - label_mean) / label_std, dtype=torch.float32)
+
+    def relative(obs, labels):
+        """Labels as the network learns them: less the joint positions with relative labels."""
+        labels = labels.astype(np.float64)
+        for k, i in enumerate(residual or []):
+            if i is not None:
+                labels[:, k] -= obs[:, i]
+        return labels
+
+    # DAgger's (state, expert label) pairs so far, raw (a resumed run's from its checkpoint).
+    dagger_obs = np.zeros((0, obs_dim))
+    dagger_labels = np.zeros((0, act_dim))
+    dagger_round = 0
+    if ckpt is not None and "dagger_round" in ckpt:
+        dagger_obs = ckpt["dagger_obs"].numpy()
+        dagger_labels = ckpt["dagger_labels"].numpy()
+        dagger_round = int(ckpt["dagger_round"])
+    demo_steps = len(x_raw)
+
+    def training_data():
+        """The normalised inputs and targets: the demos' steps, then DAgger's."""
+        xr = np.concatenate([x_raw, dagger_obs])
+        yr = np.concatenate([y, relative(dagger_obs, dagger_labels)])
+        xt = torch.as_tensor(np.clip((xr - obs_mean) / obs_std, -OBS_CLIP, OBS_CLIP),
+                             dtype=torch.float32) * keep
+        return xt, torch.as_tensor((yr - label_mean) / label_std, dtype=torch.float32)
+
+    x, t = training_data()
     n = x.shape[0]
     labelled = demos.labelled
     print(f"{args.env_id} {robot} {mode}: {len(demos.episodes)} episodes "
@@ -376,6 +466,9 @@ def main(argv=None):
         meta = metadata(
             args.env_id, robot, mode, command,
             "behaviour cloning (examples/imitate.py)"
+            + (f", then DAgger ({dagger_round} rounds of {args.dagger_episodes} episodes, "
+               f"beta {args.dagger_beta:g}; labels from the state expert)"
+               if dagger_round else "")
             + (", labels relative to the measured joint positions" if residual else ""),
             n, eval_success, mjskill.__version__, hidden, resumes, resume_commands,
             demos=(f"{len(demos.episodes)} episodes ({demos.kept_failed} failed, {labelled} "
@@ -383,7 +476,7 @@ def main(argv=None):
                    + " ".join(os.path.basename(f) for f in demos.files)),
             epochs=str(epoch),
             expert_labels=str(sum(len(e.actions) for e in demos.episodes
-                                  if e.labels is not None)),
+                                  if e.labels is not None) + len(dagger_obs)),
             # How the demos were recorded (each file's own command, where it keeps one): with
             # training_command, the whole recipe of the file.
             **({"demos_command": " ; ".join(demos.commands)} if demos.commands else {}))
@@ -399,7 +492,10 @@ def main(argv=None):
                      epoch=next_epoch, samples=samples, best=best, resumes=resumes,
                      resume_commands=resume_commands,
                      times=dict(wall=time.perf_counter() - t_start, eval=eval_time),
-                     torch_rng=torch.get_rng_state())
+                     torch_rng=torch.get_rng_state(),
+                     dagger_obs=torch.from_numpy(np.asarray(dagger_obs, np.float64)),
+                     dagger_labels=torch.from_numpy(np.asarray(dagger_labels, np.float64)),
+                     dagger_round=dagger_round)
         rundir.save_torch(os.path.join(out, "checkpoint.pt"), state)
 
     def evaluate():
@@ -450,7 +546,11 @@ def main(argv=None):
     stopping = rundir.stop_on_signals()
     epoch = first_epoch - 1
     evaluated = ckpt is not None
-    for epoch in range(first_epoch, args.epochs + 1):
+
+    def train_epoch(ep):
+        """One pass over the data; evaluates every --eval-every epochs. Whether to stop (a
+        signal, or --max-minutes)."""
+        nonlocal samples, evaluated
         perm = torch.randperm(n)
         total = 0.0
         for s0 in range(0, n, args.batch_size):
@@ -465,14 +565,40 @@ def main(argv=None):
             total += float(loss.detach()) * len(idx)
             samples += len(idx)
         wall = time.perf_counter() - t_start
-        rundir.append_row(log, writer, [epoch, samples, f"{wall:.3f}", f"{total / n:.6g}", "",
+        rundir.append_row(log, writer, [ep, samples, f"{wall:.3f}", f"{total / n:.6g}", "",
                                         "", f"{eval_time:.3f}"])
         evaluated = False
-        if epoch % args.eval_every == 0:
+        if ep % args.eval_every == 0:
+            eval_row(ep)
+            evaluated = True
+        return bool(stopping) or (args.max_minutes is not None and wall > 60 * args.max_minutes)
+
+    stop = False
+    for epoch in range(first_epoch, args.epochs + 1):
+        if train_epoch(epoch):
+            stop = True
+            break
+    while not stop and dagger_round < args.dagger_rounds:
+        dagger_round += 1
+        first_seed = args.dagger_seed + (dagger_round - 1) * args.dagger_episodes
+        obs_new, labels_new, solved = collect_dagger(
+            lambda: gym.make(gid, **kw), act, first_seed, args.dagger_episodes, max_steps,
+            args.dagger_beta ** dagger_round, np.random.default_rng([args.seed, dagger_round]))
+        dagger_obs = np.concatenate([dagger_obs, obs_new])
+        dagger_labels = np.concatenate([dagger_labels, labels_new])
+        x, t = training_data()
+        n = x.shape[0]
+        print(f"DAgger round {dagger_round}: {len(obs_new)} states labelled on "
+              f"{args.dagger_episodes} episodes (seeds {first_seed}..), {solved} solved; "
+              f"{n} samples ({demo_steps} from the demos)", flush=True)
+        for _ in range(args.dagger_epochs):
+            epoch += 1
+            if train_epoch(epoch):
+                stop = True
+                break
+        if not evaluated:
             eval_row(epoch)
             evaluated = True
-        if stopping or (args.max_minutes is not None and wall > 60 * args.max_minutes):
-            break
     if not evaluated:
         eval_row(epoch)
     log.close()

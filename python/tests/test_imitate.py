@@ -198,8 +198,52 @@ def test_a_stopped_cloning_run_continues_with_resume(demo_files, tmp_path):
     assert "--resume" not in meta["training_command"]
 
 
+def test_dagger_rounds_label_the_policys_states_and_continue_with_resume(demo_files,
+                                                                         tmp_path):
+    torch = pytest.importorskip("torch")
+    out = tmp_path / "run"
+    demos = str(demo_files / "panda.mcap")
+    dagger = ["--dagger-episodes", "2", "--dagger-epochs", "1", "--dagger-seed", "500"]
+    r = imitate(*SMALL, "--demos", demos, "--epochs", "1", "--eval-every", "100",
+                "--dagger-rounds", "1", *dagger, "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "DAgger round 1:" in r.stdout and "(seeds 500..)" in r.stdout, r.stdout[-2000:]
+    first = torch.load(out / "checkpoint.pt", weights_only=True)
+    states = len(first["dagger_obs"])
+    # Two episodes of up to 50 steps, every visited state labelled by the expert.
+    assert int(first["dagger_round"]) == 1 and 2 <= states <= 100
+    assert first["dagger_labels"].shape == (states, 4)
+    assert torch.all(first["dagger_labels"][:, 3].abs() == 1)  # the gripper: open or close
+    meta = metadata(out / "policy.onnx")
+    assert "then DAgger (1 rounds of 2 episodes" in meta["algorithm"], meta["algorithm"]
+    demo_steps = 150
+    assert int(meta["expert_labels"]) == demo_steps + states
+    # The next round on resume, with the first round's data kept.
+    r = imitate("--resume", str(out), "--dagger-rounds", "2")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "DAgger round 2:" in r.stdout and "(seeds 502..)" in r.stdout, r.stdout[-2000:]
+    last = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert int(last["dagger_round"]) == 2 and len(last["dagger_obs"]) > states
+    assert torch.equal(last["dagger_obs"][:states], first["dagger_obs"])
+    r = imitate("--resume", str(out), "--dagger-seed", "900")
+    assert r.returncode == 1 and "--dagger-seed cannot change" in r.stderr, r.stderr[-2000:]
+
+
+def test_dagger_needs_a_state_expert_and_held_out_seeds(demo_files, tmp_path):
+    r = imitate("--demos", str(demo_files / "so100.mcap"), "--dagger-rounds", "1",
+                "--out", str(tmp_path / "run"))
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert ("--dagger-rounds 1: no state expert for PickCubeSO100-v1 with so100"
+            in r.stderr), r.stderr[-2000:]
+    r = imitate("--demos", "x.mcap", "--dagger-rounds", "2", "--dagger-seed", "10050",
+                "--eval-seed", "10000")
+    assert r.returncode == 2 and "overlap the evaluation's (10000..10099)" in r.stderr, \
+        r.stderr[-2000:]
+
+
 @pytest.mark.parametrize("args, message", [
     ([], "--demos is required"),
+    (["--demos", "x.mcap", "--dagger-beta", "1.5"], "out of range: 0.0 .. 1.0 (a probability)"),
     (["--demos", "x.mcap", "--epochs", "0"], "0 is not a positive integer"),
     (["--demos", "x.mcap", "--learning-rate", "nan"], "must be a finite number"),
     (["--demos", "x.mcap", "--eval-seed", "-1"], "evaluation seeds must lie in"),
