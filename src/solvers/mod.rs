@@ -23,6 +23,7 @@ pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
 pub(crate) mod push_cube;
+pub(crate) mod stack_cube;
 pub(crate) mod xarm6;
 
 pub use convert::ModeConverted;
@@ -190,7 +191,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 15] = [
+pub const SOLVED: [(&str, &str); 17] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -206,6 +207,8 @@ pub const SOLVED: [(&str, &str); 15] = [
     ("PushCube-v1", "fetch"),
     ("PullCube-v1", "panda"),
     ("PullCube-v1", "fetch"),
+    ("StackCube-v1", "panda"),
+    ("StackCube-v1", "fetch"),
 ];
 
 /// Boxes a freshly built solver.
@@ -248,6 +251,8 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PushCube-v1" | "PullCube-v1", "panda") => boxed(push_cube::PandaSlide::new(env)),
         ("PushCube-v1", "fetch") => boxed(push_cube::FetchPush::new(env)),
         ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
+        ("StackCube-v1", "panda") => boxed(stack_cube::PandaStackCube::new(env, PANDA_GRIPPER)),
+        ("StackCube-v1", "fetch") => boxed(stack_cube::FetchStackCube::new(env)),
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,

@@ -1,5 +1,6 @@
 """Records ManiSkill 3 reference trajectories (format `mjskill-ref-traj/1`,
-docs/reference-trajectories.md) of PushCube-v1 and PullCube-v1 with the Panda and the Fetch,
+docs/reference-trajectories.md) of PushCube-v1, PullCube-v1 and StackCube-v1 with the Panda and
+the Fetch,
 and one reference camera state per pair for `tests/segmentation.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/msmp/bin/python tests/data/maniskill/record_push_pull.py \
@@ -16,7 +17,8 @@ format's description gives it:
   `pd_joint_pos`, `pd_ee_delta_pos`, `pd_ee_delta_pose`, `pd_joint_vel`,
   `pd_joint_target_delta_pos` (seeds 1100–1101);
 * Panda only: 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
-  own solutions (`solvePushCube` / `solvePullCube`), run until the solution returns.
+  own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube`), run until the solution
+  returns.
 
 Every episode runs in a freshly made env (PhysX CPU keeps contact caches across resets). Each
 snapshot holds what the format lists; floats are the shortest decimals of ManiSkill's float32
@@ -40,7 +42,13 @@ import mani_skill
 import mani_skill.envs  # noqa: F401  (registers the envs)
 
 HERE = Path(__file__).resolve().parent
-PAIRS = [(e, r) for e in ("PushCube-v1", "PullCube-v1") for r in ("panda", "fetch")]
+PAIRS = [
+    (e, r)
+    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1")
+    for r in ("panda", "fetch")
+]
+# The env attribute of the actor whose grasp the task checks.
+GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA"}
 DEFAULT_MODE = "pd_joint_delta_pos"
 WALK_MODES = ["pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_joint_vel",
               "pd_joint_target_delta_pos"]
@@ -236,8 +244,10 @@ class Recorder(gym.Wrapper):
 
 
 def motion_planning(env_id, seed):
-    from mani_skill.examples.motionplanning.panda.solutions import solvePullCube, solvePushCube
-    solve = solvePushCube if env_id == "PushCube-v1" else solvePullCube
+    from mani_skill.examples.motionplanning.panda.solutions import (
+        solvePullCube, solvePushCube, solveStackCube)
+    solve = {"PushCube-v1": solvePushCube, "PullCube-v1": solvePullCube,
+             "StackCube-v1": solveStackCube}[env_id]
     env, _ = make(env_id, "panda", "pd_joint_pos")
     rec = Recorder(env)
     res = solve(rec, seed=seed)
@@ -268,7 +278,8 @@ def record(env_id, robot):
         "joint_names": [j.name for j in u.agent.robot.get_active_joints()],
         "robot_links": {"finger1_link": u.agent.finger1_link.name,
                         "finger2_link": u.agent.finger2_link.name},
-        "grasp_object": {"env_attr": "obj", "actor_name": u.obj.name},
+        "grasp_object": {"env_attr": GRASP_ATTR[env_id],
+                         "actor_name": getattr(u, GRASP_ATTR[env_id]).name},
         "actor_body_types": {a.name: a.px_body_type for a in u.scene.actors.values()},
         "default_control_mode": DEFAULT_MODE,
         "control_modes_supported_by_robot": supported,
