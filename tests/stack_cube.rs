@@ -320,3 +320,46 @@ fn rewards_along_random_episodes_match_the_spec_formula() {
         }
     }
 }
+
+#[test]
+fn solver_episodes_pass_every_reward_stage_as_the_spec_formula() {
+    use mjskill::solvers::{make_env, make_policy};
+    for robot in ROBOTS {
+        let config = EnvConfig {
+            robot: Some(robot.into()),
+            reward_mode: RewardMode::Dense,
+            ..Default::default()
+        };
+        let mut e = make_env(ID, config, "solver").unwrap();
+        let mut policy = make_policy("solver", &e, 0).unwrap();
+        let mut action = vec![0.0f32; e.action_space().shape[0]];
+        // Reaching (< 2), grasped (4–5), on cube B (6–7), success (8).
+        let mut stages = [0usize; 4];
+        let mut successes = 0;
+        for seed in 0..6 {
+            e.reset(Some(seed));
+            policy.reset(&e);
+            for t in 0..50 {
+                policy.act(&e, &mut action);
+                let reward = e.step(&action).unwrap().reward as f64;
+                let want = spec_dense_reward(&e);
+                assert!(
+                    (reward - want).abs() < 1e-5,
+                    "{robot} seed {seed} t {t}: {reward} vs {want}"
+                );
+                stages[match reward {
+                    r if r < 2.0 => 0,
+                    r if r < 5.0 => 1,
+                    r if r < 8.0 => 2,
+                    _ => 3,
+                }] += 1;
+            }
+            successes += e.info().success() as usize;
+        }
+        assert!(stages.iter().all(|&n| n > 0), "{robot}: stages {stages:?}");
+        // The Panda's solver succeeds in 97 of seeds 0–99 (here it misses seed 2); the Fetch's, short of time, in 30
+        // (docs/solvers.md §9).
+        let want = if robot == "panda" { 5 } else { 1 };
+        assert!(successes >= want, "{robot}: {successes} of 6");
+    }
+}

@@ -38,6 +38,9 @@ const LIFT_DONE: f64 = 0.01;
 const ALIGN_TOL: f64 = 0.003;
 /// Cube A is released once its centre is within this above its resting height on cube B (m).
 const RELEASE_ABOVE: f64 = 0.003;
+/// Cube A is released only once centred over cube B within this (m): released off-centre in
+/// PhysX it slid off cube B in 2 of 50 replays of an earlier version.
+const RELEASE_ALIGN: f64 = 0.008;
 /// Steps the gripper opens while holding still.
 const OPEN_STEPS: usize = 4;
 /// Retreat height above the release pose (m).
@@ -126,7 +129,11 @@ impl StackPlan {
                     close,
                     (a.xy() - b.xy()).norm() < ALIGN_TOL,
                 ),
-                5 => (holding(rest), close, a.z - rest.z < RELEASE_ABOVE),
+                5 => (
+                    holding(rest),
+                    close,
+                    a.z - rest.z < RELEASE_ABOVE && (a.xy() - b.xy()).norm() < RELEASE_ALIGN,
+                ),
                 6 => (tcp, open, steps >= OPEN_STEPS),
                 _ => (tcp + Vector3::new(0.0, 0.0, RETREAT), open, false),
             };
