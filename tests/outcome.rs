@@ -332,21 +332,21 @@ const EXPECTED: &[Expected] = &[
         flags: &[("success", 496)],
     },
     // StackCube (2026-11-29). ManiSkill drops the Panda's released cube A off cube B in some
-    // episodes where mjskill's stays (docs/outcome-physics.md); the Fetch's solver mostly runs
-    // out of time, the same in both.
+    // episodes where mjskill's stays (docs/outcome-physics.md); the Fetch's episodes end the
+    // same in 49 of 50.
     Expected {
         file: "solver__StackCube-v1__fetch",
         episodes: 10,
-        maniskill_successes: 1,
-        mjskill_successes: 1,
-        same_outcome: 10,
+        maniskill_successes: 3,
+        mjskill_successes: 4,
+        same_outcome: 9,
         steps: 500,
-        steps_all_flags_agree: 490,
+        steps_all_flags_agree: 463,
         flags: &[
-            ("is_cubeA_grasped", 498),
-            ("is_cubeA_on_cubeB", 500),
-            ("is_cubeA_static", 490),
-            ("success", 500),
+            ("is_cubeA_grasped", 499),
+            ("is_cubeA_on_cubeB", 484),
+            ("is_cubeA_static", 478),
+            ("success", 486),
         ],
     },
     Expected {
