@@ -273,7 +273,7 @@ fn success_needs_cube_a_on_cube_b_within_the_tolerances() {
         let mut e = env(robot, ObsMode::State);
         e.reset(Some(7));
         let b = part(&e, "extra/cubeB_pose");
-        let ctx = format!("{robot}");
+        let ctx = robot;
         let flags = |e: &Env| KEYS.map(|k| e.info().get(k).unwrap() > 0.0);
         // Cube A rests on the table, apart from cube B: static only.
         assert_eq!(
