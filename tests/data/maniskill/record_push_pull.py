@@ -25,7 +25,9 @@ snapshot holds what the format lists; floats are the shortest decimals of ManiSk
 values. `--images` also writes `tests/data/maniskill_images/<pair>/
 smooth_random_walk_pd_joint_pos_1100_035.npz`: the sensor cameras' rgb, depth (mm) and
 segmentation after step 35 of that episode, rendered in `rgb+depth+segmentation`, with the
-state dict that was rendered.
+state dict that was rendered, and puts the pair's segmentation id map (ManiSkill's
+`segmentation_id_map`, id → actor or link name) into `tests/data/maniskill_images/
+segmentation_ids.json`.
 """
 
 import argparse
@@ -133,7 +135,8 @@ def snapshot(env, obs, info, t, action=None, reward=None, terminated=None, trunc
     s["robot_qpos"] = vec(batch0(agent.robot.get_qpos()))
     s["robot_qvel"] = vec(batch0(agent.robot.get_qvel()))
     s["grasp_contact"] = {
-        f"finger{k}": vec(batch0(scene.get_pairwise_contact_forces(link, u.obj)))
+        f"finger{k}": vec(batch0(scene.get_pairwise_contact_forces(
+            link, getattr(u, GRASP_ATTR[u.spec.id]))))
         for k, link in ((1, agent.finger1_link), (2, agent.finger2_link))
     }
     s["obs_state"] = vec(batch0(obs))
@@ -351,7 +354,12 @@ def image(env_id, robot):
         arrays[f"{cam}_rgb"] = data["rgb"][0].cpu().numpy().astype(np.uint8)
         arrays[f"{cam}_depth"] = data["depth"][0].cpu().numpy().astype(np.int16)
         arrays[f"{cam}_segmentation"] = data["segmentation"][0].cpu().numpy().astype(np.int16)
+    ids = {str(k): v.name for k, v in sorted(env.unwrapped.segmentation_id_map.items()) if k}
     env.close()
+    ids_path = HERE.parent / "maniskill_images" / "segmentation_ids.json"
+    maps = json.loads(ids_path.read_text())
+    maps[f"{env_id}__{robot}"] = ids
+    ids_path.write_text(json.dumps(dict(sorted(maps.items())), indent=1))
     out = HERE.parent / "maniskill_images" / f"{env_id}__{robot}"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"smooth_random_walk_{mode}_{seed}_{IMAGE_STEP:03d}.npz"
