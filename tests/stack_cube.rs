@@ -357,7 +357,7 @@ fn solver_episodes_pass_every_reward_stage_as_the_spec_formula() {
             successes += e.info().success() as usize;
         }
         assert!(stages.iter().all(|&n| n > 0), "{robot}: stages {stages:?}");
-        // The Panda's solver succeeds in 97 of seeds 0–99 (here it misses seed 2); the Fetch's, short of reach and of
+        // The Panda's solver succeeds in 98 of seeds 0–99; the Fetch's, short of reach and of
         // time, in 43 (docs/solvers.md §9).
         let want = if robot == "panda" { 5 } else { 1 };
         assert!(successes >= want, "{robot}: {successes} of 6");

@@ -126,12 +126,12 @@ pub trait Policy: std::fmt::Debug {
     }
 }
 
-/// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
-/// the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the gripper, in
-/// `pd_ee_delta_pose`) where the robot has EE controllers; SO100 and
-/// WidowX AI have none upstream, so their solvers command joint positions (`pd_joint_pos`)
-/// from an IK of their own.
-pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> {
+/// The control mode a policy needs in env `env_id` with `robot` (`None`: any). The scripted
+/// solvers drive the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the
+/// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1) where the robot has
+/// EE controllers; SO100 and WidowX AI have none upstream, so their solvers command joint
+/// positions (`pd_joint_pos`) from an IK of their own.
+pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
     if policy != "solver" {
         return None;
     }
@@ -140,8 +140,10 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     Some(match robot {
         RobotId::So100 | RobotId::WidowxAi => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
-        // its gripper to the cube's faces (solvers/xarm6.rs).
+        // its gripper to the cube's faces (solvers/xarm6.rs), and so does the Panda to stack
+        // (solvers/stack_cube.rs).
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
+        RobotId::Panda if env_id == STACK_CUBE => "pd_ee_delta_pose",
         RobotId::Panda => "pd_ee_delta_pos",
     })
 }
@@ -211,6 +213,9 @@ pub const SOLVED: [(&str, &str); 17] = [
     ("StackCube-v1", "fetch"),
 ];
 
+/// The env whose Panda solver turns the gripper (`pd_ee_delta_pose`).
+const STACK_CUBE: &str = "StackCube-v1";
+
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(
     policy: Result<P, SolverError>,
@@ -222,7 +227,7 @@ fn boxed<P: Policy + 'static>(
 fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
-    let required = required_control_mode("solver", robot).unwrap_or(mode);
+    let required = required_control_mode("solver", env.id(), robot).unwrap_or(mode);
     if mode != required {
         return boxed(ModeConverted::new(env, required, native_solver));
     }

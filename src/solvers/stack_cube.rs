@@ -6,9 +6,12 @@
 //! down to it, close, lift, carry cube A over cube B, lower it onto cube B, open, retreat.
 //! ManiSkill's solution plans with screw motions and ends with the gripper opening on cube B;
 //! here every phase's target is cube A's position ([`StackPlan`]), turned into a TCP target by
-//! the offset TCP − cube A of the current step, so that a cube that slipped in the grip still
-//! lands where it should. Unlike ManiSkill's solution neither robot turns its gripper to cube
-//! A's faces (the Panda cannot in `pd_ee_delta_pos`): the closing fingers turn the cube.
+//! the offset TCP − cube A of the current step, so that a cube that shifted in the grip still
+//! lands where it should. Like ManiSkill's solution (its grasp pose from cube A's bounding
+//! box), the Panda turns its gripper about the vertical so that the fingers close on two faces
+//! of cube A (`pd_ee_delta_pose`): closed on two edges, the cube turns in mjskill's grip but not
+//! in PhysX's, and 14 of 50 episodes replayed in ManiSkill released it 2–5 cm off cube B's axis
+//! (docs/outcome-physics.md).
 //!
 //! The lift is relative to cube B (cube A's bottom [`LIFT_CLEAR`] above cube B's top) instead
 //! of ManiSkill's 10 cm, and cube A is released [`RELEASE_ABOVE`] above its resting height.
@@ -19,19 +22,20 @@
 //! the held cube, which must land flat. It leaves the torso where it is, comes down on cube A
 //! inside a cone, and ends the carry within 1 cm of cube B.
 //!
-//! Measured (0.01 s step): Panda 97/100 on seeds 0–99 (98 on 100–199); Fetch 43/100 (48). The
+//! Measured (0.01 s step): Panda 98/100 on seeds 0–99 (98 on 100–199); Fetch 43/100 (48). The
 //! Fetch's misses are mostly reach: StackCube's cubes lie anywhere in x ∈ [−0.2, 0.2] (PickCube's
 //! in [−0.1, 0.1]), and in 34 of 100 seeds one of them lies beyond x = 0.07, where the Fetch's
 //! tilted gripper stalls (its TCP reaches x ≈ 0.10 at the table with the gripper level, less
 //! when tilted or lifted); the rest run out of the 50 steps (the wrist turns slowly).
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 
 use super::body_id;
 use super::fetch::{approached_tilted, pick_pitch_and_height, GRASP};
 use super::fetch_arm::{min_tcp_height, ArmCommand, FetchArm};
+use super::xarm6::quarter_turn;
 use super::{
-    body_xyz, ee_action, tcp_link_xyz, tcp_xyz, Grasp, Gripper, Phases, Policy, APPROACH_HEIGHT,
-    APPROACH_TOL,
+    body_quat, body_xyz, tcp_link_xyz, tcp_xyz, write_pos, write_rot, Grasp, Gripper, Phases,
+    Policy, ACTION_SCALE, APPROACH_HEIGHT, APPROACH_TOL,
 };
 use crate::env::Env;
 use crate::mujoco::BodyId;
@@ -53,6 +57,9 @@ const RELEASE_ALIGN: f64 = 0.008;
 const OPEN_STEPS: usize = 4;
 /// Retreat height above the release pose (m).
 const RETREAT: f64 = 0.05;
+
+/// Orientation tolerance before the Panda leaves the approach (rad).
+const PANDA_ROT_TOL: f64 = 0.05;
 
 /// The Fetch's approach point above the grasp point (m; the Panda's 5 cm cost the Fetch, whose
 /// arm dives while the wrist still turns, a climb back and a slow descent).
@@ -166,30 +173,54 @@ impl StackPlan {
     }
 }
 
-/// The Panda's StackCube solver (`pd_ee_delta_pos`).
+/// The Panda's StackCube solver (`pd_ee_delta_pose`): it turns the gripper about the vertical
+/// so that the fingers close on two faces of cube A, as ManiSkill's solution does.
 #[derive(Debug)]
 pub struct PandaStackCube {
     plan: StackPlan,
+    /// The hand (the TCP link) and the two fingers.
+    hand: BodyId,
+    fingers: [BodyId; 2],
+    /// The hand orientation to keep for this episode (world frame).
+    want: UnitQuaternion<f64>,
 }
 
 impl PandaStackCube {
-    /// Resolves the cubes of a StackCube env.
+    /// Resolves the cubes and the hand of a StackCube env with the Panda.
     pub fn new(env: &Env, gripper: Gripper) -> Result<Self, super::SolverError> {
+        let robot = env.robot();
         Ok(PandaStackCube {
             plan: StackPlan::new(env, Grasp::new(gripper))?,
+            hand: robot.body("panda_hand_tcp")?,
+            fingers: [
+                robot.body("panda_leftfinger")?,
+                robot.body("panda_rightfinger")?,
+            ],
+            want: UnitQuaternion::identity(),
         })
     }
 }
 
 impl Policy for PandaStackCube {
-    fn reset(&mut self, _env: &Env) {
+    fn reset(&mut self, env: &Env) {
         self.plan.phases.reset();
+        // The closing axis (finger to finger) and cube A's x axis, as angles in the xy plane:
+        // the smallest turn that puts the fingers on two faces.
+        let axis = body_xyz(env, self.fingers[0]) - body_xyz(env, self.fingers[1]);
+        let cube_x = body_quat(env, self.plan.cube_a) * Vector3::x();
+        let turn = quarter_turn(axis.y.atan2(axis.x), cube_x.y.atan2(cube_x.x));
+        self.want =
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn) * body_quat(env, self.hand);
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
         let tcp = tcp_link_xyz(env);
-        let (target, grip) = self.plan.plan(env, tcp, true);
-        ee_action(target, tcp, 1.0, grip, action);
+        let rot_err = (self.want * body_quat(env, self.hand).inverse()).scaled_axis();
+        let ready = rot_err.norm() < PANDA_ROT_TOL;
+        let (target, grip) = self.plan.plan(env, tcp, ready);
+        write_pos((target - tcp) / ACTION_SCALE, 1.0, action);
+        write_rot(rot_err, action);
+        action[6] = grip;
     }
 }
 
