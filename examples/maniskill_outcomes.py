@@ -86,6 +86,7 @@ DEMO_PAIRS = [
     ("PickCubeSO100-v1", "so100", "so100"),
     ("PushCube-v1", "panda", "panda"),
     ("PullCube-v1", "panda", "panda"),
+    ("StackCube-v1", "panda", "panda"),
 ]
 
 # Envs whose robot is fixed by the env id (passing robot_uids again is a TypeError).
