@@ -73,6 +73,8 @@ SOLVER_PAIRS = [
     ("PushCube-v1", "fetch", "pd_joint_pos"),
     ("PullCube-v1", "panda", None),
     ("PullCube-v1", "fetch", "pd_joint_pos"),
+    ("StackCube-v1", "panda", None),
+    ("StackCube-v1", "fetch", "pd_joint_pos"),
 ]
 
 # (env id, robot, ManiSkill's motion-planning module) of every motion-planning solution
@@ -84,6 +86,7 @@ DEMO_PAIRS = [
     ("PickCubeSO100-v1", "so100", "so100"),
     ("PushCube-v1", "panda", "panda"),
     ("PullCube-v1", "panda", "panda"),
+    ("StackCube-v1", "panda", "panda"),
 ]
 
 # Envs whose robot is fixed by the env id (passing robot_uids again is a TypeError).

@@ -30,7 +30,7 @@ fn files() -> Vec<RefFile> {
             out.push(RefFile::open(&p).unwrap_or_else(|err| panic!("{err}")));
         }
     }
-    assert_eq!(out.len(), 15, "one file per registered pair");
+    assert_eq!(out.len(), 17, "one file per registered pair");
     out
 }
 
@@ -196,7 +196,7 @@ fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
 /// 26–50, then the one-step (re-synchronised every step) joint, TCP and object errors. A
 /// pair passes when every figure is within 30 % of what was measured — tight enough that a
 /// wrong drive gain, limit, armature or law shows (docs/physics.md; docs/agreement.md).
-const MEASURED: [(&str, [f64; 12]); 15] = [
+const MEASURED: [(&str, [f64; 12]); 17] = [
     (
         "PickCube-v1__fetch",
         [
@@ -300,6 +300,21 @@ const MEASURED: [(&str, [f64; 12]); 15] = [
         [
             1.37e-04, 5.86e-04, 3.46e-03, 6.49e-05, 3.27e-04, 1.72e-03, 9.20e-07, 9.88e-07,
             2.78e-03, 1.46e-03, 5.54e-04, 1.03e-03,
+        ],
+    ),
+    // StackCube: 2026-11-29, from record_push_pull.py's files.
+    (
+        "StackCube-v1__fetch",
+        [
+            1.39e-03, 6.20e-03, 2.75e-02, 3.87e-04, 3.79e-03, 1.46e-02, 8.95e-07, 9.70e-07,
+            9.72e-07, 2.86e-03, 7.64e-04, 5.22e-07,
+        ],
+    ),
+    (
+        "StackCube-v1__panda",
+        [
+            1.34e-04, 5.34e-04, 1.95e-03, 6.49e-05, 3.38e-04, 5.73e-04, 9.04e-07, 9.75e-07,
+            8.04e-06, 3.58e-04, 1.28e-04, 3.96e-05,
         ],
     ),
 ];
@@ -435,7 +450,7 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
 /// drive targets of the action that led to it, states (of all) whose grasp flag differs,
 /// the largest dense-reward difference over all states). With a plain `set_state_dict`
 /// (no drive targets) mjskill's flag was false on every one of the held states.
-const HELD: [(&str, usize, usize, usize, f64); 15] = [
+const HELD: [(&str, usize, usize, usize, f64); 17] = [
     ("PickCube-v1__fetch", 0, 0, 0, 1.75e-6),
     ("PickCube-v1__panda", 130, 130, 0, 2.01e-6),
     ("PickCube-v1__so100", 0, 0, 0, 6.44e-7),
@@ -453,6 +468,9 @@ const HELD: [(&str, usize, usize, usize, f64); 15] = [
     ("PushCube-v1__panda", 0, 0, 0, 1.81e-6),
     ("PullCube-v1__fetch", 0, 0, 0, 1.46e-6),
     ("PullCube-v1__panda", 0, 0, 0, 2.25e-6),
+    // StackCube: 2026-11-29, grasp flag `is_cubeA_grasped` (the Fetch's files hold no grasp).
+    ("StackCube-v1__fetch", 0, 0, 0, 2.88e-6),
+    ("StackCube-v1__panda", 224, 224, 0, 3.53e-6),
 ];
 
 /// ManiSkill's recorded states lack the drive targets that PhysX keeps from the last action;

@@ -24,11 +24,13 @@ pub enum EnvId {
     PushCube,
     /// `PullCube-v1`.
     PullCube,
+    /// `StackCube-v1`.
+    StackCube,
 }
 
 impl EnvId {
     /// Every env, in the registry's order.
-    pub const ALL: [EnvId; 7] = [
+    pub const ALL: [EnvId; 8] = [
         EnvId::PickCube,
         EnvId::PickCubeSo100,
         EnvId::PickCubeWidowxAi,
@@ -36,6 +38,7 @@ impl EnvId {
         EnvId::PokeCube,
         EnvId::PushCube,
         EnvId::PullCube,
+        EnvId::StackCube,
     ];
 
     /// The id as ManiSkill registers it.
@@ -48,6 +51,7 @@ impl EnvId {
             EnvId::PokeCube => "PokeCube-v1",
             EnvId::PushCube => "PushCube-v1",
             EnvId::PullCube => "PullCube-v1",
+            EnvId::StackCube => "StackCube-v1",
         }
     }
 
@@ -116,7 +120,11 @@ fn pull_cube(_robot: RobotId) -> Box<dyn Task> {
     Box::new(crate::tasks::pull_cube::PullCube::new())
 }
 
-static REGISTRY: [EnvSpec; 7] = [
+fn stack_cube(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::stack_cube::StackCube::new())
+}
+
+static REGISTRY: [EnvSpec; 8] = [
     EnvSpec {
         id: EnvId::PickCube,
         robots: &RobotId::ALL,
@@ -158,6 +166,12 @@ static REGISTRY: [EnvSpec; 7] = [
         robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pull_cube,
+    },
+    EnvSpec {
+        id: EnvId::StackCube,
+        robots: &[RobotId::Panda, RobotId::Fetch],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: stack_cube,
     },
 ];
 
@@ -265,7 +279,8 @@ mod tests {
         assert_eq!(
             EnvId::parse("PickCube-v2").unwrap_err().to_string(),
             "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
-             PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1"
+             PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1, \
+             StackCube-v1"
         );
     }
 }

@@ -262,7 +262,7 @@ pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env
         Some(r) => r.clone(),
         None => crate::env::default_robot(env_id)?.to_string(),
     };
-    if let Some(required) = required_control_mode(policy, &robot) {
+    if let Some(required) = required_control_mode(policy, env_id, &robot) {
         match config.control_mode.as_deref() {
             None => config.control_mode = Some(required.to_string()),
             Some(m) if m == required => {}

@@ -24,6 +24,7 @@ pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
 pub(crate) mod push_cube;
+pub(crate) mod stack_cube;
 pub(crate) mod xarm6;
 
 pub use convert::ModeConverted;
@@ -137,12 +138,12 @@ pub trait Policy: std::fmt::Debug + Send {
     }
 }
 
-/// The control mode a policy needs with `robot` (`None`: any). The scripted solvers drive
-/// the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the gripper, in
-/// `pd_ee_delta_pose`) where the robot has EE controllers; SO100 and
-/// WidowX AI have none upstream, so their solvers command joint positions (`pd_joint_pos`)
-/// from an IK of their own.
-pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> {
+/// The control mode a policy needs in env `env_id` with `robot` (`None`: any). The scripted
+/// solvers drive the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the
+/// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1) where the robot has
+/// EE controllers; SO100 and WidowX AI have none upstream, so their solvers command joint
+/// positions (`pd_joint_pos`) from an IK of their own.
+pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
     if policy != "solver" {
         return None;
     }
@@ -151,8 +152,10 @@ pub fn required_control_mode(policy: &str, robot: &str) -> Option<&'static str> 
     Some(match robot {
         RobotId::So100 | RobotId::WidowxAi => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
-        // its gripper to the cube's faces (solvers/xarm6.rs).
+        // its gripper to the cube's faces (solvers/xarm6.rs), and so does the Panda to stack
+        // (solvers/stack_cube.rs).
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
+        RobotId::Panda if env_id == STACK_CUBE => "pd_ee_delta_pose",
         RobotId::Panda => "pd_ee_delta_pos",
     })
 }
@@ -202,7 +205,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 15] = [
+pub const SOLVED: [(&str, &str); 17] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -218,7 +221,12 @@ pub const SOLVED: [(&str, &str); 15] = [
     ("PushCube-v1", "fetch"),
     ("PullCube-v1", "panda"),
     ("PullCube-v1", "fetch"),
+    ("StackCube-v1", "panda"),
+    ("StackCube-v1", "fetch"),
 ];
+
+/// The env whose Panda solver turns the gripper (`pd_ee_delta_pose`).
+const STACK_CUBE: &str = "StackCube-v1";
 
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(
@@ -231,7 +239,7 @@ fn boxed<P: Policy + 'static>(
 fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
-    let required = required_control_mode("solver", robot).unwrap_or(mode);
+    let required = required_control_mode("solver", env.id(), robot).unwrap_or(mode);
     if mode != required {
         return boxed(ModeConverted::new(env, required, native_solver));
     }
@@ -260,6 +268,8 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PushCube-v1" | "PullCube-v1", "panda") => boxed(push_cube::PandaSlide::new(env)),
         ("PushCube-v1", "fetch") => boxed(push_cube::FetchPush::new(env)),
         ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
+        ("StackCube-v1", "panda") => boxed(stack_cube::PandaStackCube::new(env, PANDA_GRIPPER)),
+        ("StackCube-v1", "fetch") => boxed(stack_cube::FetchStackCube::new(env)),
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,

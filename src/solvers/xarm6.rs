@@ -71,7 +71,7 @@ impl Xarm6PickCube {
 
 /// The smallest turn about the vertical (in [−45°, 45°)) that brings direction `from` (an
 /// angle in the xy plane) onto one of the four directions `to` + k·90°.
-fn quarter_turn(from: f64, to: f64) -> f64 {
+pub(super) fn quarter_turn(from: f64, to: f64) -> f64 {
     use std::f64::consts::FRAC_PI_2;
     let d = (to - from).rem_euclid(FRAC_PI_2);
     if d >= FRAC_PI_2 / 2.0 {

@@ -83,6 +83,7 @@ pub mod place_sphere;
 pub mod poke_cube;
 pub mod pull_cube;
 pub mod push_cube;
+pub mod stack_cube;
 
 use nalgebra::{UnitQuaternion, Vector3};
 

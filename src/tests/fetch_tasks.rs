@@ -136,7 +136,7 @@ fn pokecube_reward_uses_gripper_link_and_fetchs_static_rule() {
 
 /// Successes of the scripted solver over `seeds` within the 50-step episodes.
 fn solver_successes(task: &str, seeds: std::ops::Range<u64>) -> usize {
-    let mode = crate::solvers::required_control_mode("solver", "fetch");
+    let mode = crate::solvers::required_control_mode("solver", task, "fetch");
     let mut e = env(task, "fetch", mode);
     let mut policy = make_policy("solver", &e, 0).unwrap();
     let mut action = vec![0f32; e.action_space().shape[0]];

@@ -12,7 +12,7 @@ fn the_shrunk_stack_holds_twice_what_every_env_uses() {
             for policy in ["solver", "random"] {
                 let config = EnvConfig {
                     robot: Some(robot.to_string()),
-                    control_mode: required_control_mode(policy, robot).map(str::to_string),
+                    control_mode: required_control_mode(policy, info.id, robot).map(str::to_string),
                     ..EnvConfig::default()
                 };
                 let mut env = make(info.id, config).unwrap();

@@ -1,5 +1,6 @@
 """Records ManiSkill 3 reference trajectories (format `mjskill-ref-traj/1`,
-docs/reference-trajectories.md) of PushCube-v1 and PullCube-v1 with the Panda and the Fetch,
+docs/reference-trajectories.md) of PushCube-v1, PullCube-v1 and StackCube-v1 with the Panda and
+the Fetch,
 and one reference camera state per pair for `tests/segmentation.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/msmp/bin/python tests/data/maniskill/record_push_pull.py \
@@ -16,14 +17,17 @@ format's description gives it:
   `pd_joint_pos`, `pd_ee_delta_pos`, `pd_ee_delta_pose`, `pd_joint_vel`,
   `pd_joint_target_delta_pos` (seeds 1100–1101);
 * Panda only: 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
-  own solutions (`solvePushCube` / `solvePullCube`), run until the solution returns.
+  own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube`), run until the solution
+  returns.
 
 Every episode runs in a freshly made env (PhysX CPU keeps contact caches across resets). Each
 snapshot holds what the format lists; floats are the shortest decimals of ManiSkill's float32
 values. `--images` also writes `tests/data/maniskill_images/<pair>/
 smooth_random_walk_pd_joint_pos_1100_035.npz`: the sensor cameras' rgb, depth (mm) and
 segmentation after step 35 of that episode, rendered in `rgb+depth+segmentation`, with the
-state dict that was rendered.
+state dict that was rendered, and puts the pair's segmentation id map (ManiSkill's
+`segmentation_id_map`, id → actor or link name) into `tests/data/maniskill_images/
+segmentation_ids.json`.
 """
 
 import argparse
@@ -40,7 +44,13 @@ import mani_skill
 import mani_skill.envs  # noqa: F401  (registers the envs)
 
 HERE = Path(__file__).resolve().parent
-PAIRS = [(e, r) for e in ("PushCube-v1", "PullCube-v1") for r in ("panda", "fetch")]
+PAIRS = [
+    (e, r)
+    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1")
+    for r in ("panda", "fetch")
+]
+# The env attribute of the actor whose grasp the task checks.
+GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA"}
 DEFAULT_MODE = "pd_joint_delta_pos"
 WALK_MODES = ["pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_joint_vel",
               "pd_joint_target_delta_pos"]
@@ -125,7 +135,8 @@ def snapshot(env, obs, info, t, action=None, reward=None, terminated=None, trunc
     s["robot_qpos"] = vec(batch0(agent.robot.get_qpos()))
     s["robot_qvel"] = vec(batch0(agent.robot.get_qvel()))
     s["grasp_contact"] = {
-        f"finger{k}": vec(batch0(scene.get_pairwise_contact_forces(link, u.obj)))
+        f"finger{k}": vec(batch0(scene.get_pairwise_contact_forces(
+            link, getattr(u, GRASP_ATTR[u.spec.id]))))
         for k, link in ((1, agent.finger1_link), (2, agent.finger2_link))
     }
     s["obs_state"] = vec(batch0(obs))
@@ -236,8 +247,10 @@ class Recorder(gym.Wrapper):
 
 
 def motion_planning(env_id, seed):
-    from mani_skill.examples.motionplanning.panda.solutions import solvePullCube, solvePushCube
-    solve = solvePushCube if env_id == "PushCube-v1" else solvePullCube
+    from mani_skill.examples.motionplanning.panda.solutions import (
+        solvePullCube, solvePushCube, solveStackCube)
+    solve = {"PushCube-v1": solvePushCube, "PullCube-v1": solvePullCube,
+             "StackCube-v1": solveStackCube}[env_id]
     env, _ = make(env_id, "panda", "pd_joint_pos")
     rec = Recorder(env)
     res = solve(rec, seed=seed)
@@ -268,7 +281,8 @@ def record(env_id, robot):
         "joint_names": [j.name for j in u.agent.robot.get_active_joints()],
         "robot_links": {"finger1_link": u.agent.finger1_link.name,
                         "finger2_link": u.agent.finger2_link.name},
-        "grasp_object": {"env_attr": "obj", "actor_name": u.obj.name},
+        "grasp_object": {"env_attr": GRASP_ATTR[env_id],
+                         "actor_name": getattr(u, GRASP_ATTR[env_id]).name},
         "actor_body_types": {a.name: a.px_body_type for a in u.scene.actors.values()},
         "default_control_mode": DEFAULT_MODE,
         "control_modes_supported_by_robot": supported,
@@ -340,7 +354,12 @@ def image(env_id, robot):
         arrays[f"{cam}_rgb"] = data["rgb"][0].cpu().numpy().astype(np.uint8)
         arrays[f"{cam}_depth"] = data["depth"][0].cpu().numpy().astype(np.int16)
         arrays[f"{cam}_segmentation"] = data["segmentation"][0].cpu().numpy().astype(np.int16)
+    ids = {str(k): v.name for k, v in sorted(env.unwrapped.segmentation_id_map.items()) if k}
     env.close()
+    ids_path = HERE.parent / "maniskill_images" / "segmentation_ids.json"
+    maps = json.loads(ids_path.read_text())
+    maps[f"{env_id}__{robot}"] = ids
+    ids_path.write_text(json.dumps(dict(sorted(maps.items())), indent=1))
     out = HERE.parent / "maniskill_images" / f"{env_id}__{robot}"
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"smooth_random_walk_{mode}_{seed}_{IMAGE_STEP:03d}.npz"

@@ -1,7 +1,10 @@
-"""Records ManiSkill 3's seeded initial states of PushCube-v1 and PullCube-v1 (panda, fetch)
-into `<env_id>__<robot>.json` next to this script, for `tests/push_pull_cube.rs`.
+"""Records ManiSkill 3's seeded initial states of PushCube-v1, PullCube-v1 and StackCube-v1
+(panda, fetch) into `<env_id>__<robot>.json` next to this script, for `tests/push_pull_cube.rs`
+and `tests/stack_cube.rs`.
 
-    MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py
+    MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py [ENV_ID ...]
+
+With env ids, only their pairs are recorded (the others' files are left as they are).
 
 Per pair, one env made as the reference trajectories were (`obs_mode="state"`,
 `sim_backend="physx_cpu"`, `render_backend="none"`, default control mode, dense reward), reset
@@ -21,7 +24,11 @@ import numpy as np
 import mani_skill
 import mani_skill.envs  # noqa: F401  (registers the envs)
 
-PAIRS = [(e, r) for e in ("PushCube-v1", "PullCube-v1") for r in ("panda", "fetch")]
+PAIRS = [
+    (e, r)
+    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1")
+    for r in ("panda", "fetch")
+]
 SEEDS = {"fit": list(range(0, 50)), "held_out": list(range(1000, 1050))}
 
 
@@ -89,5 +96,10 @@ def record(env_id, robot):
 
 
 if __name__ == "__main__":
+    only = set(sys.argv[1:])
+    unknown = only - {e for e, _ in PAIRS}
+    if unknown:
+        sys.exit(f"unknown env ids {sorted(unknown)}; valid: {sorted({e for e, _ in PAIRS})}")
     for env_id, robot in PAIRS:
-        record(env_id, robot)
+        if not only or env_id in only:
+            record(env_id, robot)
