@@ -28,6 +28,12 @@ use crate::mujoco::BodyId;
 use crate::tasks::place_sphere::{RADIUS, SHORT_SIDE_HALF};
 use crate::tasks::poke_cube::{peg_head, GOAL_RADIUS};
 
+// The solvers' own distances, heights and limits (each named once, in the solver's file).
+use super::place_sphere::{ALIGN_TOL, CARRY_ABOVE_BIN, LIFT_TOL, LOWER_TO, RELEASE_BELOW};
+use super::poke_cube::{
+    CUBE_HALF_DIAGONAL, GRASP_OFFSET_X, PRE_PUSH_GAP, PUSH_LIMIT, PUSH_SHORT_OF_GOAL,
+};
+
 /// The (env id, robot) pairs that have a state expert, in its own control mode.
 pub const STATE_EXPERTS: [(&str, &str, &str); 3] = [
     ("PickCube-v1", "panda", "pd_ee_delta_pos"),
@@ -202,21 +208,11 @@ pub(crate) struct PlaceSphereExpert {
     grip: Grip,
 }
 
-/// Carrying height of the sphere centre over the bin origin (m).
-const CARRY_ABOVE_BIN: f64 = 0.06;
-/// Carrying height tolerance (m).
-const LIFT_TOL: f64 = 0.01;
 /// The sphere is carried at least this high before it moves sideways (m over the bin origin).
 const CLEAR_ABOVE_BIN: f64 = 0.045;
-/// The sphere is over the bin within this (m, horizontal): lowering starts.
-const OVER_BIN_XY: f64 = 0.003;
 /// Once lowered into the bin's mouth, lowering goes on (and the release happens) within this
 /// (m, horizontal; the bin leaves 5 mm around the sphere).
 const LOWERING_XY: f64 = 0.006;
-/// Lowering target of the sphere centre over the bin origin (m), and the height below which
-/// it is let go.
-const LOWER_TO: f64 = 0.0255;
-const RELEASE_BELOW: f64 = 0.0285;
 /// The sphere rests in the bin (not grasped): horizontal and vertical tolerances (m), the
 /// task's `is_obj_on_bin`, widened so that a sphere settling after the release counts.
 const IN_BIN_XY: f64 = 0.01;
@@ -247,7 +243,7 @@ impl Policy for PlaceSphereExpert {
         let (target, grip) = if self.grip.holds(env) {
             if xy < LOWERING_XY && rel.z < RELEASE_BELOW {
                 (tcp, open)
-            } else if xy < OVER_BIN_XY || lowering {
+            } else if xy < ALIGN_TOL || lowering {
                 (
                     tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
                     close,
@@ -286,20 +282,10 @@ pub(crate) struct PokeCubeExpert {
     grip: Grip,
 }
 
-/// Grasp point relative to the peg centre (m, world x; the peg lies along x).
-const PEG_GRASP_X: f64 = -0.08;
-/// Half diagonal of the cube's footprint (m): the head clears the cube at any yaw.
-const CUBE_HALF_DIAGONAL: f64 = 0.0283;
-/// Gap between the head and the cube before the push (m).
-const PRE_PUSH_GAP: f64 = 0.015;
 /// The head is lined up with the cube (m, along y) and close behind it (m, along x, past the
 /// pre-push point): the push goes on.
 const PUSH_LINE_Y: f64 = 0.006;
 const PUSH_BEHIND_TOL: f64 = 0.006;
-/// The push aims the head this far short of the goal centre (m) at this action limit (a
-/// fast push launches the cube).
-const PUSH_SHORT_OF_GOAL: f64 = 0.02;
-const PUSH_LIMIT: f64 = 0.3;
 /// The cube is this far inside the goal region (m) before the arm stops pushing and holds
 /// still (success needs it static).
 const GOAL_MARGIN: f64 = 0.02;
@@ -329,7 +315,7 @@ impl Policy for PokeCubeExpert {
         if !self.grip.holds(env) {
             let (target, grip) =
                 self.grip
-                    .grasp(env, peg + Vector3::new(PEG_GRASP_X, 0.0, 0.0), tcp);
+                    .grasp(env, peg + Vector3::new(GRASP_OFFSET_X, 0.0, 0.0), tcp);
             ee_action(target, tcp, 1.0, grip, action);
             return;
         }

@@ -23,14 +23,14 @@ use crate::mujoco::BodyId;
 
 /// Carrying height of the TCP (m) and its tolerance.
 const LIFT_Z: f64 = 0.08;
-const LIFT_TOL: f64 = 0.01;
+pub(super) const LIFT_TOL: f64 = 0.01;
 /// Height of the sphere centre over the bin origin while carrying (m).
-const CARRY_ABOVE_BIN: f64 = 0.06;
+pub(super) const CARRY_ABOVE_BIN: f64 = 0.06;
 /// Horizontal alignment of sphere and bin before lowering (m).
 pub(super) const ALIGN_TOL: f64 = 0.003;
 /// Lowering target of the sphere centre above the bin origin (m), and the height at which
 /// the sphere is released.
-const LOWER_TO: f64 = 0.0255;
+pub(super) const LOWER_TO: f64 = 0.0255;
 pub(super) const RELEASE_BELOW: f64 = 0.0285;
 /// Steps the gripper opens while holding still.
 const OPEN_STEPS: usize = 4;

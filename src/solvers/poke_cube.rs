@@ -22,19 +22,19 @@ use crate::mujoco::BodyId;
 use crate::tasks::poke_cube::peg_head;
 
 /// Grasp point relative to the peg centre (m, world x; the peg starts with yaw 0).
-const GRASP_OFFSET_X: f64 = -0.08;
+pub(super) const GRASP_OFFSET_X: f64 = -0.08;
 /// Half diagonal of the cube's footprint (m): clears the cube at any yaw.
-const CUBE_HALF_DIAGONAL: f64 = 0.0283;
+pub(super) const CUBE_HALF_DIAGONAL: f64 = 0.0283;
 /// Gap between the head and the cube before the push (m).
-const PRE_PUSH_GAP: f64 = 0.015;
+pub(super) const PRE_PUSH_GAP: f64 = 0.015;
 /// Pre-push tolerance (m).
 const PRE_PUSH_TOL: f64 = 0.005;
 /// The push stops with the head this far short of the goal centre (m).
-const PUSH_SHORT_OF_GOAL: f64 = 0.02;
+pub(super) const PUSH_SHORT_OF_GOAL: f64 = 0.02;
 /// Push tolerance (m).
 const PUSH_TOL: f64 = 0.004;
 /// Action limit while pushing (a fast push launches the cube).
-const PUSH_LIMIT: f64 = 0.3;
+pub(super) const PUSH_LIMIT: f64 = 0.3;
 
 /// The PokeCube policy.
 #[derive(Debug)]
