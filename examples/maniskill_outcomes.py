@@ -75,6 +75,7 @@ SOLVER_PAIRS = [
     ("PullCube-v1", "fetch", "pd_joint_pos"),
     ("StackCube-v1", "panda", None),
     ("StackCube-v1", "fetch", "pd_joint_pos"),
+    ("LiftPegUpright-v1", "panda", None),
 ]
 
 # (env id, robot, ManiSkill's motion-planning module) of every motion-planning solution

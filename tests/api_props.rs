@@ -292,6 +292,7 @@ proptest! {
     fn random_configs_are_errors_or_finite_envs(
         id in prop::sample::select(vec!["PickCube-v1", "PokeCube-v1", "PlaceSphere-v1",
                                         "PushCube-v1", "PullCube-v1", "StackCube-v1",
+                                        "LiftPegUpright-v1",
                                         "PickCubeSO100-v1",
                                         "Bogus-v9"]),
         robot in prop::option::of(prop::sample::select(vec!["panda", "fetch", "so100",

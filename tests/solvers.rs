@@ -145,8 +145,8 @@ fn pokecube_solver_pushes_with_the_peg_and_earns_the_full_dense_reward() {
 }
 
 #[test]
-fn every_registered_env_and_robot_has_a_scripted_solver() {
-    use mjskill::solvers::{make_policy, SOLVED};
+fn every_registered_env_and_robot_has_a_scripted_solver_or_is_listed_unsolved() {
+    use mjskill::solvers::{make_policy, SOLVED, UNSOLVED};
     let mut pairs = Vec::new();
     for env in mjskill::registry() {
         for (robot, _) in &env.robots {
@@ -156,14 +156,24 @@ fn every_registered_env_and_robot_has_a_scripted_solver() {
                 ..Default::default()
             };
             let e = eval::make_env(env.id, config, "solver").unwrap();
-            make_policy("solver", &e, 0)
-                .unwrap_or_else(|err| panic!("{} with {robot}: {err}", env.id));
+            let unsolved = UNSOLVED.contains(&(env.id, *robot));
+            match make_policy("solver", &e, 0) {
+                Ok(_) => assert!(!unsolved, "{} with {robot}: listed UNSOLVED", env.id),
+                Err(err) if unsolved => {
+                    let err = err.to_string();
+                    assert!(err.contains("no scripted solver"), "{}: {err}", env.id);
+                }
+                Err(err) => panic!("{} with {robot}: {err}", env.id),
+            }
         }
     }
     pairs.sort();
-    let mut solved = SOLVED.to_vec();
-    solved.sort();
-    assert_eq!(pairs, solved, "SOLVED lists exactly the registered pairs");
+    let mut listed: Vec<(&str, &str)> = SOLVED.iter().chain(&UNSOLVED).copied().collect();
+    listed.sort();
+    assert_eq!(
+        pairs, listed,
+        "SOLVED and UNSOLVED list exactly the registered pairs"
+    );
 }
 
 /// The WidowX AI solver holds PickCube's cube with a light squeeze (docs/outcome-physics.md):

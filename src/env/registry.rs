@@ -26,11 +26,13 @@ pub enum EnvId {
     PullCube,
     /// `StackCube-v1`.
     StackCube,
+    /// `LiftPegUpright-v1`.
+    LiftPegUpright,
 }
 
 impl EnvId {
     /// Every env, in the registry's order.
-    pub const ALL: [EnvId; 8] = [
+    pub const ALL: [EnvId; 9] = [
         EnvId::PickCube,
         EnvId::PickCubeSo100,
         EnvId::PickCubeWidowxAi,
@@ -39,6 +41,7 @@ impl EnvId {
         EnvId::PushCube,
         EnvId::PullCube,
         EnvId::StackCube,
+        EnvId::LiftPegUpright,
     ];
 
     /// The id as ManiSkill registers it.
@@ -52,6 +55,7 @@ impl EnvId {
             EnvId::PushCube => "PushCube-v1",
             EnvId::PullCube => "PullCube-v1",
             EnvId::StackCube => "StackCube-v1",
+            EnvId::LiftPegUpright => "LiftPegUpright-v1",
         }
     }
 
@@ -124,7 +128,11 @@ fn stack_cube(_robot: RobotId) -> Box<dyn Task> {
     Box::new(crate::tasks::stack_cube::StackCube::new())
 }
 
-static REGISTRY: [EnvSpec; 8] = [
+fn lift_peg_upright(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::lift_peg_upright::LiftPegUpright::new())
+}
+
+static REGISTRY: [EnvSpec; 9] = [
     EnvSpec {
         id: EnvId::PickCube,
         robots: &RobotId::ALL,
@@ -172,6 +180,12 @@ static REGISTRY: [EnvSpec; 8] = [
         robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: stack_cube,
+    },
+    EnvSpec {
+        id: EnvId::LiftPegUpright,
+        robots: &[RobotId::Panda, RobotId::Fetch],
+        max_episode_steps: MAX_EPISODE_STEPS,
+        make_task: lift_peg_upright,
     },
 ];
 
@@ -280,7 +294,7 @@ mod tests {
             EnvId::parse("PickCube-v2").unwrap_err().to_string(),
             "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
              PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1, \
-             StackCube-v1"
+             StackCube-v1, LiftPegUpright-v1"
         );
     }
 }

@@ -61,6 +61,42 @@ fn visual(e: Element, rgba: &Rgba, group: i32) -> Element {
         .attr("rgba", nums(rgba))
 }
 
+/// A peg body (free joint and collision box named `name`, two drawn half-boxes).
+fn peg_body(
+    name: &str,
+    half_length: f64,
+    half_width: f64,
+    rgba: [Rgba; 2],
+    pos: [f64; 3],
+) -> Element {
+    let half_part = half_length / 2.0;
+    let mut body = Element::new("body")
+        .attr("name", name)
+        .attr_nums("pos", &pos)
+        .child(Element::new("freejoint").attr("name", name))
+        .child(
+            Element::new("geom")
+                .attr("name", name)
+                .attr("type", "box")
+                .attr_nums("size", &[half_length, half_width, half_width])
+                .attr("density", DENSITY)
+                .attr("rgba", "0 0 0 0")
+                .attr("group", super::GROUP_COLLISION),
+        );
+    for (k, (x, colour)) in [-half_part, half_part].into_iter().zip(rgba).enumerate() {
+        body.push(visual(
+            Element::new("geom")
+                .attr("name", format!("{name}_visual{k}"))
+                .attr("type", "box")
+                .attr_nums("pos", &[x, 0.0, 0.0])
+                .attr_nums("size", &[half_part, half_width, half_width]),
+            &colour,
+            0,
+        ));
+    }
+    body
+}
+
 impl Scene {
     /// The static table scene as ManiSkill draws it (docs/rendering.md): the table-workspace
     /// box (top face at z = 0; collision only) with the table model of `models/scene/` drawn
@@ -216,7 +252,8 @@ impl Scene {
     }
 
     /// PokeCube's peg (docs/tasks.md §2.1): one collision box of half extents
-    /// (half_length, half_width, half_width) along local x, drawn as two visual half-boxes.
+    /// (half_length, half_width, half_width) along local x, drawn as two visual half-boxes of
+    /// one colour.
     pub fn add_peg(
         &mut self,
         name: &str,
@@ -225,31 +262,33 @@ impl Scene {
         rgba: Rgba,
         pos: [f64; 3],
     ) {
-        let half_part = half_length / 2.0;
-        let mut body = Element::new("body")
-            .attr("name", name)
-            .attr_nums("pos", &pos)
-            .child(Element::new("freejoint").attr("name", name))
-            .child(
-                Element::new("geom")
-                    .attr("name", name)
-                    .attr("type", "box")
-                    .attr_nums("size", &[half_length, half_width, half_width])
-                    .attr("density", DENSITY)
-                    .attr("rgba", "0 0 0 0")
-                    .attr("group", super::GROUP_COLLISION),
-            );
-        for (k, x) in [-half_part, half_part].into_iter().enumerate() {
-            body.push(visual(
-                Element::new("geom")
-                    .attr("name", format!("{name}_visual{k}"))
-                    .attr("type", "box")
-                    .attr_nums("pos", &[x, 0.0, 0.0])
-                    .attr_nums("size", &[half_part, half_width, half_width]),
-                &rgba,
-                0,
-            ));
-        }
+        let body = peg_body(name, half_length, half_width, [rgba, rgba], pos);
+        self.worldbody().push(body);
+    }
+
+    /// ManiSkill's `build_twocolor_peg` (LiftPegUpright's red/blue peg): one collision box of
+    /// half extents (half_length, half_width, half_width) along local x, drawn as two visual
+    /// half-boxes, the −x half in `rgba[0]`, the +x half in `rgba[1]`. Its inertia is given
+    /// explicitly (the box's, at the props' density, principal axes along the body's): the
+    /// drawn halves would otherwise make MuJoCo diagonalise the box's degenerate inertia
+    /// (two equal moments) in the render model but not in the physics model, and a peg turned
+    /// off its axes would step differently in the two at the last bits.
+    pub fn add_twocolor_peg(
+        &mut self,
+        name: &str,
+        half_length: f64,
+        half_width: f64,
+        rgba: [Rgba; 2],
+        pos: [f64; 3],
+    ) {
+        let (l, w) = (2.0 * half_length, 2.0 * half_width);
+        let mass = DENSITY * l * w * w;
+        let side = mass / 12.0 * (l * l + w * w);
+        let inertial = Element::new("inertial")
+            .attr_nums("pos", &[0.0; 3])
+            .attr("mass", super::xml::num(mass))
+            .attr_nums("diaginertia", &[mass / 12.0 * (2.0 * w * w), side, side]);
+        let body = peg_body(name, half_length, half_width, rgba, pos).child(inertial);
         self.worldbody().push(body);
     }
 
@@ -382,5 +421,37 @@ mod tests {
         // The goal marker is a mocap body that does not fall.
         let goal = m.require_id(ObjType::Body, "goal").unwrap();
         assert_eq!(m.body_mocapid()[goal], 0);
+    }
+
+    #[test]
+    fn the_twocolor_peg_has_the_box_inertia_and_its_two_colours() {
+        let (a, b) = ([1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+        let mut s = Scene::new("t", crate::mjcf::TIMESTEP);
+        s.add_table_scene();
+        s.add_twocolor_peg("peg", 0.12, 0.025, [a, b], [0.0, 0.0, 0.1]);
+        let m = Arc::new(s.finish().compile().unwrap());
+        let peg = m.require_id(ObjType::Body, "peg").unwrap();
+        assert!((m.body_mass()[peg] - 0.6).abs() < 1e-12);
+        // (m/12)(w² + w²) about the long axis, (m/12)(l² + w²) about the others.
+        let i = &m.body_inertia()[3 * peg..3 * peg + 3];
+        for (got, want) in i.iter().zip([2.5e-4, 3.005e-3, 3.005e-3]) {
+            assert!((got - want).abs() < 1e-12, "{i:?}");
+        }
+        for (k, rgba) in [a, b].iter().enumerate() {
+            let g = m
+                .require_id(ObjType::Geom, &format!("peg_visual{k}"))
+                .unwrap();
+            let got: Vec<f64> = m.geom_rgba()[4 * g..4 * g + 4]
+                .iter()
+                .map(|&x| x as f64)
+                .collect();
+            assert_eq!(got, rgba.to_vec(), "half {k}");
+            // The −x half first.
+            let x = m.geom_pos()[3 * g];
+            assert!(
+                (x - (k as f64 - 0.5) * 0.12).abs() < 1e-12,
+                "half {k} at {x}"
+            );
+        }
     }
 }

@@ -14,6 +14,7 @@ pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
+pub(crate) mod lift_peg_upright;
 pub mod mlp;
 pub mod noise;
 #[cfg(feature = "onnx")]
@@ -140,9 +141,9 @@ pub trait Policy: std::fmt::Debug + Send {
 
 /// The control mode a policy needs in env `env_id` with `robot` (`None`: any). The scripted
 /// solvers drive the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the
-/// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1) where the robot has
-/// EE controllers; SO100 and WidowX AI have none upstream, so their solvers command joint
-/// positions (`pd_joint_pos`) from an IK of their own.
+/// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1 and LiftPegUpright-v1)
+/// where the robot has EE controllers; SO100 and WidowX AI have none upstream, so their
+/// solvers command joint positions (`pd_joint_pos`) from an IK of their own.
 pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
     if policy != "solver" {
         return None;
@@ -153,9 +154,9 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
         RobotId::So100 | RobotId::WidowxAi => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
         // its gripper to the cube's faces (solvers/xarm6.rs), and so does the Panda to stack
-        // (solvers/stack_cube.rs).
+        // (solvers/stack_cube.rs) and to stand the peg up (solvers/lift_peg_upright.rs).
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
-        RobotId::Panda if env_id == STACK_CUBE => "pd_ee_delta_pose",
+        RobotId::Panda if env_id == STACK_CUBE || env_id == LIFT_PEG_UPRIGHT => "pd_ee_delta_pose",
         RobotId::Panda => "pd_ee_delta_pos",
     })
 }
@@ -205,7 +206,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 17] = [
+pub const SOLVED: [(&str, &str); 18] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -223,10 +224,17 @@ pub const SOLVED: [(&str, &str); 17] = [
     ("PullCube-v1", "fetch"),
     ("StackCube-v1", "panda"),
     ("StackCube-v1", "fetch"),
+    ("LiftPegUpright-v1", "panda"),
 ];
 
-/// The env whose Panda solver turns the gripper (`pd_ee_delta_pose`).
+/// The envs whose Panda solver turns the gripper (`pd_ee_delta_pose`).
 const STACK_CUBE: &str = "StackCube-v1";
+const LIFT_PEG_UPRIGHT: &str = "LiftPegUpright-v1";
+
+/// The registered (env id, robot) pairs that have no scripted solver yet (issue 56):
+/// `--policy solver` answers them with [`SolverError::NoSolver`], and the tests that replay a
+/// solver episode per pair skip them. Together with [`SOLVED`], every registered pair.
+pub const UNSOLVED: [(&str, &str); 1] = [("LiftPegUpright-v1", "fetch")];
 
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(
@@ -270,6 +278,9 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
         ("StackCube-v1", "panda") => boxed(stack_cube::PandaStackCube::new(env, PANDA_GRIPPER)),
         ("StackCube-v1", "fetch") => boxed(stack_cube::FetchStackCube::new(env)),
+        ("LiftPegUpright-v1", "panda") => {
+            boxed(lift_peg_upright::PandaLiftPeg::new(env, PANDA_GRIPPER))
+        }
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,

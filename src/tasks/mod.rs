@@ -78,6 +78,7 @@ impl InfoValue for f64 {
     }
 }
 
+pub mod lift_peg_upright;
 pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;

@@ -139,6 +139,7 @@ pub fn task_description(env_id: &str) -> String {
         "PushCube-v1" => "Push the cube to the goal region in front of it.".into(),
         "PullCube-v1" => "Pull the cube onto the target.".into(),
         "StackCube-v1" => "Pick up the red cube and stack it on top of the green cube.".into(),
+        "LiftPegUpright-v1" => "Stand the peg lying on the table upright.".into(),
         other => other.to_string(),
     }
 }

@@ -1,7 +1,7 @@
 """Records ManiSkill 3 reference trajectories (format `mjskill-ref-traj/1`,
-docs/reference-trajectories.md) of PushCube-v1, PullCube-v1 and StackCube-v1 with the Panda and
-the Fetch,
-and one reference camera state per pair for `tests/segmentation.rs`.
+docs/reference-trajectories.md) of PushCube-v1, PullCube-v1, StackCube-v1 and LiftPegUpright-v1
+with the Panda and the Fetch, and one reference camera state per pair for
+`tests/segmentation.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/msmp/bin/python tests/data/maniskill/record_push_pull.py \
         [--pairs PushCube-v1:panda,...] [--images]
@@ -17,8 +17,8 @@ format's description gives it:
   `pd_joint_pos`, `pd_ee_delta_pos`, `pd_ee_delta_pose`, `pd_joint_vel`,
   `pd_joint_target_delta_pos` (seeds 1100–1101);
 * Panda only: 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
-  own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube`), run until the solution
-  returns.
+  own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube` /
+  `solveLiftPegUpright`), run until the solution returns.
 
 Every episode runs in a freshly made env (PhysX CPU keeps contact caches across resets). Each
 snapshot holds what the format lists; floats are the shortest decimals of ManiSkill's float32
@@ -46,11 +46,12 @@ import mani_skill.envs  # noqa: F401  (registers the envs)
 HERE = Path(__file__).resolve().parent
 PAIRS = [
     (e, r)
-    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1")
+    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
 ]
 # The env attribute of the actor whose grasp the task checks.
-GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA"}
+GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA",
+              "LiftPegUpright-v1": "peg"}
 DEFAULT_MODE = "pd_joint_delta_pos"
 WALK_MODES = ["pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_joint_vel",
               "pd_joint_target_delta_pos"]
@@ -248,9 +249,9 @@ class Recorder(gym.Wrapper):
 
 def motion_planning(env_id, seed):
     from mani_skill.examples.motionplanning.panda.solutions import (
-        solvePullCube, solvePushCube, solveStackCube)
+        solveLiftPegUpright, solvePullCube, solvePushCube, solveStackCube)
     solve = {"PushCube-v1": solvePushCube, "PullCube-v1": solvePullCube,
-             "StackCube-v1": solveStackCube}[env_id]
+             "StackCube-v1": solveStackCube, "LiftPegUpright-v1": solveLiftPegUpright}[env_id]
     env, _ = make(env_id, "panda", "pd_joint_pos")
     rec = Recorder(env)
     res = solve(rec, seed=seed)

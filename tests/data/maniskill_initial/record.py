@@ -1,6 +1,6 @@
-"""Records ManiSkill 3's seeded initial states of PushCube-v1, PullCube-v1 and StackCube-v1
-(panda, fetch) into `<env_id>__<robot>.json` next to this script, for `tests/push_pull_cube.rs`
-and `tests/stack_cube.rs`.
+"""Records ManiSkill 3's seeded initial states of PushCube-v1, PullCube-v1, StackCube-v1 and
+LiftPegUpright-v1 (panda, fetch) into `<env_id>__<robot>.json` next to this script, for
+`tests/push_pull_cube.rs`, `tests/stack_cube.rs` and `tests/lift_peg_upright.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py [ENV_ID ...]
 
@@ -26,7 +26,7 @@ import mani_skill.envs  # noqa: F401  (registers the envs)
 
 PAIRS = [
     (e, r)
-    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1")
+    for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
 ]
 SEEDS = {"fit": list(range(0, 50)), "held_out": list(range(1000, 1050))}
