@@ -4,132 +4,24 @@
 
 mod common;
 
-use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_2};
-use std::path::PathBuf;
 
 use common::put_free_body;
-use mjskill::{make, Env, EnvConfig, ObsMode, RewardMode};
-use serde::Deserialize;
+use common::task::{check_initial_states, closeness, env as task_env, max_abs, part};
+use mjskill::{Env, EnvConfig, ObsMode, RewardMode};
 
 const ID: &str = "LiftPegUpright-v1";
 const ROBOTS: [&str; 2] = ["panda", "fetch"];
 
-/// The bound on the seeded `state` observation (max |diff|).
-const OBS_TOL: f64 = 1e-4;
-
 fn env(robot: &str, obs_mode: ObsMode) -> Env {
-    make(
-        ID,
-        EnvConfig {
-            robot: Some(robot.into()),
-            obs_mode,
-            reward_mode: RewardMode::Dense,
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
-
-#[derive(Deserialize)]
-struct Initial {
-    obs_state: Vec<f64>,
-    actors: BTreeMap<String, [f64; 7]>,
-    tcp_pose: [f64; 7],
-    robot_qpos: Vec<f64>,
-    info: BTreeMap<String, bool>,
-    reward_dense: f64,
-    reward_normalized: f64,
-}
-
-#[derive(Deserialize)]
-struct InitialFile {
-    env_id: String,
-    robot: String,
-    control_mode: String,
-    obs_state_layout: Vec<(String, usize, usize)>,
-    seeds: BTreeMap<String, Vec<u64>>,
-    episodes: BTreeMap<String, Initial>,
-}
-
-fn initial_file(robot: &str) -> InitialFile {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/maniskill_initial")
-        .join(format!("{ID}__{robot}.json"));
-    let f: InitialFile = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
-    assert_eq!((f.env_id.as_str(), f.robot.as_str()), (ID, robot));
-    f
-}
-
-fn max_abs(a: impl IntoIterator<Item = f64>, b: &[f64]) -> f64 {
-    let a: Vec<f64> = a.into_iter().collect();
-    assert_eq!(a.len(), b.len());
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    task_env(ID, robot, obs_mode)
 }
 
 #[test]
 fn seeded_initial_states_equal_maniskills_on_fitted_and_held_out_seeds() {
     for robot in ROBOTS {
-        let f = initial_file(robot);
-        let mut e = env(robot, ObsMode::State);
-        assert_eq!(e.control_mode(), f.control_mode);
-        // ManiSkill's layout, key for key (`agent.qpos` is mjskill's `agent/qpos`).
-        let want: Vec<(String, usize, usize)> = f
-            .obs_state_layout
-            .iter()
-            .map(|(k, a, b)| (k.replace('.', "/"), *a, *b))
-            .collect();
-        let got: Vec<(String, usize, usize)> = e
-            .obs_layout()
-            .iter()
-            .map(|(k, r)| (k.clone(), r.start, r.end))
-            .collect();
-        assert_eq!(got, want, "{robot}: layout");
-        for (split, seeds) in &f.seeds {
-            assert_eq!(seeds.len(), 50, "{robot} {split}");
-            let mut worst = 0.0f64;
-            for seed in seeds {
-                let ms = &f.episodes[&seed.to_string()];
-                let ctx = format!("{robot} seed {seed}");
-                e.reset(Some(*seed));
-                let obs = e.obs().iter().map(|&x| x as f64);
-                let d = max_abs(obs, &ms.obs_state);
-                worst = worst.max(d);
-                assert!(d <= OBS_TOL, "{ctx}: state obs max |diff| {d}");
-                assert_eq!(ms.actors.len(), 2, "{ctx}: table and peg");
-                for (name, pose) in &ms.actors {
-                    let got = e
-                        .actor_pose(name)
-                        .unwrap_or_else(|| panic!("{ctx}: {name}"));
-                    assert!(
-                        max_abs(got, pose) < 2e-6,
-                        "{ctx}: {name} {got:?} vs {pose:?}"
-                    );
-                }
-                let (p, q) = e.tcp_pose();
-                let tcp = p.into_iter().chain(q);
-                assert!(max_abs(tcp, &ms.tcp_pose) < 1e-5, "{ctx}: tcp_pose");
-                assert!(
-                    max_abs(e.robot_qpos(), &ms.robot_qpos) < 1e-6,
-                    "{ctx}: qpos"
-                );
-                assert_eq!(e.info().keys, ["success"], "{ctx}");
-                for (k, &v) in &ms.info {
-                    assert_eq!(e.info().get(k), Some(v as u8 as f64), "{ctx}: {k}");
-                }
-                let dense = e.dense_reward();
-                assert!(
-                    (dense - ms.reward_dense).abs() < 1e-5,
-                    "{ctx}: dense {dense} vs {}",
-                    ms.reward_dense
-                );
-                assert!((dense / 3.0 - ms.reward_normalized).abs() < 1e-5, "{ctx}");
-            }
-            eprintln!("{robot} {split}: max |obs − ManiSkill| = {worst:.2e}");
-        }
+        // The table and the peg.
+        check_initial_states(ID, robot, &["success"], 3.0, Some(2));
     }
 }
 
@@ -154,20 +46,6 @@ fn the_peg_spawns_lying_along_x_within_the_square() {
     for k in 0..2 {
         assert!(min[k] < -0.09 && max[k] > 0.09, "{min:?} {max:?}");
     }
-}
-
-/// A flat observation part as f64.
-fn part(e: &Env, key: &str) -> Vec<f64> {
-    e.obs_part(key)
-        .unwrap_or_else(|| panic!("no {key}"))
-        .iter()
-        .map(|&x| x as f64)
-        .collect()
-}
-
-/// `1 − tanh(5 d)`.
-fn closeness(d: f64) -> f64 {
-    1.0 - (5.0 * d).tanh()
 }
 
 /// The dense reward recomputed independently from the observation (docs/tasks.md §9.4), for

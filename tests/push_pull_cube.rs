@@ -19,7 +19,7 @@ const PAIRS: [(&str, &str); 4] = [
 fn seeded_initial_states_equal_maniskills_on_fitted_and_held_out_seeds() {
     for (id, robot) in PAIRS {
         let max_reward = if id == "PushCube-v1" { 4.0 } else { 3.0 };
-        check_initial_states(id, robot, &["success"], max_reward);
+        check_initial_states(id, robot, &["success"], max_reward, None);
     }
 }
 

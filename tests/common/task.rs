@@ -94,9 +94,16 @@ pub fn closeness(d: f64) -> f64 {
 /// Checks (`id`, `robot`)'s seeded resets against ManiSkill's recorded initial states, every
 /// seed of every split (fitted and held out, 50 each): the `state` layout key for key, the
 /// observation within [`OBS_TOL`], the actors' poses, the TCP pose, the joints, the info
-/// (keys `keys`, every recorded value) and the dense and normalised rewards (`max_reward`).
-/// Prints the worst observation difference per split.
-pub fn check_initial_states(id: &str, robot: &str, keys: &[&str], max_reward: f64) {
+/// (keys `keys`, every recorded value) and the dense and normalised rewards (`max_reward`);
+/// with `actors`, that many actors recorded. Prints the worst observation difference per
+/// split.
+pub fn check_initial_states(
+    id: &str,
+    robot: &str,
+    keys: &[&str],
+    max_reward: f64,
+    actors: Option<usize>,
+) {
     let f = initial_file(id, robot);
     let mut e = env(id, robot, ObsMode::State);
     assert_eq!(e.control_mode(), f.control_mode);
@@ -124,6 +131,9 @@ pub fn check_initial_states(id: &str, robot: &str, keys: &[&str], max_reward: f6
             worst = worst.max(d);
             assert!(d <= OBS_TOL, "{ctx}: state obs max |diff| {d}");
             assert!(!ms.actors.is_empty(), "{ctx}: no actors recorded");
+            if let Some(n) = actors {
+                assert_eq!(ms.actors.len(), n, "{ctx}: actors recorded");
+            }
             for (name, pose) in &ms.actors {
                 let got = e
                     .actor_pose(name)
