@@ -75,7 +75,7 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "PokeCube-v1",
         "fetch",
         "pd_joint_pos",
-        1.00,
+        0.97,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
