@@ -55,6 +55,7 @@ impl Out {
             terminated: &mut self.terminated,
             truncated: &mut self.truncated,
             autoreset: &mut self.autoreset,
+            labels: None,
         }
     }
 }

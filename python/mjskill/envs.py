@@ -192,14 +192,15 @@ def _restore_env(kwargs: dict, render_mode: str | None, state: str) -> MjskillEn
 ROLLOUT_BUFFERS = ("obs", "actions", "rewards", "terminated", "truncated", "autoreset")
 
 
-def rollout_buffers(envs: Any, steps: int) -> dict[str, np.ndarray]:
+def rollout_buffers(envs: Any, steps: int, labels: bool = False) -> dict[str, np.ndarray]:
     """Zeroed rollout buffers of ``steps`` steps for ``envs`` (``num_envs`` and the single
     spaces): ``obs`` ``[T, N, obs_dim]`` and ``actions`` ``[T, N, act_dim]`` float32,
     ``rewards`` ``[T, N]`` float32, ``terminated``, ``truncated`` and ``autoreset`` ``[T, N]``
-    bool."""
+    bool; with ``labels``, also ``labels`` ``[T, N, act_dim]`` float32 for the state
+    expert's labels."""
     t, n = int(steps), envs.num_envs
     od, ad = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
-    return dict(
+    out = dict(
         obs=np.zeros((t, n, od), np.float32),
         actions=np.zeros((t, n, ad), np.float32),
         rewards=np.zeros((t, n), np.float32),
@@ -207,6 +208,9 @@ def rollout_buffers(envs: Any, steps: int) -> dict[str, np.ndarray]:
         truncated=np.zeros((t, n), bool),
         autoreset=np.zeros((t, n), bool),
     )
+    if labels:
+        out["labels"] = np.zeros((t, n, ad), np.float32)
+    return out
 
 
 class MjskillVectorEnv(VectorEnv):
@@ -311,15 +315,23 @@ class MjskillVectorEnv(VectorEnv):
         return live(self._native, f"this mjskill/{self._kwargs['env_id']} vector env "
                                    f"(num_envs={self.num_envs})")
 
-    def rollout_buffers(self, steps: int) -> dict[str, np.ndarray]:
+    def rollout_buffers(self, steps: int, labels: bool = False) -> dict[str, np.ndarray]:
         """Buffers for :meth:`rollout` of ``steps`` steps: ``obs`` ``[T, N, obs_dim]`` and
         ``actions`` ``[T, N, act_dim]`` float32, ``rewards`` ``[T, N]`` float32,
-        ``terminated``, ``truncated`` and ``autoreset`` ``[T, N]`` bool."""
+        ``terminated``, ``truncated`` and ``autoreset`` ``[T, N]`` bool; with ``labels``, also
+        ``labels`` ``[T, N, act_dim]`` float32, which :meth:`rollout` fills with the state
+        expert's actions (DAgger)."""
         if self._layout.dict_obs:
             raise ValueError(
                 f"rollout takes flat observations (obs_mode 'state'), not {self._layout.obs_mode!r}"
             )
-        return rollout_buffers(self, steps)
+        return rollout_buffers(self, steps, labels)
+
+    def expert_actions(self) -> np.ndarray:
+        """Every env's state-expert action for its current state, ``[N, act_dim]`` float32
+        (the single env's :meth:`MjskillEnv.expert_action`, computed on the env threads). A
+        pair without a state expert (``mjskill.STATE_EXPERTS``) is a ``ValueError``."""
+        return self._live().expert_actions()
 
     def rollout(self, policy, first_step: int, buffers: dict[str, np.ndarray]) -> np.ndarray:
         """Runs T steps (the buffers' length, :meth:`rollout_buffers`) in one call, with
@@ -328,8 +340,11 @@ class MjskillVectorEnv(VectorEnv):
         steps with it clipped to the action space (or autoresets, as :meth:`step` does).
         Step t is the policy's step ``first_step + t`` (the key of its sampling noise, with
         the env's index). The buffers receive each step's observation before the step, raw
-        action (0 where the env reset instead), reward and flags. Returns the observations
-        after the last step. The results do not depend on ``num_threads``.
+        action (0 where the env reset instead), reward and flags, and, when the buffers have
+        ``labels`` (``rollout_buffers(T, labels=True)``), the state expert's action for the
+        state each action was chosen from (0 where the env reset): a DAgger round's learner
+        steps and expert labels in one call. Returns the observations after the last step.
+        The results do not depend on ``num_threads``.
 
         The buffers must be as :meth:`rollout_buffers` makes them: exactly its dtypes and
         shapes, C-contiguous, writable and each in its own memory; ``first_step + T`` is at
@@ -352,7 +367,8 @@ class MjskillVectorEnv(VectorEnv):
             )
         b = buffers
         _, obs = _native.rollout(native, policy, first_step, b["obs"], b["actions"],
-                                 b["rewards"], b["terminated"], b["truncated"], b["autoreset"])
+                                 b["rewards"], b["terminated"], b["truncated"], b["autoreset"],
+                                 b.get("labels"))
         return obs
 
 

@@ -23,11 +23,11 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
-use mjskill::solvers::{state_expert, StateExpert};
+use mjskill::solvers::{set_state_experts, state_expert, StateExpert};
 use mjskill::VecEnv;
 use mjskill::{Env, EnvConfig, EnvError, EnvState};
 use numpy::ndarray::ArrayView2;
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -622,6 +622,29 @@ impl PyVecEnv {
     /// Envs that reset during the last step (their action was ignored).
     fn autoreset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
         Ok(PyArray1::from_slice(py, self.lock(py)?.vec.autoreset()))
+    }
+
+    /// Every env's state-expert action for its current state, `[N, act_dim]` float32, computed
+    /// on the envs' threads (`solvers::set_state_experts`, installed on first use). A pair
+    /// without a state expert, or a mode its actions cannot be converted to, is a
+    /// `ValueError` naming it.
+    fn expert_actions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let mut g = self.lock(py)?;
+        let vec = &mut g.vec;
+        let labels = py
+            .detach(|| {
+                if !vec.has_labellers() {
+                    set_state_experts(vec).map_err(|e| e.to_string())?;
+                }
+                vec.expert_actions()
+                    .map(<[f32]>::to_vec)
+                    .map_err(|e| e.to_string())
+            })
+            .map_err(PyValueError::new_err)?;
+        let ad = labels.len() / self.num_envs;
+        PyArray1::from_vec(py, labels)
+            .reshape([self.num_envs, ad])
+            .map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
     /// `{camera: {"rgb": N×H×W×3 uint8, "depth": N×H×W×1 float32 (int16 millimetres with

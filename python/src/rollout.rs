@@ -12,7 +12,7 @@
 
 use std::sync::Arc;
 
-use mjskill::solvers::{GaussianMlp, MAX_LAYER_ELEMENTS};
+use mjskill::solvers::{set_state_experts, GaussianMlp, MAX_LAYER_ELEMENTS};
 use mjskill::{RolloutBuffers, MAX_POLICY_STEP};
 use numpy::{
     BorrowError, Element, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
@@ -266,9 +266,12 @@ impl<'py, T: Element> Checked<'py, T> {
 /// shapes, C-contiguous, writable and each in its own memory) receive each step's observation
 /// before the step, raw action, reward and flags; step t is the policy's step `first_step +
 /// t`, and `first_step + T` is at most 2^48. Returns `(T, obs [N, obs_dim])`, the
-/// observations after the last step.
+/// observations after the last step. With `labels` (`[T, N, act_dim]` float32, as the others),
+/// every env's state expert labels the state each action was chosen from
+/// (`solvers::set_state_experts`, installed on first use; a pair without one is a
+/// `ValueError` naming it).
 #[pyfunction]
-#[pyo3(signature = (vec_env, policy, first_step, obs, actions, rewards, terminated, truncated, autoreset))]
+#[pyo3(signature = (vec_env, policy, first_step, obs, actions, rewards, terminated, truncated, autoreset, labels=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rollout<'py>(
     py: Python<'py>,
@@ -281,6 +284,7 @@ pub(crate) fn rollout<'py>(
     terminated: &Bound<'py, PyAny>,
     truncated: &Bound<'py, PyAny>,
     autoreset: &Bound<'py, PyAny>,
+    labels: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(usize, Bound<'py, PyAny>)> {
     let valid = format!(
         "0..{MAX_POLICY_STEP} (2^48: the step keys the policy's sampling noise, which must not \
@@ -321,7 +325,11 @@ pub(crate) fn rollout<'py>(
     let terminated = Checked::<bool>::new(terminated, "terminated", &[t, n], "bool")?;
     let truncated = Checked::<bool>::new(truncated, "truncated", &[t, n], "bool")?;
     let autoreset = Checked::<bool>::new(autoreset, "autoreset", &[t, n], "bool")?;
-    let ranges = [
+    let labels = labels
+        .filter(|l| !l.is_none())
+        .map(|l| Checked::<f32>::new(l, "labels", &[t, n, ad], "float32"))
+        .transpose()?;
+    let mut ranges = vec![
         (obs.name, obs.range()),
         (actions.name, actions.range()),
         (rewards.name, rewards.range()),
@@ -329,6 +337,9 @@ pub(crate) fn rollout<'py>(
         (truncated.name, truncated.range()),
         (autoreset.name, autoreset.range()),
     ];
+    if let Some(l) = &labels {
+        ranges.push((l.name, l.range()));
+    }
     for (i, (a, ra)) in ranges.iter().enumerate() {
         for (b, rb) in &ranges[i + 1..] {
             if ra.start < rb.end && rb.start < ra.end {
@@ -345,6 +356,7 @@ pub(crate) fn rollout<'py>(
         truncated.borrow()?,
         autoreset.borrow()?,
     );
+    let mut la = labels.as_ref().map(|l| l.borrow()).transpose()?;
     // C-contiguous and writable, checked above: the slices cannot fail.
     let slice_err = |_| PyValueError::new_err("a rollout buffer is not contiguous");
     let out = RolloutBuffers {
@@ -354,9 +366,18 @@ pub(crate) fn rollout<'py>(
         terminated: te.as_slice_mut().map_err(slice_err)?,
         truncated: tr.as_slice_mut().map_err(slice_err)?,
         autoreset: au.as_slice_mut().map_err(slice_err)?,
+        labels: la
+            .as_mut()
+            .map(|l| l.as_slice_mut())
+            .transpose()
+            .map_err(slice_err)?,
     };
     let mut g = vec_env.lock(py)?;
     let VecState { vec, .. } = &mut *g;
+    if out.labels.is_some() && !vec.has_labellers() {
+        py.detach(|| set_state_experts(vec))
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    }
     let p = policy.policy.clone();
     let steps = py
         .detach(|| vec.rollout(p, first_step, out))

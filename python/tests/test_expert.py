@@ -49,3 +49,60 @@ def test_a_pair_without_an_expert_is_a_value_error_naming_it():
     with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch; "
                                          "available: PickCube-v1 with panda"):
         env.unwrapped.expert_action()
+
+
+def test_the_vector_env_labels_every_env_as_its_single_env():
+    from mjskill import MjskillVectorEnv
+
+    vec = MjskillVectorEnv("PickCube-v1", num_envs=4, num_threads=2,
+                           control_mode="pd_joint_pos")
+    vec.reset(seed=30)
+    labels = vec.expert_actions()
+    assert labels.dtype == np.float32 and labels.shape == (4,) + vec.single_action_space.shape
+    for i in range(4):
+        env = gym.make("mjskill/PickCube-v1", control_mode="pd_joint_pos")
+        env.reset(seed=30 + i)
+        np.testing.assert_array_equal(labels[i], env.unwrapped.expert_action())
+
+
+def test_a_labelled_native_rollout_labels_the_states_it_visits():
+    from mjskill import GaussianMlp, MjskillVectorEnv
+    from rollout_case import KW, params
+
+    def run(threads):
+        vec = MjskillVectorEnv("PickCube-v1", num_envs=3, num_threads=threads, **KW)
+        vec.reset(seed=12)
+        buf = vec.rollout_buffers(8, labels=True)
+        p = params(*vec.single_observation_space.shape, *vec.single_action_space.shape)
+        vec.rollout(GaussianMlp(**p), 0, buf)
+        return buf
+
+    buf = run(2)
+    # Each label is the expert's for the observed state: replayed with plain steps.
+    vec = MjskillVectorEnv("PickCube-v1", num_envs=3, num_threads=1, **KW)
+    obs, _ = vec.reset(seed=12)
+    low, high = vec.single_action_space.low, vec.single_action_space.high
+    for t in range(8):
+        np.testing.assert_array_equal(buf["obs"][t], obs)
+        expected = vec.expert_actions()
+        reset = buf["autoreset"][t]
+        np.testing.assert_array_equal(buf["labels"][t][~reset], expected[~reset])
+        assert (buf["labels"][t][reset] == 0).all()
+        obs, *_ = vec.step(np.clip(buf["actions"][t], low, high))
+    assert buf["autoreset"].any()
+    # The same for any thread count.
+    np.testing.assert_array_equal(run(1)["labels"], buf["labels"])
+
+
+def test_a_vector_env_without_an_expert_is_a_value_error_naming_it():
+    from mjskill import GaussianMlp, MjskillVectorEnv
+    from rollout_case import params
+
+    vec = MjskillVectorEnv("PokeCube-v1", num_envs=2, robot_uids="fetch")
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch"):
+        vec.expert_actions()
+    buf = vec.rollout_buffers(3, labels=True)
+    p = params(*vec.single_observation_space.shape, *vec.single_action_space.shape)
+    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch"):
+        vec.rollout(GaussianMlp(**p), 0, buf)

@@ -255,6 +255,21 @@ pub enum EnvError {
         /// The first non-finite action component.
         value: f32,
     },
+    /// [`VecEnv::expert_actions`](super::VecEnv::expert_actions) or a labelled rollout without
+    /// labellers.
+    #[error(
+        "the vector env has no expert labellers: set them first (VecEnv::set_labellers; \
+         solvers::set_state_experts for the pairs with a state expert)"
+    )]
+    NoLabellers,
+    /// An env's labeller failed to label its state.
+    #[error("the expert labeller of env {env} failed: {message}")]
+    Labeller {
+        /// Global env index.
+        env: usize,
+        /// The labeller's message.
+        message: String,
+    },
     /// Rendering is unavailable or failed (the message names what to install).
     #[error(transparent)]
     Render(#[from] RenderError),

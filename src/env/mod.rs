@@ -24,7 +24,7 @@ pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::{depth_to_mm, CameraImage, PointCloud};
 pub use state_dict::{ActionPart, DriveTargets, StateDict, StateDictError};
 pub use types::{BoxSpace, EnvState, Info, Step};
-pub use vec::{RolloutBuffers, VecEnv, VecPolicy, MAX_POLICY_STEP};
+pub use vec::{EnvLabeller, RolloutBuffers, VecEnv, VecPolicy, MAX_POLICY_STEP};
 
 use std::sync::Arc;
 

@@ -54,8 +54,10 @@ use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, 
 use crate::mujoco::Warnings;
 
 mod images;
+mod labels;
 mod rollout;
 use images::{pack_bytes, pack_i16, store_f32, unpack_bytes, unpack_i16, ImageLayout};
+pub use labels::EnvLabeller;
 pub use rollout::{RolloutBuffers, VecPolicy, MAX_POLICY_STEP};
 
 /// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
@@ -76,6 +78,12 @@ const CMD_QUIT: u64 = 2;
 const CMD_RESET_SOME: u64 = 4;
 /// Step every env with the action of the policy in `Shared::policy` ([`VecEnv::rollout`]).
 const CMD_STEP_POLICY: u64 = 5;
+/// One thread's labellers, in its envs' order.
+type Labellers = Vec<Box<dyn EnvLabeller>>;
+/// Label every env's current state ([`VecEnv::expert_actions`]).
+const CMD_LABEL: u64 = 6;
+/// Take the labellers of [`VecEnv::set_labellers`] out of the mailbox.
+const CMD_SET_LABELLERS: u64 = 7;
 /// Test-only: workers other than the caller's panic.
 #[cfg(test)]
 const CMD_TEST_PANIC: u64 = 3;
@@ -91,7 +99,7 @@ impl Worker {
     ) -> Vec<Worker> {
         let (obs_dim, act_dim, nkeys) = dims;
         let mut workers: Vec<Worker> = Vec::with_capacity(ranges.len());
-        for r in ranges.iter().rev() {
+        for (index, r) in ranges.iter().enumerate().rev() {
             let part: Vec<Env> = envs.drain(r.clone()).collect();
             let n = part.len();
             let space = part[0].action_space();
@@ -109,6 +117,9 @@ impl Worker {
                 policy_obs: vec![0.0; n * obs_dim],
                 policy_actions: vec![0.0; n * act_dim],
                 policy_scratch: Vec::new(),
+                index,
+                labellers: Vec::new(),
+                label: vec![0.0; act_dim],
             });
         }
         workers.reverse();
@@ -165,6 +176,14 @@ struct Shared {
     policy: Mutex<Option<Arc<dyn VecPolicy>>>,
     /// The rollout step a `CMD_STEP_POLICY` runs ([`VecPolicy::act`]'s `step`).
     policy_step: AtomicU64,
+    /// `[N × act_dim]` expert labels (f32 bits) of the last labelling.
+    labels: Vec<AtomicU32>,
+    /// A rollout also labels each env's state before its step.
+    want_labels: AtomicBool,
+    /// Each thread's labellers on their way to it (`CMD_SET_LABELLERS`).
+    labeller_mailbox: Mutex<Vec<Option<Labellers>>>,
+    /// The first labeller failure of a command: (global env index, message).
+    label_error: Mutex<Option<(usize, String)>>,
     /// Set by a worker whose envs panicked; the payload waits in `panic_payload`.
     panicked: AtomicBool,
     /// The first worker panic, re-raised on the caller's thread (locked only after a panic).
@@ -190,6 +209,12 @@ struct Worker {
     policy_obs: Vec<f32>,
     policy_actions: Vec<f32>,
     policy_scratch: Vec<f32>,
+    /// This worker's share (0: the calling thread's).
+    index: usize,
+    /// Its envs' labellers (empty until [`VecEnv::set_labellers`]).
+    labellers: Vec<Box<dyn EnvLabeller>>,
+    /// A label's scratch (`act_dim`).
+    label: Vec<f32>,
 }
 
 impl Worker {
@@ -261,9 +286,20 @@ impl Worker {
             assert!(self.first == 0, "test panic in env {}", self.first);
             return;
         }
+        if command == CMD_SET_LABELLERS {
+            self.take_labellers(sh);
+            return;
+        }
+        if command == CMD_LABEL {
+            for i in 0..self.envs.len() {
+                self.label_env(sh, i, false);
+            }
+            return;
+        }
         if command == CMD_STEP_POLICY {
             self.act(sh);
         }
+        let labels = command == CMD_STEP_POLICY && sh.want_labels.load(Ordering::Relaxed);
         for i in 0..self.envs.len() {
             let g = self.first + i;
             let reset_this = command == CMD_RESET
@@ -289,6 +325,9 @@ impl Worker {
                         cell.store(0, Ordering::Relaxed);
                     }
                 }
+                if labels {
+                    self.label_env(sh, i, true);
+                }
                 self.envs[i].reset(None);
                 self.needs_reset[i] = false;
                 sh.autoreset[g].store(true, Ordering::Relaxed);
@@ -297,6 +336,9 @@ impl Worker {
             }
             sh.autoreset[g].store(false, Ordering::Relaxed);
             let cells = &sh.actions[g * self.act_dim..(g + 1) * self.act_dim];
+            if labels {
+                self.label_env(sh, i, false);
+            }
             if command == CMD_STEP_POLICY {
                 // The policy's raw action goes back to the caller; the env gets it clipped.
                 let raw = &self.policy_actions[i * self.act_dim..(i + 1) * self.act_dim];
@@ -362,6 +404,9 @@ pub struct VecEnv {
     seg: Vec<i16>,
     /// Point clouds, `[N × 4·px]`.
     xyzw: Vec<f32>,
+    /// The expert labels of [`VecEnv::expert_actions`], `[N × act_dim]` (empty without
+    /// labellers).
+    labels: Vec<f32>,
 }
 
 /// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
@@ -492,6 +537,10 @@ impl VecEnv {
             xyzw: cells32(num_envs * xyzw_len),
             policy: Mutex::new(None),
             policy_step: AtomicU64::new(0),
+            labels: cells32(num_envs * act_dim),
+            want_labels: AtomicBool::new(false),
+            labeller_mailbox: Mutex::new(Vec::new()),
+            label_error: Mutex::new(None),
             panicked: AtomicBool::new(false),
             panic_payload: Mutex::new(None),
         });
@@ -532,6 +581,7 @@ impl VecEnv {
             depth_mm: vec![0; num_envs * depth_len],
             seg: vec![0; if seg_cells > 0 { num_envs * px } else { 0 }],
             xyzw: vec![0.0; num_envs * xyzw_len],
+            labels: Vec::new(),
         };
         v.shared.has_seed.store(true, Ordering::Relaxed);
         v.shared

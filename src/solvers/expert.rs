@@ -23,7 +23,7 @@ use super::{
     body_id, body_xyz, ee_action, tcp_link_xyz, tcp_xyz, Gripper, ModeConverted, Policy,
     SolverError, APPROACH_HEIGHT, PANDA_GRIPPER,
 };
-use crate::env::Env;
+use crate::env::{Env, EnvLabeller, VecEnv};
 use crate::mujoco::BodyId;
 use crate::tasks::place_sphere::{RADIUS, SHORT_SIDE_HALF};
 use crate::tasks::poke_cube::{peg_head, GOAL_RADIUS};
@@ -84,6 +84,27 @@ pub fn state_expert(env: &Env) -> Result<Box<dyn StateExpert>, SolverError> {
     }
     let converted = ModeConverted::new(env, mode, native)?;
     Ok(Box::new(Labeller(Box::new(converted))))
+}
+
+/// Gives every env of `vec` its pair's state expert ([`state_expert`]) as its labeller
+/// ([`VecEnv::set_labellers`]), for [`VecEnv::expert_actions`] and labelled rollouts
+/// ([`crate::env::RolloutBuffers::labels`]). A pair without an expert is
+/// [`SolverError::NoStateExpert`], with nothing set. An expert converted to another control
+/// mode keeps a shadow env of its own, so each env's labeller holds one.
+pub fn set_state_experts(vec: &mut VecEnv) -> Result<(), SolverError> {
+    vec.set_labellers(|env| {
+        state_expert(env).map(|e| Box::new(ExpertLabeller(e)) as Box<dyn EnvLabeller>)
+    })
+}
+
+/// A [`StateExpert`] as the vector env's [`EnvLabeller`].
+#[derive(Debug)]
+struct ExpertLabeller(Box<dyn StateExpert>);
+
+impl EnvLabeller for ExpertLabeller {
+    fn label(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        self.0.label(env, action).map_err(|e| e.to_string())
+    }
 }
 
 /// The expert of `env`'s pair in its own mode, as a [`Policy`] whose `act` reads only the state.

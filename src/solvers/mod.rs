@@ -33,7 +33,7 @@ pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
 };
-pub use expert::{state_expert, StateExpert, STATE_EXPERTS};
+pub use expert::{set_state_experts, state_expert, StateExpert, STATE_EXPERTS};
 pub use mlp::{GaussianMlp, MlpError, MAX_LAYER_ELEMENTS};
 pub use noise::{ActionNoise, NoiseError};
 #[cfg(feature = "onnx")]

@@ -57,6 +57,10 @@ pub struct RolloutBuffers<'a> {
     /// `[T × N]`: the env reset at this step instead of stepping (its action was ignored;
     /// [`VecEnv::autoreset`]).
     pub autoreset: &'a mut [bool],
+    /// `[T × N × act_dim]`, optional: the expert's action for the state each step's action
+    /// was chosen from, by the labellers of [`VecEnv::set_labellers`] (0 for an env that reset
+    /// instead of stepping).
+    pub labels: Option<&'a mut [f32]>,
 }
 
 impl RolloutBuffers<'_> {
@@ -77,6 +81,11 @@ impl RolloutBuffers<'_> {
             ("terminated", self.terminated.len(), t * n),
             ("truncated", self.truncated.len(), t * n),
             ("autoreset", self.autoreset.len(), t * n),
+            (
+                "labels",
+                self.labels.as_ref().map_or(t * n * act_dim, |l| l.len()),
+                t * n * act_dim,
+            ),
         ];
         for (buffer, got, expected) in lens {
             if got != expected {
@@ -99,10 +108,15 @@ impl VecEnv {
     /// `t` of the rollout is the policy's step `first_step + t`. Returns `T`; the observations
     /// after the last step are [`VecEnv::obs`].
     ///
-    /// Buffers of the wrong length are [`EnvError::RolloutBuffer`] and steps that reach
-    /// [`MAX_POLICY_STEP`] are [`EnvError::RolloutSteps`], with nothing stepped; a
-    /// non-finite action is [`EnvError::PolicyActionNotFinite`] after the step that produced
-    /// it (the env with that action did not step, and reports `truncated`).
+    /// With [`RolloutBuffers::labels`], every env's labeller labels its state before each step
+    /// on the env's thread (DAgger's expert labels of the states the policy visits).
+    ///
+    /// Buffers of the wrong length are [`EnvError::RolloutBuffer`], labels without labellers
+    /// [`EnvError::NoLabellers`] and steps that reach [`MAX_POLICY_STEP`] are
+    /// [`EnvError::RolloutSteps`], with nothing stepped; a non-finite action is
+    /// [`EnvError::PolicyActionNotFinite`] and a labeller's failure [`EnvError::Labeller`],
+    /// after the step that produced it (the env with a non-finite action did not step, and
+    /// reports `truncated`).
     pub fn rollout(
         &mut self,
         policy: Arc<dyn VecPolicy>,
@@ -114,6 +128,13 @@ impl VecEnv {
         if (first_step as u128) + (steps as u128) > MAX_POLICY_STEP as u128 {
             return Err(EnvError::RolloutSteps { first_step, steps });
         }
+        let mut labels = out.labels;
+        if labels.is_some() && !self.has_labellers() {
+            return Err(EnvError::NoLabellers);
+        }
+        self.shared
+            .want_labels
+            .store(labels.is_some(), Ordering::Relaxed);
         self.set_policy(Some(policy));
         let mut result = Ok(steps);
         for t in 0..steps {
@@ -131,6 +152,13 @@ impl VecEnv {
             out.terminated[row.clone()].copy_from_slice(&self.terminated);
             out.truncated[row.clone()].copy_from_slice(&self.truncated);
             out.autoreset[row].copy_from_slice(&self.autoreset);
+            if let Some(l) = labels.as_deref_mut() {
+                self.gather_labels(Some(&mut l[t * n * ad..(t + 1) * n * ad]));
+                if let Err(e) = self.take_label_error() {
+                    result = Err(e);
+                    break;
+                }
+            }
             if let Some(index) = actions.iter().position(|a| !a.is_finite()) {
                 result = Err(EnvError::PolicyActionNotFinite {
                     env: index / ad,
@@ -141,6 +169,7 @@ impl VecEnv {
             }
         }
         self.set_policy(None);
+        self.shared.want_labels.store(false, Ordering::Relaxed);
         result
     }
 
