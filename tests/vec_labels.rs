@@ -5,7 +5,10 @@
 use std::sync::Arc;
 
 use mjskill::solvers::{set_state_experts, state_expert, GaussianMlp, SolverError};
-use mjskill::{make, EnvConfig, EnvError, RolloutBuffers, VecEnv, VecPolicy};
+mod common;
+
+use common::rollout::Out;
+use mjskill::{make, EnvConfig, EnvError, VecEnv, VecPolicy};
 
 /// Short episodes, so that rollouts cross autoresets.
 const MAX_STEPS: u32 = 6;
@@ -34,43 +37,6 @@ fn mlp(obs_dim: usize, act_dim: usize) -> GaussianMlp {
     GaussianMlp::new(layers, mean, std, Some(10.0)).unwrap()
 }
 
-/// A rollout's outputs.
-struct Out {
-    obs: Vec<f32>,
-    actions: Vec<f32>,
-    rewards: Vec<f32>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
-    autoreset: Vec<bool>,
-    labels: Vec<f32>,
-}
-
-impl Out {
-    fn new(t: usize, n: usize, od: usize, ad: usize) -> Out {
-        Out {
-            obs: vec![0.0; t * n * od],
-            actions: vec![0.0; t * n * ad],
-            rewards: vec![0.0; t * n],
-            terminated: vec![false; t * n],
-            truncated: vec![false; t * n],
-            autoreset: vec![false; t * n],
-            labels: vec![f32::NAN; t * n * ad],
-        }
-    }
-
-    fn buffers(&mut self, labels: bool) -> RolloutBuffers<'_> {
-        RolloutBuffers {
-            obs: &mut self.obs,
-            actions: &mut self.actions,
-            rewards: &mut self.rewards,
-            terminated: &mut self.terminated,
-            truncated: &mut self.truncated,
-            autoreset: &mut self.autoreset,
-            labels: labels.then_some(&mut self.labels[..]),
-        }
-    }
-}
-
 /// A labelled rollout of `t` steps of `n` envs on `threads` threads (reset with seed 40).
 fn labelled_rollout(mode: Option<&str>, n: usize, threads: usize, t: usize) -> Out {
     let mut v = VecEnv::new("PickCube-v1", config(mode), n, threads).unwrap();
@@ -82,7 +48,7 @@ fn labelled_rollout(mode: Option<&str>, n: usize, threads: usize, t: usize) -> O
     );
     let policy: Arc<dyn VecPolicy> = Arc::new(mlp(od, ad).with_noise(vec![0.3; ad], 3, 0).unwrap());
     let mut out = Out::new(t, n, od, ad);
-    assert_eq!(v.rollout(policy, 0, out.buffers(true)).unwrap(), t);
+    assert_eq!(v.rollout(policy, 0, out.labelled()).unwrap(), t);
     out
 }
 
@@ -183,7 +149,7 @@ fn labels_without_labellers_are_refused_with_nothing_stepped() {
     );
     let mut out = Out::new(3, 2, od, ad);
     let policy: Arc<dyn VecPolicy> = Arc::new(mlp(od, ad));
-    let err = v.rollout(policy.clone(), 0, out.buffers(true)).unwrap_err();
+    let err = v.rollout(policy.clone(), 0, out.labelled()).unwrap_err();
     assert!(matches!(err, EnvError::NoLabellers), "{err}");
     assert!(err.to_string().contains("set_state_experts"), "{err}");
     assert_eq!(v.obs(), &before[..]);
@@ -191,7 +157,7 @@ fn labels_without_labellers_are_refused_with_nothing_stepped() {
     set_state_experts(&mut v).unwrap();
     let mut short = Out::new(3, 2, od, ad);
     short.labels.pop();
-    let err = v.rollout(policy, 0, short.buffers(true)).unwrap_err();
+    let err = v.rollout(policy, 0, short.labelled()).unwrap_err();
     assert!(err.to_string().contains("labels"), "{err}");
     assert_eq!(v.obs(), &before[..]);
 }

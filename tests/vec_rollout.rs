@@ -3,7 +3,10 @@
 use std::sync::Arc;
 
 use mjskill::solvers::{GaussianMlp, MlpError};
-use mjskill::{EnvConfig, EnvError, RolloutBuffers, VecEnv, VecPolicy};
+mod common;
+
+use common::rollout::Out;
+use mjskill::{EnvConfig, EnvError, VecEnv, VecPolicy};
 
 /// A seeded 2-layer MLP (16 tanh units) for `obs_dim` → `act_dim`, with weights large enough
 /// that some actions leave the action space's bounds.
@@ -23,41 +26,6 @@ fn mlp(obs_dim: usize, act_dim: usize, seed: u32) -> GaussianMlp {
     let mean = (0..obs_dim).map(|i| (i as f64 * 0.1).cos() * 0.1).collect();
     let std = (0..obs_dim).map(|i| 0.5 + (i % 3) as f64).collect();
     GaussianMlp::new(layers, mean, std, Some(10.0)).unwrap()
-}
-
-/// All of a rollout's outputs.
-#[derive(Debug, PartialEq)]
-struct Out {
-    obs: Vec<f32>,
-    actions: Vec<f32>,
-    rewards: Vec<f32>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
-    autoreset: Vec<bool>,
-}
-
-impl Out {
-    fn new(t: usize, n: usize, od: usize, ad: usize) -> Out {
-        Out {
-            obs: vec![0.0; t * n * od],
-            actions: vec![0.0; t * n * ad],
-            rewards: vec![0.0; t * n],
-            terminated: vec![false; t * n],
-            truncated: vec![false; t * n],
-            autoreset: vec![false; t * n],
-        }
-    }
-    fn buffers(&mut self) -> RolloutBuffers<'_> {
-        RolloutBuffers {
-            obs: &mut self.obs,
-            actions: &mut self.actions,
-            rewards: &mut self.rewards,
-            terminated: &mut self.terminated,
-            truncated: &mut self.truncated,
-            autoreset: &mut self.autoreset,
-            labels: None,
-        }
-    }
 }
 
 fn short() -> EnvConfig {

@@ -3,6 +3,7 @@
 //! command runs bounded in time (`run_within`), and the scratch directory for test files
 //! (`scratch`, `scratch_dir`).
 #![allow(dead_code)]
+pub mod rollout;
 pub mod task;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
