@@ -1,8 +1,8 @@
 //! # mjskill
 //!
 //! ManiSkill3's tabletop manipulation tasks (PickCube-v1 and its SO100/WidowX AI variants,
-//! PokeCube-v1, PlaceSphere-v1, PushCube-v1, PullCube-v1, StackCube-v1, LiftPegUpright-v1) on
-//! MuJoCo 2.2, from Rust.
+//! PokeCube-v1, PlaceSphere-v1, PushCube-v1, PullCube-v1, StackCube-v1, LiftPegUpright-v1,
+//! PushT-v1) on MuJoCo 2.2, from Rust.
 //!
 //! ```no_run
 //! let mut env = mjskill::make("PickCube-v1", mjskill::EnvConfig::default())?;

@@ -33,12 +33,14 @@ def test_every_env_and_robot_is_registered():
         "mjskill/PullCube-v1",
         "mjskill/StackCube-v1",
         "mjskill/LiftPegUpright-v1",
+        "mjskill/PushT-v1",
     }
     assert ("mjskill/PickCube-v1", "xarm6_robotiq") in mjskill.registered()
     assert ("mjskill/PokeCube-v1", "fetch") in mjskill.registered()
     assert ("mjskill/PullCube-v1", "fetch") in mjskill.registered()
     assert ("mjskill/StackCube-v1", "fetch") in mjskill.registered()
     assert ("mjskill/LiftPegUpright-v1", "fetch") in mjskill.registered()
+    assert ("mjskill/PushT-v1", "panda_stick") in mjskill.registered()
 
 
 def test_maniskill_keywords_and_rust_bounds():

@@ -69,6 +69,11 @@ pub struct PartSpec {
     /// Drive (stiffness, damping, force limit) for every joint of the part (a velocity part
     /// drives with stiffness 0 whatever this says).
     pub gains: (f64, f64, f64),
+    /// The part is an entry of ManiSkill's controller dict even when it is the mode's only
+    /// part (`dict(arm=...)`, a `CombinedController`): its state and observation keys carry
+    /// its name (`arm.target_qpos`). A lone part without it is the mode's controller itself
+    /// (so100: `target_qpos`).
+    pub keyed: bool,
 }
 
 impl PartKind {
@@ -197,7 +202,14 @@ impl PartSpec {
             followers: vec![],
             kind,
             gains,
+            keyed: false,
         }
+    }
+
+    /// Marks the part as an entry of ManiSkill's controller dict ([`PartSpec::keyed`]).
+    pub fn keyed(mut self) -> PartSpec {
+        self.keyed = true;
+        self
     }
 
     /// Adds a mimic follower: `follower` tracks `multiplier · control + offset`.
@@ -388,6 +400,8 @@ struct Part {
 pub struct Controller {
     mode: ControlMode,
     parts: Vec<Part>,
+    /// State and observation keys carry the part names (several parts, or a keyed one).
+    nested: bool,
     low: Vec<f32>,
     high: Vec<f32>,
     n_dof: usize,
@@ -436,6 +450,7 @@ impl Controller {
             (l.0 as f32, l.1 as f32)
         };
         let n_dof = active.len();
+        let nested = parts.len() > 1 || parts.iter().any(|p| p.keyed);
         let mut built = Vec::new();
         let (mut low, mut high) = (Vec::new(), Vec::new());
         for spec in parts {
@@ -486,6 +501,7 @@ impl Controller {
         Ok(Controller {
             mode,
             parts: built,
+            nested,
             low,
             high,
             n_dof,
@@ -536,7 +552,7 @@ impl Controller {
     /// `target_qpos` / `target_pose` of the parts that accumulate targets, nested under the
     /// part name when the mode has several parts.
     pub fn observe(&self, out: &mut ObsWriter) {
-        let nested = self.parts.len() > 1;
+        let nested = self.nested;
         for p in &self.parts {
             let Some(target) = with_part!(&p.ctl, c => c.target()) else {
                 continue;
@@ -568,7 +584,7 @@ impl Controller {
     }
 
     fn state_key(&self, p: &Part, k: &str) -> String {
-        if self.parts.len() > 1 {
+        if self.nested {
             format!("{}.{k}", p.name)
         } else {
             k.to_string()
@@ -577,7 +593,7 @@ impl Controller {
 
     /// The controller state of ManiSkill's `get_state_dict()`: `("<part>.target_qpos",
     /// values)` / `("<part>.target_pose", [p, q])` for the parts that accumulate targets
-    /// (without the part prefix when the mode has a single part).
+    /// (without the part prefix when the mode has a single part that is not keyed).
     pub fn state_entries(&self) -> Vec<(String, Vec<f64>)> {
         let mut v = Vec::new();
         for p in &self.parts {

@@ -447,6 +447,15 @@ impl Env {
             &mut self.noise,
             &mut self.sim.qpos,
         );
+        if let Some(base) = self.sim.task.robot_repose() {
+            RobotSpec::repose_qpos(
+                &mut self.numpy,
+                self.config.robot_init_qpos_noise,
+                base,
+                &mut self.noise,
+                &mut self.sim.qpos,
+            );
+        }
         self.sim
             .robot
             .joints

@@ -28,11 +28,13 @@ pub enum EnvId {
     StackCube,
     /// `LiftPegUpright-v1`.
     LiftPegUpright,
+    /// `PushT-v1`.
+    PushT,
 }
 
 impl EnvId {
     /// Every env, in the registry's order.
-    pub const ALL: [EnvId; 9] = [
+    pub const ALL: [EnvId; 10] = [
         EnvId::PickCube,
         EnvId::PickCubeSo100,
         EnvId::PickCubeWidowxAi,
@@ -42,6 +44,7 @@ impl EnvId {
         EnvId::PullCube,
         EnvId::StackCube,
         EnvId::LiftPegUpright,
+        EnvId::PushT,
     ];
 
     /// The id as ManiSkill registers it.
@@ -56,6 +59,7 @@ impl EnvId {
             EnvId::PullCube => "PullCube-v1",
             EnvId::StackCube => "StackCube-v1",
             EnvId::LiftPegUpright => "LiftPegUpright-v1",
+            EnvId::PushT => "PushT-v1",
         }
     }
 
@@ -132,10 +136,23 @@ fn lift_peg_upright(_robot: RobotId) -> Box<dyn Task> {
     Box::new(crate::tasks::lift_peg_upright::LiftPegUpright::new())
 }
 
-static REGISTRY: [EnvSpec; 9] = [
+fn push_t(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::push_t::PushT::new())
+}
+
+/// ManiSkill's `PUSH_T_MAX_EPISODE_STEPS`: PushT-v1 is registered with 100 steps.
+const PUSH_T_MAX_EPISODE_STEPS: u32 = 100;
+
+static REGISTRY: [EnvSpec; 10] = [
     EnvSpec {
         id: EnvId::PickCube,
-        robots: &RobotId::ALL,
+        robots: &[
+            RobotId::Panda,
+            RobotId::Fetch,
+            RobotId::Xarm6Robotiq,
+            RobotId::So100,
+            RobotId::WidowxAi,
+        ],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: pick_cube,
     },
@@ -186,6 +203,12 @@ static REGISTRY: [EnvSpec; 9] = [
         robots: &[RobotId::Panda, RobotId::Fetch],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: lift_peg_upright,
+    },
+    EnvSpec {
+        id: EnvId::PushT,
+        robots: &[RobotId::PandaStick],
+        max_episode_steps: PUSH_T_MAX_EPISODE_STEPS,
+        make_task: push_t,
     },
 ];
 
@@ -294,7 +317,7 @@ mod tests {
             EnvId::parse("PickCube-v2").unwrap_err().to_string(),
             "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
              PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1, \
-             StackCube-v1, LiftPegUpright-v1"
+             StackCube-v1, LiftPegUpright-v1, PushT-v1"
         );
     }
 }

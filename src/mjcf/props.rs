@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use super::xml::{nums, Element};
 use super::{
     pose_attrs, Scene, CONTACT_GROUND, CONTACT_TABLE_BOX, CONTACT_TABLE_PLANE, DENSITY, GROUND,
-    GROUP_HIDDEN, TABLE,
+    GROUP_HIDDEN, TABLE, TORSIONAL_ROLLING,
 };
 
 /// Half extents of the table-workspace box in its actor frame (docs/tasks.md §0.1).
@@ -27,6 +27,8 @@ pub const GROUND_DRAWN_SIZE: [f64; 3] = [50.0, 50.0, 5.0];
 
 /// RGBA colour.
 pub type Rgba = [f64; 4];
+/// Plain white.
+pub const WHITE: Rgba = [1.0, 1.0, 1.0, 1.0];
 
 /// The table model (converted from ManiSkill's `table.glb` at scale 1.75; docs/rendering.md),
 /// relative to `models/`.
@@ -95,6 +97,36 @@ fn peg_body(
         ));
     }
     body
+}
+
+/// Centre of mass and principal moments (about it, along the body's axes) of boxes
+/// `(centre, half extents)` of one uniform density and total mass `mass`, as SAPIEN derives a
+/// builder's inertia from its collision boxes. The boxes are axis-aligned; the products of
+/// inertia vanish when the union is mirror-symmetric about two of the body's planes through
+/// its centre of mass (PushT's T is, about x = 0 and z = 0).
+pub fn box_union_inertia(boxes: &[([f64; 3], [f64; 3])], mass: f64) -> ([f64; 3], [f64; 3]) {
+    let volume = |h: &[f64; 3]| 8.0 * h[0] * h[1] * h[2];
+    let total: f64 = boxes.iter().map(|(_, h)| volume(h)).sum();
+    let masses: Vec<f64> = boxes
+        .iter()
+        .map(|(_, h)| mass * volume(h) / total)
+        .collect();
+    let mut com = [0.0; 3];
+    for ((c, _), m) in boxes.iter().zip(&masses) {
+        for k in 0..3 {
+            com[k] += m * c[k] / mass;
+        }
+    }
+    let mut inertia = [0.0; 3];
+    for ((c, h), m) in boxes.iter().zip(&masses) {
+        let d = [c[0] - com[0], c[1] - com[1], c[2] - com[2]];
+        let e = [2.0 * h[0], 2.0 * h[1], 2.0 * h[2]];
+        for (k, i) in inertia.iter_mut().enumerate() {
+            let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+            *i += m * (e[a] * e[a] + e[b] * e[b]) / 12.0 + m * (d[a] * d[a] + d[b] * d[b]);
+        }
+    }
+    (com, inertia)
 }
 
 impl Scene {
@@ -290,6 +322,95 @@ impl Scene {
             .attr_nums("diaginertia", &[mass / 12.0 * (2.0 * w * w), side, side]);
         let body = peg_body(name, half_length, half_width, rgba, pos).child(inertial);
         self.worldbody().push(body);
+    }
+
+    /// ManiSkill's un-textured white table (PushT-v1's `WhiteTableSceneBuilder`): every drawn
+    /// part of the table model loses its material and is drawn in plain white. Call after
+    /// [`Scene::add_table_scene`]; the table's collision geoms are untouched.
+    pub fn whiten_table(&mut self) {
+        let prefix = format!("{TABLE}_visual");
+        for g in self.worldbody().children.iter_mut() {
+            let is_table = g.name == "geom"
+                && g.attrs
+                    .iter()
+                    .any(|(k, v)| k == "name" && v.starts_with(&prefix));
+            if is_table {
+                g.attrs.retain(|(k, _)| k != "material");
+                g.set("rgba", nums(&WHITE));
+            }
+        }
+    }
+
+    /// A body made of boxes `(centre, half extents)` in its frame, all of colour `rgba`: a
+    /// dynamic prop (free joint named `name`) of total mass `mass` (kg) and friction
+    /// `friction` when `mass` is `Some((mass, friction))`, its boxes colliding and drawn (one
+    /// collision box `name_k` and one drawn box `name_visualk` each; the mass spread over the
+    /// boxes' volume, so the centre of mass and inertia are the union's, as SAPIEN's
+    /// `builder._mass`); a visual-only marker on a mocap body when `None` (PushT-v1's T and
+    /// its goal).
+    pub fn add_box_union(
+        &mut self,
+        name: &str,
+        boxes: &[([f64; 3], [f64; 3])],
+        rgba: Rgba,
+        mass: Option<(f64, f64)>,
+        pos: [f64; 3],
+    ) {
+        let mut body = Element::new("body").attr("name", name);
+        match mass {
+            Some((mass, friction)) => {
+                let (com, inertia) = box_union_inertia(boxes, mass);
+                body = body
+                    .attr_nums("pos", &pos)
+                    .child(Element::new("freejoint").attr("name", name))
+                    .child(
+                        Element::new("inertial")
+                            .attr_nums("pos", &com)
+                            .attr("mass", super::xml::num(mass))
+                            .attr_nums("diaginertia", &inertia),
+                    );
+                let friction = [friction, TORSIONAL_ROLLING[0], TORSIONAL_ROLLING[1]];
+                for (k, (c, h)) in boxes.iter().enumerate() {
+                    body.push(
+                        Element::new("geom")
+                            .attr("name", format!("{name}_{k}"))
+                            .attr("type", "box")
+                            .attr_nums("pos", c)
+                            .attr_nums("size", h)
+                            .attr_nums("friction", &friction)
+                            .attr("rgba", "0 0 0 0")
+                            .attr("group", super::GROUP_COLLISION),
+                    );
+                }
+            }
+            None => {
+                body = body.attr("mocap", "true").child(
+                    Element::new("inertial")
+                        .attr("pos", "0 0 0")
+                        .attr("mass", super::xml::num(super::MASSLESS))
+                        .attr_nums("diaginertia", &[super::MASSLESS; 3]),
+                );
+            }
+        }
+        for (k, (c, h)) in boxes.iter().enumerate() {
+            body.push(visual(
+                Element::new("geom")
+                    .attr("name", format!("{name}_visual{k}"))
+                    .attr("type", "box")
+                    .attr_nums("pos", c)
+                    .attr_nums("size", h),
+                &rgba,
+                0,
+            ));
+        }
+        self.worldbody().push(body);
+    }
+
+    /// A visual-only marker disc on a mocap body: a cylinder of radius `radius` and half
+    /// length `half_length` along the body's local **x** (as SAPIEN builds cylinders; see
+    /// [`Scene::add_marker_target`]). Seen by sensor cameras.
+    pub fn add_marker_disc(&mut self, name: &str, radius: f64, half_length: f64, rgba: Rgba) {
+        self.add_marker_target(name, &[(radius, half_length, rgba)]);
     }
 
     /// A kinematic (mocap) body made of boxes `(centre, half extents)` that collide.

@@ -187,10 +187,10 @@ pub static FETCH: RobotSpec = RobotSpec {
     finger_friction: (&["l_gripper_finger_link", "r_gripper_finger_link"], 2.0),
     tcp: TcpDef::FingerMidpoint("l_gripper_finger_link", "r_gripper_finger_link"),
     tcp_link: Some("gripper_link"),
-    grasp: GraspDef::new(
+    grasp: Some(GraspDef::new(
         ("l_gripper_finger_link", -1.0),
         ("r_gripper_finger_link", 1.0),
-    ),
+    )),
     static_rule: StaticRule::FetchSigned {
         base_threshold: 0.05,
     },

@@ -3,6 +3,7 @@
 //! ids a compiled scene resolves them to ([`RobotIds`]).
 pub mod fetch;
 pub mod panda;
+pub mod panda_stick;
 pub mod so100;
 pub mod widowxai;
 pub mod xarm6_robotiq;
@@ -64,12 +65,14 @@ pub enum RobotError {
     Mujoco(#[from] MjError),
 }
 
-/// The five robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
+/// The six robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
 /// depends on the robot matches on this exhaustively.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RobotId {
     /// Franka Emika Panda.
     Panda,
+    /// The Panda arm with a stick in place of its gripper (PushT-v1's robot).
+    PandaStick,
     /// Fetch mobile manipulator.
     Fetch,
     /// UFactory xArm6 with a Robotiq 2F-85 gripper.
@@ -82,8 +85,9 @@ pub enum RobotId {
 
 impl RobotId {
     /// Every robot, in ManiSkill's order of `SUPPORTED_ROBOTS`.
-    pub const ALL: [RobotId; 5] = [
+    pub const ALL: [RobotId; 6] = [
         RobotId::Panda,
+        RobotId::PandaStick,
         RobotId::Fetch,
         RobotId::Xarm6Robotiq,
         RobotId::So100,
@@ -94,6 +98,7 @@ impl RobotId {
     pub const fn uid(self) -> &'static str {
         match self {
             RobotId::Panda => "panda",
+            RobotId::PandaStick => "panda_stick",
             RobotId::Fetch => "fetch",
             RobotId::Xarm6Robotiq => "xarm6_robotiq",
             RobotId::So100 => "so100",
@@ -116,6 +121,7 @@ impl RobotId {
     pub fn spec(self) -> &'static RobotSpec {
         match self {
             RobotId::Panda => &panda::PANDA,
+            RobotId::PandaStick => &panda_stick::PANDA_STICK,
             RobotId::Fetch => &fetch::FETCH,
             RobotId::Xarm6Robotiq => &xarm6_robotiq::XARM6_ROBOTIQ,
             RobotId::So100 => &so100::SO100,
@@ -125,15 +131,16 @@ impl RobotId {
 }
 
 /// Robot uids, as ManiSkill spells them ([`RobotId::ALL`]).
-pub const ROBOT_UIDS: [&str; 5] = [
+pub const ROBOT_UIDS: [&str; 6] = [
     RobotId::ALL[0].uid(),
     RobotId::ALL[1].uid(),
     RobotId::ALL[2].uid(),
     RobotId::ALL[3].uid(),
     RobotId::ALL[4].uid(),
+    RobotId::ALL[5].uid(),
 ];
 
-/// Control modes of an arm with joint, velocity and EE controllers (Panda, xArm6), in
+/// Control modes of an arm with joint, velocity and EE controllers (Panda, panda_stick, xArm6), in
 /// upstream's order, default first.
 pub const ARM_EE_MODES: [ControlMode; 11] = [
     ControlMode::PdJointDeltaPos,
@@ -309,8 +316,9 @@ pub struct RobotSpec {
     pub tcp: TcpDef,
     /// The TCP link (`agent.tcp`, used by PokeCube and PlaceSphere); None for so100.
     pub tcp_link: Option<&'static str>,
-    /// Grasp check parameters.
-    pub grasp: GraspDef,
+    /// Grasp check parameters; `None` for a robot without fingers (panda_stick, whose
+    /// `is_grasping` ManiSkill leaves unimplemented): it never grasps.
+    pub grasp: Option<GraspDef>,
     /// The `is_static` rule.
     pub static_rule: StaticRule,
     /// Root pose in the table scene: position and quaternion (w, x, y, z).
@@ -376,6 +384,23 @@ impl RobotSpec {
         }
         for q in qpos.iter_mut() {
             *q = *q as f32 as f64;
+        }
+    }
+
+    /// A task's table scene that poses the robot again after the common one (PushT-v1's
+    /// `WhiteTableSceneBuilder` with the panda_stick): `qpos` becomes `base` plus a second
+    /// `N(0, sigma)` draw on every joint (into `noise`), rounded to float32. `base`, `noise`
+    /// and `qpos` have the robot's dof; nothing is allocated.
+    pub fn repose_qpos(
+        numpy: &mut NumpyRandomState,
+        sigma: f64,
+        base: &[f64],
+        noise: &mut [f64],
+        qpos: &mut [f64],
+    ) {
+        numpy.fill_normal(0.0, sigma, noise);
+        for ((q, b), z) in qpos.iter_mut().zip(base).zip(noise.iter()) {
+            *q = (b + z) as f32 as f64;
         }
     }
 
@@ -497,8 +522,8 @@ pub struct RobotIds {
     pub tcp_body: Option<BodyId>,
     /// Bodies and offsets that define `tcp_pose` (see [`TcpDef`]).
     pub tcp_parts: TcpIds,
-    /// Body ids of the two grasp fingers.
-    pub fingers: [BodyId; 2],
+    /// Body ids of the two grasp fingers (`None` for a robot without fingers).
+    pub fingers: Option<[BodyId; 2]>,
     /// Upward force m·g per robot body (gravity compensation), aligned with `bodies`.
     pub weight: Vec<f64>,
 }
@@ -518,7 +543,7 @@ impl RobotIds {
             tcp_site: model.id(ObjType::Site, "tcp"),
             tcp_body: None,
             tcp_parts: TcpIds::Body(BodyId::default()),
-            fingers: [BodyId::default(); 2],
+            fingers: None,
             weight: Vec::new(),
         };
         for l in &robot.links {
@@ -528,7 +553,10 @@ impl RobotIds {
             r.weight.push(model.body_mass()[b.index()] * GRAVITY);
         }
         r.root_body = r.body(&robot.links[robot.root].name)?;
-        r.fingers = [r.body(spec.grasp.finger1.0)?, r.body(spec.grasp.finger2.0)?];
+        r.fingers = match &spec.grasp {
+            Some(g) => Some([r.body(g.finger1.0)?, r.body(g.finger2.0)?]),
+            None => None,
+        };
         r.tcp_body = spec.tcp_link.map(|l| r.body(l)).transpose()?;
         r.tcp_parts = match &spec.tcp {
             TcpDef::Link(l) => TcpIds::Body(r.body(l)?),

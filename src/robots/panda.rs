@@ -17,7 +17,8 @@ pub const REST: [f64; 9] = [
     0.04,
 ];
 
-const ARM: [&str; 7] = [
+/// The arm joints (ManiSkill order).
+pub const ARM: [&str; 7] = [
     "panda_joint1",
     "panda_joint2",
     "panda_joint3",
@@ -26,7 +27,8 @@ const ARM: [&str; 7] = [
     "panda_joint6",
     "panda_joint7",
 ];
-const ARM_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
+/// Arm drive: stiffness, damping, force limit.
+pub const ARM_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
 const GRIPPER_GAINS: (f64, f64, f64) = (1e3, 1e2, 100.0);
 /// Arm delta bound (rad) of the joint-delta modes.
 const JOINT_DELTA: f32 = 0.1;
@@ -38,13 +40,14 @@ const EE_ROT_ABS: (f32, f32) = (-2.0 * std::f32::consts::PI, 2.0 * std::f32::con
 /// Gripper range (m) of the normalised absolute finger action.
 const GRIPPER_RANGE: (f32, f32) = (-0.01, 0.04);
 /// The TCP / EE link.
-const TCP: &str = "panda_hand_tcp";
+pub const TCP: &str = "panda_hand_tcp";
 
 /// Panda control modes (docs/robots.md §2), default first.
 pub const CONTROL_MODES: [ControlMode; 11] = super::ARM_EE_MODES;
 
-/// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
-pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
+/// The Panda arm's part of a control mode (ManiSkill's arm controllers, shared by the Panda and
+/// the panda_stick: same joints, gains, bounds and EE link name `panda_hand_tcp`).
+pub fn arm_part(mode: ControlMode) -> Option<PartSpec> {
     let ee = |rotation, use_target| PartKind::ee_delta(TCP, None, rotation, use_target, EE_DELTA);
     let kind = match mode {
         ControlMode::PdJointDeltaPos => PartKind::joint_delta(7, JOINT_DELTA, false),
@@ -60,6 +63,11 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
         ControlMode::PdJointDeltaPosVel => PartKind::joint_delta_pos_vel(JOINT_DELTA, 1.0),
         _ => return None,
     };
+    Some(PartSpec::new("arm", &ARM, kind, ARM_GAINS))
+}
+
+/// The parts of a Panda control mode: arm, then the mimic-coupled gripper.
+pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
     let gripper = PartSpec::new(
         "gripper",
         &["panda_finger_joint1"],
@@ -67,7 +75,7 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
         GRIPPER_GAINS,
     )
     .with_follower("panda_finger_joint2", "panda_finger_joint1", 1.0, 0.0);
-    Some(vec![PartSpec::new("arm", &ARM, kind, ARM_GAINS), gripper])
+    Some(vec![arm_part(mode)?, gripper])
 }
 
 /// The Panda as ManiSkill configures it.
@@ -82,7 +90,10 @@ pub static PANDA: RobotSpec = RobotSpec {
     finger_friction: (&["panda_leftfinger", "panda_rightfinger"], 2.0),
     tcp: TcpDef::Link(TCP),
     tcp_link: Some(TCP),
-    grasp: GraspDef::new(("panda_leftfinger", 1.0), ("panda_rightfinger", -1.0)),
+    grasp: Some(GraspDef::new(
+        ("panda_leftfinger", 1.0),
+        ("panda_rightfinger", -1.0),
+    )),
     static_rule: StaticRule::Arm(7),
     table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &REST,

@@ -86,10 +86,10 @@ pub static SO100: RobotSpec = RobotSpec {
         orientation: "Fixed_Jaw",
     },
     tcp_link: None,
-    grasp: GraspDef {
+    grasp: Some(GraspDef {
         max_angle_deg: 110.0,
         ..GraspDef::new(("Fixed_Jaw", 1.0), ("Moving_Jaw", -1.0))
-    },
+    }),
     static_rule: StaticRule::Arm(5),
     table_pose: (
         [-0.725, 0.0, 0.0],

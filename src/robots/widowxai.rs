@@ -65,10 +65,10 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     finger_friction: (&["gripper_left", "gripper_right"], 2.0),
     tcp: TcpDef::Link("ee_gripper_link"),
     tcp_link: Some("ee_gripper_link"),
-    grasp: GraspDef {
+    grasp: Some(GraspDef {
         min_force: 0.2,
         ..GraspDef::new(("gripper_left", 1.0), ("gripper_right", -1.0))
-    },
+    }),
     static_rule: StaticRule::Arm(6),
     table_pose: ([-0.615, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &READY_TO_GRASP,

@@ -183,10 +183,10 @@ pub static XARM6_ROBOTIQ: RobotSpec = RobotSpec {
     finger_friction: (&PADS, 2.0),
     tcp: TcpDef::Link(EE_LINK),
     tcp_link: Some(EE_LINK),
-    grasp: GraspDef::new(
+    grasp: Some(GraspDef::new(
         ("left_inner_finger_pad", 1.0),
         ("right_inner_finger_pad", 1.0),
-    ),
+    )),
     static_rule: StaticRule::Arm(6),
     table_pose: ([-0.522, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]),
     table_qpos: &REST,

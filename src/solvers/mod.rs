@@ -157,7 +157,7 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
         // (solvers/stack_cube.rs) and to stand the peg up (solvers/lift_peg_upright.rs).
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
         RobotId::Panda if env_id == STACK_CUBE || env_id == LIFT_PEG_UPRIGHT => "pd_ee_delta_pose",
-        RobotId::Panda => "pd_ee_delta_pos",
+        RobotId::Panda | RobotId::PandaStick => "pd_ee_delta_pos",
     })
 }
 
@@ -234,7 +234,8 @@ const LIFT_PEG_UPRIGHT: &str = "LiftPegUpright-v1";
 /// The registered (env id, robot) pairs that have no scripted solver yet (issue 56):
 /// `--policy solver` answers them with [`SolverError::NoSolver`], and the tests that replay a
 /// solver episode per pair skip them. Together with [`SOLVED`], every registered pair.
-pub const UNSOLVED: [(&str, &str); 1] = [("LiftPegUpright-v1", "fetch")];
+pub const UNSOLVED: [(&str, &str); 2] =
+    [("LiftPegUpright-v1", "fetch"), ("PushT-v1", "panda_stick")];
 
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(

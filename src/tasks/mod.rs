@@ -84,6 +84,7 @@ pub mod place_sphere;
 pub mod poke_cube;
 pub mod pull_cube;
 pub mod push_cube;
+pub mod push_t;
 pub mod stack_cube;
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -210,14 +211,13 @@ pub struct TaskCtx<'a> {
 }
 
 impl TaskCtx<'_> {
-    /// `agent.is_grasping(object)` with the forces the env computed (docs/robots.md §1.3).
+    /// `agent.is_grasping(object)` with the forces the env computed (docs/robots.md §1.3);
+    /// false for a robot without fingers.
     pub fn is_grasping(&self) -> bool {
-        is_grasping(
-            &self.spec.grasp,
-            self.data,
-            self.robot.fingers,
-            self.finger_forces,
-        )
+        match (&self.spec.grasp, self.robot.fingers) {
+            (Some(g), Some(fingers)) => is_grasping(g, self.data, fingers, self.finger_forces),
+            _ => false,
+        }
     }
     /// `agent.is_static(0.2)` with the robot's rule (docs/env.md §10).
     pub fn is_robot_static(&self) -> bool {
@@ -264,6 +264,12 @@ pub trait Task: Send + std::fmt::Debug {
     fn max_reward(&self) -> f64;
     /// Adds the task's props and cameras to the scene.
     fn build(&self, scene: &mut Scene);
+    /// The joint positions a task's own table scene poses the robot at after the common
+    /// table scene has (PushT-v1's `WhiteTableSceneBuilder`), with fresh noise
+    /// ([`crate::robots::RobotSpec::repose_qpos`]); `None` (most tasks): the common pose stays.
+    fn robot_repose(&self) -> Option<&'static [f64]> {
+        None
+    }
     /// Resolves the task's names to ids in the compiled model.
     fn resolve(&mut self, model: &Model) -> Result<(), MjError>;
     /// Body whose contacts with the fingers decide `is_grasping`.
@@ -360,15 +366,19 @@ pub fn is_grasping(
 }
 
 /// Net contact force (world frame) on each finger body from `object`, summed over the
-/// contacts of the current state (the last physics substep). No allocation.
+/// contacts of the current state (the last physics substep); zero for a robot without
+/// fingers (`None`). No allocation.
 pub fn finger_forces(
     model: &Model,
     data: &Data,
-    fingers: [BodyId; 2],
+    fingers: Option<[BodyId; 2]>,
     object: BodyId,
     out: &mut [[f64; 3]; 2],
 ) {
     *out = [[0.0; 3]; 2];
+    let Some(fingers) = fingers else {
+        return;
+    };
     let geom_body = model.geom_bodyid();
     for i in 0..data.ncon() {
         let (g1, g2) = data.contact_geoms(i);

@@ -83,7 +83,10 @@ pub const WIDOWXAI_CONFIG: PickCubeConfig = PickCubeConfig {
 /// The configuration ManiSkill uses for `robot`.
 pub fn config_for(robot: RobotId) -> PickCubeConfig {
     match robot {
-        RobotId::Panda | RobotId::Fetch | RobotId::Xarm6Robotiq => PANDA_CONFIG,
+        // Upstream falls back to the Panda's configuration for robots it does not list.
+        RobotId::Panda | RobotId::PandaStick | RobotId::Fetch | RobotId::Xarm6Robotiq => {
+            PANDA_CONFIG
+        }
         RobotId::So100 => SO100_CONFIG,
         RobotId::WidowxAi => WIDOWXAI_CONFIG,
     }
@@ -129,7 +132,7 @@ impl PickCube {
     /// Number of trailing qvel entries the static bonus ignores (docs/tasks.md §1.7).
     fn static_drop(&self) -> usize {
         match self.robot {
-            RobotId::Panda | RobotId::WidowxAi => 2,
+            RobotId::Panda | RobotId::PandaStick | RobotId::WidowxAi => 2,
             RobotId::So100 => 1,
             RobotId::Fetch | RobotId::Xarm6Robotiq => 0,
         }

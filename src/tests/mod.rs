@@ -8,6 +8,7 @@ mod fetch;
 mod fetch_tasks;
 mod foundation;
 mod poke_cube;
+mod push_t;
 mod so100;
 mod stack;
 mod widowxai;

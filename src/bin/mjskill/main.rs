@@ -77,8 +77,8 @@ impl EnvArgs {
 pub enum Command {
     /// Write the complete generated MuJoCo scene (MJCF) of a robot, or of a task with a robot.
     ExportMjcf {
-        /// Robot uid (panda, fetch, xarm6_robotiq, so100, widowxai; default: the env's
-        /// default robot, or panda without --env).
+        /// Robot uid (panda, panda_stick, fetch, xarm6_robotiq, so100, widowxai; default: the
+        /// env's default robot, or panda without --env).
         #[arg(long)]
         robot: Option<String>,
         /// Env id whose scene to export (e.g. PickCube-v1); without it, the table scene and the robot.

@@ -140,6 +140,7 @@ pub fn task_description(env_id: &str) -> String {
         "PullCube-v1" => "Pull the cube onto the target.".into(),
         "StackCube-v1" => "Pick up the red cube and stack it on top of the green cube.".into(),
         "LiftPegUpright-v1" => "Stand the peg lying on the table upright.".into(),
+        "PushT-v1" => "Precisely push the T-shaped block into the target region.".into(),
         other => other.to_string(),
     }
 }

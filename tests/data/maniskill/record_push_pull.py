@@ -1,7 +1,7 @@
 """Records ManiSkill 3 reference trajectories (format `mjskill-ref-traj/1`,
 docs/reference-trajectories.md) of PushCube-v1, PullCube-v1, StackCube-v1 and LiftPegUpright-v1
-with the Panda and the Fetch, and one reference camera state per pair for
-`tests/segmentation.rs`.
+with the Panda and the Fetch and of PushT-v1 with the panda_stick, and one reference camera
+state per pair for `tests/segmentation.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/msmp/bin/python tests/data/maniskill/record_push_pull.py \
         [--pairs PushCube-v1:panda,...] [--images]
@@ -16,7 +16,8 @@ format's description gives it:
 * 2 × 50 steps of the smooth random walk in every other mode the robot offers among
   `pd_joint_pos`, `pd_ee_delta_pos`, `pd_ee_delta_pose`, `pd_joint_vel`,
   `pd_joint_target_delta_pos` (seeds 1100–1101);
-* Panda only: 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
+* Panda only (the panda_stick has no fingers: its grasp contacts are recorded as zeros and its
+  finger links as null): 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
   own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube` /
   `solveLiftPegUpright`), run until the solution returns.
 
@@ -48,10 +49,10 @@ PAIRS = [
     (e, r)
     for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
-]
+] + [("PushT-v1", "panda_stick")]
 # The env attribute of the actor whose grasp the task checks.
 GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA",
-              "LiftPegUpright-v1": "peg"}
+              "LiftPegUpright-v1": "peg", "PushT-v1": "tee"}
 DEFAULT_MODE = "pd_joint_delta_pos"
 WALK_MODES = ["pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_joint_vel",
               "pd_joint_target_delta_pos"]
@@ -111,7 +112,7 @@ def layout(obs, prefix=""):
 def make(env_id, robot, mode, obs_mode="state", render=False):
     kwargs = dict(obs_mode=obs_mode, control_mode=mode, num_envs=1, render_mode=None,
                   sim_backend="physx_cpu", reward_mode="dense", robot_uids=robot)
-    if not render:
+    if not render and env_id != "PushT-v1":  # PushT's goal is a visual shape
         kwargs["render_backend"] = "none"
     return gym.make(env_id, **kwargs), kwargs
 
@@ -132,17 +133,23 @@ def snapshot(env, obs, info, t, action=None, reward=None, terminated=None, trunc
         s["truncated"] = bool(torch.as_tensor(truncated).reshape(-1)[0])
     s["info"] = info_json(info)
     s["actors"] = {a.name: vec(batch0(a.pose.raw_pose)) for a in scene.actors.values()}
-    s["tcp_pose"] = vec(batch0(agent.tcp_pose.raw_pose))
+    tcp = agent.tcp_pose if hasattr(agent, "tcp_pose") else agent.tcp.pose  # panda_stick
+    s["tcp_pose"] = vec(batch0(tcp.raw_pose))
     s["robot_qpos"] = vec(batch0(agent.robot.get_qpos()))
     s["robot_qvel"] = vec(batch0(agent.robot.get_qvel()))
     s["grasp_contact"] = {
         f"finger{k}": vec(batch0(scene.get_pairwise_contact_forces(
-            link, getattr(u, GRASP_ATTR[u.spec.id]))))
-        for k, link in ((1, agent.finger1_link), (2, agent.finger2_link))
+            link, getattr(u, GRASP_ATTR[u.spec.id])))) if link is not None else [0.0] * 3
+        for k, link in ((1, finger(agent, 1)), (2, finger(agent, 2)))
     }
     s["obs_state"] = vec(batch0(obs))
     s["state_dict"] = nested(u.get_state_dict())
     return s
+
+
+def finger(agent, k):
+    """The agent's k-th finger link (None for a robot without fingers: the panda_stick)."""
+    return getattr(agent, f"finger{k}_link", None)
 
 
 def controllers(env):
@@ -278,10 +285,10 @@ def record(env_id, robot):
                      "torch": torch.__version__, "numpy": np.__version__,
                      "gymnasium": gym.__version__},
         "sim_backend": "physx_cpu", "obs_mode": "state", "reward_mode": "dense", "num_envs": 1,
-        "env_class": type(u).__name__, "max_episode_steps": 50,
+        "env_class": type(u).__name__, "max_episode_steps": u.spec.max_episode_steps,
         "joint_names": [j.name for j in u.agent.robot.get_active_joints()],
-        "robot_links": {"finger1_link": u.agent.finger1_link.name,
-                        "finger2_link": u.agent.finger2_link.name},
+        "robot_links": {f"finger{k}_link": getattr(finger(u.agent, k), "name", None)
+                        for k in (1, 2)},
         "grasp_object": {"env_attr": GRASP_ATTR[env_id],
                          "actor_name": getattr(u, GRASP_ATTR[env_id]).name},
         "actor_body_types": {a.name: a.px_body_type for a in u.scene.actors.values()},

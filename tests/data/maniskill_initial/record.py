@@ -1,18 +1,28 @@
 """Records ManiSkill 3's seeded initial states of PushCube-v1, PullCube-v1, StackCube-v1 and
-LiftPegUpright-v1 (panda, fetch) into `<env_id>__<robot>.json` next to this script, for
-`tests/push_pull_cube.rs`, `tests/stack_cube.rs` and `tests/lift_peg_upright.rs`.
+LiftPegUpright-v1 (panda, fetch) and PushT-v1 (panda_stick) into `<env_id>__<robot>.json` next
+to this script, for `tests/push_pull_cube.rs`, `tests/stack_cube.rs`,
+`tests/lift_peg_upright.rs` and `tests/push_t.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py [ENV_ID ...]
 
 With env ids, only their pairs are recorded (the others' files are left as they are).
 
 Per pair, one env made as the reference trajectories were (`obs_mode="state"`,
-`sim_backend="physx_cpu"`, `render_backend="none"`, default control mode, dense reward), reset
+`sim_backend="physx_cpu"`, `render_backend="none"` (PushT-v1: the default, as its goal is a
+visual shape), default control mode, dense reward), reset
 with every seed of `fit` (0–49) and `held_out` (1000–1049). Per seed: the flat `state`
-observation, the actor poses `[x, y, z, qw, qx, qy, qz]`, `agent.tcp_pose`, robot qpos, the
+observation, the actor poses `[x, y, z, qw, qx, qy, qz]`, `agent.tcp_pose` (the panda_stick has
+none: its `agent.tcp.pose`), robot qpos, the
 info flags and both dense rewards of the reset state (`compute_dense_reward(obs=None,
 action=None, info)`, as ManiSkill returns no reward at reset). Floats are the shortest
 decimals that round-trip to ManiSkill's float32 values.
+
+PushT-v1 also gets `pseudo_render`: its `world_to_goal_trans` and, for 400 T poses drawn
+around the goal (`np.random.default_rng(56)`: 20 anywhere in the spawn box with any yaw, 180
+with xy within ±0.04 m of the goal's and yaw within ±0.4 rad of the goal's, 200 within
+±0.008 m and ±0.04 rad, where success is decided), the pose as set
+(float32 `[x, y, z, qw, qx, qy, qz]`) and `pseudo_render_intersection()` of it; and `links`:
+the mass, inertia and centre-of-mass pose SAPIEN gives every robot link and the T.
 """
 
 import json
@@ -28,7 +38,9 @@ PAIRS = [
     (e, r)
     for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
-]
+] + [("PushT-v1", "panda_stick")]
+# Poses of the pseudo-render check (PushT-v1).
+RENDER_POSES, RENDER_ANYWHERE = 400, 20
 SEEDS = {"fit": list(range(0, 50)), "held_out": list(range(1000, 1050))}
 
 
@@ -58,9 +70,16 @@ def layout(obs_dict, prefix=""):
     return out
 
 
+def tcp_pose(agent):
+    """`agent.tcp_pose`; the TCP link's pose for a robot without one (the panda_stick)."""
+    return agent.tcp_pose if hasattr(agent, "tcp_pose") else agent.tcp.pose
+
+
 def record(env_id, robot):
+    # PushT's goal is a visual shape: it cannot be built without a render backend.
+    render = {} if env_id == "PushT-v1" else {"render_backend": "none"}
     env = gym.make(env_id, robot_uids=robot, obs_mode="state", reward_mode="dense",
-                   num_envs=1, sim_backend="physx_cpu", render_backend="none")
+                   num_envs=1, sim_backend="physx_cpu", **render)
     u = env.unwrapped
     episodes = {}
     for split, seeds in SEEDS.items():
@@ -72,7 +91,7 @@ def record(env_id, robot):
                 "obs_state": vec(obs),
                 "actors": {a.name: vec(a.pose.raw_pose) for a in u.scene.actors.values()
                            if a.name != "ground"},
-                "tcp_pose": vec(u.agent.tcp_pose.raw_pose),
+                "tcp_pose": vec(tcp_pose(u.agent).raw_pose),
                 "robot_qpos": vec(u.agent.robot.get_qpos()),
                 "info": {k: bool(v.item()) for k, v in info.items()
                          if k not in ("elapsed_steps", "reconfigure")},
@@ -80,6 +99,7 @@ def record(env_id, robot):
                 "reward_normalized": f32(norm.item()),
             }
     unflat = u.get_obs(unflattened=True)
+    extra = pseudo_render(u) if env_id == "PushT-v1" else {}
     out = {
         "env_id": env_id,
         "robot": robot,
@@ -88,11 +108,45 @@ def record(env_id, robot):
         "obs_state_layout": layout(unflat),
         "seeds": SEEDS,
         "episodes": episodes,
+        **extra,
     }
     env.close()
     path = Path(__file__).with_name(f"{env_id}__{robot}.json")
     path.write_text(json.dumps(out, separators=(",", ":")) + "\n")
     print(path, len(episodes), "seeds")
+
+
+def pseudo_render(u):
+    """PushT's intersection of T poses around the goal, and SAPIEN's link inertias."""
+    import torch
+    from mani_skill.utils.structs import Pose
+
+    rng = np.random.default_rng(56)
+    goal = u.goal_offset.cpu().numpy().astype(np.float64)
+    samples = []
+    for k in range(RENDER_POSES):
+        if k < RENDER_ANYWHERE:
+            xy = goal + rng.uniform([-0.1, -0.1], [0.1, 0.2])
+            yaw = rng.uniform(0, 2 * np.pi)
+        else:
+            near = k >= RENDER_POSES // 2
+            d, a = (0.008, 0.04) if near else (0.04, 0.4)
+            xy = goal + rng.uniform(-d, d, 2)
+            yaw = u.goal_z_rot + rng.uniform(-a, a)
+        p = torch.tensor([[xy[0], xy[1], 0.021]], dtype=torch.float32)
+        q = torch.tensor([[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]], dtype=torch.float32)
+        u.tee.set_pose(Pose.create_from_pq(p=p, q=q))
+        samples.append({"pose": vec(u.tee.pose.raw_pose),
+                        "intersection": f32(u.pseudo_render_intersection().item())})
+    links = {}
+    for link in list(u.agent.robot.get_links()) + [u.tee]:
+        body = link._bodies[0]
+        c = body.cmass_local_pose
+        links[link.name] = {"mass": f32(body.mass), "inertia": vec(body.inertia),
+                            "cmass": vec(np.concatenate([c.p, c.q]))}
+    return {"pseudo_render": {"world_to_goal": vec(u.world_to_goal_trans),
+                              "samples": samples},
+            "links": links}
 
 
 if __name__ == "__main__":
