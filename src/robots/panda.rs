@@ -4,8 +4,8 @@ use std::f64::consts::PI;
 use super::{GraspDef, InitNoise, RobotSpec, StaticRule, TcpDef};
 use crate::controllers::{ControlMode, PartKind, PartSpec};
 
-/// The Panda's rest keyframe (ManiSkill order).
-pub const REST: [f64; 9] = [
+/// The arm's part of the rest keyframe (ManiSkill order), which `panda_stick` shares.
+pub const ARM_REST: [f64; 7] = [
     0.0,
     PI / 8.0,
     0.0,
@@ -13,6 +13,17 @@ pub const REST: [f64; 9] = [
     0.0,
     3.0 * PI / 4.0,
     PI / 4.0,
+];
+
+/// The Panda's rest keyframe (ManiSkill order): the arm's, the fingers open.
+pub const REST: [f64; 9] = [
+    ARM_REST[0],
+    ARM_REST[1],
+    ARM_REST[2],
+    ARM_REST[3],
+    ARM_REST[4],
+    ARM_REST[5],
+    ARM_REST[6],
     0.04,
     0.04,
 ];

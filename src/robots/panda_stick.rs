@@ -1,7 +1,6 @@
 //! The Panda arm with a stick in place of its gripper, `panda_stick` (docs/robots.md §2.1):
 //! the Panda's 7 arm joints, no fingers; its tool is a 0.1 m cylinder of radius 8 mm under the
 //! hand whose tip is the TCP link `panda_hand_tcp`, 0.15 m below the hand. PushT-v1's robot.
-use std::f64::consts::PI;
 
 use super::panda::{arm_part, ARM, ARM_GAINS};
 use super::{InitNoise, RobotSpec, StaticRule, TcpDef};
@@ -10,15 +9,7 @@ use crate::controllers::{ControlMode, PartSpec};
 /// The `rest` keyframe of ManiSkill's `PandaStick` (the Panda's arm rest pose): where the
 /// common table scene puts it, before the noise. (PushT-v1, its one task, poses it again:
 /// `tasks::push_t::ROBOT_QPOS`.)
-pub const REST: [f64; 7] = [
-    0.0,
-    PI / 8.0,
-    0.0,
-    -5.0 * PI / 8.0,
-    0.0,
-    3.0 * PI / 4.0,
-    PI / 4.0,
-];
+pub const REST: [f64; 7] = super::panda::ARM_REST;
 
 /// The TCP link: the stick's tip.
 const TCP: &str = super::panda::TCP;
