@@ -17,6 +17,9 @@ seed three ways:
   targets PhysX holds) and the same action; the largest arm-joint error after that one step,
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
 
+Its successes are success at the last step (`success_at_end` of eval_in_maniskill.py, whose
+headline figure is success at any step, as `mjskill eval`'s is).
+
 Prints one JSON line per episode and a summary line (`"summary": true`): successes in both,
 agreement of the final outcome, the median first parting step and its most common quantity,
 and the median one-step arm error (first step from the seeded state, and over all steps).
