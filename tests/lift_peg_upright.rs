@@ -7,7 +7,7 @@ mod common;
 use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_2};
 
 use common::put_free_body;
-use common::task::{check_initial_states, closeness, env as task_env, max_abs, part};
+use common::task::{check_initial_states, closeness, env as task_env, extra_keys, max_abs, part};
 use mjskill::{Env, EnvConfig, ObsMode, RewardMode};
 
 const ID: &str = "LiftPegUpright-v1";
@@ -68,12 +68,7 @@ fn spec_dense_reward(e: &Env, grasped: bool) -> f64 {
 fn state_keys_and_visual_keys_follow_maniskill() {
     for robot in ROBOTS {
         let e = env(robot, ObsMode::StateDict);
-        let extra: Vec<&str> = e
-            .obs_layout()
-            .iter()
-            .map(|(k, _)| k.as_str())
-            .filter(|k| k.starts_with("extra/"))
-            .collect();
+        let extra = extra_keys(&e);
         assert_eq!(extra, ["extra/tcp_pose", "extra/obj_pose"]);
         let n = if robot == "panda" { 9 } else { 15 };
         assert_eq!(e.observation_space().shape, vec![2 * n + 14], "{robot}");

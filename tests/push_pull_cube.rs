@@ -5,7 +5,7 @@
 mod common;
 
 use common::put_free_body;
-use common::task::{check_initial_states, closeness, env, norm, part, sub};
+use common::task::{check_initial_states, closeness, env, extra_keys, norm, part, sub};
 use mjskill::{Env, EnvConfig, ObsMode, RewardMode};
 
 const PAIRS: [(&str, &str); 4] = [
@@ -51,12 +51,7 @@ fn state_keys_and_visual_keys_follow_maniskill() {
     // PushCube gives `goal_pos` only with state; PullCube in every obs mode.
     for (id, robot) in PAIRS {
         let e = env(id, robot, ObsMode::StateDict);
-        let keys: Vec<&str> = e.obs_layout().iter().map(|(k, _)| k.as_str()).collect();
-        let extra: Vec<&str> = keys
-            .iter()
-            .filter(|k| k.starts_with("extra/"))
-            .copied()
-            .collect();
+        let extra = extra_keys(&e);
         assert_eq!(
             extra,
             ["extra/tcp_pose", "extra/goal_pos", "extra/obj_pose"]

@@ -6,7 +6,7 @@
 mod common;
 
 use common::put_free_body;
-use common::task::{check_initial_states, closeness, env as task_env, norm, part, sub};
+use common::task::{check_initial_states, closeness, env as task_env, extra_keys, norm, part, sub};
 use mjskill::{Env, EnvConfig, ObsMode, RewardMode};
 
 const ID: &str = "StackCube-v1";
@@ -103,12 +103,7 @@ fn spec_dense_reward(e: &Env) -> f64 {
 fn state_keys_and_visual_keys_follow_maniskill() {
     for robot in ROBOTS {
         let e = env(robot, ObsMode::StateDict);
-        let extra: Vec<&str> = e
-            .obs_layout()
-            .iter()
-            .map(|(k, _)| k.as_str())
-            .filter(|k| k.starts_with("extra/"))
-            .collect();
+        let extra = extra_keys(&e);
         assert_eq!(
             extra,
             [

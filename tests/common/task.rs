@@ -67,6 +67,15 @@ pub fn max_abs(a: impl IntoIterator<Item = f64>, b: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The observation layout's `extra/...` keys, in order (a task's observation extras).
+pub fn extra_keys(e: &Env) -> Vec<&str> {
+    e.obs_layout()
+        .iter()
+        .map(|(k, _)| k.as_str())
+        .filter(|k| k.starts_with("extra/"))
+        .collect()
+}
+
 /// A flat observation part as f64.
 pub fn part(e: &Env, key: &str) -> Vec<f64> {
     e.obs_part(key)
