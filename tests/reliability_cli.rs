@@ -476,7 +476,8 @@ fn bench_reports_the_threads_it_used() {
     let o = run_within(
         {
             let mut c = mjskill();
-            c.args(["bench", "--steps", "20", "--envs", "2", "--threads", "8"]);
+            // Steps enough for /proc/stat's clock (10 ms ticks) to move during a timed pass.
+            c.args(["bench", "--steps", "2000", "--envs", "2", "--threads", "8"]);
             c
         },
         300,
@@ -488,6 +489,22 @@ fn bench_reports_the_threads_it_used() {
         r["threads"], 2,
         "a VecEnv of 2 envs runs on at most 2 threads: {r}"
     );
+    // Each of those threads' busy share of the timed pass: a share of wall time, so in
+    // (0, 1] (a little above 1 only from the clocks' granularity).
+    let busy = r["vec_thread_busy"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no vec_thread_busy: {r}"));
+    assert_eq!(busy.len(), 2, "{r}");
+    for b in busy {
+        let b = b.as_f64().unwrap_or_else(|| panic!("not a number: {r}"));
+        assert!(b > 0.0 && b <= 1.05, "{r}");
+    }
+    if std::path::Path::new("/proc/stat").exists() {
+        let steal = r["steal_percent"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no steal_percent: {r}"));
+        assert!((0.0..=100.0).contains(&steal), "{r}");
+    }
 }
 
 #[test]

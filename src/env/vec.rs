@@ -3,9 +3,12 @@
 //! The calling thread steps the first share of the envs itself; T − 1 worker threads, created
 //! once in [`VecEnv::new`], step the rest. A step hands work out by bumping an atomic epoch and
 //! waking the workers (`Thread::unpark`); results come back through atomic cells (relaxed
-//! stores of f32 bits, published by one release/acquire pair per worker), so the step path
-//! takes no locks and allocates nothing. The caller sees contiguous `[N × obs_dim]`
-//! observations and `[N]` rewards / terminated / truncated buffers.
+//! stores of f32 bits, published by one release/acquire pair per worker), and the last worker
+//! to finish wakes the caller. So the step path allocates nothing and takes one lock, never
+//! contended: that worker's read of the caller's handle. A waiting thread spins for at most
+//! 50 µs, then sleeps (`wait`), so idle env threads leave the cores to whatever runs between
+//! steps. The caller sees contiguous `[N × obs_dim]` observations and `[N]` rewards /
+//! terminated / truncated buffers.
 //!
 //! **Autoreset (gymnasium ≥ 1.0 "next-step" mode).** When env i reports terminated or
 //! truncated at step t, the values returned at t are the finished episode's final observation,
@@ -47,7 +50,8 @@ use std::ops::Range;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use std::thread::{JoinHandle, Thread};
+use std::thread::{JoinHandle, Thread, ThreadId};
+use std::time::Instant;
 
 use super::memory;
 use super::{depth_to_mm, make, BoxSpace, CameraImage, Env, EnvConfig, EnvError, PointCloud};
@@ -56,9 +60,11 @@ use crate::mujoco::Warnings;
 mod images;
 mod labels;
 mod rollout;
+mod wait;
 use images::{pack_bytes, pack_i16, store_f32, unpack_bytes, unpack_i16, ImageLayout};
 pub use labels::EnvLabeller;
 pub use rollout::{RolloutBuffers, VecPolicy, MAX_POLICY_STEP};
+use wait::{wait_until, Busy};
 
 /// Largest `num_envs` of a [`VecEnv`] (and the most threads the Python binding accepts).
 ///
@@ -87,8 +93,9 @@ const CMD_SET_LABELLERS: u64 = 7;
 /// Test-only: workers other than the caller's panic.
 #[cfg(test)]
 const CMD_TEST_PANIC: u64 = 3;
-/// Busy-wait iterations before a waiting thread parks or yields.
-const SPINS: u32 = 20_000;
+/// Test-only: workers other than the caller's sleep 20 ms, long past the caller's spin.
+#[cfg(test)]
+const CMD_TEST_SLEEP: u64 = 8;
 
 impl Worker {
     /// One worker per range of `envs`, in order; `dims` = (obs_dim, act_dim, info keys).
@@ -150,6 +157,12 @@ struct Shared {
     has_seed: AtomicBool,
     /// Workers that finished the current command.
     done: AtomicUsize,
+    /// Worker threads (the caller's not counted): the last to finish wakes the caller.
+    workers: usize,
+    /// The thread that dispatched the current command (the caller may change between calls).
+    caller: Mutex<Option<Thread>>,
+    /// Each thread's time running commands (index: its share; 0 is the caller's).
+    busy: Vec<Busy>,
     /// Whether an ended env resets on the next step ([`VecEnv::set_autoreset`]).
     autoreset_on: AtomicBool,
     /// The envs a `CMD_RESET_SOME` resets.
@@ -286,6 +299,13 @@ impl Worker {
             assert!(self.first == 0, "test panic in env {}", self.first);
             return;
         }
+        #[cfg(test)]
+        if command == CMD_TEST_SLEEP {
+            if self.first != 0 {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            return;
+        }
         if command == CMD_SET_LABELLERS {
             self.take_labellers(sh);
             return;
@@ -381,6 +401,8 @@ pub struct VecEnv {
     /// The envs stepped by the calling thread.
     local: Worker,
     threads: Vec<Thread>,
+    /// The thread the workers wake when they finish (`Shared::caller`), by id.
+    caller: Option<ThreadId>,
     handles: Vec<JoinHandle<()>>,
     ranges: Vec<Range<usize>>,
     single_action_space: BoxSpace,
@@ -410,32 +432,21 @@ pub struct VecEnv {
 }
 
 /// Starts worker thread `k` (named `mjskill-vecenv-k`): it waits for each new epoch of
-/// `sh` (spinning, then parked), runs the epoch's command on its envs and counts itself done,
-/// until the command is [`CMD_QUIT`].
+/// `sh` (spinning briefly, then asleep: [`wait`]), runs the epoch's command on its envs,
+/// counts itself done (the last one wakes the caller), until the command is [`CMD_QUIT`].
 fn spawn_worker(k: usize, mut w: Worker, sh: Arc<Shared>) -> Result<JoinHandle<()>, EnvError> {
     std::thread::Builder::new()
         .name(format!("mjskill-vecenv-{k}"))
         .spawn(move || {
             let mut seen = 0u64;
             loop {
-                let mut spins = 0u32;
-                let epoch = loop {
-                    let e = sh.epoch.load(Ordering::Acquire);
-                    if e != seen {
-                        break e;
-                    }
-                    if spins < SPINS {
-                        spins += 1;
-                        std::hint::spin_loop();
-                    } else {
-                        std::thread::park();
-                    }
-                };
-                seen = epoch;
+                wait_until(|| sh.epoch.load(Ordering::Acquire) != seen);
+                seen = sh.epoch.load(Ordering::Acquire);
                 let command = sh.command.load(Ordering::Relaxed);
                 if command == CMD_QUIT {
                     break;
                 }
+                let start = Instant::now();
                 // A panic in an env (a bug, or a GL driver failing mid-run) must not
                 // leave the caller waiting for `done` forever: it is caught here and
                 // re-raised on the caller's thread, as a single env's panic would be.
@@ -445,7 +456,17 @@ fn spawn_worker(k: usize, mut w: Worker, sh: Arc<Shared>) -> Result<JoinHandle<(
                     }
                     sh.panicked.store(true, Ordering::Release);
                 }
-                sh.done.fetch_add(1, Ordering::Release);
+                sh.busy[k].add_since(start);
+                if sh.done.fetch_add(1, Ordering::AcqRel) + 1 == sh.workers {
+                    // The last worker wakes the caller, in case it stopped spinning.
+                    let caller = match sh.caller.lock() {
+                        Ok(c) => c.clone(),
+                        Err(c) => c.into_inner().clone(),
+                    };
+                    if let Some(t) = caller {
+                        t.unpark();
+                    }
+                }
             }
         })
         .map_err(|e| EnvError::WorkerThread(e.to_string()))
@@ -514,12 +535,16 @@ impl VecEnv {
         let (seg_cells, xyzw_len, px) = (images.seg_cells, images.xyzw_len, images.px);
         let cells32 = |n: usize| (0..n).map(|_| AtomicU32::new(0)).collect::<Vec<_>>();
         let flags = |n: usize| (0..n).map(|_| AtomicBool::new(false)).collect::<Vec<_>>();
+        let ranges = shares(num_envs, threads);
         let shared = Arc::new(Shared {
             epoch: AtomicU64::new(0),
             command: AtomicU64::new(CMD_STEP),
             seed: AtomicU64::new(0),
             has_seed: AtomicBool::new(false),
             done: AtomicUsize::new(0),
+            workers: ranges.len() - 1,
+            caller: Mutex::new(None),
+            busy: (0..ranges.len()).map(|_| Busy::default()).collect(),
             autoreset_on: AtomicBool::new(true),
             reset_mask: flags(num_envs),
             actions: cells32(num_envs * act_dim),
@@ -544,7 +569,6 @@ impl VecEnv {
             panicked: AtomicBool::new(false),
             panic_payload: Mutex::new(None),
         });
-        let ranges = shares(num_envs, threads);
         let dims = (obs_dim, act_dim, nkeys);
         let mut workers = Worker::split(envs, &ranges, dims).into_iter();
         let local = workers.next().expect("at least one share");
@@ -564,6 +588,7 @@ impl VecEnv {
             shared,
             local,
             threads: thread_handles,
+            caller: None,
             handles,
             ranges,
             single_action_space,
@@ -596,20 +621,24 @@ impl VecEnv {
         let sh = &*self.shared;
         sh.command.store(command, Ordering::Relaxed);
         sh.done.store(0, Ordering::Relaxed);
+        let me = std::thread::current();
+        if !self.threads.is_empty() && self.caller != Some(me.id()) {
+            // A new calling thread (the VecEnv moved): the workers wake this one from now on.
+            self.caller = Some(me.id());
+            match sh.caller.lock() {
+                Ok(mut c) => *c = Some(me),
+                Err(c) => *c.into_inner() = Some(me),
+            }
+        }
         sh.epoch.fetch_add(1, Ordering::Release);
         for t in &self.threads {
             t.unpark();
         }
+        let start = Instant::now();
         self.local.run(sh, command);
-        let mut spins = 0u32;
-        while sh.done.load(Ordering::Acquire) < self.threads.len() {
-            if spins < SPINS {
-                spins += 1;
-                std::hint::spin_loop();
-            } else {
-                std::thread::yield_now();
-            }
-        }
+        sh.busy[0].add_since(start);
+        let workers = self.threads.len();
+        wait_until(|| sh.done.load(Ordering::Acquire) >= workers);
         if sh.panicked.load(Ordering::Acquire) {
             let payload = sh.panic_payload.lock().ok().and_then(|mut p| p.take());
             resume_unwind(payload.unwrap_or_else(|| Box::new("a VecEnv worker panicked")));
@@ -770,6 +799,13 @@ impl VecEnv {
     pub fn num_threads(&self) -> usize {
         self.ranges.len()
     }
+    /// Seconds each thread has spent running commands (resets, steps, rollout steps, labels)
+    /// since the VecEnv was built, in [`VecEnv::thread_ranges`]' order. Against the wall time
+    /// of the same calls it tells threads that wait for each other (a share idle while another
+    /// works) from a machine that runs every thread slower.
+    pub fn thread_busy_seconds(&self) -> Vec<f64> {
+        self.shared.busy.iter().map(Busy::seconds).collect()
+    }
     /// The env index ranges handled by each thread (thread 0 is the caller).
     pub fn thread_ranges(&self) -> &[Range<usize>] {
         &self.ranges
@@ -891,63 +927,4 @@ impl Drop for VecEnv {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::mujoco::limits::Headroom;
-
-    #[test]
-    fn a_worker_panic_reaches_the_caller_instead_of_hanging() {
-        let mut v = VecEnv::new("PickCube-v1", EnvConfig::default(), 2, 2).unwrap();
-        let r = catch_unwind(AssertUnwindSafe(|| v.dispatch(CMD_TEST_PANIC)));
-        let msg = r.expect_err("the worker's panic is re-raised here");
-        assert_eq!(
-            msg.downcast_ref::<String>().map(String::as_str),
-            Some("test panic in env 1")
-        );
-        drop(v); // the workers survived the panic and join
-    }
-
-    #[test]
-    fn envs_that_would_not_fit_in_memory_are_refused_before_they_are_made() {
-        // 16384 envs against 64 MB: refused after the first env is made (making them all
-        // would take minutes and about 48 GB).
-        let cfg = EnvConfig::default();
-        let room = |bytes| memory::Available {
-            memory: Some(Headroom {
-                bytes,
-                source: "MemAvailable in /proc/meminfo",
-            }),
-            address_space: None,
-        };
-        let e = VecEnv::new_within("PickCube-v1", cfg.clone(), MAX_NUM_ENVS, 4, room(64 << 20))
-            .unwrap_err();
-        let EnvError::EnvsExceedMemory {
-            num_envs,
-            per_env_bytes,
-            available_bytes,
-            ..
-        } = e
-        else {
-            panic!("{e}");
-        };
-        assert_eq!((num_envs, available_bytes), (MAX_NUM_ENVS, 64 << 20));
-        // The estimate covers the measured 2.1 MB per PickCube-v1 env (docs/python.md).
-        assert!(
-            (2_100_000..4 << 20).contains(&per_env_bytes),
-            "{per_env_bytes}"
-        );
-        let msg = e.to_string();
-        assert!(
-            msg.contains("num_envs 16384") && msg.contains("64 MB of memory available"),
-            "{msg}"
-        );
-        // Rendering envs cost more: 100 of them do not fit in 1 GB, as 100 state envs do.
-        let rgb = EnvConfig {
-            obs_mode: crate::env::ObsMode::Rgb,
-            ..cfg.clone()
-        };
-        assert!(VecEnv::new_within("PickCube-v1", rgb, 100, 1, room(1 << 30)).is_err());
-        let v = VecEnv::new_within("PickCube-v1", cfg, 2, 1, room(1 << 30)).unwrap();
-        assert_eq!(v.num_envs(), 2);
-    }
-}
+mod tests;

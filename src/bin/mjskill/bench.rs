@@ -44,6 +44,16 @@ pub struct BenchReport {
     /// vec_env_steps_per_s / env_steps_per_s (with `--envs`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scaling: Option<f64>,
+    /// Share of the fastest vector pass's wall time that each VecEnv thread spent stepping
+    /// (`VecEnv::thread_busy_seconds`; thread 0 is the caller's). Below 1, the thread waited
+    /// for another; all near 1 with a low `scaling`, the cores themselves ran slower.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vec_thread_busy: Option<Vec<f64>>,
+    /// The hypervisor's steal time during that pass, in per cent of the machine's CPU time
+    /// (`/proc/stat`; absent where it cannot be read): time this virtual machine's cores
+    /// were runnable but not run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub steal_percent: Option<f64>,
     /// Human render camera frames per second (`Env::render`, with `--render`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub render_frames_per_s: Option<f64>,
@@ -184,6 +194,28 @@ fn check_count(flag: &str, n: usize, max: usize) -> Result<(), CliError> {
     Ok(())
 }
 
+/// The vector passes' figures: env steps/s summed over the envs, each thread's busy share
+/// and the steal time, all of the fastest pass.
+struct VecRate {
+    steps_per_s: f64,
+    busy: Vec<f64>,
+    steal_percent: Option<f64>,
+}
+
+/// The `cpu` line of `/proc/stat`: (steal, total) jiffies, or None where it cannot be read.
+fn cpu_steal() -> Option<(u64, u64)> {
+    let stat = std::fs::read_to_string("/proc/stat").ok()?;
+    let fields: Vec<u64> = stat
+        .lines()
+        .next()?
+        .strip_prefix("cpu ")?
+        .split_whitespace()
+        .map(|f| f.parse().ok())
+        .collect::<Option<_>>()?;
+    // user nice system idle iowait irq softirq steal (guest times are within user and nice).
+    Some((*fields.get(7)?, fields.iter().take(8).sum()))
+}
+
 /// VecEnv steps per second summed over its envs (best of three timed passes after a
 /// warm-up), every env following the single env's action sequence `actions` (`steps` rows of
 /// `dim`), so that the workload per env step is the single env's.
@@ -192,7 +224,7 @@ fn vec_env_rate(
     actions: &[f32],
     dim: usize,
     steps: usize,
-) -> Result<f64, CliError> {
+) -> Result<VecRate, CliError> {
     let n = v.num_envs();
     let vsteps = (steps / n).max(1);
     let mut acts = vec![0.0f32; n * dim];
@@ -207,15 +239,38 @@ fn vec_env_rate(
         fill(t, &mut acts);
         v.step(&acts)?;
     }
-    let mut best = 0.0f64;
+    let mut best = VecRate {
+        steps_per_s: 0.0,
+        busy: Vec::new(),
+        steal_percent: None,
+    };
     for _ in 0..3 {
         v.reset(Some(0));
+        let (busy0, steal0) = (v.thread_busy_seconds(), cpu_steal());
         let t0 = Instant::now();
         for t in 0..vsteps {
             fill(t, &mut acts);
             v.step(&acts)?;
         }
-        best = best.max((vsteps * n) as f64 / t0.elapsed().as_secs_f64());
+        let wall = t0.elapsed().as_secs_f64();
+        let rate = (vsteps * n) as f64 / wall;
+        if rate > best.steps_per_s {
+            let busy1 = v.thread_busy_seconds();
+            best = VecRate {
+                steps_per_s: rate,
+                busy: busy1
+                    .iter()
+                    .zip(&busy0)
+                    .map(|(b, b0)| (b - b0) / wall)
+                    .collect(),
+                steal_percent: match (steal0, cpu_steal()) {
+                    (Some((s0, t0)), Some((s1, t1))) if t1 > t0 => {
+                        Some(100.0 * s1.saturating_sub(s0) as f64 / (t1 - t0) as f64)
+                    }
+                    _ => None,
+                },
+            };
+        }
     }
     Ok(best)
 }
@@ -338,8 +393,10 @@ pub fn run(
         replay_identical,
         envs: vec_env.as_ref().map(|v| v.num_envs()),
         threads: vec_env.as_ref().map(|v| v.num_threads()),
-        vec_env_steps_per_s: vec_rate,
-        scaling: vec_rate.map(|r| r / env_rate),
+        vec_env_steps_per_s: vec_rate.as_ref().map(|r| r.steps_per_s),
+        scaling: vec_rate.as_ref().map(|r| r.steps_per_s / env_rate),
+        vec_thread_busy: vec_rate.as_ref().map(|r| r.busy.clone()),
+        steal_percent: vec_rate.as_ref().and_then(|r| r.steal_percent),
         render_frames_per_s: render_rate,
         render_size: render_rate.map(|_| env.render_size()),
         profile,
