@@ -6,12 +6,17 @@ env; saves the policy as an ONNX policy file (docs/training.md) that `mjskill ev
     python examples/ppo.py --env-id PickCube-v1 --robot panda
     python examples/plot_training.py runs/<run>/log.csv
 
-The algorithm and its defaults are ManiSkill 3's state PPO baseline (examples/baselines/ppo/
-ppo.py, per-task settings from its examples.sh; docs/training.md lists each default and its
-source, and the one measured change: PokeCube-v1 in pd_ee_delta_pose): actor and critic MLPs of 3x256 tanh units, a state-independent log std (init -0.5),
-gamma 0.8, GAE lambda 0.9, 4 or 8 update epochs of 32 minibatches with a target KL of 0.1,
-partial resets (an env resets at success), and the value of the final observation bootstrapped
-at every episode end. Differences, all for the native env or the ONNX file:
+The algorithm is ManiSkill 3's state PPO baseline (examples/baselines/ppo/ppo.py): actor and
+critic MLPs of 3x256 tanh units, a state-independent log std (init -0.5), gamma 0.8, GAE
+lambda 0.9, a target KL of 0.1, partial resets (an env resets at success), and the value of
+the final observation bootstrapped at every episode end. Its sizes come from a preset:
+``--preset cpu`` (the default) was measured on a 2-core machine for the shortest time to 90 %
+(128 envs x 50 steps, 4 epochs of 16 minibatches, native rollouts: PickCube-v1 at 90 % in
+about 5 minutes);
+``--preset maniskill`` is ManiSkill's examples.sh (1024 envs, 8 epochs of 32), sized for its
+GPU simulation. docs/training.md lists each default, its source and the measurements, with
+the one change to ManiSkill's settings in both presets: PokeCube-v1 in pd_ee_delta_pose.
+Differences, all for the native env or the ONNX file:
 
 * mjskill's vector env resets an ended env on the *next* step (gymnasium's next-step
   autoreset): that step's transition (action ignored, reward 0) is masked out of the update,
@@ -28,11 +33,13 @@ at every episode end. Differences, all for the native env or the ONNX file:
   0), so a policy that reads them behaves differently in ManiSkill
   (docs/outcome-physics.md). The exported graph has zero weights on those inputs.
 
-With ``--rollout native`` the vector env runs the T steps of an iteration in one call, with
-the actor evaluated on its threads (``mjskill.GaussianMlp``: the same network in f32, actions
-sampled from a per-env random stream), and the log-probs and values of the stored observations
-come from one batched torch pass afterwards. ``--rollout torch`` (the default without Ray) is
-the one-step-per-call loop with torch sampling (the only way with ``--simulator maniskill``). ``--ray-workers N`` steps the training envs on N Ray actors
+With ``--rollout native`` (the default) the vector env runs the T steps of an iteration in one
+call, with the actor evaluated on its threads (``mjskill.GaussianMlp``: the same network in
+f32, actions sampled from a per-env random stream), and the log-probs and values of the stored
+observations come from one batched torch pass afterwards. ``--rollout torch`` is the
+one-step-per-call loop with torch sampling: the default under ``--preset maniskill``, and the
+only way with ``--simulator maniskill`` or ``--action-floor``, which take it by default.
+``--ray-workers N`` steps the training envs on N Ray actors
 (``mjskill.ray.RayVectorEnv``, on the local machine or the cluster of ``RAY_ADDRESS``) and
 learns here; with the same seed and env count it learns the same weights as the local run.
 
@@ -57,6 +64,13 @@ import argparse
 import os
 import sys
 import time
+
+# torch's OpenMP threads spin for a while after each parallel region (GNU OpenMP's default),
+# so between two forward passes of a torch rollout they keep the cores from the env threads:
+# 256 envs on 2 env threads stepped at 15,000 env steps/s with them spinning, 18,300 with them
+# asleep (docs/training.md). They sleep unless the caller chose otherwise; set before torch
+# loads, which reads it once.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import gymnasium as gym
 import numpy as np
@@ -117,19 +131,46 @@ TASKS = {
 }
 
 
-def defaults(env_id: str) -> dict:
-    return {**BASE, **TASKS.get(env_id, TASKS["PickCube-v1"])}
+#: The presets: ``cpu`` (the default) is measured on the project's 2-core machine for the
+#: shortest time to 90 % (docs/training.md, "Defaults that learn fast"); ``maniskill`` is
+#: ManiSkill's settings above, sized for its GPU simulation (1024 envs per iteration), and
+#: the default of every run before 29 November 2026.
+PRESETS = ("cpu", "maniskill")
+
+#: The cpu preset's changes to ManiSkill's settings: fewer envs per iteration, so the policy
+#: updates 8 times as often per env step, half the epochs, minibatches of 400 samples, and
+#: an evaluation every 64 k env steps (measured on PickCube-v1). PokeCube-v1 takes the
+#: recipe of its shipped policy instead (256 envs x 20 steps, 8 epochs of 32, 100 eval envs
+#: every 51 k env steps): with PickCube-v1's sizes it rose to 66 % and fell back to 6 %.
+CPU = dict(num_envs=128, update_epochs=4, num_minibatches=16, eval_freq=10, num_eval_envs=32)
+CPU_TASKS = {"PokeCube-v1": dict(num_envs=256, update_epochs=8, num_minibatches=32,
+                                 eval_freq=10, num_eval_envs=100)}
+
+
+def defaults(env_id: str, preset: str = "cpu") -> dict:
+    """The option defaults of ``env_id`` under ``preset`` (one of PRESETS)."""
+    d = {**BASE, **TASKS.get(env_id, TASKS["PickCube-v1"])}
+    if preset == "cpu":
+        d.update(CPU)
+        d.update(CPU_TASKS.get(env_id, {}))
+    return d
 
 
 def parse_args(argv=None, check=True):
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--env-id", default="PickCube-v1")
-    env_id = pre.parse_known_args(argv)[0].env_id
-    d = defaults(env_id)
+    pre.add_argument("--preset", choices=PRESETS, default="cpu")
+    known = pre.parse_known_args(argv)[0]
+    d = defaults(known.env_id, known.preset)
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument("--env-id", default="PickCube-v1", help="mjskill env id")
+    p.add_argument("--preset", choices=PRESETS, default="cpu",
+                   help="the defaults of the options below: cpu (measured for the shortest "
+                        "time to success on a CPU: 128 envs, 4 epochs of 16 minibatches) or "
+                        "maniskill (ManiSkill's examples.sh, sized for 1024 GPU envs; the "
+                        "default before 29 November 2026)")
     p.add_argument("--robot", default=None, help="robot uid (default: the env's)")
     p.add_argument("--control-mode", default=None,
                    help=f"control mode (default: the demos' with --demos, else "
@@ -190,9 +231,9 @@ def parse_args(argv=None, check=True):
     p.add_argument("--rollout", choices=["native", "torch"], default=None,
                    help="native: the actor runs inside the vector env's threads, T steps per "
                         "call, log-probs and values in one batched pass afterwards (the "
-                        "default with --ray-workers); torch: one env step and one torch "
-                        "forward per step (the default otherwise, and the only way with "
-                        "--simulator maniskill)")
+                        "default); torch: one env step and one torch forward per step (the "
+                        "default with --preset maniskill, --simulator maniskill or "
+                        "--action-floor, the only ways for the last two)")
     p.add_argument("--ray-workers", type=non_negative, default=0,
                    help="step the training envs on N Ray actors (mjskill.ray.RayVectorEnv, "
                         "--num-threads threads each; RAY_ADDRESS for a cluster) and learn "
@@ -256,7 +297,7 @@ def parse_args(argv=None, check=True):
 
 
 #: Options a resumed run cannot change: they define the networks, the data or the envs.
-RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
+RUN_DEFINING = ("env_id", "preset", "robot", "control_mode", "seed", "num_envs", "num_steps", "hidden",
                 "no_obs_norm", "gripper_qvel", "rollout", "simulator", "ray_workers",
                 "action_floor", "demos", "bc_epochs", "bc_obs_noise", "demo_logstd",
                 "reward_mode")
@@ -355,6 +396,9 @@ def resumed_args(argv):
     given = parse_args(argv)
     ckpt = load_checkpoint(given.resume)
     saved_argv = list(ckpt["argv"])
+    if "--preset" not in option_names(saved_argv):
+        # Saved before --preset existed: the run took ManiSkill's settings.
+        saved_argv = ["--preset", "maniskill"] + saved_argv
     # The options given now, without --resume DIR (or --resume=DIR).
     rest = without_option(list(sys.argv[1:] if argv is None else argv), "--resume")
     if "--action-floor" in option_names(rest):
@@ -414,6 +458,18 @@ def start_log(log_path, resume_at=None):
     the (iteration, env steps) its checkpoint continues from) with the rows after the
     checkpoint dropped."""
     return rundir.start_log(log_path, LOG_HEADER, resume_at, "ppo.py")
+
+
+def default_rollout(args):
+    """--rollout when not given: native with --ray-workers and under the cpu preset (measured:
+    as reliable as torch rollouts, docs/training.md), torch where native cannot run
+    (--simulator maniskill, --action-floor) and under the maniskill preset (the loop of every
+    run before the cpu preset)."""
+    if args.ray_workers:
+        return "native"
+    if args.simulator == "maniskill" or args.action_floor or args.preset == "maniskill":
+        return "torch"
+    return "native"
 
 
 def default_num_threads(args):
@@ -483,7 +539,7 @@ def main(argv=None):
     if args.num_threads is None:
         args.num_threads = default_num_threads(args)
     if args.rollout is None:
-        args.rollout = "native" if args.ray_workers else "torch"
+        args.rollout = default_rollout(args)
     native = args.rollout == "native"
     if args.simulator == "maniskill" and (native or args.ray_workers):
         sys.exit("--simulator maniskill steps one env per slot: use --rollout torch, no --ray-workers")
@@ -555,6 +611,10 @@ def main(argv=None):
     # keeps) and the options it was parsed from.
     run_argv = list(ckpt["argv"]) if ckpt is not None else list(
         sys.argv[1:] if argv is None else argv)
+    for name, value in (("--preset", args.preset), ("--rollout", args.rollout)):
+        if name not in option_names(run_argv):
+            # Recorded, so that the command and a resume keep today's defaults.
+            run_argv += [name, value]
     # The policy files' training_command is the command as typed (relative demo paths
     # included); the checkpoint's argv, which --resume runs again, names the demos by
     # absolute path.

@@ -82,6 +82,56 @@ def load_ppo_module():
     return mod
 
 
+def test_the_presets_give_the_measured_cpu_defaults_or_maniskills(monkeypatch):
+    # torch's OpenMP threads sleep between parallel regions, unless the caller chose.
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    load_ppo_module()
+    assert os.environ["OMP_WAIT_POLICY"] == "PASSIVE"
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    ppo = load_ppo_module()
+    assert os.environ["OMP_WAIT_POLICY"] == "ACTIVE"
+    cpu = ppo.parse_args(["--env-id", "PickCube-v1"], check=False)
+    assert (cpu.preset, cpu.num_envs, cpu.num_steps, cpu.update_epochs, cpu.num_minibatches,
+            cpu.eval_freq) == ("cpu", 128, 50, 4, 16, 10)
+    ms = ppo.parse_args(["--env-id", "PickCube-v1", "--preset", "maniskill"], check=False)
+    assert (ms.num_envs, ms.update_epochs, ms.num_minibatches, ms.eval_freq) == (1024, 8, 32, 25)
+    # A task's own settings stay under either preset; an option given wins over both.
+    poke = ppo.parse_args(["--env-id", "PokeCube-v1", "--num-envs", "64"], check=False)
+    assert (poke.num_steps, poke.num_envs, poke.update_epochs, poke.num_eval_envs) == (20, 64, 8, 100)
+    assert ppo.defaults("PokeCube-v1", "cpu")["control_mode"] == "pd_ee_delta_pose"
+    # Native rollouts under the cpu preset; torch where native cannot run, and under
+    # ManiSkill's preset.
+    assert ppo.default_rollout(cpu) == "native"
+    assert ppo.default_rollout(ms) == "torch"
+    floor = ppo.parse_args(["--action-floor", "7:0.5"], check=False)
+    assert ppo.default_rollout(floor) == "torch"
+    assert ppo.default_rollout(ppo.parse_args(["--simulator", "maniskill"], check=False)) == "torch"
+    r = run("--preset", "gpu")
+    assert r.returncode == 2 and "invalid choice: 'gpu'" in r.stderr, r.stderr[-2000:]
+
+
+def test_a_run_records_its_preset_and_an_older_run_resumes_with_maniskills(tmp_path):
+    torch = pytest.importorskip("torch")
+    out = tmp_path / "run"
+    r = run(*SMALL, "--total-timesteps", str(BATCH), "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    ckpt = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert ckpt["argv"][-4:] == ["--preset", "cpu", "--rollout", "native"], ckpt["argv"]
+    assert "--preset cpu --rollout native" in ckpt["command"]
+    # A checkpoint from before --preset existed: its run took ManiSkill's settings and torch
+    # rollouts, and a resume keeps them (8 epochs, not the cpu preset's 4) and records them.
+    ppo = load_ppo_module()
+    ckpt["argv"] = ppo.without_option(ppo.without_option(ckpt["argv"], "--preset"), "--rollout")
+    torch.save(ckpt, out / "checkpoint.pt")
+    r = run("--resume", str(out), "--total-timesteps", str(2 * BATCH))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "torch rollouts" in r.stdout, r.stdout[-2000:]
+    last = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert last["argv"][-4:] == ["--preset", "maniskill", "--rollout", "torch"], last["argv"]
+    r = run("--resume", str(out), "--preset", "cpu", "--total-timesteps", str(3 * BATCH))
+    assert r.returncode != 0 and "--preset cannot change" in r.stderr, r.stderr[-2000:]
+
+
 def test_atomic_write_leaves_the_old_file_when_the_write_fails(tmp_path):
     ppo = load_ppo_module()
     target = tmp_path / "policy.onnx"
