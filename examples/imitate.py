@@ -22,9 +22,10 @@ absolute targets. Which action entries are a joint's absolute target is measured
 after one step, the joint's drive target is the action entry itself.
 
 ``--dagger-rounds R`` (DAgger): after the cloning epochs, each round runs the policy on
-``--dagger-episodes`` episodes (seeds from ``--dagger-seed``, held out from the evaluation),
-asks the env's state expert for its action at every state the policy visits
-(``env.unwrapped.expert_action()``: a function of the state, docs/solvers.md §8.2), adds
+``--dagger-episodes`` episodes (seeds from ``--dagger-seed``, held out from the evaluation;
+up to 64 at once in the vector env, on ``--num-threads`` threads), asks the state expert for
+its action at every state the policy visits (``envs.expert_actions()``, all the envs at once
+on their threads: a function of the state, docs/solvers.md §8.2), adds
 those (state, label) pairs to the data and trains ``--dagger-epochs`` more epochs on all of
 it. With ``--dagger-beta B`` the expert's own action is executed instead of the policy's
 with probability B^round. The normalisation keeps the demos' statistics. A resumed run goes
@@ -235,28 +236,45 @@ def absolute_joint_targets(env):
     return out
 
 
-def collect_dagger(make_env, act, first_seed, episodes, max_steps, beta, rng):
-    """One DAgger round: ``episodes`` episodes (seeds ``first_seed``, ``first_seed + 1``,
-    ...), each until its first success or ``max_steps``, executing ``act``'s action (with
-    probability ``beta`` the expert's instead, drawn from ``rng``) and recording every visited
-    state with the state expert's label for it. Returns (observations, labels, successes)."""
-    env = make_env()
-    obs_seen, labels, successes = [], [], 0
+#: Envs a DAgger round steps at once (fewer when the round has fewer episodes).
+DAGGER_ENVS = 64
+
+
+def collect_dagger(make_vec, act, first_seed, episodes, max_steps, beta, rng):
+    """One DAgger round on the vector env ``make_vec()`` (N envs): ``episodes`` episodes (seeds
+    ``first_seed``, ``first_seed + 1``, ...), N at a time, each until its first success or
+    ``max_steps``, executing ``act``'s action (with probability ``beta`` the expert's instead,
+    drawn from ``rng`` per env and step) and recording every visited state with the state
+    expert's label for it. The N envs are labelled at once, on the env threads
+    (``MjskillVectorEnv.expert_actions``: the single env's ``expert_action``, bit for bit).
+    Returns (observations, labels, successes), the episodes in seed order."""
+    envs = make_vec()
+    n = envs.num_envs
+    obs_seen = [[] for _ in range(episodes)]
+    labels_seen = [[] for _ in range(episodes)]
+    successes = 0
     try:
-        for e in range(episodes):
-            obs, _ = env.reset(seed=first_seed + e)
+        for start in range(0, episodes, n):
+            # Env i runs episode start + i (seed first_seed + start + i); the envs past the
+            # round's last episode, and every env after its episode ends, step unrecorded.
+            obs, _ = envs.reset(seed=first_seed + start)
+            live = np.arange(n) < episodes - start
             for _ in range(max_steps):
-                label = env.unwrapped.expert_action()
-                obs_seen.append(np.asarray(obs, np.float64))
-                labels.append(np.asarray(label, np.float64))
-                a = label if rng.random() < beta else act(np.asarray(obs)[None])[0]
-                obs, _, terminated, truncated, _ = env.step(a)
-                if terminated or truncated:
-                    successes += bool(terminated)
+                labels = envs.expert_actions()
+                for i in np.flatnonzero(live):
+                    obs_seen[start + i].append(np.asarray(obs[i], np.float64))
+                    labels_seen[start + i].append(np.asarray(labels[i], np.float64))
+                expert = rng.random(n) < beta
+                a = np.where(expert[:, None], labels, act(np.asarray(obs))).astype(np.float32)
+                obs, _, terminated, truncated, _ = envs.step(a)
+                successes += int(np.count_nonzero(live & terminated))
+                live &= ~(terminated | truncated)
+                if not live.any():
                     break
     finally:
-        env.close()
-    return np.array(obs_seen), np.array(labels), successes
+        envs.close()
+    return (np.array([o for ep in obs_seen for o in ep]),
+            np.array([label for ep in labels_seen for label in ep]), successes)
 
 
 def main(argv=None):
@@ -582,7 +600,9 @@ def main(argv=None):
         dagger_round += 1
         first_seed = args.dagger_seed + (dagger_round - 1) * args.dagger_episodes
         obs_new, labels_new, solved = collect_dagger(
-            lambda: gym.make(gid, **kw), act, first_seed, args.dagger_episodes, max_steps,
+            lambda: gym.make_vec(gid, num_envs=min(args.dagger_episodes, DAGGER_ENVS),
+                                 num_threads=num_threads, **kw),
+            act, first_seed, args.dagger_episodes, max_steps,
             args.dagger_beta ** dagger_round, np.random.default_rng([args.seed, dagger_round]))
         dagger_obs = np.concatenate([dagger_obs, obs_new])
         dagger_labels = np.concatenate([dagger_labels, labels_new])

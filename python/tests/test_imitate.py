@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -227,6 +228,57 @@ def test_dagger_rounds_label_the_policys_states_and_continue_with_resume(demo_fi
     assert torch.equal(last["dagger_obs"][:states], first["dagger_obs"])
     r = imitate("--resume", str(out), "--dagger-seed", "900")
     assert r.returncode == 1 and "--dagger-seed cannot change" in r.stderr, r.stderr[-2000:]
+
+
+def test_a_dagger_round_runs_seeded_episodes_in_batches_as_single_envs_would():
+    """collect_dagger on a vector env of 3 envs runs 5 episodes (two batches, the second
+    short) as 3 single envs stepped alongside would: slot i runs seed 700 + i, then 703 + i,
+    and between them steps on (resetting unseeded after its episode's end) until the batch's
+    last live episode ends. A reset's first observation reports the last step's contacts, as
+    in ManiSkill, so what a slot did before its second episode shows in that episode. The
+    round records each live episode's states and the expert's labels, in seed order. With
+    beta 1 the expert drives, so no policy is needed; the one given returns NaN, which the env
+    would refuse had it been executed."""
+    import imitate
+    import mjskill  # noqa: F401 (registers the envs)
+
+    gid, kw = "mjskill/PickCube-v1", dict(control_mode="pd_ee_delta_pos", obs_mode="state")
+    slots = [gym.make(gid, **kw) for _ in range(3)]
+    episodes = {}
+    want_solved = 0
+    for start in (0, 3):
+        obs = [slot.reset(seed=700 + start + i)[0] for i, slot in enumerate(slots)]
+        live = [start + i < 5 for i in range(3)]
+        ended = [False] * 3
+        for _ in range(50):
+            for i, slot in enumerate(slots):
+                if ended[i]:  # the vector env's next-step autoreset
+                    obs[i], _ = slot.reset()
+                    ended[i] = False
+                    continue
+                label = slot.unwrapped.expert_action()
+                if live[i]:
+                    episodes.setdefault(start + i, []).append((obs[i], label))
+                obs[i], _, terminated, truncated, _ = slot.step(label)
+                if terminated or truncated:
+                    want_solved += live[i] and bool(terminated)
+                    live[i], ended[i] = False, True
+            if not any(live):
+                break
+    for slot in slots:
+        slot.close()
+    want = [pair for e in sorted(episodes) for pair in episodes[e]]
+
+    def nan_policy(obs):
+        return np.full((len(obs), 4), np.nan, np.float32)
+
+    obs, labels, solved = imitate.collect_dagger(
+        lambda: gym.make_vec(gid, num_envs=3, num_threads=2, **kw), nan_policy, 700, 5, 50,
+        1.0, np.random.default_rng(0))
+    assert obs.shape == (len(want), len(want[0][0])) and obs.dtype == np.float64
+    assert np.array_equal(obs, np.array([o for o, _ in want], np.float64))
+    assert np.array_equal(labels, np.array([label for _, label in want], np.float64))
+    assert solved == want_solved >= 4
 
 
 def test_dagger_needs_a_state_expert(demo_files, tmp_path):
