@@ -4,10 +4,11 @@
 //! once in [`VecEnv::new`], step the rest. A step hands work out by bumping an atomic epoch and
 //! waking the workers (`Thread::unpark`); results come back through atomic cells (relaxed
 //! stores of f32 bits, published by one release/acquire pair per worker), and the last worker
-//! to finish wakes the caller. So the step path allocates nothing and takes one lock, never
-//! contended: that worker's read of the caller's handle. A waiting thread spins for at most
-//! 50 µs, then sleeps (`wait`), so idle env threads leave the cores to whatever runs between
-//! steps. The caller sees contiguous `[N × obs_dim]` observations and `[N]` rewards /
+//! to finish wakes the caller. So the step path allocates nothing and takes one lock, which no
+//! other thread wants in the steady state: that worker's read of the caller's handle (the
+//! caller writes it only when it is another thread than last time). A waiting thread spins for
+//! at most 50 µs, then sleeps (`wait`), so idle env threads leave the cores to whatever runs
+//! between steps. The caller sees contiguous `[N × obs_dim]` observations and `[N]` rewards /
 //! terminated / truncated buffers.
 //!
 //! **Autoreset (gymnasium ≥ 1.0 "next-step" mode).** When env i reports terminated or
