@@ -622,13 +622,15 @@ impl VecEnv {
         let sh = &*self.shared;
         sh.command.store(command, Ordering::Relaxed);
         sh.done.store(0, Ordering::Relaxed);
-        let me = std::thread::current();
-        if !self.threads.is_empty() && self.caller != Some(me.id()) {
-            // A new calling thread (the VecEnv moved): the workers wake this one from now on.
-            self.caller = Some(me.id());
-            match sh.caller.lock() {
-                Ok(mut c) => *c = Some(me),
-                Err(c) => *c.into_inner() = Some(me),
+        // Only workers wake the caller: a one-thread VecEnv needs no handle.
+        if let Some(me) = (!self.threads.is_empty()).then(std::thread::current) {
+            if self.caller != Some(me.id()) {
+                // A new calling thread (the VecEnv moved): the workers wake this one from now on.
+                self.caller = Some(me.id());
+                match sh.caller.lock() {
+                    Ok(mut c) => *c = Some(me),
+                    Err(c) => *c.into_inner() = Some(me),
+                }
             }
         }
         sh.epoch.fetch_add(1, Ordering::Release);
