@@ -40,6 +40,17 @@
 //!   as the arm: a finger closing on a free cube pushes finger and cube together, one
 //!   pressed between object and opposite finger (`W ≈ 0`) squeezes with the full spring
 //!   force `clamp(kp (q* − q) + kd q̇*, ±F)`, as in PhysX.
+//! * **The pinch's kick.** A gripper drive that moves an undriven follower through a
+//!   constraint (the WidowX AI's mimic carriage, the Robotiq's linkage) and pinches an object
+//!   squeezes with an impulse that, in PhysX, reaches the arm through the articulation
+//!   (`W_arm,grip F`) and stays there: PhysX's held WidowX AI wrist drifts in proportion to the
+//!   squeeze, about 10 mrad per 50 ms step at a 0.01 m carriage target, while MuJoCo, which
+//!   solves contacts and forces together, cancels the kick. So such a drive's force stays out
+//!   of the arm drives' micro-steps (they do not answer it), and the arm gets the kick as a
+//!   generalised force `M a`, `a = W_arm,grip F`, which MuJoCo's contacts do not cancel.
+//!   Grippers whose fingers are all driven (Panda, Fetch, SO100) get no kick: applied to
+//!   them it parted the Panda's solver episodes from ManiSkill's (docs/physics.md, "The
+//!   pinch's kick").
 //! * **Position.** MuJoCo's semi-implicit Euler moves a joint by `h q̇'`; the micro-steps
 //!   know the path within the substep. The difference `c` is applied as a generalised force
 //!   `M c / h²` (so that what the arm holds moves with it through the contacts) and the
@@ -384,9 +395,14 @@ impl Drives {
                     ((c - g * self.mv[i]) / (1.0 + dt * g * row[i]))
                         .clamp(-cap - self.force_sum[i], cap - self.force_sum[i])
                 };
-                // W is symmetric: column i is row i.
-                for (v, w) in self.mv.iter_mut().zip(row) {
-                    *v += dt * w * f;
+                // W is symmetric: column i is row i. The force of a pinching drive that
+                // moves a linkage does not reach the arm drives (see the module docs, "The
+                // pinch's kick").
+                let kicks = self.pinching[i] && self.linked[i];
+                for ((v, w), dk) in self.mv.iter_mut().zip(row).zip(&self.dofs) {
+                    if !(kicks && dk.arm) {
+                        *v += dt * w * f;
+                    }
                 }
                 self.force_sum[i] += f;
             }
@@ -412,6 +428,20 @@ impl Drives {
         self.cvec.fill(0.0);
         for (d, &c) in self.dofs.iter().zip(&self.correction) {
             self.cvec[d.dof] = c;
+        }
+        // The pinch's kick: the acceleration the force of a pinching gripper drive that moves
+        // a linkage gives the arm through the articulation, travelling with the correction as
+        // `M a`.
+        for (j, dj) in self.dofs.iter().enumerate() {
+            if !dj.arm {
+                continue;
+            }
+            let row = &self.w[j * n..(j + 1) * n];
+            let kick: f64 = (0..n)
+                .filter(|&i| self.pinching[i] && self.linked[i])
+                .map(|i| row[i] * self.micro_force[i])
+                .sum();
+            self.cvec[dj.dof] += kick * h * h;
         }
         data.mul_m(&mut self.mc, &self.cvec);
         for (f, mc) in data.qfrc_applied_mut().iter_mut().zip(&self.mc) {
