@@ -165,6 +165,11 @@ pub struct Drives {
     fold_a: Vec<DMatrix<f64>>,
     fold_z: Vec<DMatrix<f64>>,
     fold_yd: Vec<DMatrix<f64>>,
+    /// Whether the last substep's arm took the pinch's kick (see
+    /// [`Drives::report_velocities`]), and whether it can at all (an equality moves an
+    /// undriven dof of the robot): then the flag is part of the saved state.
+    kicking: bool,
+    can_kick: bool,
 }
 
 impl Drives {
@@ -233,6 +238,10 @@ impl Drives {
         for d in &dofs {
             driven_dof[d.dof] = true;
         }
+        // A gripper drive can move a linkage (and take the pinch's kick) only where the model
+        // has equalities and the robot an undriven dof.
+        let can_kick = model.neq() > 0
+            && (0..nv).any(|k| !driven_dof[k] && robot_body[model.dof_bodyid()[k] as usize]);
         let mut unit = vec![0.0; n * nv];
         for (k, d) in dofs.iter().enumerate() {
             unit[k * nv + d.dof] = 1.0;
@@ -280,6 +289,8 @@ impl Drives {
             fold_a: (0..=max_rows).map(|k| DMatrix::zeros(k, k)).collect(),
             fold_z: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
             fold_yd: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
+            kicking: false,
+            can_kick,
             dofs,
         })
     }
@@ -321,6 +332,31 @@ impl Drives {
     /// Mean drive forces of the last substep.
     pub fn forces(&self) -> &[f64] {
         &self.force
+    }
+
+    /// Writes into `qvel` (the robot's joint velocities, ManiSkill order, read from `data`)
+    /// the velocities PhysX reports where they are not the motion: while the last substep's
+    /// arm took the pinch's kick, each arm drive reports its force-free velocity
+    /// `(kp (q* − q) + kd q̇*) / (kd + kp dt)` (dt a PhysX sub-step), the velocity its implicit
+    /// drive brings the joint to before the gripper's kick takes it away again. PhysX's velocity
+    /// pass keeps that velocity: measured on the WidowX AI holding the cube, ManiSkill
+    /// reports `kp/kd (q* − q)` on a wrist that stands still (docs/physics.md, "The pinch's
+    /// kick"). Elsewhere the reported velocity is the motion, as MuJoCo's.
+    pub fn report_velocities(&self, data: &Data, qvel: &mut [f64]) {
+        if !self.kicking {
+            return;
+        }
+        let dt = data.model().timestep() / MICRO_STEPS as f64;
+        let q = data.qpos();
+        for (v, d) in qvel.iter_mut().zip(&self.by_joint) {
+            if let Some(d) = *d {
+                let dof = &self.dofs[d];
+                if dof.arm {
+                    *v = (dof.kp * (self.target_q[d] - q[dof.qpos]) + dof.kd * self.target_v[d])
+                        / (dof.kd + dof.kp * dt);
+                }
+            }
+        }
     }
 
     /// Computes the drive forces for the coming substep of length `h` and writes them as
@@ -432,16 +468,19 @@ impl Drives {
         // The pinch's kick: the acceleration the force of a pinching gripper drive that moves
         // a linkage gives the arm through the articulation, travelling with the correction as
         // `M a`.
-        for (j, dj) in self.dofs.iter().enumerate() {
-            if !dj.arm {
-                continue;
+        self.kicking = (0..n).any(|i| self.pinching[i] && self.linked[i]);
+        if self.kicking {
+            for (j, dj) in self.dofs.iter().enumerate() {
+                if !dj.arm {
+                    continue;
+                }
+                let row = &self.w[j * n..(j + 1) * n];
+                let kick: f64 = (0..n)
+                    .filter(|&i| self.pinching[i] && self.linked[i])
+                    .map(|i| row[i] * self.micro_force[i])
+                    .sum();
+                self.cvec[dj.dof] += kick * h * h;
             }
-            let row = &self.w[j * n..(j + 1) * n];
-            let kick: f64 = (0..n)
-                .filter(|&i| self.pinching[i] && self.linked[i])
-                .map(|i| row[i] * self.micro_force[i])
-                .sum();
-            self.cvec[dj.dof] += kick * h * h;
         }
         data.mul_m(&mut self.mc, &self.cvec);
         for (f, mc) in data.qfrc_applied_mut().iter_mut().zip(&self.mc) {
@@ -709,11 +748,14 @@ impl Drives {
         if self.release_depth.is_some() {
             out.extend(self.deep_substeps.iter().map(|&c| f64::from(c)));
         }
+        if self.can_kick {
+            out.push(if self.kicking { 1.0 } else { 0.0 });
+        }
     }
 
     /// Number of values [`Drives::save`] writes.
     pub fn save_len(&self) -> usize {
-        self.targets_len() + self.counters_len()
+        self.targets_len() + self.counters_len() + usize::from(self.can_kick)
     }
 
     /// Number of release counters [`Drives::save`] writes (0 for a robot without a release
@@ -744,7 +786,14 @@ impl Drives {
     /// The error gives the counter's index in `s`, its value and the valid range.
     pub fn check_saved(&self, s: &[f64]) -> Result<(), (usize, f64, String)> {
         let from = self.targets_len();
+        let counters = from..from + self.counters_len();
         for (i, &x) in s.iter().enumerate().skip(from) {
+            if !counters.contains(&i) {
+                if x != 0.0 && x != 1.0 {
+                    return Err((i, x, "is not a pinch's kick flag (0 or 1)".to_string()));
+                }
+                continue;
+            }
             if !(0.0..=f64::from(u32::MAX)).contains(&x) || x.fract() != 0.0 {
                 return Err((
                     i,
@@ -763,6 +812,7 @@ impl Drives {
     /// nothing is sunk into anything yet.
     pub fn forget_contacts(&mut self) {
         self.deep_substeps.fill(0);
+        self.kicking = false;
     }
 
     /// Restores what [`Drives::save`] wrote; a state of [`Drives::targets_len`] values (the
@@ -776,6 +826,9 @@ impl Drives {
             for (c, &x) in self.deep_substeps.iter_mut().zip(&s[from..]) {
                 // In range after check_saved; `as` saturates anything else.
                 *c = x as u32;
+            }
+            if self.can_kick {
+                self.kicking = s[self.save_len() - 1] != 0.0;
             }
         }
     }

@@ -62,6 +62,7 @@ impl Sim {
     fn read_joints(&mut self) {
         self.robot.joints.qpos(&self.data, &mut self.qpos);
         self.robot.joints.qvel(&self.data, &mut self.qvel);
+        self.drives.report_velocities(&self.data, &mut self.qvel);
     }
 
     /// Writes the flat observation (docs/env.md §7.3): `agent/qpos`, `agent/qvel`, the

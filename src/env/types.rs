@@ -77,7 +77,8 @@ pub struct EnvState {
     /// MuJoCo state ([`Data::get_state`](crate::mujoco::Data::get_state)).
     pub physics: Vec<f64>,
     /// Controller targets, then the drives' state: their targets and, for the SO100, its
-    /// jaw's release counters (`Drives::save`).
+    /// jaw's release counters, for a robot whose gripper moves a linkage (WidowX AI, xArm6)
+    /// whether its arm took the pinch's kick (`Drives::save`).
     pub controller: Vec<f64>,
     /// Steps since reset.
     pub elapsed_steps: u32,

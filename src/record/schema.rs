@@ -63,7 +63,7 @@ fn env_state() -> Value {
             },
             "controller": {
                 "type": "array",
-                "description": "controller targets, then the drive targets and (SO100) the jaw's release counters",
+                "description": "controller targets, then the drive targets, (SO100) the jaw's release counters and (WidowX AI, xArm6) the pinch's kick flag",
                 "items": { "type": "number" }
             },
             "elapsed_steps": { "type": "integer", "minimum": 0, "maximum": 4294967294u64 },
