@@ -72,7 +72,8 @@ OBS_CLIP = 10.0
 
 #: Options a resumed run cannot change: they define the network or its data.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "hidden", "demos",
-                "include_failed", "relative_labels", "gripper_qvel", "batch_size", "obs_noise",
+                "include_failed", "relative_labels", "absolute_gripper", "gripper_qvel",
+                "batch_size", "obs_noise",
                 "dagger_episodes", "dagger_beta", "dagger_seed")
 
 #: log.csv's columns.
@@ -111,6 +112,10 @@ def parse_args(argv=None, check=True):
     p.add_argument("--relative-labels", action="store_true",
                    help="learn joint targets relative to the measured joint positions (joint "
                         "position modes); the exported file adds the positions back")
+    p.add_argument("--absolute-gripper", action="store_true",
+                   help="with --relative-labels: learn the gripper joints' targets as they "
+                        "are (a relative open-or-close label averages to 'stay' where the "
+                        "expert lets go)")
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
                    help="hide the gripper joints' velocities from the policy (default; "
                         "PhysX reports a residual there, docs/outcome-physics.md) or observe them")
@@ -159,6 +164,9 @@ def parse_args(argv=None, check=True):
         return args
     if not args.demos:
         p.error("--demos is required (the recordings to clone), unless --resume")
+    if args.absolute_gripper and not args.relative_labels:
+        p.error("--absolute-gripper keeps the gripper's labels absolute under --relative-labels; "
+                "without --relative-labels every label is absolute already")
     if not 0 <= args.eval_seed or args.eval_seed + args.num_eval_envs - 1 > 2**32 - 1:
         p.error(f"--eval-seed {args.eval_seed} with --num-eval-envs {args.num_eval_envs}: "
                 "evaluation seeds must lie in 0..=4294967295")
@@ -344,6 +352,9 @@ def main(argv=None):
                 sys.exit(f"error: --dagger-rounds {args.dagger_rounds}: {e}")
         if args.relative_labels and ckpt is None:
             residual = absolute_joint_targets(probe_env)
+            if args.absolute_gripper:
+                gripper = set(base._native.spec()["gripper_joints"])
+                residual = [None if i in gripper else i for i in residual]
             if all(i is None for i in residual):
                 sys.exit(f"error: --relative-labels: no action entry of {robot} in {mode} is "
                          "a joint's absolute position target; relative labels are for joint "

@@ -165,6 +165,19 @@ def test_relative_labels_are_folded_back_into_absolute_targets(demo_files, tmp_p
     assert json.loads(e.stdout)["control_mode"] == "pd_joint_pos"
 
 
+def test_absolute_gripper_keeps_the_gripper_labels_absolute(demo_files, tmp_path):
+    """--absolute-gripper: the arm's labels relative, the jaw's as the expert gave them (a
+    relative open-or-close label averages to "stay" where the expert lets go)."""
+    pytest.importorskip("torch")
+    out = tmp_path / "run"
+    r = imitate(*SMALL, "--demos", str(demo_files / "so100.mcap"), "--relative-labels",
+                "--absolute-gripper", "--epochs", "2", "--eval-every", "2", "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    # The SO100's jaw is action entry 5.
+    assert "relative labels on action entries [0, 1, 2, 3, 4]" in r.stdout, r.stdout[-2000:]
+    assert "--absolute-gripper" in metadata(out / "policy.onnx")["training_command"]
+
+
 def test_relative_labels_in_a_mode_without_absolute_joint_targets_are_refused(demo_files,
                                                                                tmp_path):
     pytest.importorskip("torch")
@@ -303,6 +316,8 @@ def test_dagger_seeds_must_be_held_out_from_the_evaluation():
     (["--demos", "x.mcap", "--epochs", "0"], "0 is not a positive integer"),
     (["--demos", "x.mcap", "--learning-rate", "nan"], "must be a finite number"),
     (["--demos", "x.mcap", "--eval-seed", "-1"], "evaluation seeds must lie in"),
+    (["--demos", "x.mcap", "--absolute-gripper"],
+     "--absolute-gripper keeps the gripper's labels absolute under --relative-labels"),
 ])
 def test_settings_that_cannot_train_are_refused(args, message):
     r = imitate(*args)
