@@ -174,4 +174,9 @@ fn a_saved_held_state_restores_the_reported_velocities() {
     old.controller.pop();
     env.set_state(&old).unwrap();
     assert!((f64::from(env.obs()[8 + 4]) - motion).abs() < 1e-6);
+    // A flag other than 0 or 1 is refused, naming the value.
+    let mut bad = state.clone();
+    *bad.controller.last_mut().unwrap() = 0.5;
+    let e = env.set_state(&bad).unwrap_err().to_string();
+    assert!(e.contains("0.5") && e.contains("pinch's kick flag (0 or 1)"), "{e}");
 }

@@ -50,7 +50,8 @@
 //!   generalised force `M a`, `a = W_arm,grip F`, which MuJoCo's contacts do not cancel.
 //!   Grippers whose fingers are all driven (Panda, Fetch, SO100) get no kick: applied to
 //!   them it parted the Panda's solver episodes from ManiSkill's (docs/physics.md, "The
-//!   pinch's kick").
+//!   pinch's kick"). While the arm takes the kick, its joints report the velocity PhysX
+//!   reports there ([`Drives::report_velocities`]), not their motion.
 //! * **Position.** MuJoCo's semi-implicit Euler moves a joint by `h q̇'`; the micro-steps
 //!   know the path within the substep. The difference `c` is applied as a generalised force
 //!   `M c / h²` (so that what the arm holds moves with it through the contacts) and the
@@ -334,6 +335,12 @@ impl Drives {
         &self.force
     }
 
+    /// Whether drive `i` kicks the arm this substep: a gripper drive that moves a linkage and
+    /// pinches an object (see the module docs, "The pinch's kick").
+    fn kicks(&self, i: usize) -> bool {
+        self.pinching[i] && self.linked[i]
+    }
+
     /// Writes into `qvel` (the robot's joint velocities, ManiSkill order, read from `data`)
     /// the velocities PhysX reports where they are not the motion: while the last substep's
     /// arm took the pinch's kick, each arm drive reports its force-free velocity
@@ -434,7 +441,7 @@ impl Drives {
                 // W is symmetric: column i is row i. The force of a pinching drive that
                 // moves a linkage does not reach the arm drives (see the module docs, "The
                 // pinch's kick").
-                let kicks = self.pinching[i] && self.linked[i];
+                let kicks = self.kicks(i);
                 for ((v, w), dk) in self.mv.iter_mut().zip(row).zip(&self.dofs) {
                     if !(kicks && dk.arm) {
                         *v += dt * w * f;
@@ -468,7 +475,7 @@ impl Drives {
         // The pinch's kick: the acceleration the force of a pinching gripper drive that moves
         // a linkage gives the arm through the articulation, travelling with the correction as
         // `M a`.
-        self.kicking = (0..n).any(|i| self.pinching[i] && self.linked[i]);
+        self.kicking = (0..n).any(|i| self.kicks(i));
         if self.kicking {
             for (j, dj) in self.dofs.iter().enumerate() {
                 if !dj.arm {
@@ -476,7 +483,7 @@ impl Drives {
                 }
                 let row = &self.w[j * n..(j + 1) * n];
                 let kick: f64 = (0..n)
-                    .filter(|&i| self.pinching[i] && self.linked[i])
+                    .filter(|&i| self.kicks(i))
                     .map(|i| row[i] * self.micro_force[i])
                     .sum();
                 self.cvec[dj.dof] += kick * h * h;
@@ -781,9 +788,10 @@ impl Drives {
         2 * self.dofs.len()
     }
 
-    /// Checks the release counters of `s`, a state of [`Drives::save_len`] (or
-    /// [`Drives::targets_len`]) values: each must be a whole number from 0 to `u32::MAX`.
-    /// The error gives the counter's index in `s`, its value and the valid range.
+    /// Checks the release counters and the kick flag of `s`, a state of [`Drives::save_len`]
+    /// (or [`Drives::targets_len`]) values: each counter must be a whole number from 0 to
+    /// `u32::MAX`, the flag 0 or 1. The error gives the value's index in `s`, the value and
+    /// the valid range.
     pub fn check_saved(&self, s: &[f64]) -> Result<(), (usize, f64, String)> {
         let from = self.targets_len();
         let counters = from..from + self.counters_len();
