@@ -16,22 +16,33 @@ use std::path::Path;
 const FIRST_STEP: f64 = 2.5e-3;
 const ANY_STEP: f64 = 1.5e-2;
 
+/// A reference recorded from ManiSkill, from `tests/data/`.
+fn reference(file: &str) -> serde_json::Value {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(file);
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// `env_id` with `robot` in `control_mode`.
+fn make(env_id: &str, robot: &str, control_mode: &str) -> mjskill::Env {
+    let config = mjskill::EnvConfig {
+        robot: Some(robot.into()),
+        control_mode: Some(control_mode.into()),
+        ..Default::default()
+    };
+    mjskill::make(env_id, config).unwrap()
+}
+
 #[test]
 fn free_arm_motion_ends_each_step_where_physx_does() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_drives.json");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let v = reference("maniskill_drives.json");
     let cases = v["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 12);
     let (mut worst_first, mut worst_any) = (0.0f64, 0.0f64);
     for case in cases {
         let mode = case["control_mode"].as_str().unwrap();
-        let config = mjskill::EnvConfig {
-            robot: Some("panda".into()),
-            control_mode: Some(mode.into()),
-            ..Default::default()
-        };
-        let mut env = mjskill::make("PickCube-v1", config).unwrap();
+        let mut env = make("PickCube-v1", "panda", mode);
         env.reset(Some(case["seed"].as_u64().unwrap()));
         let steps = case["actions"].as_array().unwrap();
         for (t, (a, q)) in steps
@@ -84,17 +95,10 @@ const HELD_REPORTED_QVEL: f64 = 0.1;
 /// its joint positions and reported velocities after two steps at five carriage targets.
 #[test]
 fn held_widowxai_wrist_drifts_where_physx_does() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_pinch_kick.json");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let v = reference("maniskill_pinch_kick.json");
     let cases = v["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 15);
-    let config = mjskill::EnvConfig {
-        robot: Some("widowxai".into()),
-        control_mode: Some("pd_joint_delta_pos".into()),
-        ..Default::default()
-    };
-    let mut env = mjskill::make("PickCubeWidowXAI-v1", config).unwrap();
+    let mut env = make("PickCubeWidowXAI-v1", "widowxai", "pd_joint_delta_pos");
     let (mut worst, mut largest_drift, mut worst_qvel) = (0.0f64, 0.0f64, 0.0f64);
     for case in cases {
         env.reset(Some(case["seed"].as_u64().unwrap()));
@@ -143,16 +147,9 @@ fn held_widowxai_wrist_drifts_where_physx_does() {
 /// the flag (a state from before it existed) restores with the motion reported.
 #[test]
 fn a_saved_held_state_restores_the_reported_velocities() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_pinch_kick.json");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let v = reference("maniskill_pinch_kick.json");
     let case = &v["cases"][2];
-    let config = mjskill::EnvConfig {
-        robot: Some("widowxai".into()),
-        control_mode: Some("pd_joint_delta_pos".into()),
-        ..Default::default()
-    };
-    let mut env = mjskill::make("PickCubeWidowXAI-v1", config).unwrap();
+    let mut env = make("PickCubeWidowXAI-v1", "widowxai", "pd_joint_delta_pos");
     env.reset(Some(case["seed"].as_u64().unwrap()));
     env.set_state_dict(&mjskill::StateDict::from_json(&case["state_dict"]).unwrap())
         .unwrap();
@@ -178,5 +175,8 @@ fn a_saved_held_state_restores_the_reported_velocities() {
     let mut bad = state.clone();
     *bad.controller.last_mut().unwrap() = 0.5;
     let e = env.set_state(&bad).unwrap_err().to_string();
-    assert!(e.contains("0.5") && e.contains("pinch's kick flag (0 or 1)"), "{e}");
+    assert!(
+        e.contains("0.5") && e.contains("pinch's kick flag (0 or 1)"),
+        "{e}"
+    );
 }
