@@ -474,9 +474,7 @@ impl Env {
                 .task
                 .initialize_episode(&mut self.sim.data, &mut self.torch_global),
         }
-        self.sim
-            .robot
-            .apply_gravity_compensation(&mut self.sim.data);
+        self.sim.robot.apply_gravity(&mut self.sim.data);
         self.sim.data.forward();
         self.sim
             .controller
@@ -641,6 +639,7 @@ impl Env {
             .data
             .set_state(&s.physics)
             .map_err(|e| EnvError::BadState(e.to_string()))?;
+        self.sim.robot.apply_gravity(&mut self.sim.data);
         let k = self.sim.controller.load(&s.controller);
         self.sim.drives.load(&s.controller[k..]);
         self.elapsed_steps = s.elapsed_steps;

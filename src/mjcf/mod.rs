@@ -7,8 +7,11 @@
 //!   steps.
 //! * Every controlled joint gets a force actuator (`motor`, force range ±F); the env computes
 //!   PhysX's implicit, force-clamped PD drive law every substep (`controllers::drive`).
-//! * Robot links do not feel gravity: the env applies `m·g` upward at each robot body's
-//!   centre of mass through `xfrc_applied` (MuJoCo 2.2 has no per-body gravity switch).
+//! * Robot links do not feel gravity (ManiSkill disables it on them). MuJoCo 2.2 has no
+//!   per-body gravity switch, so the scene's gravity is switched off (`<flag gravity=
+//!   "disable"/>`; `gravity` keeps ManiSkill's value) and the env applies `m·g` downward at the
+//!   centre of mass of every body that moves and is not the robot's, through `xfrc_applied`:
+//!   one or two props instead of every robot link (docs/speed.md, "Cuts").
 //! * Friction: every shape has ManiSkill's default material μ = 0.3; shapes with their own
 //!   material (finger pads, μ = 2.0) get the PhysX *average* with the default, because
 //!   MuJoCo combines by *max* and every partner of a finger has μ = 0.3.
@@ -20,7 +23,7 @@ pub mod xml;
 
 use nalgebra::Isometry3;
 
-use crate::mujoco::{Model, Result as MjResult};
+use crate::mujoco::{BodyId, Data, Model, Result as MjResult};
 use urdf::{JointKind, RobotDesc, ShapeGeom};
 use xml::{num, nums, Element};
 
@@ -270,6 +273,39 @@ pub const GROUND: &str = "ground";
 /// Name of the table geom.
 pub const TABLE: &str = "table-workspace";
 
+/// The weights (m·g, N) of the bodies of `model` that a joint moves, leaving out `robot`'s
+/// (whose links ManiSkill keeps weightless) and bodies without mass. The scene's gravity is
+/// switched off (module docs); [`apply_weights`] puts these back as applied forces.
+pub fn prop_weights(model: &Model, robot: &[BodyId]) -> Vec<(BodyId, f64)> {
+    let parent = model.body_parentid();
+    let dofs = model.body_dofnum();
+    // A body moves when it or a body above it has a dof; a static or mocap body carries no
+    // weight anywhere.
+    let moves = |mut b: usize| loop {
+        if b == 0 {
+            return false;
+        }
+        if dofs[b] > 0 {
+            return true;
+        }
+        b = parent[b] as usize;
+    };
+    (1..model.nbody())
+        .filter(|&b| model.body_mass()[b] > 0.0 && moves(b))
+        .filter(|&b| !robot.iter().any(|r| r.index() == b))
+        .map(|b| (BodyId::from_index(b), model.body_mass()[b] * GRAVITY))
+        .collect()
+}
+
+/// Sets `xfrc_applied` to `weights` (each a downward force at the body's centre of mass, from
+/// [`prop_weights`]) and to zero on every other body. It persists across steps.
+pub fn apply_weights(data: &mut Data, weights: &[(BodyId, f64)]) {
+    data.xfrc_applied_mut().fill(0.0);
+    for &(b, w) in weights {
+        data.set_body_wrench(b, [0.0, 0.0, -w, 0.0, 0.0, 0.0]);
+    }
+}
+
 /// Converts a pose to MJCF `pos` and `quat` attributes.
 pub fn pose_attrs(mut e: Element, p: &Isometry3<f64>) -> Element {
     let t = p.translation.vector;
@@ -318,7 +354,9 @@ impl Scene {
                 .attr("integrator", "Euler")
                 // Dense constraint Jacobians: the drives read the equality rows.
                 .attr("jacobian", "dense")
-                .attr_nums("gravity", &[0.0, 0.0, -GRAVITY]),
+                .attr_nums("gravity", &[0.0, 0.0, -GRAVITY])
+                // Gravity reaches the props alone, as `xfrc_applied` (module docs).
+                .child(Element::new("flag").attr("gravity", "disable")),
         );
         root.push(
             Element::new("size")

@@ -525,6 +525,7 @@ mod tests {
             m.body_mass()[sphere]
         );
         let mut d = Data::new(m.clone()).unwrap();
+        crate::mjcf::apply_weights(&mut d, &crate::mjcf::prop_weights(&m, &[]));
         for _ in 0..1000 {
             d.step();
         }

@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::controllers::{ControlMode, Controller, ControllerError, Drives, JointMap, PartSpec};
 use crate::mjcf::urdf::{RobotDesc, RobotError as UrdfError};
-use crate::mjcf::{Drive, LinkCamera, RobotOptions, SceneError, GRAVITY};
+use crate::mjcf::{Drive, LinkCamera, RobotOptions, SceneError};
 use crate::models::ModelFileError;
 use crate::mujoco::{BodyId, Data, MjError, Model, ObjType};
 use crate::rng::NumpyRandomState;
@@ -524,8 +524,10 @@ pub struct RobotIds {
     pub tcp_parts: TcpIds,
     /// Body ids of the two grasp fingers (`None` for a robot without fingers).
     pub fingers: Option<[BodyId; 2]>,
-    /// Upward force m·g per robot body (gravity compensation), aligned with `bodies`.
-    pub weight: Vec<f64>,
+    /// Weight m·g (N) of every body that moves and is not the robot's (the props), which
+    /// [`RobotIds::apply_gravity`] applies: the scene's gravity is switched off
+    /// ([`crate::mjcf`]).
+    pub prop_weights: Vec<(BodyId, f64)>,
 }
 
 impl RobotIds {
@@ -544,14 +546,14 @@ impl RobotIds {
             tcp_body: None,
             tcp_parts: TcpIds::Body(BodyId::default()),
             fingers: None,
-            weight: Vec::new(),
+            prop_weights: Vec::new(),
         };
         for l in &robot.links {
             let b = model.require_body(&l.name)?;
             r.bodies.push(b);
             r.link_bodies.push((l.name.clone(), b));
-            r.weight.push(model.body_mass()[b.index()] * GRAVITY);
         }
+        r.prop_weights = crate::mjcf::prop_weights(model, &r.bodies);
         r.root_body = r.body(&robot.links[robot.root].name)?;
         r.fingers = match &spec.grasp {
             Some(g) => Some([r.body(g.finger1.0)?, r.body(g.finger2.0)?]),
@@ -583,13 +585,13 @@ impl RobotIds {
             .ok_or_else(|| RobotError::NoLink(link.to_string()))
     }
 
-    /// Cancels gravity on every robot body (ManiSkill disables gravity on robot links):
-    /// writes an upward force m·g at each body's centre of mass into `xfrc_applied`.
-    /// `xfrc_applied` persists across steps, so this is needed once per reset.
-    pub fn apply_gravity_compensation(&self, data: &mut Data) {
-        for (&b, &w) in self.bodies.iter().zip(&self.weight) {
-            data.set_body_wrench(b, [0.0, 0.0, w, 0.0, 0.0, 0.0]);
-        }
+    /// Gravity as ManiSkill has it, on the props and not on the robot's links: sets
+    /// `xfrc_applied` to the props' weights (m·g downward at each centre of mass) and to zero
+    /// everywhere else. `xfrc_applied` persists across steps, so this is needed once per
+    /// reset, and after a state is set (a state saved before the scene's gravity was
+    /// switched off holds upward forces on the robot's links instead).
+    pub fn apply_gravity(&self, data: &mut Data) {
+        crate::mjcf::apply_weights(data, &self.prop_weights);
     }
 
     /// `agent.tcp_pose` (PickCube's TCP) as position and raw quaternion (w, x, y, z).

@@ -170,7 +170,7 @@ pub fn check_fk_with(
 }
 
 /// The table scene of `spec` at its (noise-free) table qpos with the drive targets there and
-/// gravity compensation applied: model, ids, data and drives.
+/// gravity applied (none on the robot): model, ids, data and drives.
 pub fn table_scene(spec: &RobotSpec) -> (Arc<Model>, RobotIds, Data, Drives) {
     table_scene_with(spec, |_| {})
 }
@@ -197,7 +197,7 @@ pub fn table_scene_at(
     } = robots::table_scene_at(spec, timestep, extra).unwrap();
     let mut d = Data::new(model.clone()).unwrap();
     ids.joints.set_qpos(&mut d, spec.table_qpos);
-    ids.apply_gravity_compensation(&mut d);
+    ids.apply_gravity(&mut d);
     for (k, &q) in spec.table_qpos.iter().enumerate() {
         drives.set_joint_target(k, q, 0.0);
     }
