@@ -107,6 +107,47 @@ fn a_label_is_a_function_of_the_state() {
     }
 }
 
+/// The SO100 and WidowX AI pairs: their experts' own mode is `pd_joint_pos`, each env's default
+/// robot.
+const JOINT_IK_PAIRS: [&str; 2] = ["PickCubeSO100-v1", "PickCubeWidowXAI-v1"];
+
+#[test]
+fn the_joint_ik_experts_solve_pickcube_from_the_reset_and_from_states_off_their_path() {
+    for id in JOINT_IK_PAIRS {
+        let n = successes(id, Some("pd_joint_pos"), 7000..7030, 0);
+        assert!(n >= 29, "{id} from the reset: {n}/30");
+        // Five uniform random joint targets fling the arm anywhere in its range and the cube
+        // sometimes off the table (measured: 25 of 30 each).
+        let n = successes(id, Some("pd_joint_pos"), 7100..7130, 5);
+        assert!(n >= 22, "{id} after 5 random actions: {n}/30");
+    }
+}
+
+#[test]
+fn a_joint_ik_label_is_a_function_of_the_state() {
+    for id in JOINT_IK_PAIRS {
+        let mut a = env(id, Some("pd_joint_pos"));
+        let mut b = env(id, Some("pd_joint_pos"));
+        let mut ea = state_expert(&a).unwrap();
+        let mut eb = state_expert(&b).unwrap();
+        let dim = a.action_space().shape[0];
+        let (mut la, mut lb) = (vec![0.0f32; dim], vec![0.0f32; dim]);
+        a.reset(Some(5));
+        b.reset(Some(98));
+        let mut states = Vec::new();
+        for _ in 0..40 {
+            ea.label(&a, &mut la).unwrap();
+            states.push((a.get_state(), la.clone()));
+            a.step(&la).unwrap();
+        }
+        for (state, label) in states.iter().rev() {
+            b.set_state(state).unwrap();
+            eb.label(&b, &mut lb).unwrap();
+            assert_eq!(&lb, label, "{id}");
+        }
+    }
+}
+
 #[test]
 fn converted_to_joint_modes_the_expert_does_as_the_solver_does() {
     let n = successes("PickCube-v1", Some("pd_joint_pos"), 7200..7220, 0);

@@ -165,9 +165,9 @@ fn labels_without_labellers_are_refused_with_nothing_stepped() {
 #[test]
 fn a_pair_without_an_expert_sets_no_labellers_and_names_the_pairs() {
     let mut v = VecEnv::new(
-        "PickCube-v1",
+        "PokeCube-v1",
         EnvConfig {
-            robot: Some("so100".into()),
+            robot: Some("fetch".into()),
             ..Default::default()
         },
         2,
@@ -178,7 +178,9 @@ fn a_pair_without_an_expert_sets_no_labellers_and_names_the_pairs() {
     assert!(matches!(err, SolverError::NoStateExpert { .. }), "{err}");
     let msg = err.to_string();
     assert!(
-        msg.contains("so100") && msg.contains("PickCube-v1 with panda"),
+        msg.contains("PokeCube-v1 with fetch")
+            && msg.contains("PickCube-v1 with panda")
+            && msg.contains("PickCubeSO100-v1 with so100"),
         "{msg}"
     );
     assert!(!v.has_labellers());

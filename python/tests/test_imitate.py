@@ -67,6 +67,8 @@ def demo_files(tmp_path_factory):
                 "--action-noise", "arm=0.05,gripper=0")
     assert s["action_noise"] == [0.05, 0.05, 0.05, 0.0], s
     rollout(d / "plain.mcap", "--env", "PickCube-v1", "--episodes", "1")
+    rollout(d / "xarm6.mcap", "--env", "PickCube-v1", "--robot", "xarm6_robotiq",
+            "--episodes", "1")
     rollout(d / "so100.mcap", "--env", "PickCubeSO100-v1", "--episodes", "1",
             "--action-noise", "0.02")
     # Noise the SO100's solver does not always survive (it drops or misses the cube).
@@ -296,10 +298,10 @@ def test_a_dagger_round_runs_seeded_episodes_in_batches_as_single_envs_would():
 
 def test_dagger_needs_a_state_expert(demo_files, tmp_path):
     pytest.importorskip("torch")
-    r = imitate("--demos", str(demo_files / "so100.mcap"), "--dagger-rounds", "1",
+    r = imitate("--demos", str(demo_files / "xarm6.mcap"), "--dagger-rounds", "1",
                 "--out", str(tmp_path / "run"))
     assert r.returncode == 1, r.stderr[-2000:]
-    assert ("--dagger-rounds 1: no state expert for PickCubeSO100-v1 with so100"
+    assert ("--dagger-rounds 1: no state expert for PickCube-v1 with xarm6_robotiq"
             in r.stderr), r.stderr[-2000:]
 
 

@@ -15,10 +15,13 @@
 //! function of the state): joint position targets come out within π of the current angle on
 //! continuous joints.
 //!
-//! Pairs: PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda ([`STATE_EXPERTS`]); any
-//! other is a clear error naming the pair and the ones that have an expert.
+//! Pairs ([`STATE_EXPERTS`]): PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda, and
+//! PickCube-v1 (with PickCubeSO100-v1 and PickCubeWidowXAI-v1) with the SO100 and the WidowX
+//! AI ([`JointIkPickCubeExpert`], in `pd_joint_pos`); any other is a clear error naming the
+//! pair and the ones that have an expert.
 use nalgebra::Vector3;
 
+use super::joint_ik::{self, JointIkPickCubeExpert};
 use super::{
     body_id, body_xyz, ee_action, tcp_link_xyz, tcp_xyz, Gripper, ModeConverted, Policy,
     SolverError, APPROACH_HEIGHT, PANDA_GRIPPER,
@@ -35,10 +38,14 @@ use super::poke_cube::{
 };
 
 /// The (env id, robot) pairs that have a state expert, in its own control mode.
-pub const STATE_EXPERTS: [(&str, &str, &str); 3] = [
+pub const STATE_EXPERTS: [(&str, &str, &str); 7] = [
     ("PickCube-v1", "panda", "pd_ee_delta_pos"),
     ("PlaceSphere-v1", "panda", "pd_ee_delta_pos"),
     ("PokeCube-v1", "panda", "pd_ee_delta_pos"),
+    ("PickCube-v1", "so100", "pd_joint_pos"),
+    ("PickCubeSO100-v1", "so100", "pd_joint_pos"),
+    ("PickCube-v1", "widowxai", "pd_joint_pos"),
+    ("PickCubeWidowXAI-v1", "widowxai", "pd_joint_pos"),
 ];
 
 /// The TCP is over the object within this (m, horizontal): the descent may start.
@@ -109,9 +116,14 @@ impl EnvLabeller for ExpertLabeller {
 
 /// The expert of `env`'s pair in its own mode, as a [`Policy`] whose `act` reads only the state.
 fn native(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
-    match env.id() {
-        "PickCube-v1" => Ok(Box::new(PickCubeExpert::new(env, PANDA_GRIPPER)?)),
-        "PokeCube-v1" => Ok(Box::new(PokeCubeExpert::new(env, PANDA_GRIPPER)?)),
+    match (env.id(), env.robot_spec().uid()) {
+        (_, "so100") => Ok(Box::new(JointIkPickCubeExpert::new(env, joint_ik::SO100)?)),
+        (_, "widowxai") => Ok(Box::new(JointIkPickCubeExpert::new(
+            env,
+            joint_ik::WIDOWXAI,
+        )?)),
+        ("PickCube-v1", _) => Ok(Box::new(PickCubeExpert::new(env, PANDA_GRIPPER)?)),
+        ("PokeCube-v1", _) => Ok(Box::new(PokeCubeExpert::new(env, PANDA_GRIPPER)?)),
         _ => Ok(Box::new(PlaceSphereExpert::new(env, PANDA_GRIPPER)?)),
     }
 }

@@ -18,13 +18,13 @@
 //! `at_goal` targets (the SO100 eases its squeeze there). Every step the IK target moves at most
 //! [`MAX_STEP`] from the current grasp point.
 //! Positions are read from MuJoCo before the step; nothing is allocated per step.
-use nalgebra::{Isometry3, SMatrix, SVector, Vector3};
+use nalgebra::{Isometry3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use super::body_id;
 use super::{body_xyz, Phases, Policy, APPROACH_TOL, DESCEND_TOL};
 use crate::controllers::ik::Chain;
 use crate::env::Env;
-use crate::mujoco::BodyId;
+use crate::mujoco::{BodyId, ObjType};
 
 /// Most arm joints an IK chain may have.
 const MAX_ARM: usize = 6;
@@ -284,8 +284,17 @@ impl JointIkPickCube {
 /// and y axes, the one closer to the current closing axis. Returns its horizontal normal.
 fn closing_normal(env: &Env, cube: BodyId, closing: &Vector3<f64>) -> Vector3<f64> {
     let m = env.data().body_mat(cube);
-    let ax = Vector3::new(m[0], m[3], 0.0).normalize();
-    let ay = Vector3::new(m[1], m[4], 0.0).normalize();
+    face_normal(
+        Vector3::new(m[0], m[3], m[6]),
+        Vector3::new(m[1], m[4], m[7]),
+        closing,
+    )
+}
+
+/// [`closing_normal`] for a cube whose x and y axes (world) are `x` and `y`.
+fn face_normal(x: Vector3<f64>, y: Vector3<f64>, closing: &Vector3<f64>) -> Vector3<f64> {
+    let ax = Vector3::new(x.x, x.y, 0.0).normalize();
+    let ay = Vector3::new(y.x, y.y, 0.0).normalize();
     let d = if ax.dot(closing).abs() >= ay.dot(closing).abs() {
         ax
     } else {
@@ -340,5 +349,151 @@ impl Policy for JointIkPickCube {
         }
         let at_goal = self.phases.phase >= 3 && (target - p).norm() < AT_GOAL_TOL;
         self.gripper(action, close, at_goal);
+    }
+}
+
+/// The gripper is open enough to descend around the cube: this fraction of the way from its
+/// `close` target to its `open` one (the first gripper entry of [`JointIkRobot`]).
+const EXPERT_OPEN_ENOUGH: f64 = 0.9;
+/// Not grasping, away from the grasp point, and shut past this fraction: closed on nothing,
+/// so open again, rising to the approach height.
+const EXPERT_SHUT: f64 = 0.5;
+/// A grasped cube is held once the gripper closes slower than this (fraction of its range
+/// per second); until then, over the cube, it goes on closing where it is, as the solver's
+/// `hold` steps do.
+const EXPERT_HELD_RATE: f64 = 0.25;
+
+/// The gripper descends onto the cube only within this (m, horizontal) of it: further off,
+/// the fixed jaw of the SO100 lands on the cube's top (the solver reaches its approach point
+/// first and centres while it descends).
+const EXPERT_OVER_XY: f64 = 0.004;
+/// The gripper descends onto the cube only with its closing axis this close to a face axis
+/// (the cosine to the face's normal): turned further, the open jaws land on top of it.
+const EXPERT_ALIGNED: f64 = 0.15;
+/// The IK from the measured joints misses its target by more than this (m): it is tried again
+/// from the robot's table pose, and the closer of the two solutions is taken.
+const EXPERT_RESTART: f64 = 0.002;
+
+/// The state expert of PickCube for the SO100 and the WidowX AI (docs/solvers.md §8.2): the
+/// [`JointIkPickCube`] solver's targets, IK and grip, with its phase read off the state each
+/// call instead of counted: the cube held (the task's grasp flag, the gripper no longer
+/// closing) → carry it to the goal (easing the SO100's jaw there); grasped but still closing,
+/// or the grasp point reached → close, the arm still; the gripper shut on nothing → open and rise; over the cube with the gripper open →
+/// descend; otherwise → the approach point above the cube. The closing axis is chosen from the
+/// cube's current faces every call, and the IK starts from the measured joints, so the label
+/// is a function of the state. (The grasp flag is the env's last evaluation, part of its
+/// state.)
+#[derive(Debug)]
+pub struct JointIkPickCubeExpert {
+    ik: JointIkPickCube,
+    /// qpos address of the cube's free joint: its pose is read from the state itself (the
+    /// body's rotation matrix can differ in the last bit between a state reached by a step
+    /// and the same state set).
+    cube_qpos: usize,
+    /// The robot's table pose (ManiSkill order): the IK's second start when the first, from
+    /// the measured joints, stops short (an arm thrown into an odd configuration).
+    rest: Vec<f64>,
+    /// The first start's solution, kept while the second is tried.
+    first: Vec<f64>,
+    /// qpos and dof address of the gripper joint the `open` and `close` targets name first.
+    grip_qpos: usize,
+    grip_dof: usize,
+}
+
+impl JointIkPickCubeExpert {
+    /// Builds the expert for a PickCube env whose robot is described by `robot`.
+    pub fn new(env: &Env, robot: JointIkRobot) -> Result<Self, super::SolverError> {
+        let ik = JointIkPickCube::new(env, robot)?;
+        let k = robot.open[0].0;
+        let joints = &env.robot().joints;
+        let rest = env.robot_spec().table_qpos.to_vec();
+        let m = env.model();
+        let cube_qpos = m.jnt_qposadr()[m.require_id(ObjType::Joint, "cube")?] as usize;
+        Ok(JointIkPickCubeExpert {
+            cube_qpos,
+            first: vec![0.0; ik.q.len()],
+            rest,
+            ik,
+            grip_qpos: joints.qpos_adr[k],
+            grip_dof: joints.dof_adr[k],
+        })
+    }
+
+    /// How far the gripper is open (0 at its `close` target, 1 at `open`) and the rate of that
+    /// fraction (1/s).
+    fn opening(&self, env: &Env) -> (f64, f64) {
+        let (open, close) = (
+            f64::from(self.ik.robot.open[0].1),
+            f64::from(self.ik.robot.close[0].1),
+        );
+        let q = env.data().qpos()[self.grip_qpos];
+        let v = env.data().qvel()[self.grip_dof];
+        ((q - close) / (open - close), v / (open - close))
+    }
+}
+
+impl Policy for JointIkPickCubeExpert {
+    fn reset(&mut self, _env: &Env) {}
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        let (opening, rate) = self.opening(env);
+        let s = &mut self.ik;
+        env.robot().joints.qpos(env.data(), &mut s.q);
+        let (p, _, c) = s.frame(&s.q);
+        let qc = &env.data().qpos()[self.cube_qpos..self.cube_qpos + 7];
+        let cube = Vector3::new(qc[0], qc[1], qc[2]);
+        let rot = UnitQuaternion::from_quaternion(Quaternion::new(qc[3], qc[4], qc[5], qc[6]));
+        let goal = body_xyz(env, s.goal);
+        let n = face_normal(rot * Vector3::x(), rot * Vector3::y(), &c);
+        let r = s.robot;
+        let grasp = cube + Vector3::new(0.0, 0.0, r.grasp_height);
+        let above = cube + Vector3::new(0.0, 0.0, r.approach_height);
+        let over = (p.xy() - cube.xy()).norm() < APPROACH_TOL;
+        // The grasp flag with an open gripper is the last episode's (a reset does not
+        // refresh the contacts, docs/env.md).
+        let grasped = env.info().flag(env.grasp_info_key()) && opening < EXPERT_OPEN_ENOUGH;
+        let closing = rate < -EXPERT_HELD_RATE;
+        let held = grasped && !closing;
+        // (grasp-point target, close, the arm stands where it is)
+        let (target, close, still) = if held {
+            (goal + (p - cube), true, false)
+        } else if over && (grasped || closing || (p - grasp).norm() < DESCEND_TOL) {
+            // Closing on the cube, which the closing gripper may push a little: go on.
+            (p, true, true)
+        } else if opening < EXPERT_SHUT {
+            (Vector3::new(p.x, p.y, p.z.max(above.z)), false, false)
+        } else if (p.xy() - cube.xy()).norm() < EXPERT_OVER_XY
+            && c.dot(&n).abs() < EXPERT_ALIGNED
+            && opening > EXPERT_OPEN_ENOUGH
+        {
+            (grasp, false, false)
+        } else {
+            (above, false, false)
+        };
+        if still {
+            s.q_ik.copy_from_slice(&s.q);
+        } else {
+            let d = target - p;
+            let step = if d.norm() > MAX_STEP {
+                p + d * (MAX_STEP / d.norm())
+            } else {
+                target
+            };
+            s.solve(&step, &n);
+            let miss = (s.frame(&s.q_ik).0 - step).norm();
+            if miss > EXPERT_RESTART {
+                self.first.copy_from_slice(&s.q_ik);
+                s.q[..r.n_arm].copy_from_slice(&self.rest[..r.n_arm]);
+                s.solve(&step, &n);
+                if (s.frame(&s.q_ik).0 - step).norm() >= miss {
+                    s.q_ik.copy_from_slice(&self.first);
+                }
+            }
+        }
+        for (a, q) in action.iter_mut().zip(&s.q_ik).take(r.n_arm) {
+            *a = *q as f32;
+        }
+        let at_goal = held && (target - p).norm() < AT_GOAL_TOL;
+        s.gripper(action, close, at_goal);
     }
 }
