@@ -3,21 +3,13 @@
 //! (docs/controllers.md §6), which the env writes at every reset and state restore.
 
 use mjskill::mujoco::JointType;
-use mjskill::{make, Env, EnvConfig};
+use mjskill::Env;
+
+mod common;
+
+use common::env_in as env;
 
 const G: f64 = 9.81;
-
-fn env(id: &str, robot: &str, mode: &str) -> Env {
-    make(
-        id,
-        EnvConfig {
-            robot: Some(robot.into()),
-            control_mode: Some(mode.into()),
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
 
 /// Bodies that a free joint moves: the props of these scenes.
 fn free_bodies(env: &Env) -> Vec<usize> {
@@ -65,15 +57,14 @@ fn only_the_props_carry_their_weight() {
 fn a_raised_cube_falls_as_under_gravity_while_the_arm_holds() {
     let mut e = env("PickCube-v1", "panda", "pd_joint_delta_pos");
     e.reset(Some(5));
-    let cube = free_bodies(&e)[0];
     let m = e.model().clone();
-    let qadr = m.jnt_qposadr()[(0..m.njnt())
-        .find(|&j| m.jnt_bodyid()[j] as usize == cube)
-        .unwrap()] as usize;
-    let mut s = e.get_state();
-    let z0 = s.physics[1 + qadr + 2] + 0.1;
-    s.physics[1 + qadr + 2] = z0;
-    e.set_state(&s).unwrap();
+    let joint = m
+        .require_id(mjskill::mujoco::ObjType::Joint, "cube")
+        .unwrap();
+    let qadr = m.jnt_qposadr()[joint] as usize;
+    let q = e.data().qpos()[qadr..qadr + 7].to_vec();
+    let z0 = q[2] + 0.1;
+    common::put_free_body(&mut e, "cube", [q[0], q[1], z0], [q[3], q[4], q[5], q[6]]);
     let arm0: Vec<f64> = e.data().qpos()[..7].to_vec();
     let zero = vec![0.0f32; e.action_space().shape[0]];
     // Two control steps: ten 0.01 s substeps of semi-implicit Euler fall g h² n(n+1)/2.

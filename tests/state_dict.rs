@@ -4,17 +4,7 @@ use mjskill::{make, EnvConfig, SimConfig, StateDict};
 
 mod common;
 
-fn env(id: &str, robot: &str, mode: &str) -> mjskill::Env {
-    make(
-        id,
-        EnvConfig {
-            robot: Some(robot.into()),
-            control_mode: Some(mode.into()),
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
+use common::env_in as env;
 
 #[test]
 fn state_dict_has_maniskills_layout_and_round_trips() {

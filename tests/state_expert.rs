@@ -78,32 +78,40 @@ fn the_experts_finish_the_task_from_states_off_their_path() {
     }
 }
 
+/// Runs `id`'s expert in `mode` for `steps` steps from seed 3, then sets a second env, with
+/// no history of its own, to each visited state in reverse order: its expert must give the
+/// same label bit for bit, and again when asked twice.
+fn labels_are_a_function_of_the_state(id: &str, mode: Option<&str>, steps: usize) {
+    let mut a = env(id, mode);
+    let mut b = env(id, mode);
+    let mut ea = state_expert(&a).unwrap();
+    let mut eb = state_expert(&b).unwrap();
+    let dim = a.action_space().shape[0];
+    let (mut la, mut lb) = (vec![0.0f32; dim], vec![0.0f32; dim]);
+    a.reset(Some(3));
+    b.reset(Some(99));
+    let mut states = Vec::new();
+    for _ in 0..steps {
+        ea.label(&a, &mut la).unwrap();
+        states.push((a.get_state(), la.clone()));
+        a.step(&la).unwrap();
+    }
+    for (state, label) in states.iter().rev() {
+        b.set_state(state).unwrap();
+        eb.label(&b, &mut lb).unwrap();
+        assert_eq!(&lb, label, "{id}");
+        eb.label(&b, &mut lb).unwrap();
+        assert_eq!(&lb, label, "{id}: asked twice");
+    }
+}
+
 #[test]
 fn a_label_is_a_function_of_the_state() {
     for id in ["PickCube-v1", "PlaceSphere-v1", "PokeCube-v1"] {
-        let mut a = env(id, None);
-        let mut b = env(id, None);
-        let mut ea = state_expert(&a).unwrap();
-        let mut eb = state_expert(&b).unwrap();
-        let dim = a.action_space().shape[0];
-        let (mut la, mut lb) = (vec![0.0f32; dim], vec![0.0f32; dim]);
-        a.reset(Some(3));
-        // b reaches the same states by being set to them, with no history of its own, and
-        // is asked in the reverse order too.
-        b.reset(Some(99));
-        let mut states = Vec::new();
-        for _ in 0..30 {
-            ea.label(&a, &mut la).unwrap();
-            states.push((a.get_state(), la.clone()));
-            a.step(&la).unwrap();
-        }
-        for (state, label) in states.iter().rev() {
-            b.set_state(state).unwrap();
-            eb.label(&b, &mut lb).unwrap();
-            assert_eq!(&lb, label, "{id}");
-            eb.label(&b, &mut lb).unwrap();
-            assert_eq!(&lb, label, "{id}: asked twice");
-        }
+        labels_are_a_function_of_the_state(id, None, 30);
+    }
+    for id in JOINT_IK_PAIRS {
+        labels_are_a_function_of_the_state(id, Some("pd_joint_pos"), 40);
     }
 }
 
@@ -120,31 +128,6 @@ fn the_joint_ik_experts_solve_pickcube_from_the_reset_and_from_states_off_their_
         // sometimes off the table (measured: 25 of 30 each).
         let n = successes(id, Some("pd_joint_pos"), 7100..7130, 5);
         assert!(n >= 22, "{id} after 5 random actions: {n}/30");
-    }
-}
-
-#[test]
-fn a_joint_ik_label_is_a_function_of_the_state() {
-    for id in JOINT_IK_PAIRS {
-        let mut a = env(id, Some("pd_joint_pos"));
-        let mut b = env(id, Some("pd_joint_pos"));
-        let mut ea = state_expert(&a).unwrap();
-        let mut eb = state_expert(&b).unwrap();
-        let dim = a.action_space().shape[0];
-        let (mut la, mut lb) = (vec![0.0f32; dim], vec![0.0f32; dim]);
-        a.reset(Some(5));
-        b.reset(Some(98));
-        let mut states = Vec::new();
-        for _ in 0..40 {
-            ea.label(&a, &mut la).unwrap();
-            states.push((a.get_state(), la.clone()));
-            a.step(&la).unwrap();
-        }
-        for (state, label) in states.iter().rev() {
-            b.set_state(state).unwrap();
-            eb.label(&b, &mut lb).unwrap();
-            assert_eq!(&lb, label, "{id}");
-        }
     }
 }
 

@@ -178,6 +178,19 @@ pub fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
     }
 }
 
+/// The env `id` with `robot` in control mode `mode`.
+pub fn env_in(id: &str, robot: &str, mode: &str) -> mjskill::Env {
+    mjskill::make(
+        id,
+        mjskill::EnvConfig {
+            robot: Some(robot.into()),
+            control_mode: Some(mode.into()),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 /// Writes the pose of the free body whose free joint is `joint` (zero velocity) through the
 /// env state: `physics` = [time, qpos (nq), qvel (nv), ...].
 pub fn put_free_body(e: &mut mjskill::Env, joint: &str, pos: [f64; 3], quat: [f64; 4]) {
