@@ -17,7 +17,7 @@
 //!
 //! Pairs ([`STATE_EXPERTS`]): PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda, and
 //! PickCube-v1 (with PickCubeSO100-v1 and PickCubeWidowXAI-v1) with the SO100 and the WidowX
-//! AI ([`JointIkPickCubeExpert`], in `pd_joint_pos`); any other is a clear error naming the
+//! AI (`joint_ik::JointIkPickCubeExpert`, in `pd_joint_pos`); any other is a clear error naming the
 //! pair and the ones that have an expert.
 use nalgebra::Vector3;
 

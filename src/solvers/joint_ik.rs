@@ -363,10 +363,13 @@ const EXPERT_SHUT: f64 = 0.5;
 /// `hold` steps do.
 const EXPERT_HELD_RATE: f64 = 0.25;
 
-/// The gripper descends onto the cube only within this (m, horizontal) of it: further off,
-/// the fixed jaw of the SO100 lands on the cube's top (the solver reaches its approach point
-/// first and centres while it descends).
+/// The descent onto the cube goes down to the grasp point within this (m, horizontal) of
+/// the cube, and further off no lower than [`EXPERT_CONE`] times the excess above it: the
+/// SO100's fixed jaw, descending 7 mm off, lands on the cube's top (the solver reaches its
+/// approach point first and centres while it descends).
 const EXPERT_OVER_XY: f64 = 0.004;
+/// Height allowed above the grasp point per metre off the cube (see [`EXPERT_OVER_XY`]).
+const EXPERT_CONE: f64 = 5.0;
 /// The gripper descends onto the cube only with its closing axis this close to a face axis
 /// (the cosine to the face's normal): turned further, the open jaws land on top of it.
 const EXPERT_ALIGNED: f64 = 0.15;
@@ -378,11 +381,13 @@ const EXPERT_RESTART: f64 = 0.002;
 /// [`JointIkPickCube`] solver's targets, IK and grip, with its phase read off the state each
 /// call instead of counted: the cube held (the task's grasp flag, the gripper no longer
 /// closing) → carry it to the goal (easing the SO100's jaw there); grasped but still closing,
-/// or the grasp point reached → close, the arm still; the gripper shut on nothing → open and rise; over the cube with the gripper open →
-/// descend; otherwise → the approach point above the cube. The closing axis is chosen from the
-/// cube's current faces every call, and the IK starts from the measured joints, so the label
-/// is a function of the state. (The grasp flag is the env's last evaluation, part of its
-/// state.)
+/// or the grasp point reached → close, the arm still; the gripper shut on nothing → open and
+/// rise; over the cube, turned to its faces, with the gripper open → descend, within a cone
+/// that centres the gripper first; otherwise → the approach point above the cube. The face
+/// axis to close along is the one nearer to the table pose's closing axis (as the solver's
+/// first step picks it), the cube's pose is read from its free joint in the state, and the IK
+/// starts from the measured joints, so the label is a function of the state. (The grasp flag
+/// is the env's last evaluation, part of its state.)
 #[derive(Debug)]
 pub struct JointIkPickCubeExpert {
     ik: JointIkPickCube,
@@ -395,6 +400,10 @@ pub struct JointIkPickCubeExpert {
     rest: Vec<f64>,
     /// The first start's solution, kept while the second is tried.
     first: Vec<f64>,
+    /// The closing axis (world) of the table pose: of the cube's two face axes, the gripper
+    /// closes along the one nearer to it, as the solver picks at its first step. Chosen by the
+    /// wrist's current axis instead, the choice flips near 45° and the wrist chases it.
+    rest_closing: Vector3<f64>,
     /// qpos and dof address of the gripper joint the `open` and `close` targets name first.
     grip_qpos: usize,
     grip_dof: usize,
@@ -409,7 +418,9 @@ impl JointIkPickCubeExpert {
         let rest = env.robot_spec().table_qpos.to_vec();
         let m = env.model();
         let cube_qpos = m.jnt_qposadr()[m.require_id(ObjType::Joint, "cube")?] as usize;
+        let rest_closing = ik.frame(&rest).2;
         Ok(JointIkPickCubeExpert {
+            rest_closing,
             cube_qpos,
             first: vec![0.0; ik.q.len()],
             rest,
@@ -444,7 +455,7 @@ impl Policy for JointIkPickCubeExpert {
         let cube = Vector3::new(qc[0], qc[1], qc[2]);
         let rot = UnitQuaternion::from_quaternion(Quaternion::new(qc[3], qc[4], qc[5], qc[6]));
         let goal = body_xyz(env, s.goal);
-        let n = face_normal(rot * Vector3::x(), rot * Vector3::y(), &c);
+        let n = face_normal(rot * Vector3::x(), rot * Vector3::y(), &self.rest_closing);
         let r = s.robot;
         let grasp = cube + Vector3::new(0.0, 0.0, r.grasp_height);
         let above = cube + Vector3::new(0.0, 0.0, r.approach_height);
@@ -462,11 +473,11 @@ impl Policy for JointIkPickCubeExpert {
             (p, true, true)
         } else if opening < EXPERT_SHUT {
             (Vector3::new(p.x, p.y, p.z.max(above.z)), false, false)
-        } else if (p.xy() - cube.xy()).norm() < EXPERT_OVER_XY
-            && c.dot(&n).abs() < EXPERT_ALIGNED
-            && opening > EXPERT_OPEN_ENOUGH
-        {
-            (grasp, false, false)
+        } else if over && c.dot(&n).abs() < EXPERT_ALIGNED && opening > EXPERT_OPEN_ENOUGH {
+            // Descend, no lower than a cone over the cube allows: centred first.
+            let off = (p.xy() - cube.xy()).norm();
+            let h = (EXPERT_CONE * (off - EXPERT_OVER_XY)).clamp(0.0, r.approach_height);
+            (grasp + Vector3::new(0.0, 0.0, h), false, false)
         } else {
             (above, false, false)
         };
