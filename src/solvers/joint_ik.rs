@@ -268,6 +268,13 @@ impl JointIkPickCube {
         }
     }
 
+    /// Writes the IK solution's arm joints into the action's first entries.
+    fn arm_action(&self, action: &mut [f32]) {
+        for (a, q) in action.iter_mut().zip(&self.q_ik).take(self.robot.n_arm) {
+            *a = *q as f32;
+        }
+    }
+
     fn gripper(&self, action: &mut [f32], close: bool, at_goal: bool) {
         let set = match (close, at_goal) {
             (false, _) => self.robot.open,
@@ -277,6 +284,17 @@ impl JointIkPickCube {
         for &(i, v) in set {
             action[i] = v;
         }
+    }
+}
+
+/// This step's IK target on the way from the grasp point `p` to `target`: at most [`MAX_STEP`]
+/// from `p`.
+fn toward(p: Vector3<f64>, target: Vector3<f64>) -> Vector3<f64> {
+    let d = target - p;
+    if d.norm() > MAX_STEP {
+        p + d * (MAX_STEP / d.norm())
+    } else {
+        target
     }
 }
 
@@ -334,19 +352,11 @@ impl Policy for JointIkPickCube {
             };
             ((target, close), done)
         });
-        let d = target - p;
-        let step = if d.norm() > MAX_STEP {
-            p + d * (MAX_STEP / d.norm())
-        } else {
-            target
-        };
         // While closing, the arm keeps its last targets.
         if self.phases.phase != 2 {
-            self.solve(&step, &n);
+            self.solve(&toward(p, target), &n);
         }
-        for (a, q) in action.iter_mut().zip(&self.q_ik).take(r.n_arm) {
-            *a = *q as f32;
-        }
+        self.arm_action(action);
         let at_goal = self.phases.phase >= 3 && (target - p).norm() < AT_GOAL_TOL;
         self.gripper(action, close, at_goal);
     }
@@ -484,12 +494,7 @@ impl Policy for JointIkPickCubeExpert {
         if still {
             s.q_ik.copy_from_slice(&s.q);
         } else {
-            let d = target - p;
-            let step = if d.norm() > MAX_STEP {
-                p + d * (MAX_STEP / d.norm())
-            } else {
-                target
-            };
+            let step = toward(p, target);
             s.solve(&step, &n);
             let miss = (s.frame(&s.q_ik).0 - step).norm();
             if miss > EXPERT_RESTART {
@@ -501,9 +506,7 @@ impl Policy for JointIkPickCubeExpert {
                 }
             }
         }
-        for (a, q) in action.iter_mut().zip(&s.q_ik).take(r.n_arm) {
-            *a = *q as f32;
-        }
+        s.arm_action(action);
         let at_goal = held && (target - p).norm() < AT_GOAL_TOL;
         s.gripper(action, close, at_goal);
     }
