@@ -76,6 +76,7 @@ SOLVER_PAIRS = [
     ("StackCube-v1", "panda", None),
     ("StackCube-v1", "fetch", "pd_joint_pos"),
     ("LiftPegUpright-v1", "panda", None),
+    ("PegInsertionSide-v1", "panda_wristcam", None),
 ]
 
 # (env id, robot, ManiSkill's motion-planning module) of every motion-planning solution

@@ -242,6 +242,18 @@ impl NumpyRandomState {
         }
     }
 
+    /// One value of `RandomState.uniform(low, high)`: `low + (high − low)·d` for a 53-bit
+    /// double `d` in [0, 1).
+    pub fn uniform(&mut self, low: f64, high: f64) -> f64 {
+        low + (high - low) * self.next_double()
+    }
+
+    /// One value of `RandomState.randint(2**31)`: numpy's masked rejection sampling, which
+    /// for this range keeps the low 31 bits of one MT19937 word.
+    pub fn randint_2_31(&mut self) -> u64 {
+        u64::from(self.mt.next_u32() & 0x7fff_ffff)
+    }
+
     /// Whether the underlying MT19937 is in its all-zero state ([`Mt19937::is_degenerate`]).
     #[must_use]
     pub fn is_degenerate(&self) -> bool {

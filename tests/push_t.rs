@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 use common::put_free_body;
-use common::task::{check_initial_states, env as task_env, part};
+use common::task::{check_initial_states, check_links, env as task_env, part, Link};
 use mjskill::maniskill::reference::RefFile;
 use mjskill::{Env, ObsMode};
 use serde::Deserialize;
@@ -38,13 +38,6 @@ struct Extra {
     links: BTreeMap<String, Link>,
 }
 
-#[derive(Deserialize)]
-struct Link {
-    mass: f64,
-    inertia: [f64; 3],
-    cmass: [f64; 7],
-}
-
 fn extra() -> Extra {
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/maniskill_initial")
@@ -55,38 +48,7 @@ fn extra() -> Extra {
 #[test]
 fn the_t_and_the_robot_weigh_what_sapien_gives_them() {
     let x = extra();
-    let e = env(ObsMode::State);
-    let m = e.model();
-    for (name, link) in &x.links {
-        // Links without shapes get SAPIEN's token mass; mjskill gives them none.
-        if link.mass < 1e-3 {
-            continue;
-        }
-        let b = m.require_body(name).unwrap().index();
-        let mass = m.body_mass()[b];
-        assert!(
-            (mass - link.mass).abs() < 1e-5 * link.mass,
-            "{name}: mass {mass}"
-        );
-        let ipos = &m.body_ipos()[3 * b..3 * b + 3];
-        for k in 0..3 {
-            assert!(
-                (ipos[k] - link.cmass[k]).abs() < 2e-5,
-                "{name}: com {ipos:?}"
-            );
-        }
-        // Principal moments, as sets (the two sims may order the axes differently).
-        let mut got = m.body_inertia()[3 * b..3 * b + 3].to_vec();
-        let mut want = link.inertia.to_vec();
-        got.sort_by(f64::total_cmp);
-        want.sort_by(f64::total_cmp);
-        for k in 0..3 {
-            assert!(
-                (got[k] - want[k]).abs() < 1e-4 * want[2],
-                "{name}: inertia {got:?} vs {want:?}"
-            );
-        }
-    }
+    check_links(&env(ObsMode::State), &x.links);
     assert!(x.links.contains_key("Tee") && x.links.contains_key("panda_hand"));
 }
 

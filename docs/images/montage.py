@@ -9,16 +9,19 @@ only. Run from the repository root after `cargo build --release`:
         /tmp/panda.png /tmp/fetch.png /tmp/xarm6_robotiq.png /tmp/so100.png /tmp/widowxai.png
 
 docs/images/tasks-panda.png, every task, the same way (PushT, which has no solver yet, at its
-seeded first state):
+seeded first state; PegInsertionSide with its robot, the panda_wristcam):
 
     for e in PickCube-v1 PokeCube-v1 PlaceSphere-v1 PushCube-v1 PullCube-v1 StackCube-v1 \
              LiftPegUpright-v1; do
         target/release/mjskill rollout --env $e --robot panda --episodes 1 --out /tmp/$e.mcap
     done
+    target/release/mjskill rollout --env PegInsertionSide-v1 --episodes 1 \
+        --out /tmp/PegInsertionSide-v1.mcap
     target/release/mjskill render --env PushT-v1 --seed 0 -o /tmp/PushT-v1.png
     python3 docs/images/montage.py docs/images/tasks-panda.png /tmp/PickCube-v1.png \
         /tmp/PokeCube-v1.png /tmp/PlaceSphere-v1.png /tmp/PushCube-v1.png /tmp/PullCube-v1.png \
-        /tmp/StackCube-v1.png /tmp/LiftPegUpright-v1.png /tmp/PushT-v1.png
+        /tmp/StackCube-v1.png /tmp/LiftPegUpright-v1.png /tmp/PushT-v1.png \
+        /tmp/PegInsertionSide-v1.png
 """
 import zlib, struct, sys
 def read_png(path):

@@ -251,7 +251,9 @@ def check_sim_backend(sim_backend: Any) -> None:
 
 def check_reconfiguration_freq(freq: Any) -> int:
     """ManiSkill's ``reconfiguration_freq`` (None = 0). mjskill's scenes have fixed assets, so
-    there is nothing to reconfigure; the value is kept as ``env.reconfiguration_freq``."""
+    there is nothing to reconfigure, but for PegInsertionSide-v1, whose shapes are drawn at every
+    reset as ManiSkill's single env does (``reconfiguration_freq=1``); the value is kept as
+    ``env.reconfiguration_freq`` and not applied."""
     if freq is None:
         return 0
     if isinstance(freq, bool) or not isinstance(freq, (int, np.integer)) or freq < 0:

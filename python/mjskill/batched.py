@@ -181,6 +181,8 @@ class MjskillBatchedEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
         self.max_episode_steps = int(spec["max_episode_steps"])
+        # PegInsertionSide-v1 draws its shapes at every reset (each env from its own seed).
+        self._reconfigures = bool(spec["reconfigures"])
         if max_episode_steps is None and _made_without_time_limit():
             # gym.make(..., max_episode_steps=-1): gymnasium's "no time limit", as for the
             # single env (and -1 given here or to make_vec).
@@ -246,7 +248,8 @@ class MjskillBatchedEnv(gym.Env):
         if unknown:
             raise ValueError(
                 f"unsupported reset options {unknown}; valid: {', '.join(RESET_OPTIONS)} "
-                "(reconfigure has no effect: mjskill's scenes have fixed assets)"
+                "(reconfigure has no effect: mjskill's scenes have fixed assets, and "
+                "PegInsertionSide-v1 draws its shapes at every reset)"
             )
         if isinstance(seed, (list, tuple)):
             seeds = [_check_seed(s) for s in seed]
@@ -268,7 +271,7 @@ class MjskillBatchedEnv(gym.Env):
             obs, info = native.reset_envs(mask, seed)
             self._elapsed[mask] = 0
         info = self._info(info)
-        info["reconfigure"] = False
+        info["reconfigure"] = self._reconfigures
         return self._out(self._layout.batch(obs, native)), info
 
     def _disarm_time_limits(self) -> None:

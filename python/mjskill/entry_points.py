@@ -22,7 +22,8 @@ def make_env(num_envs: int = 1, **kwargs):
     num_envs=N)``): the batched :class:`mjskill.batched.MjskillBatchedEnv`, which truncates
     each env itself (it disarms gymnasium's ``TimeLimit``). ManiSkill's ``sim_backend`` and
     ``reconfiguration_freq`` keywords are accepted and checked (mjskill simulates with MuJoCo
-    on the CPU; its scenes have nothing to reconfigure).
+    on the CPU; its scenes have nothing to reconfigure, but PegInsertionSide-v1's shapes, drawn
+    at every reset).
     """
     num_envs = _check_count("num_envs", num_envs)
     if num_envs > 1:

@@ -97,12 +97,27 @@ fn info_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
     let info = env.info();
     let d = PyDict::new(py);
     d.set_item("elapsed_steps", info.elapsed_steps)?;
+    // A vector value is held as one scalar key per component, `name[0]`, `name[1]`, ...
+    // (PegInsertionSide-v1's `peg_head_pos_at_hole`): here it is one array, as upstream.
+    let mut vector: Option<(&str, Vec<f64>)> = None;
     for (k, v) in info.keys.iter().zip(&info.values) {
-        if env.info_is_flag(k) {
+        let base = k
+            .strip_suffix(']')
+            .and_then(|s| s.rsplit_once('['))
+            .map(|(b, _)| b);
+        if let Some((name, values)) = vector.take_if(|(name, _)| Some(*name) != base) {
+            d.set_item(name, PyArray1::from_vec(py, values))?;
+        }
+        if let Some(b) = base {
+            vector.get_or_insert((b, Vec::new())).1.push(*v);
+        } else if env.info_is_flag(k) {
             d.set_item(*k, *v != 0.0)?;
         } else {
             d.set_item(*k, *v)?;
         }
+    }
+    if let Some((name, values)) = vector {
+        d.set_item(name, PyArray1::from_vec(py, values))?;
     }
     if let Some(r) = info.reconfigure {
         d.set_item("reconfigure", r)?;
@@ -163,6 +178,7 @@ fn spec_dict<'py>(py: Python<'py>, env: &Env) -> PyResult<Bound<'py, PyDict>> {
         .collect();
     d.set_item("info_keys", keys)?;
     d.set_item("render_size", env.render_size())?;
+    d.set_item("reconfigures", env.reconfigures())?;
     Ok(d)
 }
 

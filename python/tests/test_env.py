@@ -34,6 +34,7 @@ def test_every_env_and_robot_is_registered():
         "mjskill/StackCube-v1",
         "mjskill/LiftPegUpright-v1",
         "mjskill/PushT-v1",
+        "mjskill/PegInsertionSide-v1",
     }
     assert ("mjskill/PickCube-v1", "xarm6_robotiq") in mjskill.registered()
     assert ("mjskill/PokeCube-v1", "fetch") in mjskill.registered()
@@ -41,6 +42,24 @@ def test_every_env_and_robot_is_registered():
     assert ("mjskill/StackCube-v1", "fetch") in mjskill.registered()
     assert ("mjskill/LiftPegUpright-v1", "fetch") in mjskill.registered()
     assert ("mjskill/PushT-v1", "panda_stick") in mjskill.registered()
+    assert ("mjskill/PegInsertionSide-v1", "panda_wristcam") in mjskill.registered()
+
+
+def test_peg_insertion_side_reconfigures_and_reports_the_head_as_a_vector():
+    env = gym.make("mjskill/PegInsertionSide-v1")
+    obs, info = env.reset(seed=0)
+    # Every reset rebuilds the scene, as upstream's; the shapes follow the seed.
+    assert info["reconfigure"] is True
+    half = obs[32:35].copy()
+    assert 0.085 <= half[0] <= 0.125 and 0.015 <= half[1] == half[2] <= 0.025
+    obs, info = env.reset(seed=1)
+    assert not np.array_equal(obs[32:35], half)
+    assert np.array_equal(env.reset(seed=0)[0][32:35], half)
+    _, _, terminated, _, info = env.step(env.action_space.sample())
+    head = info["peg_head_pos_at_hole"]
+    assert isinstance(head, np.ndarray) and head.shape == (3,)
+    assert head[0] < -0.1 and isinstance(info["success"], bool) and not terminated
+    assert not any(k.startswith("peg_head_pos_at_hole[") for k in info)
 
 
 def test_maniskill_keywords_and_rust_bounds():

@@ -11,7 +11,7 @@ from conftest import ENV
 @pytest.mark.parametrize(
     "kwargs,message",
     [
-        ({"robot_uids": "ur5"}, 'unknown robot "ur5"; valid robots: panda, panda_stick, fetch'),
+        ({"robot_uids": "ur5"}, 'unknown robot "ur5"; valid robots: panda, panda_stick, panda_wristcam, fetch'),
         ({"obs_mode": "voxel"}, "valid obs modes: state, state_dict, none, rgb, depth, rgbd"),
         ({"reward_mode": "great"}, "valid reward modes: normalized_dense, dense, sparse, none"),
         ({"control_mode": "pd_magic"}, "pd_joint_delta_pos"),

@@ -75,14 +75,7 @@ impl Env {
     fn compile_render_model(
         &self,
     ) -> Result<(std::sync::Arc<crate::mujoco::Model>, Vec<i16>), EnvError> {
-        let spec = super::registry::env_spec(self.id)?;
-        let scene = super::registry::build_scene(
-            spec,
-            self.sim.spec,
-            self.control_mode(),
-            self.config.sim,
-            self.sim.task.as_ref(),
-        )?;
+        let scene = self.scene_now()?;
         let model = std::sync::Arc::new(scene.render_model().map_err(EnvError::Robot)?);
         let labels = super::segmentation::SegmentationIds::new(
             &model,
@@ -91,6 +84,46 @@ impl Env {
         )
         .geom_labels;
         Ok((model, labels))
+    }
+
+    /// The physics model the scene compiles to with the task's current shapes, compiled
+    /// afresh (a test holds the model edited in place at each reset to it).
+    #[cfg(test)]
+    pub(crate) fn compile_physics_model(
+        &self,
+    ) -> Result<std::sync::Arc<crate::mujoco::Model>, EnvError> {
+        Ok(self.scene_now()?.model)
+    }
+
+    /// The env's scene built and compiled anew, with the task's current shapes.
+    fn scene_now(&self) -> Result<crate::robots::TableScene, EnvError> {
+        super::registry::build_scene(
+            super::registry::env_spec(self.id)?,
+            self.sim.spec,
+            self.control_mode(),
+            self.config.sim,
+            self.sim.task.as_ref(),
+        )
+    }
+
+    /// A renderer of the scene as it is now: the sensor textures of the obs mode (none in a
+    /// non-visual mode, which renders only [`Env::render`]'s frames).
+    pub(super) fn make_vision(&self) -> Result<render::Vision, EnvError> {
+        let (model, labels) = self.compile_render_model()?;
+        let visual = self.config.obs_mode.is_visual();
+        render::Vision::new(
+            &model,
+            self.sim.task.cameras(),
+            self.sim.spec.cameras,
+            match visual {
+                true => self.config.obs_mode.textures(),
+                false => Default::default(),
+            },
+            visual && self.config.obs_mode.is_point_cloud(),
+            labels,
+            self.render_options,
+        )
+        .map_err(EnvError::from)
     }
 
     /// Names of the sensor cameras of a visual obs mode, as [`Env::image`] takes them: the
@@ -112,19 +145,7 @@ impl Env {
     /// non-visual obs mode creates its renderer; an error says what to install.
     pub fn render(&mut self) -> Result<&[u8], EnvError> {
         if self.vision.is_none() {
-            let (model, labels) = self.compile_render_model()?;
-            self.vision = Some(
-                render::Vision::new(
-                    &model,
-                    self.sim.task.cameras(),
-                    self.sim.spec.cameras,
-                    Default::default(),
-                    false,
-                    labels,
-                    self.render_options,
-                )
-                .map_err(EnvError::from)?,
-            );
+            self.vision = Some(self.make_vision()?);
         }
         let v = self.vision.as_mut().expect("created above");
         v.render_human(&self.sim.data).map_err(EnvError::from)

@@ -43,7 +43,8 @@ use registry::{build_scene, env_spec, resolve_robot};
 #[derive(Debug)]
 struct Sim {
     spec: &'static RobotSpec,
-    model: Arc<Model>,
+    /// The physics state, and through it the model it steps (edited in place at the resets of
+    /// a task whose shapes change every episode).
     data: Data,
     robot: RobotIds,
     controller: Controller,
@@ -103,6 +104,9 @@ pub struct Env {
     /// ManiSkill's actors (table first, then the task's), resolved to bodies.
     actors: Vec<state_dict::Actor>,
     numpy: NumpyRandomState,
+    /// ManiSkill's main RNG: it draws the episode seed of an unseeded reset of a task whose
+    /// shapes change every episode (`_batched_main_rng.randint(2**31)`).
+    main_numpy: NumpyRandomState,
     torch_global: TorchGenerator,
     main_seed: Option<u64>,
     episode_seed: Option<u64>,
@@ -158,7 +162,6 @@ impl Env {
         let keys = task.info_keys();
         let mut sim = Sim {
             spec: rs,
-            model,
             data,
             robot,
             controller,
@@ -179,7 +182,7 @@ impl Env {
             sim.observe(&sim.ctx(), &values, config.obs_mode.is_state(), &mut w);
             w.len()
         };
-        let (model, task, controller) = (&sim.model, &sim.task, &sim.controller);
+        let (model, task, controller) = (sim.data.model(), &sim.task, &sim.controller);
         let (low, high) = controller.bounds();
         let action_space = BoxSpace {
             shape: vec![low.len()],
@@ -226,6 +229,7 @@ impl Env {
             sim,
             actors,
             numpy: NumpyRandomState::new(CONSTRUCTION_SEED),
+            main_numpy: NumpyRandomState::new(CONSTRUCTION_SEED),
             torch_global: TorchGenerator::default(),
             main_seed: None,
             episode_seed: None,
@@ -288,7 +292,7 @@ impl Env {
     }
     /// The compiled model.
     pub fn model(&self) -> &Arc<Model> {
-        &self.sim.model
+        self.sim.data.model()
     }
     /// The simulation data (read-only).
     pub fn data(&self) -> &Data {
@@ -404,6 +408,12 @@ impl Env {
     pub fn info(&self) -> &Info {
         &self.info
     }
+    /// Whether the task's shapes change every episode, drawn at each reset as upstream
+    /// rebuilds its scene (PegInsertionSide-v1): a state dict, which holds poses but not
+    /// shapes, then belongs to the episode of its seed.
+    pub fn reconfigures(&self) -> bool {
+        self.sim.task.reconfigures()
+    }
     /// Main seed.
     pub fn main_seed(&self) -> Option<u64> {
         self.main_seed
@@ -433,7 +443,17 @@ impl Env {
     pub fn reset(&mut self, seed: Option<u64>) -> (&[f32], &Info) {
         if let Some(s) = seed {
             self.main_seed = Some(s);
+            self.main_numpy = NumpyRandomState::new(s);
             self.episode_seed = Some(s);
+            self.numpy = NumpyRandomState::new(s);
+        }
+        let reconfigure = self.sim.task.reconfigures();
+        if reconfigure {
+            // ManiSkill's reconfiguring reset: the episode seed (drawn from the main RNG when
+            // none is given) seeds the shapes' draws, then the episode's numpy stream afresh.
+            let s = seed.unwrap_or_else(|| self.main_numpy.randint_2_31());
+            self.sim.task.draw_geometry(&mut NumpyRandomState::new(s));
+            self.apply_geometry();
             self.numpy = NumpyRandomState::new(s);
         }
         self.elapsed_steps = 0;
@@ -449,9 +469,10 @@ impl Env {
             &mut self.sim.qpos,
         );
         if let Some(base) = self.sim.task.robot_repose() {
-            RobotSpec::repose_qpos(
+            let sigma = self.sim.task.repose_noise();
+            self.sim.spec.repose_qpos(
                 &mut self.numpy,
-                self.config.robot_init_qpos_noise,
+                sigma.unwrap_or(self.config.robot_init_qpos_noise),
                 base,
                 &mut self.noise,
                 &mut self.sim.qpos,
@@ -484,7 +505,7 @@ impl Env {
         self.info.warnings = Warnings::default();
         // Contacts are not refreshed by a reset (docs/env.md §3 step 8): the grasp check sees the
         // previous episode's last finger forces at the new poses.
-        self.info.reconfigure = Some(false);
+        self.info.reconfigure = Some(reconfigure);
         self.update_outputs();
         (self.obs(), &self.info)
     }
@@ -532,7 +553,7 @@ impl Env {
         self.sim.data.update_kinematics();
         self.elapsed_steps = self.elapsed_steps.saturating_add(1);
         finger_forces(
-            &self.sim.model,
+            self.sim.data.model(),
             &self.sim.data,
             self.sim.robot.fingers,
             self.sim.task.grasp_object(),
@@ -627,6 +648,8 @@ impl Env {
             numpy: self.numpy.clone(),
             torch_global: self.torch_global.clone(),
             seeds: (self.main_seed, self.episode_seed),
+            main_numpy: Some(self.main_numpy.clone()),
+            geometry: self.sim.task.geometry(),
         }
     }
 
@@ -635,6 +658,10 @@ impl Env {
     /// is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
         self.check_state(s)?;
+        if !s.geometry.is_empty() && s.geometry != self.sim.task.geometry() {
+            self.sim.task.set_geometry(&s.geometry);
+            self.apply_geometry();
+        }
         self.sim
             .data
             .set_state(&s.physics)
@@ -647,6 +674,10 @@ impl Env {
         self.numpy = s.numpy.clone();
         self.torch_global = s.torch_global.clone();
         (self.main_seed, self.episode_seed) = s.seeds;
+        self.main_numpy = match &s.main_numpy {
+            Some(m) => m.clone(),
+            None => NumpyRandomState::new(self.main_seed.unwrap_or(CONSTRUCTION_SEED)),
+        };
         self.update_outputs();
         Ok(())
     }
@@ -682,7 +713,13 @@ impl Env {
                 ctl + drives.save_len()
             )));
         }
-        checks::check_state_values(&self.sim.model, s)?;
+        checks::check_state_values(self.sim.data.model(), s)?;
+        if self.sim.task.reconfigures() || !s.geometry.is_empty() {
+            self.sim
+                .task
+                .check_geometry(&s.geometry)
+                .map_err(|e| EnvError::BadState(format!("geometry: {e}")))?;
+        }
         if let Err((i, x, why)) = drives.check_saved(&s.controller[ctl..]) {
             return Err(EnvError::BadState(format!(
                 "controller[{}] = {x} {why}",
@@ -690,6 +727,30 @@ impl Env {
             )));
         }
         Ok(())
+    }
+
+    /// Writes the task's current shapes into the physics model (in place: `mj_setConst`
+    /// recomputes what depends on them), the props' weights into the forces that carry them,
+    /// and rebuilds the renderer, if the env has one, for the new shapes.
+    ///
+    /// # Panics
+    /// If the renderer cannot be rebuilt after it was first created successfully (out of
+    /// memory, or a broken GL driver), as [`Env::step`]'s sensor rendering does.
+    fn apply_geometry(&mut self) {
+        let task = &self.sim.task;
+        if let Err(e) = self.sim.data.edit_model(|m| task.apply_geometry(m)) {
+            // The shapes are drawn within the task's ranges and its ids were resolved when
+            // the env was built, so MuJoCo's checks cannot fail here.
+            panic!("the task's shapes could not be written into its model: {e}");
+        }
+        self.sim.robot.prop_weights =
+            crate::mjcf::prop_weights(self.sim.data.model(), &self.sim.robot.bodies);
+        if self.vision.is_some() {
+            match self.make_vision() {
+                Ok(v) => self.vision = Some(v),
+                Err(e) => panic!("the renderer could not be rebuilt for the new shapes: {e}"),
+            }
+        }
     }
 
     /// Raw physics state (for recording), written into `out`.

@@ -30,11 +30,13 @@ pub enum EnvId {
     LiftPegUpright,
     /// `PushT-v1`.
     PushT,
+    /// `PegInsertionSide-v1`.
+    PegInsertionSide,
 }
 
 impl EnvId {
     /// Every env, in the registry's order.
-    pub const ALL: [EnvId; 10] = [
+    pub const ALL: [EnvId; 11] = [
         EnvId::PickCube,
         EnvId::PickCubeSo100,
         EnvId::PickCubeWidowxAi,
@@ -45,6 +47,7 @@ impl EnvId {
         EnvId::StackCube,
         EnvId::LiftPegUpright,
         EnvId::PushT,
+        EnvId::PegInsertionSide,
     ];
 
     /// The id as ManiSkill registers it.
@@ -60,6 +63,7 @@ impl EnvId {
             EnvId::StackCube => "StackCube-v1",
             EnvId::LiftPegUpright => "LiftPegUpright-v1",
             EnvId::PushT => "PushT-v1",
+            EnvId::PegInsertionSide => "PegInsertionSide-v1",
         }
     }
 
@@ -143,7 +147,14 @@ fn push_t(_robot: RobotId) -> Box<dyn Task> {
 /// ManiSkill's `PUSH_T_MAX_EPISODE_STEPS`: PushT-v1 is registered with 100 steps.
 const PUSH_T_MAX_EPISODE_STEPS: u32 = 100;
 
-static REGISTRY: [EnvSpec; 10] = [
+fn peg_insertion_side(_robot: RobotId) -> Box<dyn Task> {
+    Box::new(crate::tasks::peg_insertion_side::PegInsertionSide::new())
+}
+
+/// PegInsertionSide-v1 is registered with 100 steps.
+const PEG_INSERTION_SIDE_MAX_EPISODE_STEPS: u32 = 100;
+
+static REGISTRY: [EnvSpec; 11] = [
     EnvSpec {
         id: EnvId::PickCube,
         robots: &[
@@ -209,6 +220,12 @@ static REGISTRY: [EnvSpec; 10] = [
         robots: &[RobotId::PandaStick],
         max_episode_steps: PUSH_T_MAX_EPISODE_STEPS,
         make_task: push_t,
+    },
+    EnvSpec {
+        id: EnvId::PegInsertionSide,
+        robots: &[RobotId::PandaWristCam],
+        max_episode_steps: PEG_INSERTION_SIDE_MAX_EPISODE_STEPS,
+        make_task: peg_insertion_side,
     },
 ];
 
@@ -317,7 +334,7 @@ mod tests {
             EnvId::parse("PickCube-v2").unwrap_err().to_string(),
             "unknown env id \"PickCube-v2\"; valid env ids: PickCube-v1, PickCubeSO100-v1, \
              PickCubeWidowXAI-v1, PlaceSphere-v1, PokeCube-v1, PushCube-v1, PullCube-v1, \
-             StackCube-v1, LiftPegUpright-v1, PushT-v1"
+             StackCube-v1, LiftPegUpright-v1, PushT-v1, PegInsertionSide-v1"
         );
     }
 }

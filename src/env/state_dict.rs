@@ -677,7 +677,7 @@ impl Env {
                     // linear velocity and the world angular velocity.
                     let r = quat_of(&s[3..7]).to_rotation_matrix();
                     let w = Vector3::from_column_slice(&s[10..13]);
-                    let ipos = self.sim.model.body_com_offset(body);
+                    let ipos = self.sim.data.model().body_com_offset(body);
                     let com_offset: Vector3<f64> = r * Vector3::from(ipos);
                     let v_origin = Vector3::from_column_slice(&s[7..10]) - w.cross(&com_offset);
                     let w_local: Vector3<f64> = Matrix3::from(r).transpose() * w;
@@ -699,12 +699,11 @@ impl Env {
     fn refresh_after_state_change(&mut self) {
         // The drive forces of the new state take part in the contact forces.
         self.sim.data.forward();
-        self.sim
-            .drives
-            .apply(&mut self.sim.data, self.sim.model.timestep());
+        let dt = self.sim.data.model().timestep();
+        self.sim.drives.apply(&mut self.sim.data, dt);
         self.sim.data.forward();
         crate::tasks::finger_forces(
-            &self.sim.model,
+            self.sim.data.model(),
             &self.sim.data,
             self.sim.robot.fingers,
             self.sim.task.grasp_object(),

@@ -90,4 +90,14 @@ pub struct EnvState {
     pub torch_global: TorchGenerator,
     /// Main and episode seeds.
     pub seeds: (Option<u64>, Option<u64>),
+    /// The main RNG (ManiSkill's `_main_rng`), which draws the episode seed of an unseeded
+    /// reset of a task whose shapes change every episode. Absent from states saved before it
+    /// was part of them: the main RNG then restarts from the main seed.
+    #[serde(default)]
+    pub main_numpy: Option<NumpyRandomState>,
+    /// The episode's shapes, for a task that draws them every episode (PegInsertionSide-v1:
+    /// the peg's half length and radius, the hole's centre; `Task::geometry`); empty for the
+    /// others.
+    #[serde(default)]
+    pub geometry: Vec<f64>,
 }

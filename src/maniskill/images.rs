@@ -55,6 +55,10 @@ pub struct RefImageState {
     pub control_mode: String,
     /// The state dict that was rendered.
     pub state: serde_json::Value,
+    /// The episode's seed, from the file's stem (`<source>_<control mode>_<seed>_<step>`):
+    /// a task whose shapes change every episode (PegInsertionSide-v1) is reset with it before
+    /// the state dict, which holds poses but not shapes, is loaded.
+    pub seed: Option<u64>,
     /// The cameras, sorted by name.
     pub cameras: Vec<RefCamera>,
 }
@@ -153,13 +157,16 @@ impl RefImageState {
         if cameras.is_empty() {
             return Err(bad("no <camera>_segmentation arrays".into()));
         }
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let seed = name.rsplit('_').nth(1).and_then(|s| s.parse().ok());
         Ok(RefImageState {
             env_id,
             robot,
-            name: path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            name,
+            seed,
             control_mode,
             state,
             cameras,
@@ -344,6 +351,13 @@ impl Comparer {
             self.envs.insert(key.clone(), env);
         }
         let env = self.envs.get_mut(&key).expect("inserted above");
+        if env.reconfigures() {
+            let seed = s.seed.ok_or_else(|| CompareError::Bad {
+                path: what.clone(),
+                msg: "the file's name holds no seed, which this task's shapes need".into(),
+            })?;
+            env.reset(Some(seed));
+        }
         let sd = StateDict::from_json(&s.state).map_err(|e| CompareError::Bad {
             path: what.clone(),
             msg: format!("state_json: {e}"),

@@ -276,6 +276,16 @@ pub fn measure(
     let keys: Vec<String> = out.flags.keys().cloned().collect();
     let objects = env.dynamic_actor_names();
     for ep in episodes {
+        // A task that builds its actors per env (PegInsertionSide-v1) names them `peg_0` in
+        // ManiSkill's scene; its state dict, and mjskill, `peg`.
+        let merged = ep.final_objects.iter().map(|(name, p)| {
+            let short = name.strip_suffix("_0").filter(|m| objects.contains(m));
+            (short.map_or_else(|| name.clone(), str::to_string), *p)
+        });
+        let ep = &OutcomeEpisode {
+            final_objects: merged.collect(),
+            ..ep.clone()
+        };
         if ep.flags.keys().ne(keys.iter()) {
             return Err(OutcomeError::Format {
                 path: p.clone(),

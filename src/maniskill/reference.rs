@@ -217,12 +217,22 @@ impl RefFile {
         Ok(f)
     }
 
-    /// Names of the dynamic actors (the objects whose errors fidelity reports).
+    /// Names of the dynamic actors (the objects whose errors fidelity reports), as the state
+    /// dicts name them: a task that builds its actors per env (PegInsertionSide-v1) names
+    /// them `peg_0` in its scene and `peg` (merged) in its state dict.
     pub fn dynamic_actors(&self) -> Vec<&str> {
+        let in_state_dict = |n: &str| {
+            self.episodes
+                .first()
+                .is_some_and(|e| e.initial.state_dict.actors.contains_key(n))
+        };
         self.actor_body_types
             .iter()
             .filter(|(_, t)| t.as_str() == "dynamic")
-            .map(|(n, _)| n.as_str())
+            .map(|(n, _)| match n.strip_suffix("_0") {
+                Some(merged) if !in_state_dict(n) && in_state_dict(merged) => merged,
+                _ => n.as_str(),
+            })
             .collect()
     }
 }

@@ -99,6 +99,78 @@ fn peg_body(
     body
 }
 
+/// A kinematic (mocap) body `name` of colliding boxes `(centre, half extents)` named `name_k`.
+fn kinematic_boxes(name: &str, boxes: &[([f64; 3], [f64; 3])], rgba: Rgba) -> Element {
+    let mut body = Element::new("body")
+        .attr("name", name)
+        .attr("mocap", "true");
+    for (k, (c, h)) in boxes.iter().enumerate() {
+        body.push(
+            Element::new("geom")
+                .attr("name", format!("{name}_{k}"))
+                .attr("type", "box")
+                .attr_nums("pos", c)
+                .attr_nums("size", h)
+                .attr("rgba", nums(&rgba)),
+        );
+    }
+    body
+}
+
+/// The token inertial of a kinematic body (a mocap body, never simulated), like SAPIEN's
+/// shapeless links: MuJoCo cannot place the centre of mass of several massless geoms, and a
+/// body whose geoms are resized in place keeps the same compiled mass.
+fn token_inertial() -> Element {
+    Element::new("inertial")
+        .attr("pos", "0 0 0")
+        .attr("mass", super::xml::num(super::MASSLESS))
+        .attr_nums("diaginertia", &[super::MASSLESS; 3])
+}
+
+/// Mass and principal moments (along its axes) of a box peg of half extents
+/// (half_length, half_width, half_width) at the props' density, as SAPIEN derives them
+/// from its collision box (ManiSkill's pegs).
+pub fn peg_inertia(half_length: f64, half_width: f64) -> (f64, [f64; 3]) {
+    let (l, w) = (2.0 * half_length, 2.0 * half_width);
+    let mass = DENSITY * l * w * w;
+    let side = mass / 12.0 * (l * l + w * w);
+    (mass, [mass / 12.0 * (2.0 * w * w), side, side])
+}
+
+/// The four boxes `(centre, half extents)` of ManiSkill's `_build_box_with_hole`: a square
+/// tube along x of half length `depth` and half width `outer_radius` around a square hole of
+/// half width `inner_radius`, the hole's centre offset by `center` (y, z) from the tube's.
+/// Each wall is as thick as ManiSkill makes it, `(outer − inner)/2` shifted by half the
+/// offset, so the walls on the two sides of an off-centre hole differ.
+pub fn box_with_hole(
+    inner_radius: f64,
+    outer_radius: f64,
+    depth: f64,
+    center: [f64; 2],
+) -> [([f64; 3], [f64; 3]); 4] {
+    let thickness = (outer_radius - inner_radius) * 0.5;
+    let half_center = [center[0] * 0.5, center[1] * 0.5];
+    let offset = thickness + inner_radius;
+    [
+        (
+            [0.0, offset + half_center[0], 0.0],
+            [depth, thickness - half_center[0], outer_radius],
+        ),
+        (
+            [0.0, -offset + half_center[0], 0.0],
+            [depth, thickness + half_center[0], outer_radius],
+        ),
+        (
+            [0.0, 0.0, offset + half_center[1]],
+            [depth, outer_radius, thickness - half_center[1]],
+        ),
+        (
+            [0.0, 0.0, -offset + half_center[1]],
+            [depth, outer_radius, thickness + half_center[1]],
+        ),
+    ]
+}
+
 /// Centre of mass and principal moments (about it, along the body's axes) of boxes
 /// `(centre, half extents)` of one uniform density and total mass `mass`, as SAPIEN derives a
 /// builder's inertia from its collision boxes. The boxes are axis-aligned; the products of
@@ -313,14 +385,29 @@ impl Scene {
         rgba: [Rgba; 2],
         pos: [f64; 3],
     ) {
-        let (l, w) = (2.0 * half_length, 2.0 * half_width);
-        let mass = DENSITY * l * w * w;
-        let side = mass / 12.0 * (l * l + w * w);
+        let (mass, inertia) = peg_inertia(half_length, half_width);
         let inertial = Element::new("inertial")
             .attr_nums("pos", &[0.0; 3])
             .attr("mass", super::xml::num(mass))
-            .attr_nums("diaginertia", &[mass / 12.0 * (2.0 * w * w), side, side]);
+            .attr_nums("diaginertia", &inertia);
         let body = peg_body(name, half_length, half_width, rgba, pos).child(inertial);
+        self.worldbody().push(body);
+    }
+
+    /// ManiSkill's `_build_box_with_hole` (PegInsertionSide-v1): a kinematic (mocap) body of
+    /// the four colliding boxes of [`box_with_hole`], all of colour `rgba`, named `name_k`, at
+    /// `pos`. Its token inertial does not depend on the boxes, so that a model whose boxes are
+    /// resized in place ([`crate::mujoco::Model::set_box_geom`]) equals one compiled with them.
+    pub fn add_box_with_hole(
+        &mut self,
+        name: &str,
+        boxes: &[([f64; 3], [f64; 3]); 4],
+        rgba: Rgba,
+        pos: [f64; 3],
+    ) {
+        let body = kinematic_boxes(name, boxes, rgba)
+            .attr_nums("pos", &pos)
+            .child(token_inertial());
         self.worldbody().push(body);
     }
 
@@ -384,12 +471,7 @@ impl Scene {
                 }
             }
             None => {
-                body = body.attr("mocap", "true").child(
-                    Element::new("inertial")
-                        .attr("pos", "0 0 0")
-                        .attr("mass", super::xml::num(super::MASSLESS))
-                        .attr_nums("diaginertia", &[super::MASSLESS; 3]),
-                );
+                body = body.attr("mocap", "true").child(token_inertial());
             }
         }
         for (k, (c, h)) in boxes.iter().enumerate() {
@@ -415,20 +497,7 @@ impl Scene {
 
     /// A kinematic (mocap) body made of boxes `(centre, half extents)` that collide.
     pub fn add_kinematic_boxes(&mut self, name: &str, boxes: &[([f64; 3], [f64; 3])], rgba: Rgba) {
-        let mut body = Element::new("body")
-            .attr("name", name)
-            .attr("mocap", "true");
-        for (k, (c, h)) in boxes.iter().enumerate() {
-            body.push(
-                Element::new("geom")
-                    .attr("name", format!("{name}_{k}"))
-                    .attr("type", "box")
-                    .attr_nums("pos", c)
-                    .attr_nums("size", h)
-                    .attr("rgba", nums(&rgba)),
-            );
-        }
-        self.worldbody().push(body);
+        self.worldbody().push(kinematic_boxes(name, boxes, rgba));
     }
 
     /// A visual-only marker sphere on a mocap body. `hidden` puts it in the group that sensor
@@ -459,12 +528,7 @@ impl Scene {
         let mut body = Element::new("body")
             .attr("name", name)
             .attr("mocap", "true")
-            .child(
-                Element::new("inertial")
-                    .attr("pos", "0 0 0")
-                    .attr("mass", super::xml::num(super::MASSLESS))
-                    .attr_nums("diaginertia", &[super::MASSLESS; 3]),
-            );
+            .child(token_inertial());
         for (k, (r, hl, rgba)) in rings.iter().enumerate() {
             body.push(visual(
                 Element::new("geom")

@@ -23,7 +23,7 @@ pub struct Contact {
 
 /// Owned simulation state (`mjData`) of one [`Model`]; keeps the model alive. Freed on drop.
 pub struct Data {
-    model: Arc<Model>,
+    pub(super) model: Arc<Model>,
     pub(super) ptr: *mut sys::mjData,
     /// Scratch copy of qacc_warmstart, so that [`Data::forward`] leaves the future unchanged.
     warmstart: Vec<f64>,

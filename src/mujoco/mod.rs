@@ -647,6 +647,7 @@ impl Model {
 // After the array macros above, which it uses (macros are scoped textually).
 mod data;
 pub use data::{Contact, Data};
+mod edit;
 mod ids;
 pub use ids::{ActuatorId, BodyId, CameraId, GeomId, JointId, MocapId, Pose};
 

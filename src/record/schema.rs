@@ -79,19 +79,20 @@ fn env_state() -> Value {
                 "minItems": 2,
                 "maxItems": 2
             },
-            "numpy": {
-                "type": "object",
-                "description": "numpy RandomState of the episode (joint noise)",
-                "properties": {
-                    "mt": mt19937(),
-                    "gauss_bits": {
-                        "type": ["integer", "null"],
-                        "minimum": 0,
-                        "description": "IEEE-754 bits of the cached Gaussian"
-                    }
-                },
-                "required": ["mt", "gauss_bits"],
-                "additionalProperties": false
+            "numpy": numpy("numpy RandomState of the episode (joint noise)"),
+            "main_numpy": {
+                "anyOf": [
+                    numpy("numpy RandomState of the main RNG (draws the episode seed of an \
+                           unseeded reset of a task whose shapes change every episode)"),
+                    { "type": "null" }
+                ]
+            },
+            "geometry": {
+                "type": "array",
+                "description": "the episode's shapes of a task that draws them every episode \
+                                (PegInsertionSide-v1: peg half length, radius, hole y, hole z); \
+                                empty for the others",
+                "items": { "type": "number" }
             },
             "torch_global": {
                 "type": "object",
@@ -113,6 +114,24 @@ fn env_state() -> Value {
         },
         "required": ["env_id", "robot", "control_mode", "physics", "controller", "elapsed_steps",
                      "finger_forces", "numpy", "torch_global", "seeds"],
+        "additionalProperties": false
+    })
+}
+
+/// Schema of a numpy `RandomState` (an MT19937 and the cached Gaussian), described as `what`.
+fn numpy(what: &str) -> Value {
+    json!({
+        "type": "object",
+        "description": what,
+        "properties": {
+            "mt": mt19937(),
+            "gauss_bits": {
+                "type": ["integer", "null"],
+                "minimum": 0,
+                "description": "IEEE-754 bits of the cached Gaussian"
+            }
+        },
+        "required": ["mt", "gauss_bits"],
         "additionalProperties": false
     })
 }

@@ -4,6 +4,7 @@
 pub mod fetch;
 pub mod panda;
 pub mod panda_stick;
+pub mod panda_wristcam;
 pub mod so100;
 pub mod widowxai;
 pub mod xarm6_robotiq;
@@ -65,7 +66,7 @@ pub enum RobotError {
     Mujoco(#[from] MjError),
 }
 
-/// The six robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
+/// The seven robots. Parsed once from a uid at the API edge ([`RobotId::parse`]); code that
 /// depends on the robot matches on this exhaustively.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RobotId {
@@ -73,6 +74,8 @@ pub enum RobotId {
     Panda,
     /// The Panda arm with a stick in place of its gripper (PushT-v1's robot).
     PandaStick,
+    /// The Panda with its wrist camera (PegInsertionSide-v1's robot).
+    PandaWristCam,
     /// Fetch mobile manipulator.
     Fetch,
     /// UFactory xArm6 with a Robotiq 2F-85 gripper.
@@ -85,9 +88,10 @@ pub enum RobotId {
 
 impl RobotId {
     /// Every robot, in ManiSkill's order of `SUPPORTED_ROBOTS`.
-    pub const ALL: [RobotId; 6] = [
+    pub const ALL: [RobotId; 7] = [
         RobotId::Panda,
         RobotId::PandaStick,
+        RobotId::PandaWristCam,
         RobotId::Fetch,
         RobotId::Xarm6Robotiq,
         RobotId::So100,
@@ -99,6 +103,7 @@ impl RobotId {
         match self {
             RobotId::Panda => "panda",
             RobotId::PandaStick => "panda_stick",
+            RobotId::PandaWristCam => "panda_wristcam",
             RobotId::Fetch => "fetch",
             RobotId::Xarm6Robotiq => "xarm6_robotiq",
             RobotId::So100 => "so100",
@@ -122,6 +127,7 @@ impl RobotId {
         match self {
             RobotId::Panda => &panda::PANDA,
             RobotId::PandaStick => &panda_stick::PANDA_STICK,
+            RobotId::PandaWristCam => &panda_wristcam::PANDA_WRISTCAM,
             RobotId::Fetch => &fetch::FETCH,
             RobotId::Xarm6Robotiq => &xarm6_robotiq::XARM6_ROBOTIQ,
             RobotId::So100 => &so100::SO100,
@@ -131,13 +137,14 @@ impl RobotId {
 }
 
 /// Robot uids, as ManiSkill spells them ([`RobotId::ALL`]).
-pub const ROBOT_UIDS: [&str; 6] = [
+pub const ROBOT_UIDS: [&str; 7] = [
     RobotId::ALL[0].uid(),
     RobotId::ALL[1].uid(),
     RobotId::ALL[2].uid(),
     RobotId::ALL[3].uid(),
     RobotId::ALL[4].uid(),
     RobotId::ALL[5].uid(),
+    RobotId::ALL[6].uid(),
 ];
 
 /// Control modes of an arm with joint, velocity and EE controllers (Panda, panda_stick, xArm6), in
@@ -388,10 +395,13 @@ impl RobotSpec {
     }
 
     /// A task's table scene that poses the robot again after the common one (PushT-v1's
-    /// `WhiteTableSceneBuilder` with the panda_stick): `qpos` becomes `base` plus a second
-    /// `N(0, sigma)` draw on every joint (into `noise`), rounded to float32. `base`, `noise`
-    /// and `qpos` have the robot's dof; nothing is allocated.
+    /// `WhiteTableSceneBuilder` with the panda_stick, PegInsertionSide-v1 with the
+    /// panda_wristcam): `qpos` becomes `base` plus a second `N(0, sigma)` draw on every joint
+    /// (into `noise`), rounded to float32; joints that the common pose keeps noise-free (the
+    /// Panda's fingers, [`InitNoise::AllButLast`]) are set to `base` again, as upstream
+    /// overwrites them. `base`, `noise` and `qpos` have the robot's dof; nothing is allocated.
     pub fn repose_qpos(
+        &self,
         numpy: &mut NumpyRandomState,
         sigma: f64,
         base: &[f64],
@@ -399,8 +409,12 @@ impl RobotSpec {
         qpos: &mut [f64],
     ) {
         numpy.fill_normal(0.0, sigma, noise);
-        for ((q, b), z) in qpos.iter_mut().zip(base).zip(noise.iter()) {
-            *q = (b + z) as f32 as f64;
+        let keep = match self.init_noise {
+            InitNoise::AllButLast(k) => noise.len() - k,
+            InitNoise::None | InitNoise::All => noise.len(),
+        };
+        for (k, ((q, b), z)) in qpos.iter_mut().zip(base).zip(noise.iter()).enumerate() {
+            *q = if k < keep { b + z } else { *b } as f32 as f64;
         }
     }
 

@@ -90,7 +90,10 @@ pub fn parts(mode: ControlMode) -> Option<Vec<PartSpec>> {
 }
 
 /// The Panda as ManiSkill configures it.
-pub static PANDA: RobotSpec = RobotSpec {
+pub static PANDA: RobotSpec = PANDA_SPEC;
+
+/// [`PANDA`]'s value, which the Panda's variants (`panda_wristcam`) start from.
+pub(crate) const PANDA_SPEC: RobotSpec = RobotSpec {
     id: super::RobotId::Panda,
     urdf: "panda/panda.urdf",
     srdf: "panda/panda.srdf",

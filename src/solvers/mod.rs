@@ -21,6 +21,7 @@ pub mod noise;
 pub mod onnx;
 #[cfg(feature = "onnx")]
 pub(crate) mod onnx_guard;
+pub(crate) mod peg_insertion_side;
 pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
@@ -158,6 +159,8 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
         RobotId::Panda if env_id == STACK_CUBE || env_id == LIFT_PEG_UPRIGHT => "pd_ee_delta_pose",
         RobotId::Panda | RobotId::PandaStick => "pd_ee_delta_pos",
+        // The peg is turned to the hole's axis (solvers/peg_insertion_side.rs).
+        RobotId::PandaWristCam => "pd_ee_delta_pose",
     })
 }
 
@@ -206,7 +209,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 18] = [
+pub const SOLVED: [(&str, &str); 19] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -225,6 +228,7 @@ pub const SOLVED: [(&str, &str); 18] = [
     ("StackCube-v1", "panda"),
     ("StackCube-v1", "fetch"),
     ("LiftPegUpright-v1", "panda"),
+    ("PegInsertionSide-v1", "panda_wristcam"),
 ];
 
 /// The envs whose Panda solver turns the gripper (`pd_ee_delta_pose`).
@@ -281,6 +285,9 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("StackCube-v1", "fetch") => boxed(stack_cube::FetchStackCube::new(env)),
         ("LiftPegUpright-v1", "panda") => {
             boxed(lift_peg_upright::PandaLiftPeg::new(env, PANDA_GRIPPER))
+        }
+        ("PegInsertionSide-v1", "panda_wristcam") => {
+            boxed(peg_insertion_side::PegInsertionSideSolver::new(env))
         }
         (env, robot) => Err(SolverError::NoSolver {
             env,

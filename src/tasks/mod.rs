@@ -79,6 +79,7 @@ impl InfoValue for f64 {
 }
 
 pub mod lift_peg_upright;
+pub mod peg_insertion_side;
 pub mod pick_cube;
 pub mod place_sphere;
 pub mod poke_cube;
@@ -93,7 +94,7 @@ use crate::mjcf::props::Rgba;
 use crate::mjcf::Scene;
 use crate::mujoco::{BodyId, Data, MjError, Model, Pose};
 pub use crate::obs::ObsWriter;
-use crate::rng::TorchGenerator;
+use crate::rng::{NumpyRandomState, TorchGenerator};
 use crate::robots::{GraspDef, RobotIds, RobotSpec};
 
 /// Threshold of `agent.is_static` as every task calls it (rad/s or m/s).
@@ -219,6 +220,20 @@ impl TaskCtx<'_> {
             _ => false,
         }
     }
+    /// `agent.is_grasping(object, max_angle)` with a tighter angle (degrees) than the robot's
+    /// own check (PegInsertionSide-v1's reward); false for a robot without fingers.
+    pub fn is_grasping_within(&self, max_angle_deg: f64) -> bool {
+        match (&self.spec.grasp, self.robot.fingers) {
+            (Some(g), Some(fingers)) => {
+                let g = GraspDef {
+                    max_angle_deg,
+                    ..g.clone()
+                };
+                is_grasping(&g, self.data, fingers, self.finger_forces)
+            }
+            _ => false,
+        }
+    }
     /// `agent.is_static(0.2)` with the robot's rule (docs/env.md §10).
     pub fn is_robot_static(&self) -> bool {
         self.spec
@@ -270,8 +285,46 @@ pub trait Task: Send + std::fmt::Debug {
     fn robot_repose(&self) -> Option<&'static [f64]> {
         None
     }
+    /// The standard deviation of [`Task::robot_repose`]'s draw when the task fixes it
+    /// (PegInsertionSide-v1: 0.02); `None`: the env's `robot_init_qpos_noise`.
+    fn repose_noise(&self) -> Option<f64> {
+        None
+    }
     /// Resolves the task's names to ids in the compiled model.
     fn resolve(&mut self, model: &Model) -> Result<(), MjError>;
+    /// Whether the task's shapes change every episode: ManiSkill rebuilds its scene at every
+    /// reset (`reconfiguration_freq = 1`) and [`Task::draw_geometry`] draws them. False (the
+    /// default) for a task whose scene is built once.
+    fn reconfigures(&self) -> bool {
+        false
+    }
+    /// Draws the episode's shapes from the episode's numpy stream, as upstream's `_load_scene`
+    /// draws them from `_batched_episode_rng`; [`Task::build`] builds the shapes last drawn.
+    fn draw_geometry(&mut self, _numpy: &mut NumpyRandomState) {}
+    /// The shapes last drawn, as numbers ([`Task::set_geometry`] takes them back); empty for a
+    /// task whose scene never changes.
+    fn geometry(&self) -> Vec<f64> {
+        Vec::new()
+    }
+    /// Whether [`Task::set_geometry`] takes `values`: an error names a list of the wrong
+    /// length or a value out of the task's ranges.
+    fn check_geometry(&self, values: &[f64]) -> Result<(), String> {
+        match values.is_empty() {
+            true => Ok(()),
+            false => Err(format!(
+                "this task's shapes never change, but the state holds {} shape values",
+                values.len()
+            )),
+        }
+    }
+    /// Takes shapes that [`Task::check_geometry`] accepted.
+    fn set_geometry(&mut self, _values: &[f64]) {}
+    /// Writes the shapes last drawn into the compiled physics model whose ids
+    /// [`Task::resolve`] resolved, in place: the model then equals the one the scene of
+    /// [`Task::build`] compiles to.
+    fn apply_geometry(&self, _model: &mut Model) -> Result<(), MjError> {
+        Ok(())
+    }
     /// Body whose contacts with the fingers decide `is_grasping`.
     fn grasp_object(&self) -> BodyId;
     /// Places the objects for a new episode, drawing from `torch` in upstream order.

@@ -84,9 +84,11 @@ pub const WIDOWXAI_CONFIG: PickCubeConfig = PickCubeConfig {
 pub fn config_for(robot: RobotId) -> PickCubeConfig {
     match robot {
         // Upstream falls back to the Panda's configuration for robots it does not list.
-        RobotId::Panda | RobotId::PandaStick | RobotId::Fetch | RobotId::Xarm6Robotiq => {
-            PANDA_CONFIG
-        }
+        RobotId::Panda
+        | RobotId::PandaStick
+        | RobotId::PandaWristCam
+        | RobotId::Fetch
+        | RobotId::Xarm6Robotiq => PANDA_CONFIG,
         RobotId::So100 => SO100_CONFIG,
         RobotId::WidowxAi => WIDOWXAI_CONFIG,
     }
@@ -132,7 +134,7 @@ impl PickCube {
     /// Number of trailing qvel entries the static bonus ignores (docs/tasks.md §1.7).
     fn static_drop(&self) -> usize {
         match self.robot {
-            RobotId::Panda | RobotId::PandaStick | RobotId::WidowxAi => 2,
+            RobotId::Panda | RobotId::PandaStick | RobotId::PandaWristCam | RobotId::WidowxAi => 2,
             RobotId::So100 => 1,
             RobotId::Fetch | RobotId::Xarm6Robotiq => 0,
         }

@@ -7,6 +7,7 @@ mod common;
 mod fetch;
 mod fetch_tasks;
 mod foundation;
+mod peg_insertion_side;
 mod poke_cube;
 mod push_t;
 mod so100;

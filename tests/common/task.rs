@@ -57,6 +57,81 @@ pub fn initial_file(id: &str, robot: &str) -> InitialFile {
     f
 }
 
+/// The env's flat `state` layout is ManiSkill's recorded `obs_state_layout`, key for key
+/// (`agent.qpos` is mjskill's `agent/qpos`).
+pub fn check_layout(e: &Env, layout: &[(String, usize, usize)], what: &str) {
+    let want: Vec<(String, usize, usize)> = layout
+        .iter()
+        .map(|(k, a, b)| (k.replace('.', "/"), *a, *b))
+        .collect();
+    let got: Vec<(String, usize, usize)> = e
+        .obs_layout()
+        .iter()
+        .map(|(k, r)| (k.clone(), r.start, r.end))
+        .collect();
+    assert_eq!(got, want, "{what}: layout");
+}
+
+/// The env's actors are at ManiSkill's recorded poses (within 2e-6). A task that builds its
+/// actors per env (PegInsertionSide-v1) names them `peg_0` in ManiSkill's scene; its state
+/// dict, and mjskill, `peg`.
+pub fn check_actor_poses(e: &Env, actors: &BTreeMap<String, [f64; 7]>, ctx: &str) {
+    for (name, pose) in actors {
+        let got = e
+            .actor_pose(name)
+            .or_else(|| e.actor_pose(name.strip_suffix("_0")?))
+            .unwrap_or_else(|| panic!("{ctx}: {name}"));
+        assert!(
+            max_abs(got, pose) < 2e-6,
+            "{ctx}: {name} {got:?} vs {pose:?}"
+        );
+    }
+}
+
+/// Mass, principal moments and centre of mass (link frame) SAPIEN gives a link or an actor
+/// (record.py's `links`).
+#[derive(Deserialize)]
+pub struct Link {
+    pub mass: f64,
+    pub inertia: [f64; 3],
+    pub cmass: [f64; 7],
+}
+
+/// Every body in `links` weighs in the env's model what SAPIEN gives it: mass, centre of mass
+/// and principal moments (as sets: the two sims may order the axes differently). Links
+/// without shapes get SAPIEN's token mass and mjskill none: they are skipped.
+pub fn check_links(e: &Env, links: &BTreeMap<String, Link>) {
+    let m = e.model();
+    for (name, link) in links {
+        if link.mass < 1e-3 {
+            continue;
+        }
+        let b = m.require_body(name).unwrap().index();
+        let mass = m.body_mass()[b];
+        assert!(
+            (mass - link.mass).abs() < 1e-5 * link.mass,
+            "{name}: mass {mass}"
+        );
+        let ipos = &m.body_ipos()[3 * b..3 * b + 3];
+        for k in 0..3 {
+            assert!(
+                (ipos[k] - link.cmass[k]).abs() < 2e-5,
+                "{name}: com {ipos:?}"
+            );
+        }
+        let mut got = m.body_inertia()[3 * b..3 * b + 3].to_vec();
+        let mut want = link.inertia.to_vec();
+        got.sort_by(f64::total_cmp);
+        want.sort_by(f64::total_cmp);
+        for k in 0..3 {
+            assert!(
+                (got[k] - want[k]).abs() < 1e-4 * want[2],
+                "{name}: inertia {got:?} vs {want:?}"
+            );
+        }
+    }
+}
+
 /// max |a − b| over two sequences of the same length.
 pub fn max_abs(a: impl IntoIterator<Item = f64>, b: &[f64]) -> f64 {
     let a: Vec<f64> = a.into_iter().collect();
@@ -116,18 +191,7 @@ pub fn check_initial_states(
     let f = initial_file(id, robot);
     let mut e = env(id, robot, ObsMode::State);
     assert_eq!(e.control_mode(), f.control_mode);
-    // ManiSkill's layout, key for key (`agent.qpos` is mjskill's `agent/qpos`).
-    let want: Vec<(String, usize, usize)> = f
-        .obs_state_layout
-        .iter()
-        .map(|(k, a, b)| (k.replace('.', "/"), *a, *b))
-        .collect();
-    let got: Vec<(String, usize, usize)> = e
-        .obs_layout()
-        .iter()
-        .map(|(k, r)| (k.clone(), r.start, r.end))
-        .collect();
-    assert_eq!(got, want, "{id} {robot}: layout");
+    check_layout(&e, &f.obs_state_layout, &format!("{id} {robot}"));
     for (split, seeds) in &f.seeds {
         assert_eq!(seeds.len(), 50, "{id} {robot} {split}");
         let mut worst = 0.0f64;
@@ -143,15 +207,7 @@ pub fn check_initial_states(
             if let Some(n) = actors {
                 assert_eq!(ms.actors.len(), n, "{ctx}: actors recorded");
             }
-            for (name, pose) in &ms.actors {
-                let got = e
-                    .actor_pose(name)
-                    .unwrap_or_else(|| panic!("{ctx}: {name}"));
-                assert!(
-                    max_abs(got, pose) < 2e-6,
-                    "{ctx}: {name} {got:?} vs {pose:?}"
-                );
-            }
+            check_actor_poses(&e, &ms.actors, &ctx);
             let (p, q) = e.tcp_pose();
             let tcp = p.into_iter().chain(q);
             assert!(max_abs(tcp, &ms.tcp_pose) < 1e-5, "{ctx}: tcp_pose");

@@ -77,7 +77,7 @@ impl EnvArgs {
 pub enum Command {
     /// Write the complete generated MuJoCo scene (MJCF) of a robot, or of a task with a robot.
     ExportMjcf {
-        /// Robot uid (panda, panda_stick, fetch, xarm6_robotiq, so100, widowxai; default: the
+        /// Robot uid (panda, panda_stick, panda_wristcam, fetch, xarm6_robotiq, so100, widowxai; default: the
         /// env's default robot, or panda without --env).
         #[arg(long)]
         robot: Option<String>,

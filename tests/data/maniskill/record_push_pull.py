@@ -1,7 +1,7 @@
 """Records ManiSkill 3 reference trajectories (format `mjskill-ref-traj/1`,
 docs/reference-trajectories.md) of PushCube-v1, PullCube-v1, StackCube-v1 and LiftPegUpright-v1
-with the Panda and the Fetch and of PushT-v1 with the panda_stick, and one reference camera
-state per pair for `tests/segmentation.rs`.
+with the Panda and the Fetch, of PushT-v1 with the panda_stick and of PegInsertionSide-v1 with
+the panda_wristcam, and one reference camera state per pair for `tests/segmentation.rs`.
 
     MS_ASSET_DIR=/tmp/ms_assets /tmp/msmp/bin/python tests/data/maniskill/record_push_pull.py \
         [--pairs PushCube-v1:panda,...] [--images]
@@ -16,19 +16,21 @@ format's description gives it:
 * 2 × 50 steps of the smooth random walk in every other mode the robot offers among
   `pd_joint_pos`, `pd_ee_delta_pos`, `pd_ee_delta_pose`, `pd_joint_vel`,
   `pd_joint_target_delta_pos` (seeds 1100–1101);
-* Panda only (the panda_stick has no fingers: its grasp contacts are recorded as zeros and its
-  finger links as null): 4 motion-planning episodes in `pd_joint_pos` (seeds 1200–1203) with ManiSkill's
-  own solutions (`solvePushCube` / `solvePullCube` / `solveStackCube` /
-  `solveLiftPegUpright`), run until the solution returns.
+* Panda and panda_wristcam only (the panda_stick has no fingers: its grasp contacts are
+  recorded as zeros and its finger links as null): 4 motion-planning episodes in
+  `pd_joint_pos` (seeds 1200–1203) with ManiSkill's own solutions (`solvePushCube` /
+  `solvePullCube` / `solveStackCube` / `solveLiftPegUpright` / `solvePegInsertionSide`), run
+  until the solution returns.
 
 Every episode runs in a freshly made env (PhysX CPU keeps contact caches across resets). Each
 snapshot holds what the format lists; floats are the shortest decimals of ManiSkill's float32
-values. `--images` also writes `tests/data/maniskill_images/<pair>/
-smooth_random_walk_pd_joint_pos_1100_035.npz`: the sensor cameras' rgb, depth (mm) and
-segmentation after step 35 of that episode, rendered in `rgb+depth+segmentation`, with the
-state dict that was rendered, and puts the pair's segmentation id map (ManiSkill's
-`segmentation_id_map`, id → actor or link name) into `tests/data/maniskill_images/
-segmentation_ids.json`.
+values; an info entry that is a vector (PegInsertionSide's `peg_head_pos_at_hole`) is a list of
+them. PegInsertionSide-v1 reconfigures (draws a new peg and hole) on every reset. `--images`
+also writes `tests/data/maniskill_images/<pair>/smooth_random_walk_pd_joint_pos_1100_035.npz`:
+the sensor cameras' rgb, depth (mm) and segmentation after step 35 of that episode, rendered
+in `rgb+depth+segmentation`, with the state dict that was rendered, and puts the pair's
+segmentation id map (ManiSkill's `segmentation_id_map`, id → actor or link name) into
+`tests/data/maniskill_images/segmentation_ids.json`.
 """
 
 import argparse
@@ -49,10 +51,12 @@ PAIRS = [
     (e, r)
     for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
-] + [("PushT-v1", "panda_stick")]
+] + [("PushT-v1", "panda_stick"), ("PegInsertionSide-v1", "panda_wristcam")]
 # The env attribute of the actor whose grasp the task checks.
 GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA",
-              "LiftPegUpright-v1": "peg", "PushT-v1": "tee"}
+              "LiftPegUpright-v1": "peg", "PushT-v1": "tee", "PegInsertionSide-v1": "peg"}
+# The robots ManiSkill's motion-planning solutions drive.
+MP_ROBOTS = ("panda", "panda_wristcam")
 DEFAULT_MODE = "pd_joint_delta_pos"
 WALK_MODES = ["pd_joint_pos", "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_joint_vel",
               "pd_joint_target_delta_pos"]
@@ -89,6 +93,9 @@ def nested(d):
 def info_json(info):
     out = {}
     for k, v in info.items():
+        if isinstance(v, torch.Tensor) and v.numel() > 1:  # peg_head_pos_at_hole
+            out[k] = vec(batch0(v))
+            continue
         v = v.item() if isinstance(v, torch.Tensor) else v
         out[k] = v if isinstance(v, (bool, int)) else f32(v)
     return out
@@ -254,12 +261,14 @@ class Recorder(gym.Wrapper):
         return obs, r, term, trunc, info
 
 
-def motion_planning(env_id, seed):
+def motion_planning(env_id, robot, seed):
     from mani_skill.examples.motionplanning.panda.solutions import (
-        solveLiftPegUpright, solvePullCube, solvePushCube, solveStackCube)
+        solveLiftPegUpright, solvePegInsertionSide, solvePullCube, solvePushCube,
+        solveStackCube)
     solve = {"PushCube-v1": solvePushCube, "PullCube-v1": solvePullCube,
-             "StackCube-v1": solveStackCube, "LiftPegUpright-v1": solveLiftPegUpright}[env_id]
-    env, _ = make(env_id, "panda", "pd_joint_pos")
+             "StackCube-v1": solveStackCube, "LiftPegUpright-v1": solveLiftPegUpright,
+             "PegInsertionSide-v1": solvePegInsertionSide}[env_id]
+    env, _ = make(env_id, robot, "pd_joint_pos")
     rec = Recorder(env)
     res = solve(rec, seed=seed)
     ok = not (isinstance(res, int) and res == -1)
@@ -324,14 +333,14 @@ def record(env_id, robot):
             for seed in SEEDS["smooth"]:
                 episodes.append(run_actions(env_id, robot, mode, seed, "smooth_random_walk",
                                             smooth_walk(seed, abs_dims)))
-    if robot == "panda":
+    if robot in MP_ROBOTS:
         for seed in SEEDS["motion_planning"]:
-            episodes.append(motion_planning(env_id, seed))
+            episodes.append(motion_planning(env_id, robot, seed))
     for k, e in enumerate(episodes):
         e["episode_index"] = k
     header.update({
         "control_modes_recorded": list(modes), "control_mode_failures": failures,
-        "motion_planning_note": None if robot == "panda"
+        "motion_planning_note": None if robot in MP_ROBOTS
         else "motion-planning episodes are recorded for the panda only",
         "control_modes": modes, "n_episodes": len(episodes),
         "n_steps": sum(e["n_steps"] for e in episodes), "episodes": episodes,
