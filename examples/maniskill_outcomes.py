@@ -75,6 +75,7 @@ SOLVER_PAIRS = [
     ("PullCube-v1", "fetch", "pd_joint_pos"),
     ("StackCube-v1", "panda", None),
     ("StackCube-v1", "fetch", "pd_joint_pos"),
+    ("StackCube-v1", "panda_wristcam", None),
     ("LiftPegUpright-v1", "panda", None),
     ("PegInsertionSide-v1", "panda_wristcam", None),
 ]

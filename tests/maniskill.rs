@@ -30,7 +30,7 @@ fn files() -> Vec<RefFile> {
             out.push(RefFile::open(&p).unwrap_or_else(|err| panic!("{err}")));
         }
     }
-    assert_eq!(out.len(), 21, "one file per registered pair");
+    assert_eq!(out.len(), 22, "one file per registered pair");
     out
 }
 
@@ -246,7 +246,7 @@ fn obs_rewards_and_flags_on_maniskills_states_equal_maniskills() {
 /// 26–50, then the one-step (re-synchronised every step) joint, TCP and object errors. A
 /// pair passes when every figure is within 30 % of what was measured — tight enough that a
 /// wrong drive gain, limit, armature or law shows (docs/physics.md; docs/agreement.md).
-const MEASURED: [(&str, [f64; 12]); 21] = [
+const MEASURED: [(&str, [f64; 12]); 22] = [
     (
         "PickCube-v1__fetch",
         [
@@ -365,6 +365,15 @@ const MEASURED: [(&str, [f64; 12]); 21] = [
         [
             1.34e-04, 5.34e-04, 1.95e-03, 6.49e-05, 3.38e-04, 5.73e-04, 9.04e-07, 9.75e-07,
             8.04e-06, 3.58e-04, 1.28e-04, 3.96e-05,
+        ],
+    ),
+    // StackCube with the panda_wristcam (2026-11-30): the Panda's figures but for the held
+    // cube's (twice its one-step joint error).
+    (
+        "StackCube-v1__panda_wristcam",
+        [
+            1.35e-04, 5.64e-04, 2.87e-03, 6.36e-05, 3.61e-04, 7.17e-04, 9.04e-07, 9.75e-07,
+            3.67e-04, 7.17e-04, 1.90e-04, 2.16e-04,
         ],
     ),
     // LiftPegUpright: 2026-11-29, from record_push_pull.py's files.
@@ -535,7 +544,7 @@ fn motion_planning_episodes_succeed_where_maniskills_did() {
 /// drive targets of the action that led to it, states (of all) whose grasp flag differs,
 /// the largest dense-reward difference over all states). With a plain `set_state_dict`
 /// (no drive targets) mjskill's flag was false on every one of the held states.
-const HELD: [(&str, usize, usize, usize, f64); 21] = [
+const HELD: [(&str, usize, usize, usize, f64); 22] = [
     ("PickCube-v1__fetch", 0, 0, 0, 1.75e-6),
     ("PickCube-v1__panda", 130, 130, 0, 2.01e-6),
     ("PickCube-v1__so100", 0, 0, 0, 6.44e-7),
@@ -556,6 +565,7 @@ const HELD: [(&str, usize, usize, usize, f64); 21] = [
     // StackCube: 2026-11-29, grasp flag `is_cubeA_grasped` (the Fetch's files hold no grasp).
     ("StackCube-v1__fetch", 0, 0, 0, 2.88e-6),
     ("StackCube-v1__panda", 224, 224, 0, 3.53e-6),
+    ("StackCube-v1__panda_wristcam", 189, 189, 0, 4.75e-6),
     // LiftPegUpright: 2026-11-29. No grasp flag in `info`, but the reward checks the grasp:
     // with the drive targets restored it agrees on every state.
     ("LiftPegUpright-v1__fetch", 0, 0, 0, 3.36e-7),

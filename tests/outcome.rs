@@ -379,6 +379,22 @@ const EXPECTED: &[Expected] = &[
             ("success", 492),
         ],
     },
+    // StackCube with the panda_wristcam (2026-11-30): the Panda's solver, 50 of 50 end the same.
+    Expected {
+        file: "solver__StackCube-v1__panda_wristcam",
+        episodes: 10,
+        maniskill_successes: 10,
+        mjskill_successes: 10,
+        same_outcome: 10,
+        steps: 500,
+        steps_all_flags_agree: 470,
+        flags: &[
+            ("is_cubeA_grasped", 498),
+            ("is_cubeA_on_cubeB", 500),
+            ("is_cubeA_static", 470),
+            ("success", 494),
+        ],
+    },
     // LiftPegUpright (2026-11-29): the Panda's loosely held peg swings upright in mjskill's grip
     // but stays tilted in PhysX's on the same actions (8 of 50 end the same; docs/solvers.md).
     Expected {

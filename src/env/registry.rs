@@ -205,7 +205,7 @@ static REGISTRY: [EnvSpec; 11] = [
     },
     EnvSpec {
         id: EnvId::StackCube,
-        robots: &[RobotId::Panda, RobotId::Fetch],
+        robots: &[RobotId::Panda, RobotId::Fetch, RobotId::PandaWristCam],
         max_episode_steps: MAX_EPISODE_STEPS,
         make_task: stack_cube,
     },

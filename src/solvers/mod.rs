@@ -209,7 +209,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 19] = [
+pub const SOLVED: [(&str, &str); 20] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -227,6 +227,7 @@ pub const SOLVED: [(&str, &str); 19] = [
     ("PullCube-v1", "fetch"),
     ("StackCube-v1", "panda"),
     ("StackCube-v1", "fetch"),
+    ("StackCube-v1", "panda_wristcam"),
     ("LiftPegUpright-v1", "panda"),
     ("PegInsertionSide-v1", "panda_wristcam"),
 ];
@@ -281,7 +282,9 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PushCube-v1" | "PullCube-v1", "panda") => boxed(push_cube::PandaSlide::new(env)),
         ("PushCube-v1", "fetch") => boxed(push_cube::FetchPush::new(env)),
         ("PullCube-v1", "fetch") => boxed(push_cube::FetchPull::new(env)),
-        ("StackCube-v1", "panda") => boxed(stack_cube::PandaStackCube::new(env, PANDA_GRIPPER)),
+        ("StackCube-v1", "panda" | "panda_wristcam") => {
+            boxed(stack_cube::PandaStackCube::new(env, PANDA_GRIPPER))
+        }
         ("StackCube-v1", "fetch") => boxed(stack_cube::FetchStackCube::new(env)),
         ("LiftPegUpright-v1", "panda") => {
             boxed(lift_peg_upright::PandaLiftPeg::new(env, PANDA_GRIPPER))

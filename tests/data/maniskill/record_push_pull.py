@@ -51,7 +51,11 @@ PAIRS = [
     (e, r)
     for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
-] + [("PushT-v1", "panda_stick"), ("PegInsertionSide-v1", "panda_wristcam")]
+] + [
+    ("StackCube-v1", "panda_wristcam"),
+    ("PushT-v1", "panda_stick"),
+    ("PegInsertionSide-v1", "panda_wristcam"),
+]
 # The env attribute of the actor whose grasp the task checks.
 GRASP_ATTR = {"PushCube-v1": "obj", "PullCube-v1": "obj", "StackCube-v1": "cubeA",
               "LiftPegUpright-v1": "peg", "PushT-v1": "tee", "PegInsertionSide-v1": "peg"}

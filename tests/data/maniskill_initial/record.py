@@ -4,9 +4,9 @@ LiftPegUpright-v1 (panda, fetch), PushT-v1 (panda_stick) and PegInsertionSide-v1
 `tests/push_pull_cube.rs`, `tests/stack_cube.rs`, `tests/lift_peg_upright.rs`,
 `tests/push_t.rs` and the PegInsertionSide tests.
 
-    MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py [ENV_ID ...]
+    MS_ASSET_DIR=/tmp/ms_assets /tmp/ms/bin/python tests/data/maniskill_initial/record.py [ENV_ID|ENV_ID:ROBOT ...]
 
-With env ids, only their pairs are recorded (the others' files are left as they are).
+With env ids or pairs, only those pairs are recorded (the others' files are left as they are).
 
 Per pair, one env made as the reference trajectories were (`obs_mode="state"`,
 `sim_backend="physx_cpu"`, `render_backend="none"` (PushT-v1: the default, as its goal is a
@@ -49,7 +49,11 @@ PAIRS = [
     (e, r)
     for e in ("PushCube-v1", "PullCube-v1", "StackCube-v1", "LiftPegUpright-v1")
     for r in ("panda", "fetch")
-] + [("PushT-v1", "panda_stick"), ("PegInsertionSide-v1", "panda_wristcam")]
+] + [
+    ("StackCube-v1", "panda_wristcam"),
+    ("PushT-v1", "panda_stick"),
+    ("PegInsertionSide-v1", "panda_wristcam"),
+]
 # Poses of the pseudo-render check (PushT-v1).
 RENDER_POSES, RENDER_ANYWHERE = 400, 20
 SEEDS = {"fit": list(range(0, 50)), "held_out": list(range(1000, 1050))}
@@ -220,9 +224,10 @@ def unseeded(env):
 
 if __name__ == "__main__":
     only = set(sys.argv[1:])
-    unknown = only - {e for e, _ in PAIRS}
+    valid = {e for e, _ in PAIRS} | {f"{e}:{r}" for e, r in PAIRS}
+    unknown = only - valid
     if unknown:
-        sys.exit(f"unknown env ids {sorted(unknown)}; valid: {sorted({e for e, _ in PAIRS})}")
+        sys.exit(f"unknown env ids or pairs {sorted(unknown)}; valid: {sorted(valid)}")
     for env_id, robot in PAIRS:
-        if not only or env_id in only:
+        if not only or env_id in only or f"{env_id}:{robot}" in only:
             record(env_id, robot)
