@@ -289,3 +289,33 @@ fn the_solver_inserts_the_peg_and_earns_every_reward_stage() {
     assert!(successes >= 19, "{successes} of 20");
     assert!(lined_up >= successes, "{lined_up} lined up");
 }
+
+#[test]
+fn the_solver_runs_in_pd_joint_pos_through_a_shadow_env_with_the_same_shapes() {
+    use mjskill::solvers::make_policy;
+    let mut own = common::env_in(ID, ROBOT, "pd_ee_delta_pose");
+    let mut joint = common::env_in(ID, ROBOT, "pd_joint_pos");
+    // A shadow env follows the episode's shapes, not those of its own last reset.
+    own.reset(Some(3));
+    joint.reset(Some(4));
+    joint.sync_from(&own).unwrap();
+    assert_eq!(joint.get_state().geometry, own.get_state().geometry);
+    let peg = own.model().require_geom("peg").unwrap().index();
+    let size = |e: &Env| e.model().geom_size()[3 * peg..3 * peg + 3].to_vec();
+    assert_eq!(size(&joint), size(&own));
+    // The solver converted to pd_joint_pos (a shadow env in its own mode) inserts the peg in
+    // the episodes it inserts it in its own mode (seeds 0-4: all five).
+    for seed in 0..5 {
+        let run = |e: &mut Env| {
+            e.reset(Some(seed));
+            let mut solver = make_policy("solver", e, 0).unwrap();
+            solver.reset(e);
+            let mut action = vec![0.0f32; e.action_space().shape[0]];
+            (0..100).any(|_| {
+                solver.act(e, &mut action);
+                e.step(&action).unwrap().terminated
+            })
+        };
+        assert!(run(&mut own) && run(&mut joint), "seed {seed}");
+    }
+}

@@ -7,8 +7,8 @@ use super::{Env, EnvError};
 
 impl Env {
     /// Makes this env a copy of `other`, the same env and robot in any control mode: the
-    /// physics, the drives (targets and force law state), the step count, the finger forces,
-    /// the seeds and both random streams. The targets this env's controller accumulates
+    /// episode's shapes (PegInsertionSide-v1's), the physics, the drives (targets and force
+    /// law state), the step count, the finger forces, the seeds and the random streams. The targets this env's controller accumulates
     /// restart from the measured positions (as after a reset), so its next action acts from
     /// `other`'s state.
     pub fn sync_from(&mut self, other: &Env) -> Result<(), EnvError> {
@@ -20,6 +20,14 @@ impl Env {
                 self.id,
                 self.sim.spec.uid()
             )));
+        }
+        // The episode's shapes first (PegInsertionSide-v1): writing them resets the data.
+        if other.sim.task.reconfigures() {
+            let shapes = other.sim.task.geometry();
+            if shapes != self.sim.task.geometry() {
+                self.sim.task.set_geometry(&shapes);
+                self.apply_geometry();
+            }
         }
         let mut physics = Vec::with_capacity(other.sim.data.state_len());
         other.sim.data.get_state(&mut physics);
@@ -38,6 +46,7 @@ impl Env {
         self.numpy = other.numpy.clone();
         self.torch_global = other.torch_global.clone();
         (self.main_seed, self.episode_seed) = (other.main_seed, other.episode_seed);
+        self.main_numpy = other.main_numpy.clone();
         self.update_outputs();
         Ok(())
     }
