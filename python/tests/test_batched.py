@@ -57,6 +57,22 @@ def test_gym_make_num_envs_returns_the_batched_env():
     assert one.spec.max_episode_steps == 50
 
 
+def test_a_vector_info_value_is_one_array_per_env_as_maniskills():
+    env = gym.make("mjskill/PegInsertionSide-v1", num_envs=3, array_backend="numpy")
+    _, info = env.reset(seed=0)
+    assert info["reconfigure"] is True and info["success"].shape == (3,)
+    a = env.action_space.sample()
+    _, _, _, _, info = env.step(a)
+    head = info["peg_head_pos_at_hole"]
+    assert head.shape == (3, 3) and (head[:, 0] < -0.1).all()
+    assert not any(k.startswith("peg_head_pos_at_hole[") for k in info)
+    # Env i is the single env seeded 0 + i: row i is its vector.
+    one = gym.make("mjskill/PegInsertionSide-v1")
+    one.reset(seed=2)
+    _, _, _, _, single = one.step(a[2])
+    np.testing.assert_array_equal(head[2], single["peg_head_pos_at_hole"])
+
+
 def test_gymnasium_time_limit_never_ends_all_envs_with_a_scalar():
     env = make(2)
     env.reset(seed=0)
