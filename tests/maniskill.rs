@@ -367,8 +367,9 @@ const MEASURED: [(&str, [f64; 12]); 22] = [
             8.04e-06, 3.58e-04, 1.28e-04, 3.96e-05,
         ],
     ),
-    // StackCube with the panda_wristcam (2026-11-30): the Panda's figures but for the held
-    // cube's (twice its one-step joint error).
+    // StackCube with the panda_wristcam (2026-11-30): the Panda's figures, episode for
+    // episode, but for one motion-planning episode (seed 1202: one-step joint error 4.6e-3,
+    // the Panda's 2.7e-4), which doubles the mean.
     (
         "StackCube-v1__panda_wristcam",
         [
