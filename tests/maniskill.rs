@@ -12,6 +12,7 @@
 use std::path::PathBuf;
 
 use mjskill::maniskill::fidelity::{env_for, replay_file, FidelityOptions, StepError};
+use mjskill::maniskill::merged_actor_name;
 use mjskill::maniskill::reference::{RefFile, Snapshot};
 use mjskill::{Env, SimConfig};
 
@@ -87,11 +88,9 @@ fn check_state_quantities(
         if name == "ground" {
             continue;
         }
-        // A task that builds its actors per env (PegInsertionSide-v1) names them `peg_0` in
-        // its scene and `peg` (merged) in its state dict, as mjskill does.
+        let name = merged_actor_name(name, |n| env.actor_pose(n).is_some());
         let got = env
             .actor_pose(name)
-            .or_else(|| env.actor_pose(name.strip_suffix("_0")?))
             .unwrap_or_else(|| panic!("{ctx}: no actor {name}"));
         assert!(
             max_abs(&got[..3], &pose[..3]) < 2e-6,

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use mjskill::maniskill::images::{list_states, Comparer, RefImageState, Summary};
+use mjskill::maniskill::merged_actor_name;
 use mjskill::mujoco::ObjType;
 use mjskill::{make, registry, Env, EnvConfig, ObsMode, VecEnv};
 
@@ -44,12 +45,9 @@ fn segmentation_ids_equal_maniskills_id_map_for_every_pair() {
             .unwrap_or_else(|| panic!("no ManiSkill id map for {id}/{robot}"))
             .as_object()
             .unwrap();
-        // A task that builds its actors per env (PegInsertionSide-v1) names them `peg_0` in
-        // its scene and `peg` in its state dict, mjskill's name.
-        let merged = |n: &str| match (e.actor_pose(n), n.strip_suffix("_0")) {
-            (None, Some(m)) if e.actor_pose(m).is_some() => m.to_string(),
-            _ => n.to_string(),
-        };
+        // ManiSkill's scene names, as mjskill names the actors.
+        let known = |n: &str| e.actor_pose(n).is_some();
+        let merged = |n: &str| merged_actor_name(n, known).to_string();
         let mut want: Vec<(i16, String)> = want
             .iter()
             .map(|(k, v)| (k.parse().unwrap(), merged(v.as_str().unwrap())))

@@ -22,13 +22,7 @@ impl Env {
             )));
         }
         // The episode's shapes first (PegInsertionSide-v1): writing them resets the data.
-        if other.sim.task.reconfigures() {
-            let shapes = other.sim.task.geometry();
-            if shapes != self.sim.task.geometry() {
-                self.sim.task.set_geometry(&shapes);
-                self.apply_geometry();
-            }
-        }
+        self.adopt_geometry(&other.sim.task.geometry());
         let mut physics = Vec::with_capacity(other.sim.data.state_len());
         other.sim.data.get_state(&mut physics);
         self.sim

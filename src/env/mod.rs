@@ -658,10 +658,7 @@ impl Env {
     /// is left unchanged.
     pub fn set_state(&mut self, s: &EnvState) -> Result<(), EnvError> {
         self.check_state(s)?;
-        if !s.geometry.is_empty() && s.geometry != self.sim.task.geometry() {
-            self.sim.task.set_geometry(&s.geometry);
-            self.apply_geometry();
-        }
+        self.adopt_geometry(&s.geometry);
         self.sim
             .data
             .set_state(&s.physics)
@@ -727,6 +724,16 @@ impl Env {
             )));
         }
         Ok(())
+    }
+
+    /// Takes the shapes of a state or of another env of the same task (none: a task whose
+    /// shapes never change, or a state saved before they were part of it) and writes them
+    /// into the model when they differ from the episode's.
+    pub(super) fn adopt_geometry(&mut self, shapes: &[f64]) {
+        if !shapes.is_empty() && shapes != self.sim.task.geometry() {
+            self.sim.task.set_geometry(shapes);
+            self.apply_geometry();
+        }
     }
 
     /// Writes the task's current shapes into the physics model (in place: `mj_setConst`

@@ -276,11 +276,10 @@ pub fn measure(
     let keys: Vec<String> = out.flags.keys().cloned().collect();
     let objects = env.dynamic_actor_names();
     for ep in episodes {
-        // A task that builds its actors per env (PegInsertionSide-v1) names them `peg_0` in
-        // ManiSkill's scene; its state dict, and mjskill, `peg`.
+        // ManiSkill's scene names of the objects, as mjskill names them.
         let merged = ep.final_objects.iter().map(|(name, p)| {
-            let short = name.strip_suffix("_0").filter(|m| objects.contains(m));
-            (short.map_or_else(|| name.clone(), str::to_string), *p)
+            let known = |n: &str| objects.contains(&n);
+            (super::merged_actor_name(name, known).to_string(), *p)
         });
         let ep = &OutcomeEpisode {
             final_objects: merged.collect(),

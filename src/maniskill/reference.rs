@@ -218,8 +218,7 @@ impl RefFile {
     }
 
     /// Names of the dynamic actors (the objects whose errors fidelity reports), as the state
-    /// dicts name them: a task that builds its actors per env (PegInsertionSide-v1) names
-    /// them `peg_0` in its scene and `peg` (merged) in its state dict.
+    /// dicts name them ([`super::merged_actor_name`]).
     pub fn dynamic_actors(&self) -> Vec<&str> {
         let in_state_dict = |n: &str| {
             self.episodes
@@ -229,10 +228,7 @@ impl RefFile {
         self.actor_body_types
             .iter()
             .filter(|(_, t)| t.as_str() == "dynamic")
-            .map(|(n, _)| match n.strip_suffix("_0") {
-                Some(merged) if !in_state_dict(n) && in_state_dict(merged) => merged,
-                _ => n.as_str(),
-            })
+            .map(|(n, _)| super::merged_actor_name(n, in_state_dict))
             .collect()
     }
 }

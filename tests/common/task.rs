@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use mjskill::maniskill::merged_actor_name;
 use mjskill::{make, Env, EnvConfig, ObsMode, RewardMode};
 use serde::Deserialize;
 
@@ -72,14 +73,13 @@ pub fn check_layout(e: &Env, layout: &[(String, usize, usize)], what: &str) {
     assert_eq!(got, want, "{what}: layout");
 }
 
-/// The env's actors are at ManiSkill's recorded poses (within 2e-6). A task that builds its
-/// actors per env (PegInsertionSide-v1) names them `peg_0` in ManiSkill's scene; its state
-/// dict, and mjskill, `peg`.
+/// The env's actors are at ManiSkill's recorded poses (within 2e-6), under their merged names
+/// (`mjskill::maniskill::merged_actor_name`).
 pub fn check_actor_poses(e: &Env, actors: &BTreeMap<String, [f64; 7]>, ctx: &str) {
     for (name, pose) in actors {
+        let name = merged_actor_name(name, |n| e.actor_pose(n).is_some());
         let got = e
             .actor_pose(name)
-            .or_else(|| e.actor_pose(name.strip_suffix("_0")?))
             .unwrap_or_else(|| panic!("{ctx}: {name}"));
         assert!(
             max_abs(got, pose) < 2e-6,
