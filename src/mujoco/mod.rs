@@ -10,6 +10,7 @@
 //! printed; they are counted in `mjData.warning` and surfaced through [`Data::warnings`].
 #![allow(unsafe_code)]
 
+pub mod filter;
 pub(crate) mod limits;
 pub mod render;
 pub mod timer;
@@ -79,7 +80,8 @@ pub fn version_string() -> String {
         .into_owned()
 }
 
-/// Checks that the loaded library is MuJoCo 2.2.x and installs the error and warning handlers.
+/// Checks that the loaded library is MuJoCo 2.2.x and installs the error and warning handlers
+/// and the contact filter ([`filter`]).
 /// Idempotent and thread-safe; every constructor in this module calls it.
 pub fn init() -> Result<()> {
     INIT.get_or_init(|| {
@@ -93,6 +95,7 @@ pub fn init() -> Result<()> {
             sys::mju_user_error = Some(error_handler);
             sys::mju_user_warning = Some(warning_handler);
         }
+        filter::install();
         Ok(())
     })
     .clone()
