@@ -5,11 +5,11 @@
 //! the whole robot, so every robot geom met the table in the narrow phase (`mjc_BoxBox`, or
 //! libccd's MPR for a cylinder) at every substep: about 2 µs of a Panda substep's 20, for no
 //! contact. MuJoCo lets a process replace its contact filter (`mjcb_contactfilter`, called for
-//! every geom pair the broad phase passes, before the bounding-sphere test). [`contact_filter`]
-//! is MuJoCo 2.2.2's own filter (`mj_contactFilter`: contype/conaffinity, same weld body,
-//! parent filter) followed by a slab test: a pair is also skipped when the other geom's
-//! bounding sphere lies beyond one of a box's three face slabs by more than the contact margin
-//! plus [`SLACK`].
+//! every geom pair the broad phase passes, before the bounding-sphere test). The filter
+//! installed here is MuJoCo 2.2.2's own filter (`mj_contactFilter`: contype/conaffinity, same
+//! weld body, parent filter) followed by a slab test: a pair is also skipped when the other
+//! geom's bounding sphere lies beyond one of a box's three face slabs by more than the contact
+//! margin plus [`SLACK`].
 //!
 //! **It changes no contact.** A box's face normals are separating axes that `mjc_BoxBox` tests
 //! first, returning no contact when the other box's extent along one of them (at most its
