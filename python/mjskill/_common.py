@@ -131,6 +131,25 @@ def _nest(flat: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _merge_components(info: dict[str, Any]) -> dict[str, Any]:
+    """One array per vector info value of a batch of envs.
+
+    The native vector envs give a vector value one key per component, ``name[0]``,
+    ``name[1]``, ... (PegInsertionSide-v1's ``peg_head_pos_at_hole``), each an array over the
+    envs. They become one ``name`` array of shape ``[N, k]``, as ManiSkill's, and their gymnasium
+    masks ``_name[i]`` the one mask ``_name`` (an env is set where every component is). In
+    place; returns ``info``.
+    """
+    parts: dict[str, list[tuple[int, Any]]] = {}
+    for key in [k for k in info if k.endswith("]") and "[" in k]:
+        name, index = key[:-1].rsplit("[", 1)
+        parts.setdefault(name, []).append((int(index), info.pop(key)))
+    for name, values in parts.items():
+        stacked = np.stack([v for _, v in sorted(values, key=lambda p: p[0])], axis=-1)
+        info[name] = np.logical_and.reduce(stacked, axis=-1) if name.startswith("_") else stacked
+    return info
+
+
 def _to_space(tree: Any) -> spaces.Space:
     if isinstance(tree, dict):
         return spaces.Dict({k: _to_space(v) for k, v in tree.items()})

@@ -46,6 +46,7 @@ from ._common import (
     _check_render_mode,
     _check_seed,
     _describe,
+    _merge_components,
     _tensor_to_numpy,
     check_reconfiguration_freq,
     check_sim_backend,
@@ -206,14 +207,8 @@ class MjskillBatchedEnv(gym.Env):
     def _info(self, native_info: dict) -> dict:
         # ManiSkill's info has no gymnasium "_key" masks; MuJoCo warnings keep theirs.
         info = {k: v for k, v in native_info.items() if not k.startswith("_") or k == "_warnings"}
-        # A vector value comes one component a key, `name[0]`, `name[1]`, ... (PegInsertionSide's
-        # `peg_head_pos_at_hole`): one [N, k] array, as ManiSkill's.
-        parts: dict[str, list[tuple[int, Any]]] = {}
-        for key in [k for k in info if k.endswith("]") and "[" in k]:
-            name, index = key[:-1].rsplit("[", 1)
-            parts.setdefault(name, []).append((int(index), info.pop(key)))
-        for name, values in parts.items():
-            info[name] = np.stack([v for _, v in sorted(values, key=lambda p: p[0])], axis=-1)
+        # A vector value (PegInsertionSide's `peg_head_pos_at_hole`): one [N, k] array.
+        _merge_components(info)
         info["elapsed_steps"] = self._elapsed.astype(np.int32)
         return self._out(info)
 

@@ -28,6 +28,7 @@ from ._common import (
     _check_render_mode,
     _check_seed,
     _describe,
+    _merge_components,
     env_kwargs,
     live,
 )
@@ -291,13 +292,19 @@ class MjskillVectorEnv(VectorEnv):
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
         obs, info = native.reset(seed)
-        return self._layout.batch(obs, native), info
+        return self._layout.batch(obs, native), _merge_components(info)
 
     def step(self, actions):
         native = self._live()
         a = _as_actions(actions, 2)
         obs, rewards, terminated, truncated, info = native.step(a)
-        return self._layout.batch(obs, native), rewards, terminated, truncated, info
+        return (
+            self._layout.batch(obs, native),
+            rewards,
+            terminated,
+            truncated,
+            _merge_components(info),
+        )
 
     @property
     def autoreset(self) -> np.ndarray:

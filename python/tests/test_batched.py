@@ -276,3 +276,18 @@ def test_close_twice_is_harmless_and_use_after_close_raises():
         base.step(np.zeros(base.action_space.shape, np.float32))
     with pytest.raises(RuntimeError, match="renders no human-camera frames"):
         base.render()
+
+
+def test_the_gymnasium_vector_env_gives_a_vector_info_value_as_one_array():
+    env = mjskill.MjskillVectorEnv("PegInsertionSide-v1", num_envs=3)
+    _, info = env.reset(seed=0)
+    assert info["peg_head_pos_at_hole"].shape == (3, 3)
+    assert info["_peg_head_pos_at_hole"].shape == (3,) and info["_peg_head_pos_at_hole"].all()
+    a = env.action_space.sample()
+    _, _, _, _, info = env.step(a)
+    assert not any(k.startswith(("peg_head_pos_at_hole[", "_peg_head_pos_at_hole[")) for k in info)
+    # Env i is the single env seeded 0 + i: row i is its vector.
+    one = gym.make("mjskill/PegInsertionSide-v1")
+    one.reset(seed=1)
+    _, _, _, _, single = one.step(a[1])
+    np.testing.assert_array_equal(info["peg_head_pos_at_hole"][1], single["peg_head_pos_at_hole"])
