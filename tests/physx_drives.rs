@@ -180,3 +180,42 @@ fn a_saved_held_state_restores_the_reported_velocities() {
         "{e}"
     );
 }
+
+/// PhysX's default `maxJointVelocity` (rad/s; `controllers::drive::MAX_JOINT_VELOCITY`).
+const PHYSX_MAX_JOINT_VELOCITY: f64 = 100.0;
+
+/// PhysX caps an articulation joint's speed (`maxJointVelocity`, 100 rad/s by default): the
+/// Fetch's upper-arm roll (a continuous joint) set spinning at 1000 rad/s keeps that speed for
+/// the next substep only (the cap applies after each), then turns at most 100 rad/s: about
+/// 14 rad in the step instead of about 50, and ends it under the cap. Normal motion is untouched
+/// (the free-motion cases above).
+#[test]
+fn a_joint_spinning_past_physx_speed_limit_is_capped() {
+    let mut e = make("PickCube-v1", "fetch", "pd_joint_delta_pos");
+    e.reset(Some(0));
+    let model = e.model().clone();
+    let j = model
+        .require_id(mjskill::mujoco::ObjType::Joint, "upperarm_roll_joint")
+        .unwrap();
+    let (qadr, dadr) = (
+        model.jnt_qposadr()[j] as usize,
+        model.jnt_dofadr()[j] as usize,
+    );
+    let mut s = e.get_state();
+    // physics = [time, qpos (nq), qvel (nv), ...].
+    s.physics[1 + model.nq() + dadr] = 1000.0;
+    e.set_state(&s).unwrap();
+    let q0 = e.data().qpos()[qadr];
+    let zero = vec![0.0f32; e.action_space().shape[0]];
+    e.step(&zero).unwrap();
+    let (turn, v) = (e.data().qpos()[qadr] - q0, e.data().qvel()[dadr]);
+    assert!(
+        v.abs() <= PHYSX_MAX_JOINT_VELOCITY,
+        "the joint spins at {v} rad/s after a step"
+    );
+    // Uncapped it would turn about 50 rad in the step (1000 rad/s, slowed by its drive).
+    assert!(
+        turn.abs() <= 1000.0 * 0.01 + PHYSX_MAX_JOINT_VELOCITY * 0.04 + 1e-6,
+        "the joint turned {turn} rad in a 0.05 s step"
+    );
+}

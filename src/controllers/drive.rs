@@ -68,6 +68,13 @@ use crate::mujoco::{Data, Model, ObjType};
 /// Implicit micro-steps of the drive dynamics per physics substep: ManiSkill's
 /// `solver_position_iterations` (15), PhysX TGS's sub-steps of its 10 ms step.
 pub const MICRO_STEPS: usize = 15;
+/// PhysX's default speed limit of an articulation joint (`PxArticulationJointReducedCoordinate::
+/// setMaxJointVelocity`, 100 rad/s or m/s), which SAPIEN and ManiSkill keep: a driven joint's
+/// velocity is clamped to it after every substep. Normal motion stays far below it (a free
+/// Panda swing under saturated drives reaches a few rad/s); it bounds the runaway of an arm
+/// that the IK has thrown onto another branch, which MuJoCo's explicit step would otherwise
+/// let diverge.
+pub const MAX_JOINT_VELOCITY: f64 = 100.0;
 /// Substeps in a row a gripper must be sunk deeper than its release depth into an object before
 /// it lets go (one control step at ManiSkill's 100 Hz physics and 20 Hz control).
 pub const RELEASE_SUBSTEPS: u32 = 5;
@@ -742,6 +749,8 @@ impl Drives {
         let v = data.qvel_mut();
         for (d, c) in self.dofs.iter().zip(&self.correction) {
             v[d.dof] -= c / h;
+            // PhysX's per-axis speed limit of articulation joints (`maxJointVelocity`).
+            v[d.dof] = v[d.dof].clamp(-MAX_JOINT_VELOCITY, MAX_JOINT_VELOCITY);
         }
     }
 
