@@ -78,6 +78,7 @@ SOLVER_PAIRS = [
     ("StackCube-v1", "panda_wristcam", None),
     ("LiftPegUpright-v1", "panda", None),
     ("PegInsertionSide-v1", "panda_wristcam", None),
+    ("PushT-v1", "panda_stick", "pd_joint_pos"),
 ]
 
 # (env id, robot, ManiSkill's motion-planning module) of every motion-planning solution
@@ -96,7 +97,7 @@ DEMO_PAIRS = [
 FIXED_ROBOT = {"PickCubeSO100-v1", "PickCubeWidowXAI-v1"}
 
 # Arm joints at the front of each robot's pd_joint_pos action (the rest is gripper), for --perturb.
-ARM_JOINTS = {"panda": 7, "xarm6_robotiq": 6, "so100": 5, "widowxai": 6}
+ARM_JOINTS = {"panda": 7, "panda_stick": 7, "xarm6_robotiq": 6, "so100": 5, "widowxai": 6}
 
 
 def f32_text(x):
@@ -156,9 +157,11 @@ def replay(env_id, robot, mode, seed, actions, reuse=False, target_noise=None):
         control_mode=mode,
         num_envs=1,
         sim_backend="physx_cpu",
-        render_backend="none",
         reward_mode="dense",
     )
+    # PushT-v1's table scene whitens the table's render shapes, which need a renderer.
+    if env_id != "PushT-v1":
+        kw["render_backend"] = "none"
     if env_id not in FIXED_ROBOT:
         kw["robot_uids"] = robot
     key = (env_id, robot, mode)

@@ -26,6 +26,7 @@ pub(crate) mod pick_cube;
 pub(crate) mod place_sphere;
 pub(crate) mod poke_cube;
 pub(crate) mod push_cube;
+pub(crate) mod push_t;
 pub(crate) mod stack_cube;
 pub(crate) mod xarm6;
 
@@ -158,7 +159,9 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
         // (solvers/stack_cube.rs) and to stand the peg up (solvers/lift_peg_upright.rs).
         RobotId::Fetch | RobotId::Xarm6Robotiq => "pd_ee_delta_pose",
         RobotId::Panda if env_id == STACK_CUBE || env_id == LIFT_PEG_UPRIGHT => "pd_ee_delta_pose",
-        RobotId::Panda | RobotId::PandaStick => "pd_ee_delta_pos",
+        RobotId::Panda => "pd_ee_delta_pos",
+        // The pusher sets the stick's tip where it wants it (solvers/push_t.rs).
+        RobotId::PandaStick => "pd_ee_pose",
         // The peg is turned to the hole's axis (solvers/peg_insertion_side.rs).
         RobotId::PandaWristCam => "pd_ee_delta_pose",
     })
@@ -209,7 +212,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 20] = [
+pub const SOLVED: [(&str, &str); 21] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -230,6 +233,7 @@ pub const SOLVED: [(&str, &str); 20] = [
     ("StackCube-v1", "panda_wristcam"),
     ("LiftPegUpright-v1", "panda"),
     ("PegInsertionSide-v1", "panda_wristcam"),
+    ("PushT-v1", "panda_stick"),
 ];
 
 /// The envs whose Panda solver turns the gripper (`pd_ee_delta_pose`).
@@ -239,8 +243,7 @@ const LIFT_PEG_UPRIGHT: &str = "LiftPegUpright-v1";
 /// The registered (env id, robot) pairs that have no scripted solver yet (issue 56):
 /// `--policy solver` answers them with [`SolverError::NoSolver`], and the tests that replay a
 /// solver episode per pair skip them. Together with [`SOLVED`], every registered pair.
-pub const UNSOLVED: [(&str, &str); 2] =
-    [("LiftPegUpright-v1", "fetch"), ("PushT-v1", "panda_stick")];
+pub const UNSOLVED: [(&str, &str); 1] = [("LiftPegUpright-v1", "fetch")];
 
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(
@@ -292,6 +295,7 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("PegInsertionSide-v1", "panda_wristcam") => {
             boxed(peg_insertion_side::PegInsertionSideSolver::new(env))
         }
+        ("PushT-v1", "panda_stick") => boxed(push_t::PushTSolver::new(env)),
         (env, robot) => Err(SolverError::NoSolver {
             env,
             robot,
