@@ -431,8 +431,8 @@ const EXPECTED: &[Expected] = &[
         mjskill_successes: 5,
         same_outcome: 5,
         steps: 1000,
-        steps_all_flags_agree: 888,
-        flags: &[("success", 888)],
+        steps_all_flags_agree: 882,
+        flags: &[("success", 882)],
     },
 ];
 
