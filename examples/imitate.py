@@ -331,8 +331,10 @@ def main(argv=None):
     gid = f"mjskill/{args.env_id}"
     kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state")
 
+    # Each evaluation episode is its seed's, PegInsertionSide-v1's shapes included.
     def make_eval_envs():
-        return gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=num_threads, **kw)
+        return gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=num_threads,
+                            reconfiguration_freq=1, **kw)
 
     probe_env = gym.make(gid, **kw)
     try:

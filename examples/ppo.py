@@ -558,9 +558,11 @@ def main(argv=None):
         gid = f"mjskill/{args.env_id}"
         kw = dict(robot_uids=args.robot, control_mode=args.control_mode, obs_mode="state",
                   reward_mode=args.reward_mode)
+        # As ManiSkill's ppo.py (eval_reconfiguration_freq=1): each evaluation episode is its
+        # seed's, PegInsertionSide-v1's shapes included.
         def make_eval_envs():
-            return gym.make_vec(gid, num_envs=args.num_eval_envs,
-                                num_threads=args.num_threads, **kw)
+            return gym.make_vec(gid, num_envs=args.num_eval_envs, num_threads=args.num_threads,
+                                reconfiguration_freq=1, **kw)
 
         eval_envs = make_eval_envs()
         if demos is not None:

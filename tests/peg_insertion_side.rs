@@ -12,7 +12,7 @@ use common::task::{
     check_actor_poses, check_layout, check_links, env as task_env, extra_keys, max_abs, part, Link,
     OBS_TOL,
 };
-use mjskill::{Env, ObsMode};
+use mjskill::{make, Env, EnvConfig, ObsMode, RewardMode, VecEnv};
 use serde::Deserialize;
 
 const ID: &str = "PegInsertionSide-v1";
@@ -318,4 +318,118 @@ fn the_solver_runs_in_pd_joint_pos_through_a_shadow_env_with_the_same_shapes() {
         };
         assert!(run(&mut own) && run(&mut joint), "seed {seed}");
     }
+}
+
+/// The episode's shapes as the `state` observation holds them: the peg's half sizes and the
+/// hole's radius.
+fn shapes(e: &Env) -> Vec<f64> {
+    [
+        part(e, "extra/peg_half_size"),
+        part(e, "extra/box_hole_radius"),
+    ]
+    .concat()
+}
+
+/// The `state` observation of a fresh single env after a reset with `seed` (shapes drawn from
+/// it).
+fn single_obs(seed: u64) -> Vec<f32> {
+    let mut e = env(ObsMode::State);
+    e.reset(Some(seed));
+    e.obs().to_vec()
+}
+
+fn config(reconfiguration_freq: Option<u32>) -> EnvConfig {
+    EnvConfig {
+        robot: Some(ROBOT.into()),
+        reward_mode: RewardMode::Dense,
+        reconfiguration_freq,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn reconfiguration_freq_decides_at_which_resets_the_shapes_are_drawn_again() {
+    // ManiSkill's single-env default (1) draws them at every reset (the tests above); 0 keeps
+    // the construction's (seed 2022) until a reset asks for a redraw.
+    let mut fixed = make(ID, config(Some(0))).unwrap();
+    let mut every = env(ObsMode::State);
+    every.reset(Some(2022));
+    let built = shapes(&fixed);
+    assert_eq!(built, shapes(&every));
+    for seed in [5, 6] {
+        let (_, info) = fixed.reset(Some(seed));
+        assert_eq!(info.reconfigure, Some(false), "seed {seed}");
+        assert_eq!(shapes(&fixed), built, "seed {seed}: the shapes stay");
+        every.reset(Some(seed));
+        assert_ne!(shapes(&every), built, "seed {seed}: drawn anew");
+    }
+    // ManiSkill's reset option `reconfigure`: drawn from the seed, the same episode as the
+    // default env's.
+    let (_, info) = fixed.reset_with(Some(6), true);
+    assert_eq!(info.reconfigure, Some(true));
+    assert_eq!(fixed.obs(), every.obs());
+    // Every second reset: ManiSkill's counter, set to 2 by the construction's rebuild.
+    let mut two = make(ID, config(Some(2))).unwrap();
+    let rebuilt: Vec<_> = (10..14).map(|s| two.reset(Some(s)).1.reconfigure).collect();
+    assert_eq!(rebuilt, [Some(false), Some(true), Some(false), Some(true)]);
+    assert_eq!(two.obs(), single_obs(13));
+}
+
+#[test]
+fn a_vec_env_keeps_each_envs_construction_shapes_as_maniskills_batch_does() {
+    let n = 3;
+    let mut v = VecEnv::new(ID, config(None), n, 1).unwrap();
+    let dim = v.obs().len() / n;
+    let probe = env(ObsMode::State);
+    let ranges: Vec<_> = ["extra/peg_half_size", "extra/box_hole_radius"]
+        .iter()
+        .map(|k| {
+            probe
+                .obs_layout()
+                .iter()
+                .find(|(x, _)| x == k)
+                .unwrap()
+                .1
+                .clone()
+        })
+        .collect();
+    let row_shapes = |obs: &[f32], i: usize| -> Vec<f32> {
+        let row = &obs[i * dim..(i + 1) * dim];
+        ranges
+            .iter()
+            .flat_map(|r| row[r.clone()].to_vec())
+            .collect()
+    };
+    let shapes_of = |obs: &[f32]| -> Vec<f32> {
+        ranges
+            .iter()
+            .flat_map(|r| obs[r.clone()].to_vec())
+            .collect()
+    };
+    // Env i keeps the shapes of its construction seed 2022 + i through seeded resets.
+    for seed in [0, 40] {
+        let obs = v.reset(Some(seed)).to_vec();
+        for i in 0..n {
+            let built = shapes_of(&single_obs(2022 + i as u64));
+            assert_eq!(row_shapes(&obs, i), built, "seed {seed}, env {i}");
+            assert_ne!(
+                row_shapes(&obs, i),
+                shapes_of(&single_obs(seed + i as u64)),
+                "seed {seed}, env {i}"
+            );
+        }
+    }
+    // With `reconfigure`, env i is the single env reset with seed s + i, shapes and all.
+    let obs = v.reset_with(Some(40), true).to_vec();
+    for i in 0..n {
+        assert_eq!(
+            &obs[i * dim..(i + 1) * dim],
+            single_obs(40 + i as u64),
+            "env {i}"
+        );
+    }
+    // Asked for every reset (1), the batch redraws as the single env.
+    let mut every = VecEnv::new(ID, config(Some(1)), 2, 1).unwrap();
+    let obs = every.reset(Some(9)).to_vec();
+    assert_eq!(&obs[dim..], single_obs(10));
 }

@@ -4,6 +4,7 @@ the observation layout. :mod:`mjskill.envs` and :mod:`mjskill.batched` both buil
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -268,19 +269,40 @@ def check_sim_backend(sim_backend: Any) -> None:
         )
 
 
-def check_reconfiguration_freq(freq: Any) -> int:
-    """ManiSkill's ``reconfiguration_freq`` (None = 0). mjskill's scenes have fixed assets, so
-    there is nothing to reconfigure, but for PegInsertionSide-v1, whose shapes are drawn at every
-    reset as ManiSkill's single env does (``reconfiguration_freq=1``); the value is kept as
-    ``env.reconfiguration_freq`` and not applied."""
+def check_reconfiguration_freq(freq: Any, num_envs: int = 1) -> int:
+    """ManiSkill's ``reconfiguration_freq``, resolved: every how many resets a task whose
+    shapes are drawn per episode (PegInsertionSide-v1) draws them anew; 0: only when the env
+    is made (env i of a batch from seed 2022 + i) and on ``reset(options={"reconfigure":
+    True})``. None is ManiSkill's default: 1 for one env, 0 for ``num_envs > 1``. The other
+    tasks' scenes are fixed: nothing to redraw."""
     if freq is None:
-        return 0
+        return 1 if num_envs == 1 else 0
     if isinstance(freq, bool) or not isinstance(freq, (int, np.integer)) or freq < 0:
         raise ValueError(
-            f"reconfiguration_freq must be None or an int >= 0, got {freq!r} (mjskill's scenes "
-            "have fixed assets: nothing is reconfigured)"
+            f"reconfiguration_freq must be None or an int >= 0, got {freq!r} (resets between "
+            "redraws of PegInsertionSide-v1's shapes; None: 1 for one env, 0 for a batch)"
         )
     return int(freq)
+
+
+def reconfigure_option(options: Any, valid: tuple[str, ...] = ("reconfigure",)) -> dict:
+    """The reset ``options`` as a dict (None: empty) whose keys are all in ``valid`` and whose
+    ``reconfigure``, if given, is a bool; a ``TypeError`` or ``ValueError`` names the bad
+    value and the valid choices."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(
+            f"options must be a dict such as {{'reconfigure': True}} (or None), got "
+            f"{type(options).__name__}"
+        )
+    unknown = sorted(set(options) - set(valid))
+    if unknown:
+        raise ValueError(f"unsupported reset options {unknown}; valid: {', '.join(valid)}")
+    r = options.get("reconfigure", False)
+    if not isinstance(r, (bool, np.bool_)):
+        raise TypeError(f"options['reconfigure'] must be a bool, got {r!r}")
+    return dict(options)
 
 
 def live(native: Any, what: str, remedy: str = "make a new one") -> Any:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import os
 import sys
 import weakref
-from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -52,6 +51,7 @@ from ._common import (
     check_sim_backend,
     env_kwargs,
     live,
+    reconfigure_option,
 )
 
 __all__ = [
@@ -139,7 +139,7 @@ class MjskillBatchedEnv(gym.Env):
     ):
         _check_depth_dtype(depth_dtype)
         check_sim_backend(sim_backend)
-        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq)
+        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq, num_envs)
         if array_backend not in ARRAY_BACKENDS:
             raise ValueError(
                 f"unknown array_backend {array_backend!r}; valid: {', '.join(ARRAY_BACKENDS)}"
@@ -165,7 +165,9 @@ class MjskillBatchedEnv(gym.Env):
             self.device = None
         self.array_backend = array_backend
         self.sim_backend = sim_backend
-        self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
+        # The native envs never redraw shapes by themselves: this env keeps ManiSkill's one
+        # reset counter and asks for a redraw when it is due (see reset).
+        self._kwargs = dict(env_id=env_id, **dict(env_kwargs(locals()), reconfiguration_freq=0))
         # The static description (layout, bounds, default episode length) from one env.
         spec = _native.Env(**self._kwargs).spec()
         threads = num_threads if num_threads is not None else (os.cpu_count() or 1)
@@ -184,6 +186,9 @@ class MjskillBatchedEnv(gym.Env):
         self.max_episode_steps = int(spec["max_episode_steps"])
         # PegInsertionSide-v1 draws its shapes at every reset (each env from its own seed).
         self._reconfigures = bool(spec["reconfigures"])
+        # ManiSkill's _reconfig_counter after the construction's reconfiguring reset.
+        freq = self.reconfiguration_freq
+        self._reconfig_counter = freq - 1 if freq != 0 else 0
         if max_episode_steps is None and _made_without_time_limit():
             # gym.make(..., max_episode_steps=-1): gymnasium's "no time limit", as for the
             # single env (and -1 given here or to make_vec).
@@ -241,18 +246,15 @@ class MjskillBatchedEnv(gym.Env):
         mask, numpy or torch) only those; env i gets seed ``seed + i``. Returns the
         observations and info of all N envs."""
         native = self._live()
-        if options is not None and not isinstance(options, Mapping):
-            raise TypeError(
-                f"options must be a dict such as {{'env_idx': [0, 2]}} (or None), got "
-                f"{type(options).__name__}"
-            )
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ValueError(
-                f"unsupported reset options {unknown}; valid: {', '.join(RESET_OPTIONS)} "
-                "(reconfigure has no effect: mjskill's scenes have fixed assets, and "
-                "PegInsertionSide-v1 draws its shapes at every reset)"
+        options = reconfigure_option(options, tuple(RESET_OPTIONS))
+        freq = self.reconfiguration_freq
+        reconfigure = bool(options.get("reconfigure", False)) or (
+            self._reconfig_counter == 0 and freq != 0
+        )
+        if reconfigure and options.get("env_idx") is not None:
+            raise RuntimeError(
+                "Cannot do a partial reset and reconfigure the environment. You must do one "
+                "or the other (ManiSkill's rule: options env_idx and reconfigure=True)"
             )
         if isinstance(seed, (list, tuple)):
             seeds = [_check_seed(s) for s in seed]
@@ -266,15 +268,20 @@ class MjskillBatchedEnv(gym.Env):
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
         self._disarm_time_limits()
+        if reconfigure:
+            self._reconfig_counter = freq
+        if freq != 0:
+            self._reconfig_counter -= 1
         if options.get("env_idx") is None:
-            obs, info = native.reset(seed)
+            obs, info = native.reset(seed, reconfigure)
             self._elapsed[:] = 0
         else:
             mask = self._index_mask(options["env_idx"])
             obs, info = native.reset_envs(mask, seed)
             self._elapsed[mask] = 0
         info = self._info(info)
-        info["reconfigure"] = self._reconfigures
+        # Whether the scene was rebuilt (only PegInsertionSide-v1's shapes are redrawn).
+        info["reconfigure"] = reconfigure and self._reconfigures
         return self._out(self._layout.batch(obs, native)), info
 
     def _disarm_time_limits(self) -> None:

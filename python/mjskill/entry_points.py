@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from ._common import UNLIMITED, _check_count, check_reconfiguration_freq, check_sim_backend
+from ._common import UNLIMITED, _check_count, check_sim_backend
 from .batched import MjskillBatchedEnv
 from .envs import MjskillEnv, MjskillVectorEnv
 
@@ -20,16 +20,15 @@ def make_env(num_envs: int = 1, **kwargs):
     its own episode limit is lifted, because gymnasium's ``TimeLimit`` (``max_episode_steps``,
     default 50) truncates, as in ManiSkill. ``num_envs > 1`` (ManiSkill's ``gym.make(...,
     num_envs=N)``): the batched :class:`mjskill.batched.MjskillBatchedEnv`, which truncates
-    each env itself (it disarms gymnasium's ``TimeLimit``). ManiSkill's ``sim_backend`` and
-    ``reconfiguration_freq`` keywords are accepted and checked (mjskill simulates with MuJoCo
-    on the CPU; its scenes have nothing to reconfigure, but PegInsertionSide-v1's shapes, drawn
-    at every reset).
+    each env itself (it disarms gymnasium's ``TimeLimit``). ManiSkill's ``sim_backend``
+    keyword is accepted and checked (mjskill simulates with MuJoCo on the CPU), and
+    ``reconfiguration_freq`` applies as in ManiSkill (PegInsertionSide-v1's shapes; the other
+    scenes are fixed).
     """
     num_envs = _check_count("num_envs", num_envs)
     if num_envs > 1:
         return MjskillBatchedEnv(num_envs=int(num_envs), **kwargs)
     check_sim_backend(kwargs.pop("sim_backend", "auto"))
-    check_reconfiguration_freq(kwargs.pop("reconfiguration_freq", None))
     batched_only = sorted({"num_threads", "array_backend"} & set(kwargs))
     if batched_only:
         env_id = kwargs.get("env_id", "PickCube-v1")

@@ -29,8 +29,10 @@ from ._common import (
     _check_seed,
     _describe,
     _merge_components,
+    check_reconfiguration_freq,
     env_kwargs,
     live,
+    reconfigure_option,
 )
 
 class MjskillEnv(gym.Env):
@@ -63,9 +65,11 @@ class MjskillEnv(gym.Env):
         robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         sim_freq: int = DEFAULT_SIM_FREQ,
         depth_dtype: str = "float32",
+        reconfiguration_freq: int | None = None,
     ):
         _check_render_mode(render_mode)
         _check_depth_dtype(depth_dtype)
+        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq)
         self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         self._native = _native.Env(**self._kwargs)
         self.render_mode = render_mode
@@ -75,12 +79,9 @@ class MjskillEnv(gym.Env):
     # -- gymnasium API ---------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         seed = _check_seed(seed)
-        if options:
-            raise ValueError(
-                f"unsupported reset options {sorted(options)}; mjskill envs take no options"
-            )
+        reconfigure = bool(reconfigure_option(options).get("reconfigure", False))
         super().reset(seed=None if seed is None else seed % (MAX_SEED + 1))
-        obs, info = self._native.reset(seed)
+        obs, info = self._native.reset(seed, reconfigure)
         return self._layout.single(obs, self._native), info
 
     def step(self, action):
@@ -247,6 +248,7 @@ class MjskillVectorEnv(VectorEnv):
         sim_freq: int = DEFAULT_SIM_FREQ,
         render_mode: str | None = None,
         depth_dtype: str = "float32",
+        reconfiguration_freq: int | None = None,
     ):
         _check_depth_dtype(depth_dtype)
         if render_mode is not None:
@@ -257,6 +259,7 @@ class MjskillVectorEnv(VectorEnv):
             )
         num_envs = _check_count("num_envs", num_envs)
         num_threads = _check_count("num_threads", num_threads)
+        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq, num_envs)
         self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         # The static description (layout, bounds, cameras) comes from one plain env.
         spec = _native.Env(**self._kwargs).spec()
@@ -284,14 +287,11 @@ class MjskillVectorEnv(VectorEnv):
                 )
             seed = seeds[0]
         seed = _check_seed(seed)
-        if options:
-            raise ValueError(
-                f"unsupported reset options {sorted(options)}; mjskill envs take no options"
-            )
+        reconfigure = bool(reconfigure_option(options).get("reconfigure", False))
         native = self._live()
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(seed)
-        obs, info = native.reset(seed)
+        obs, info = native.reset(seed, reconfigure)
         return self._layout.batch(obs, native), _merge_components(info)
 
     def step(self, actions):

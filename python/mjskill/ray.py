@@ -90,7 +90,9 @@ def run_shard(
     for start in range(0, len(seeds), n):
         batch = list(range(seeds[start], seeds[start] + n))
         live = np.array([s <= seeds[-1] for s in batch])
-        obs, _ = vec.reset(seed=batch[0])
+        # Each episode is its seed's, shapes included (PegInsertionSide-v1's, which a batch
+        # otherwise keeps from its construction), as the single env that records it draws them.
+        obs, _ = vec.reset(seed=batch[0], options={"reconfigure": True})
         done = ~live
         ret = np.zeros(n)
         success = np.zeros(n, bool)

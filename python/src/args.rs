@@ -96,7 +96,7 @@ pub(crate) fn count_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize>
 /// ManiSkill's env keyword arguments, the one declaration for `Env`, `VecEnv` and
 /// `record_episodes` (which take them as `**kwargs`) and for the Python classes (which read
 /// them, with their defaults, as `ENV_KWARGS`).
-const ENV_KWARGS: [&str; 7] = [
+const ENV_KWARGS: [&str; 8] = [
     "robot_uids",
     "obs_mode",
     "control_mode",
@@ -104,6 +104,7 @@ const ENV_KWARGS: [&str; 7] = [
     "max_episode_steps",
     "robot_init_qpos_noise",
     "sim_freq",
+    "reconfiguration_freq",
 ];
 
 /// Episode length that means "no limit" (`max_episode_steps` of envs whose time limit is
@@ -122,6 +123,7 @@ pub(crate) fn env_kwargs_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>>
     d.set_item(ENV_KWARGS[4], c.max_episode_steps)?;
     d.set_item(ENV_KWARGS[5], c.robot_init_qpos_noise)?;
     d.set_item(ENV_KWARGS[6], c.sim.sim_freq)?;
+    d.set_item(ENV_KWARGS[7], c.reconfiguration_freq)?;
     Ok(d)
 }
 
@@ -190,6 +192,13 @@ pub(crate) fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResu
                 );
                 // Beyond u32 here; within it, SimConfig's own check names the valid rates.
                 cfg.sim.sim_freq = int_arg(&value, &key, 0, u32::MAX as i128, &valid)? as u32;
+            }
+            "reconfiguration_freq" => {
+                let valid = "resets between redraws of a task's per-episode shapes: 0 (never \
+                             after construction), 1 (every reset), ..., or None (ManiSkill's \
+                             default: 1 for one env, 0 for a batch)";
+                cfg.reconfiguration_freq =
+                    Some(int_arg(&value, &key, 0, u32::MAX as i128, valid)? as u32);
             }
             _ => {
                 return Err(PyTypeError::new_err(format!(

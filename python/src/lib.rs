@@ -302,17 +302,19 @@ impl PyEnv {
         spec_dict(py, &*self.lock(py)?)
     }
 
-    /// Resets (seeded: ManiSkill's exact initial state) and returns `(obs, info)`.
-    #[pyo3(signature = (seed=None))]
+    /// Resets (seeded: ManiSkill's exact initial state) and returns `(obs, info)`;
+    /// `reconfigure`: ManiSkill's reset option (a task's per-episode shapes drawn anew).
+    #[pyo3(signature = (seed=None, reconfigure=false))]
     fn reset<'py>(
         &self,
         py: Python<'py>,
         seed: Option<&Bound<'py, PyAny>>,
+        reconfigure: bool,
     ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyDict>)> {
         let seed = seed_arg(seed, "seed")?;
         let mut g = self.lock(py)?;
         let env = &mut *g;
-        py.detach(|| env.try_reset(seed).map(|_| ()))
+        py.detach(|| env.try_reset_with(seed, reconfigure).map(|_| ()))
             .map_err(value_err)?;
         Ok((PyArray1::from_slice(py, env.obs()), info_dict(py, env)?))
     }
@@ -554,17 +556,19 @@ impl PyVecEnv {
         Ok(self.lock(py)?.vec.num_threads())
     }
 
-    /// Resets every env (env i with `seed + i`, or unseeded): `(obs [N × D], info)`.
-    #[pyo3(signature = (seed=None))]
+    /// Resets every env (env i with `seed + i`, or unseeded): `(obs [N × D], info)`;
+    /// `reconfigure`: ManiSkill's reset option (every env's per-episode shapes drawn anew).
+    #[pyo3(signature = (seed=None, reconfigure=false))]
     fn reset<'py>(
         &self,
         py: Python<'py>,
         seed: Option<&Bound<'py, PyAny>>,
+        reconfigure: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let seed = seed_arg(seed, "seed")?;
         let mut g = self.lock(py)?;
         let st = &mut *g;
-        py.detach(|| st.vec.try_reset(seed).map(|_| ()))
+        py.detach(|| st.vec.try_reset_with(seed, reconfigure).map(|_| ()))
             .map_err(value_err)?;
         Ok((self.obs(py, &st.vec)?, self.info(py, &st.vec)?))
     }

@@ -59,7 +59,7 @@ def test_gym_make_num_envs_returns_the_batched_env():
 
 def test_a_vector_info_value_is_one_array_per_env_as_maniskills():
     env = gym.make("mjskill/PegInsertionSide-v1", num_envs=3, array_backend="numpy")
-    _, info = env.reset(seed=0)
+    _, info = env.reset(seed=0, options={"reconfigure": True})
     assert info["reconfigure"] is True and info["success"].shape == (3,)
     a = env.action_space.sample()
     _, _, _, _, info = env.step(a)
@@ -280,7 +280,7 @@ def test_close_twice_is_harmless_and_use_after_close_raises():
 
 def test_the_gymnasium_vector_env_gives_a_vector_info_value_as_one_array():
     env = mjskill.MjskillVectorEnv("PegInsertionSide-v1", num_envs=3)
-    _, info = env.reset(seed=0)
+    _, info = env.reset(seed=0, options={"reconfigure": True})
     assert info["peg_head_pos_at_hole"].shape == (3, 3)
     assert info["_peg_head_pos_at_hole"].shape == (3,) and info["_peg_head_pos_at_hole"].all()
     a = env.action_space.sample()
@@ -291,3 +291,33 @@ def test_the_gymnasium_vector_env_gives_a_vector_info_value_as_one_array():
     one.reset(seed=1)
     _, _, _, _, single = one.step(a[1])
     np.testing.assert_array_equal(info["peg_head_pos_at_hole"][1], single["peg_head_pos_at_hole"])
+
+
+def test_a_batch_keeps_each_envs_construction_shapes_as_maniskills_does():
+    """ManiSkill's gym.make(num_envs=N) defaults to reconfiguration_freq 0: env i keeps the
+    peg and hole of its construction seed 2022 + i until a reset asks for a redraw."""
+    env = gym.make("mjskill/PegInsertionSide-v1", num_envs=2, array_backend="numpy")
+    assert env.unwrapped.reconfiguration_freq == 0
+    one = gym.make("mjskill/PegInsertionSide-v1")
+    built = [one.reset(seed=2022 + i)[0][32:35] for i in range(2)]
+    for seed in (5, 7):
+        obs, info = env.reset(seed=seed)
+        assert info["reconfigure"] is False
+        for i in range(2):
+            np.testing.assert_array_equal(obs[i][32:35], built[i])
+    obs, info = env.reset(seed=5, options={"reconfigure": True})
+    assert info["reconfigure"] is True
+    np.testing.assert_array_equal(obs[1], one.reset(seed=6)[0])
+    with pytest.raises(RuntimeError, match="partial reset and reconfigure"):
+        env.reset(options={"env_idx": [0], "reconfigure": True})
+    with pytest.raises(TypeError, match=r"options\['reconfigure'\] must be a bool, got 'yes'"):
+        env.reset(options={"reconfigure": "yes"})
+    # Asked for every reset, as ManiSkill's single env: redrawn from the seeds, and a partial
+    # reset, which would be due to rebuild, is refused as ManiSkill refuses it.
+    every = gym.make("mjskill/PegInsertionSide-v1", num_envs=2, reconfiguration_freq=1,
+                     array_backend="numpy")
+    obs, info = every.reset(seed=5)
+    assert info["reconfigure"] is True
+    np.testing.assert_array_equal(obs[1], one.reset(seed=6)[0])
+    with pytest.raises(RuntimeError, match="partial reset and reconfigure"):
+        every.reset(options={"env_idx": [1]})

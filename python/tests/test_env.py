@@ -237,3 +237,21 @@ def test_every_env_class_takes_the_native_keywords_with_the_native_defaults():
     assert mjskill.MjskillEnv.metadata["render_fps"] == _native.CONTROL_FREQ == 20
     with pytest.raises(TypeError, match=r"Env\(\) got an unexpected keyword argument 'foo'"):
         _native.Env("PickCube-v1", foo=1)
+
+
+def test_reconfiguration_freq_zero_keeps_the_construction_shapes_until_asked():
+    env = gym.make("mjskill/PegInsertionSide-v1", reconfiguration_freq=0)
+    assert env.unwrapped.reconfiguration_freq == 0
+    every = gym.make("mjskill/PegInsertionSide-v1")
+    assert every.unwrapped.reconfiguration_freq == 1
+    built = every.reset(seed=2022)[0][32:35]
+    obs, info = env.reset(seed=1)
+    assert info["reconfigure"] is False
+    np.testing.assert_array_equal(obs[32:35], built)
+    obs, info = env.reset(seed=1, options={"reconfigure": True})
+    assert info["reconfigure"] is True
+    np.testing.assert_array_equal(obs, every.reset(seed=1)[0])
+    with pytest.raises(ValueError, match=r"unsupported reset options \['env_idx'\]; valid: reconfigure"):
+        env.reset(options={"env_idx": [0]})
+    with pytest.raises(ValueError, match="reconfiguration_freq must be None or an int >= 0"):
+        gym.make("mjskill/PegInsertionSide-v1", reconfiguration_freq=-2)

@@ -70,3 +70,11 @@ def test_bad_arguments(tmp_path):
     with pytest.raises(ValueError, match="valid env ids"):
         mray.rollout("Nope-v1", range(2), tmp_path, use_ray=False)
     assert not list(tmp_path.glob("*.mcap")), "nothing written on failure"
+
+
+def test_a_shard_of_peg_insertion_side_records_each_seeds_own_shapes(tmp_path):
+    # A batch keeps its construction shapes unless a reset asks for a redraw; a shard's
+    # episodes are their seeds' (the recorder re-simulates them in one env and must agree).
+    out = mray.run_shard("PegInsertionSide-v1", [7, 8, 9], tmp_path / "peg.mcap", num_envs=2,
+                         policy="zero")
+    assert out["seeds"] == [7, 8, 9] and out["steps"] == [100, 100, 100]

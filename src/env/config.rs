@@ -550,6 +550,14 @@ pub struct EnvConfig {
     /// Physics settings.
     #[serde(default)]
     pub sim: SimConfig,
+    /// ManiSkill's `reconfiguration_freq`: every how many resets a task whose shapes are drawn
+    /// per episode (PegInsertionSide-v1) draws them anew; 0: only when the env is made and on
+    /// [`super::Env::reset_with`]`(.., true)`. `None`: ManiSkill's default, 1 for a single env
+    /// (every reset) and 0 for a [`super::vec::VecEnv`] of more than one env (each env keeps
+    /// the shapes of its construction seed, 2022 + i). No effect on the other tasks, whose
+    /// scenes are fixed.
+    #[serde(default)]
+    pub reconfiguration_freq: Option<u32>,
 }
 
 impl Default for EnvConfig {
@@ -562,6 +570,7 @@ impl Default for EnvConfig {
             robot_init_qpos_noise: DEFAULT_QPOS_NOISE,
             max_episode_steps: None,
             sim: SimConfig::default(),
+            reconfiguration_freq: None,
         }
     }
 }

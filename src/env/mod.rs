@@ -99,6 +99,10 @@ impl Sim {
 pub struct Env {
     id: &'static str,
     config: EnvConfig,
+    /// ManiSkill's `reconfiguration_freq` (resolved) and `_reconfig_counter`: resets left
+    /// before a task with per-episode shapes draws them again.
+    reconfiguration_freq: u32,
+    reconfig_counter: u32,
     max_episode_steps: u32,
     sim: Sim,
     /// ManiSkill's actors (table first, then the task's), resolved to bodies.
@@ -218,8 +222,13 @@ impl Env {
             }
             None => None,
         };
+        // ManiSkill's default reconfiguration_freq for one env: 1 (and nothing to redraw
+        // where the scene is fixed).
+        let reconfiguration_freq = config.reconfiguration_freq.unwrap_or(1);
         let mut env = Env {
             id: spec.id.id(),
+            reconfiguration_freq,
+            reconfig_counter: 0,
             config: EnvConfig {
                 robot: Some(rs.uid().to_string()),
                 control_mode: Some(mode),
@@ -251,7 +260,8 @@ impl Env {
             render_options,
             seg_ids,
         };
-        env.reset(Some(CONSTRUCTION_SEED));
+        // ManiSkill's construction: a reconfiguring reset with seed 2022.
+        env.reset_with(Some(CONSTRUCTION_SEED), true);
         Ok(env)
     }
 
@@ -426,10 +436,19 @@ impl Env {
     /// Like [`Env::reset`], but a seed above [`checks::MAX_SEED`] is an error
     /// ([`EnvError::BadSeed`]) and the env is left unchanged.
     pub fn try_reset(&mut self, seed: Option<u64>) -> Result<(&[f32], &Info), EnvError> {
+        self.try_reset_with(seed, false)
+    }
+
+    /// [`Env::try_reset`] with ManiSkill's reset option `reconfigure` ([`Env::reset_with`]).
+    pub fn try_reset_with(
+        &mut self,
+        seed: Option<u64>,
+        reconfigure: bool,
+    ) -> Result<(&[f32], &Info), EnvError> {
         if let Some(s) = seed {
             checks::check_seed(s)?;
         }
-        Ok(self.reset(seed))
+        Ok(self.reset_with(seed, reconfigure))
     }
 
     /// Resets (docs/env.md §3): with a seed, both RNG streams restart from it; without, the numpy
@@ -441,13 +460,29 @@ impl Env {
     /// episode (the seed itself is kept as given, e.g. in recordings). Use [`Env::try_reset`]
     /// to reject such seeds instead.
     pub fn reset(&mut self, seed: Option<u64>) -> (&[f32], &Info) {
+        self.reset_with(seed, false)
+    }
+
+    /// [`Env::reset`] with ManiSkill's reset option `reconfigure`: a task whose shapes are
+    /// drawn per episode (PegInsertionSide-v1) draws them from the episode seed when
+    /// `reconfigure` is true or its [`EnvConfig::reconfiguration_freq`] count of resets has
+    /// run out (every reset at ManiSkill's single-env default of 1), and keeps the last ones
+    /// otherwise; `info.reconfigure` says which. Tasks with fixed scenes ignore it.
+    pub fn reset_with(&mut self, seed: Option<u64>, reconfigure: bool) -> (&[f32], &Info) {
         if let Some(s) = seed {
             self.main_seed = Some(s);
             self.main_numpy = NumpyRandomState::new(s);
             self.episode_seed = Some(s);
             self.numpy = NumpyRandomState::new(s);
         }
-        let reconfigure = self.sim.task.reconfigures();
+        // ManiSkill's counter: set to the frequency when the scene is rebuilt, counted down
+        // at every reset, a rebuild due when it reaches zero (never at frequency 0).
+        let reconfigure = self.sim.task.reconfigures()
+            && (reconfigure || (self.reconfig_counter == 0 && self.reconfiguration_freq != 0));
+        if reconfigure {
+            self.reconfig_counter = self.reconfiguration_freq;
+        }
+        self.reconfig_counter = self.reconfig_counter.saturating_sub(1);
         if reconfigure {
             // ManiSkill's reconfiguring reset: the episode seed (drawn from the main RNG when
             // none is given) seeds the shapes' draws, then the episode's numpy stream afresh.

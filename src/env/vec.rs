@@ -156,6 +156,9 @@ struct Shared {
     /// Reset seed (valid when `has_seed`).
     seed: AtomicU64,
     has_seed: AtomicBool,
+    /// Whether a full reset rebuilds the envs' per-episode shapes (ManiSkill's reset option
+    /// `reconfigure`, see [`Env::reset_with`]).
+    reconfigure: AtomicBool,
     /// Workers that finished the current command.
     done: AtomicUsize,
     /// Worker threads (the caller's not counted): the last to finish wakes the caller.
@@ -333,7 +336,8 @@ impl Worker {
                     .has_seed
                     .load(Ordering::Relaxed)
                     .then(|| sh.seed.load(Ordering::Relaxed).wrapping_add(g as u64));
-                self.envs[i].reset(seed);
+                let reconfigure = command == CMD_RESET && sh.reconfigure.load(Ordering::Relaxed);
+                self.envs[i].reset_with(seed, reconfigure);
                 self.needs_reset[i] = false;
                 sh.autoreset[g].store(false, Ordering::Relaxed);
                 self.write(sh, i, &self.envs[i], 0.0, false, false);
@@ -507,6 +511,15 @@ impl VecEnv {
             return Err(EnvError::TooManyEnvs(num_envs));
         }
         let threads = threads.clamp(1, num_envs);
+        // ManiSkill's default: a batch of envs keeps the shapes of its construction seeds.
+        let config = EnvConfig {
+            reconfiguration_freq: Some(config.reconfiguration_freq.unwrap_or(if num_envs == 1 {
+                1
+            } else {
+                0
+            })),
+            ..config
+        };
         let first = make(env_id, config.clone())?;
         let obs_dim = first.obs().len();
         let act_dim = first.action_space().shape[0];
@@ -542,6 +555,7 @@ impl VecEnv {
             command: AtomicU64::new(CMD_STEP),
             seed: AtomicU64::new(0),
             has_seed: AtomicBool::new(false),
+            reconfigure: AtomicBool::new(false),
             done: AtomicUsize::new(0),
             workers: ranges.len() - 1,
             caller: Mutex::new(None),
@@ -613,7 +627,10 @@ impl VecEnv {
         v.shared
             .seed
             .store(super::CONSTRUCTION_SEED, Ordering::Relaxed);
+        // ManiSkill's construction: a reconfiguring reset, env i with seed 2022 + i.
+        v.shared.reconfigure.store(true, Ordering::Relaxed);
         v.dispatch(CMD_RESET);
+        v.shared.reconfigure.store(false, Ordering::Relaxed);
         Ok(v)
     }
 
@@ -694,6 +711,16 @@ impl VecEnv {
     /// [`EnvError::VecSeedRange`] naming the seed given when only `s + i` is) and nothing is
     /// reset.
     pub fn try_reset(&mut self, seed: Option<u64>) -> Result<&[f32], EnvError> {
+        self.try_reset_with(seed, false)
+    }
+
+    /// [`VecEnv::try_reset`] with ManiSkill's reset option `reconfigure`
+    /// ([`VecEnv::reset_with`]).
+    pub fn try_reset_with(
+        &mut self,
+        seed: Option<u64>,
+        reconfigure: bool,
+    ) -> Result<&[f32], EnvError> {
         if let Some(s) = seed {
             let last = s as u128 + self.num_envs as u128 - 1;
             if s > super::checks::MAX_SEED {
@@ -706,12 +733,24 @@ impl VecEnv {
                 });
             }
         }
-        Ok(self.reset(seed))
+        Ok(self.reset_with(seed, reconfigure))
     }
 
     /// Resets every env (env i with seed `s + i`, or unseeded) and returns the observations.
     /// Seeds act mod 2³² as for [`Env::reset`] (env i gets `(s + i) mod 2³²`).
     pub fn reset(&mut self, seed: Option<u64>) -> &[f32] {
+        self.reset_with(seed, false)
+    }
+
+    /// [`VecEnv::reset`] with ManiSkill's reset option `reconfigure`: every env redraws a
+    /// task's per-episode shapes (PegInsertionSide-v1) from its seed, as
+    /// [`Env::reset_with`]; without it, each env follows its
+    /// [`EnvConfig::reconfiguration_freq`] (for a batch of envs by default 0: the shapes of
+    /// construction, env i's from seed 2022 + i, as in ManiSkill).
+    pub fn reset_with(&mut self, seed: Option<u64>, reconfigure: bool) -> &[f32] {
+        self.shared
+            .reconfigure
+            .store(reconfigure, Ordering::Relaxed);
         self.shared
             .has_seed
             .store(seed.is_some(), Ordering::Relaxed);

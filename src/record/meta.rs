@@ -177,6 +177,7 @@ impl Meta {
             robot_init_qpos_noise: self.robot_init_qpos_noise,
             max_episode_steps: Some(self.max_episode_steps),
             sim: self.sim(),
+            reconfiguration_freq: None,
         })
     }
 
