@@ -57,11 +57,7 @@ fn only_the_props_carry_their_weight() {
 fn a_raised_cube_falls_as_under_gravity_while_the_arm_holds() {
     let mut e = env("PickCube-v1", "panda", "pd_joint_delta_pos");
     e.reset(Some(5));
-    let m = e.model().clone();
-    let joint = m
-        .require_id(mjskill::mujoco::ObjType::Joint, "cube")
-        .unwrap();
-    let qadr = m.jnt_qposadr()[joint] as usize;
+    let (qadr, _) = common::joint_addresses(&e, "cube");
     let q = e.data().qpos()[qadr..qadr + 7].to_vec();
     let z0 = q[2] + 0.1;
     common::put_free_body(&mut e, "cube", [q[0], q[1], z0], [q[3], q[4], q[5], q[6]]);

@@ -10,7 +10,11 @@
 //! the force limit on the step's accumulated impulse, 1.8e-3 and 9.3e-3 (the largest in the
 //! `pd_joint_pos` cases, whose targets jump by up to 0.4 rad every step; the 0.01 kg·m²
 //! armature remains).
+mod common;
+
 use std::path::Path;
+
+use common::env_in as make;
 
 /// Largest arm-joint error (rad) allowed after the first step, and after any of the five.
 const FIRST_STEP: f64 = 2.5e-3;
@@ -22,16 +26,6 @@ fn reference(file: &str) -> serde_json::Value {
         .join("tests/data")
         .join(file);
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-/// `env_id` with `robot` in `control_mode`.
-fn make(env_id: &str, robot: &str, control_mode: &str) -> mjskill::Env {
-    let config = mjskill::EnvConfig {
-        robot: Some(robot.into()),
-        control_mode: Some(control_mode.into()),
-        ..Default::default()
-    };
-    mjskill::make(env_id, config).unwrap()
 }
 
 #[test]
@@ -193,17 +187,11 @@ const PHYSX_MAX_JOINT_VELOCITY: f64 = 100.0;
 fn a_joint_spinning_past_physx_speed_limit_is_capped() {
     let mut e = make("PickCube-v1", "fetch", "pd_joint_delta_pos");
     e.reset(Some(0));
-    let model = e.model().clone();
-    let j = model
-        .require_id(mjskill::mujoco::ObjType::Joint, "upperarm_roll_joint")
-        .unwrap();
-    let (qadr, dadr) = (
-        model.jnt_qposadr()[j] as usize,
-        model.jnt_dofadr()[j] as usize,
-    );
+    let (qadr, dadr) = common::joint_addresses(&e, "upperarm_roll_joint");
+    let nq = e.model().nq();
     let mut s = e.get_state();
     // physics = [time, qpos (nq), qvel (nv), ...].
-    s.physics[1 + model.nq() + dadr] = 1000.0;
+    s.physics[1 + nq + dadr] = 1000.0;
     e.set_state(&s).unwrap();
     let q0 = e.data().qpos()[qadr];
     let zero = vec![0.0f32; e.action_space().shape[0]];

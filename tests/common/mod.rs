@@ -191,16 +191,23 @@ pub fn env_in(id: &str, robot: &str, mode: &str) -> mjskill::Env {
     .unwrap()
 }
 
-/// Writes the pose of the free body whose free joint is `joint` (zero velocity) through the
-/// env state: `physics` = [time, qpos (nq), qvel (nv), ...].
-pub fn put_free_body(e: &mut mjskill::Env, joint: &str, pos: [f64; 3], quat: [f64; 4]) {
-    let model = e.model().clone();
+/// The qpos and qvel addresses of the joint named `joint` in `e`'s model.
+pub fn joint_addresses(e: &mjskill::Env, joint: &str) -> (usize, usize) {
+    let model = e.model();
     let j = model
         .require_id(mjskill::mujoco::ObjType::Joint, joint)
         .unwrap();
-    let adr = model.jnt_qposadr()[j] as usize;
-    let vadr = model.jnt_dofadr()[j] as usize;
-    let nq = model.nq();
+    (
+        model.jnt_qposadr()[j] as usize,
+        model.jnt_dofadr()[j] as usize,
+    )
+}
+
+/// Writes the pose of the free body whose free joint is `joint` (zero velocity) through the
+/// env state: `physics` = [time, qpos (nq), qvel (nv), ...].
+pub fn put_free_body(e: &mut mjskill::Env, joint: &str, pos: [f64; 3], quat: [f64; 4]) {
+    let (adr, vadr) = joint_addresses(e, joint);
+    let nq = e.model().nq();
     let mut st = e.get_state();
     st.physics[1 + adr..1 + adr + 3].copy_from_slice(&pos);
     st.physics[1 + adr + 3..1 + adr + 7].copy_from_slice(&quat);
