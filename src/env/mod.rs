@@ -232,6 +232,7 @@ impl Env {
             config: EnvConfig {
                 robot: Some(rs.uid().to_string()),
                 control_mode: Some(mode),
+                reconfiguration_freq: Some(reconfiguration_freq),
                 ..config
             },
             max_episode_steps,
