@@ -23,9 +23,9 @@
 //! Once the T covers [`DONE_OVERLAP`] of the goal in the task's pseudo render, the stick lifts
 //! off and waits.
 //!
-//! Measured (0.01 s step, `mjskill eval --episodes 100`, success at any step): 71 of seeds
-//! 0–99, 68 of 100–199 and 57 of the held-out 5000–5099 (docs/solvers.md §7.8), short of the
-//! 80 % issue 56 asks for. What holds it back: a half turn takes 40–75 of the 100 steps (about
+//! Measured (0.01 s step, `mjskill eval --episodes 100`, success at any step): 65 of seeds
+//! 0–99, 76 of 100–199 and 72 of the held-out 5000–5099 (docs/solvers.md §7.8; about 70 % over
+//! 900 seeds), short of the 80 % issue 56 asks for. What holds it back: a half turn takes 40–75 of the 100 steps (about
 //! 0.05 rad a step at the lever), and every change of contact costs 5–10 steps of travel.
 
 use std::f64::consts::PI;
@@ -433,10 +433,6 @@ impl Policy for PushTSolver {
         } else {
             self.mode = Mode::Travel;
         }
-        // pd_ee_pose: the target in the root frame, the rotation as XYZ Euler angles.
-        action[0] = (target.x - ROOT[0]) as f32;
-        action[1] = (target.y - ROOT[1]) as f32;
-        action[2] = (target.z - ROOT[2]) as f32;
         // The lean changes by at most TURN_RATE a step: a sudden turn of the wanted
         // orientation sends the IK to far joint targets.
         // The commanded tip moves at most TARGET_STEP a step: a far jump of the target near a
@@ -447,6 +443,10 @@ impl Policy for PushTSolver {
                 target = last + d * (TARGET_STEP / d.norm());
             }
         }
+        // pd_ee_pose: the target in the root frame, the rotation as XYZ Euler angles.
+        action[0] = (target.x - ROOT[0]) as f32;
+        action[1] = (target.y - ROOT[1]) as f32;
+        action[2] = (target.z - ROOT[2]) as f32;
         self.last_target = Some(target);
         // Far from the base the stick also leans outwards, its tip away from the base, and near
         // it inwards: upright there, the wrist (joint 6, far) or the elbow (joint 4, near) is at
