@@ -69,7 +69,9 @@ class MjskillEnv(gym.Env):
     ):
         _check_render_mode(render_mode)
         _check_depth_dtype(depth_dtype)
-        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq)
+        # Resolved here (ManiSkill's default for one env) and handed to the native env as such.
+        reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq)
+        self.reconfiguration_freq = reconfiguration_freq
         self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         self._native = _native.Env(**self._kwargs)
         self.render_mode = render_mode
@@ -259,7 +261,8 @@ class MjskillVectorEnv(VectorEnv):
             )
         num_envs = _check_count("num_envs", num_envs)
         num_threads = _check_count("num_threads", num_threads)
-        self.reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq, num_envs)
+        reconfiguration_freq = check_reconfiguration_freq(reconfiguration_freq, num_envs)
+        self.reconfiguration_freq = reconfiguration_freq
         self._kwargs = dict(env_id=env_id, **env_kwargs(locals()))
         # The static description (layout, bounds, cameras) comes from one plain env.
         spec = _native.Env(**self._kwargs).spec()

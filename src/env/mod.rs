@@ -99,9 +99,8 @@ impl Sim {
 pub struct Env {
     id: &'static str,
     config: EnvConfig,
-    /// ManiSkill's `reconfiguration_freq` (resolved) and `_reconfig_counter`: resets left
-    /// before a task with per-episode shapes draws them again.
-    reconfiguration_freq: u32,
+    /// ManiSkill's `_reconfig_counter`: resets left before a task with per-episode shapes
+    /// draws them again (the frequency is `config.reconfiguration_freq`, resolved in `new`).
     reconfig_counter: u32,
     max_episode_steps: u32,
     sim: Sim,
@@ -227,7 +226,6 @@ impl Env {
         let reconfiguration_freq = config.reconfiguration_freq.unwrap_or(1);
         let mut env = Env {
             id: spec.id.id(),
-            reconfiguration_freq,
             reconfig_counter: 0,
             config: EnvConfig {
                 robot: Some(rs.uid().to_string()),
@@ -478,10 +476,11 @@ impl Env {
         }
         // ManiSkill's counter: set to the frequency when the scene is rebuilt, counted down
         // at every reset, a rebuild due when it reaches zero (never at frequency 0).
+        let freq = self.config.reconfiguration_freq.unwrap_or(1);
         let reconfigure = self.sim.task.reconfigures()
-            && (reconfigure || (self.reconfig_counter == 0 && self.reconfiguration_freq != 0));
+            && (reconfigure || (self.reconfig_counter == 0 && freq != 0));
         if reconfigure {
-            self.reconfig_counter = self.reconfiguration_freq;
+            self.reconfig_counter = freq;
         }
         self.reconfig_counter = self.reconfig_counter.saturating_sub(1);
         if reconfigure {
