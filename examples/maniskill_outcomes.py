@@ -77,6 +77,7 @@ SOLVER_PAIRS = [
     ("StackCube-v1", "fetch", "pd_joint_pos"),
     ("StackCube-v1", "panda_wristcam", None),
     ("LiftPegUpright-v1", "panda", None),
+    ("LiftPegUpright-v1", "fetch", "pd_joint_pos"),
     ("PegInsertionSide-v1", "panda_wristcam", None),
     ("PushT-v1", "panda_stick", "pd_joint_pos"),
 ]

@@ -212,7 +212,7 @@ impl Policy for Random {
 }
 
 /// The (env id, robot) pairs that have a scripted solver (the arms of `solver`'s match).
-pub const SOLVED: [(&str, &str); 21] = [
+pub const SOLVED: [(&str, &str); 22] = [
     ("PickCube-v1", "panda"),
     ("PickCube-v1", "fetch"),
     ("PickCube-v1", "xarm6_robotiq"),
@@ -232,6 +232,7 @@ pub const SOLVED: [(&str, &str); 21] = [
     ("StackCube-v1", "fetch"),
     ("StackCube-v1", "panda_wristcam"),
     ("LiftPegUpright-v1", "panda"),
+    ("LiftPegUpright-v1", "fetch"),
     ("PegInsertionSide-v1", "panda_wristcam"),
     ("PushT-v1", "panda_stick"),
 ];
@@ -240,10 +241,11 @@ pub const SOLVED: [(&str, &str); 21] = [
 const STACK_CUBE: &str = "StackCube-v1";
 const LIFT_PEG_UPRIGHT: &str = "LiftPegUpright-v1";
 
-/// The registered (env id, robot) pairs that have no scripted solver yet (issue 56):
-/// `--policy solver` answers them with [`SolverError::NoSolver`], and the tests that replay a
-/// solver episode per pair skip them. Together with [`SOLVED`], every registered pair.
-pub const UNSOLVED: [(&str, &str); 1] = [("LiftPegUpright-v1", "fetch")];
+/// The registered (env id, robot) pairs that have no scripted solver yet (none today; a new
+/// pair lands here until its solver does): `--policy solver` answers them with
+/// [`SolverError::NoSolver`], and the tests that replay a solver episode per pair skip them.
+/// Together with [`SOLVED`], every registered pair.
+pub const UNSOLVED: [(&str, &str); 0] = [];
 
 /// Boxes a freshly built solver.
 fn boxed<P: Policy + 'static>(
@@ -292,6 +294,7 @@ fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
         ("LiftPegUpright-v1", "panda") => {
             boxed(lift_peg_upright::PandaLiftPeg::new(env, PANDA_GRIPPER))
         }
+        ("LiftPegUpright-v1", "fetch") => boxed(lift_peg_upright::FetchLiftPeg::new(env)),
         ("PegInsertionSide-v1", "panda_wristcam") => {
             boxed(peg_insertion_side::PegInsertionSideSolver::new(env))
         }
