@@ -8,8 +8,8 @@ only. Run from the repository root after `cargo build --release`:
     python3 docs/images/montage.py docs/images/pickcube-robots.png \
         /tmp/panda.png /tmp/fetch.png /tmp/xarm6_robotiq.png /tmp/so100.png /tmp/widowxai.png
 
-docs/images/tasks-panda.png, every task, the same way (PushT, which has no solver yet, at its
-seeded first state; PegInsertionSide with its robot, the panda_wristcam):
+docs/images/tasks-panda.png, every task, the same way (PushT at its seeded first state;
+PegInsertionSide with its robot, the panda_wristcam):
 
     for e in PickCube-v1 PokeCube-v1 PlaceSphere-v1 PushCube-v1 PullCube-v1 StackCube-v1 \
              LiftPegUpright-v1; do
