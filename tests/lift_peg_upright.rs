@@ -161,18 +161,25 @@ fn rewards_along_random_episodes_match_the_spec_formula() {
     }
 }
 
-#[test]
-fn the_pandas_solver_stands_the_peg_upright_with_the_spec_rewards() {
+/// `robot`'s scripted solver with its env (dense reward) and an action buffer; both robots'
+/// solvers drive `pd_ee_delta_pose`.
+fn solver(robot: &str) -> (Env, Box<dyn mjskill::solvers::Policy>, Vec<f32>) {
     use mjskill::solvers::{make_env, make_policy};
     let config = EnvConfig {
-        robot: Some("panda".into()),
+        robot: Some(robot.into()),
         reward_mode: RewardMode::Dense,
         ..Default::default()
     };
-    let mut e = make_env(ID, config, "solver").unwrap();
+    let e = make_env(ID, config, "solver").unwrap();
     assert_eq!(e.control_mode(), "pd_ee_delta_pose");
-    let mut policy = make_policy("solver", &e, 0).unwrap();
-    let mut action = vec![0.0f32; e.action_space().shape[0]];
+    let policy = make_policy("solver", &e, 0).unwrap();
+    let action = vec![0.0f32; e.action_space().shape[0]];
+    (e, policy, action)
+}
+
+#[test]
+fn the_pandas_solver_stands_the_peg_upright_with_the_spec_rewards() {
+    let (mut e, mut policy, mut action) = solver("panda");
     let mut successes = 0;
     for seed in 0..6 {
         e.reset(Some(seed));
@@ -200,15 +207,7 @@ fn the_pandas_solver_stands_the_peg_upright_with_the_spec_rewards() {
 
 #[test]
 fn the_fetchs_solver_stands_the_loosely_held_peg_on_its_lower_end() {
-    use mjskill::solvers::{make_env, make_policy};
-    let config = EnvConfig {
-        robot: Some("fetch".into()),
-        ..Default::default()
-    };
-    let mut e = make_env(ID, config, "solver").unwrap();
-    assert_eq!(e.control_mode(), "pd_ee_delta_pose");
-    let mut policy = make_policy("solver", &e, 0).unwrap();
-    let mut action = vec![0.0f32; e.action_space().shape[0]];
+    let (mut e, mut policy, mut action) = solver("fetch");
     let mut successes = 0;
     for seed in 0..20 {
         e.reset(Some(seed));
