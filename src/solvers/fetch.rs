@@ -57,12 +57,12 @@ pub(super) const GRASP: Grasp = Grasp {
 /// Torso height while picking and while carrying (m; the table pose has 0.386, the limit
 /// is 0.38615): low to reach down to the table, high to reach up to the goal.
 pub(super) const TORSO_PICK: f64 = 0.25;
-const TORSO_CARRY: f64 = 0.386;
+pub(super) const TORSO_CARRY: f64 = 0.386;
 /// Torso command per unit error while carrying (1 while picking: the whole error in one
 /// step). At the 0.01 s step the torso raised at full speed overshoots, sags back under the
 /// arm and creeps up again, and the gripper drifts with it: above high goals the robot was
 /// still moving at step 50 in 2–3 % of the episodes (seeds 0–399); at half speed it settles.
-const CARRY_TORSO_GAIN: f64 = 0.5;
+pub(super) const CARRY_TORSO_GAIN: f64 = 0.5;
 
 /// The approach above the cube is done: within [`APPROACH_TOL`] across the fingers (y, z),
 /// [`APPROACH_TOL_ALONG`] along them (x): above the farthest cubes the arm stops short at

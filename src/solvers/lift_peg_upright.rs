@@ -21,7 +21,8 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::fetch::{
-    approached_tilted, pick_pitch_and_height, GRASP, ROT_TOL as FETCH_ROT_TOL, TORSO_PICK,
+    approached_tilted, pick_pitch_and_height, CARRY_TORSO_GAIN, GRASP, ROT_TOL as FETCH_ROT_TOL,
+    TORSO_CARRY, TORSO_PICK,
 };
 use super::fetch_arm::{ArmCommand, FetchArm};
 use super::{
@@ -164,9 +165,6 @@ const FETCH_LOOSE_GRIP: f32 = -0.4;
 /// below the horizontal).
 const FETCH_LIFT_HEIGHT: f64 = 0.26;
 const FETCH_LIFT_PITCH: f64 = 0.6;
-/// Torso height and gain from the lift on (the Fetch's PickCube carry).
-const FETCH_LIFT_TORSO: f64 = 0.386;
-const FETCH_TORSO_GAIN: f64 = 0.5;
 /// The lift ends once the peg hangs within this of the vertical (rad); the hand then stands it
 /// on its lower end.
 const FETCH_STAND_TILT: f64 = 0.6;
@@ -256,12 +254,8 @@ impl Policy for FetchLiftPeg {
             target,
             tcp,
             pitch,
-            torso: if lifting {
-                FETCH_LIFT_TORSO
-            } else {
-                TORSO_PICK
-            },
-            torso_gain: if lifting { FETCH_TORSO_GAIN } else { 1.0 },
+            torso: if lifting { TORSO_CARRY } else { TORSO_PICK },
+            torso_gain: if lifting { CARRY_TORSO_GAIN } else { 1.0 },
             grip,
             limit: 1.0,
             min_step: if self.phases.phase == 1 {
