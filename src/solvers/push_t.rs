@@ -27,8 +27,9 @@
 //!
 //! Measured (0.01 s step, `mjskill eval`, success at any step): 88 of seeds 0–99, 90 of
 //! 100–199, and 86.5 % and 85.4 % of the held-out 7000–7999 and 5000–5999, 85.1 % and 84.1 %
-//! on the goal at step 100 (docs/solvers.md §7.8). What holds it back: a half turn takes 40–75 of the 100 steps (about 0.05 rad a step
-//! at the lever), and every change of contact costs 5–10 steps of travel.
+//! on the goal at step 100 (docs/solvers.md §7.8). What holds it back: a half turn takes 40–75
+//! of the 100 steps (about 0.05 rad a step at the lever), and every change of contact costs
+//! 5–10 steps of travel.
 
 use std::f64::consts::PI;
 use std::sync::OnceLock;
@@ -178,7 +179,7 @@ pub struct PushTSolver {
 }
 
 /// The pose the pusher pushes the T to (world xy, yaw).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy)]
 struct Aim {
     xy: Vector2<f64>,
     yaw: f64,
@@ -461,13 +462,15 @@ impl Policy for PushTSolver {
             self.lever = None;
             plan_push(pos, yaw, e_p, e_yaw)
         };
-        let mut target = Vector3::new(tip.x, tip.y, HOVER);
-        let mut lean = UnitQuaternion::identity();
         let qf = [q.w as f32, q.i as f32, q.j as f32, q.k as f32];
         let done = self.render.intersection(tee.x as f32, tee.y as f32, qf) >= DONE_OVERLAP;
-        if done {
-            target = tip3;
-        }
+        // Done: the stick stays where it is; no push: it hovers where it is.
+        let mut target = if done {
+            tip3
+        } else {
+            Vector3::new(tip.x, tip.y, HOVER)
+        };
+        let mut lean = UnitQuaternion::identity();
         if let (Some(p), false) = (plan, done) {
             let rel = tip - p.contact;
             let along = rel.dot(&p.u);
