@@ -219,18 +219,29 @@ fn the_fetchs_solver_stands_the_loosely_held_peg_on_its_lower_end() {
             e.step(&action).unwrap();
             lifted |= part(&e, "extra/obj_pose")[2] > 0.1;
         }
-        // Open, then the loose grip (−0.4) from the close on: never the full −1.
+        // Open, then the loose grip (−0.4) from the close on, never the full −1; once the stood
+        // peg is let go, the hand stays open.
         assert_eq!(grips[0], 1.0, "seed {seed}");
         assert!(
             grips.iter().all(|&g| g == 1.0 || g == -0.4),
             "seed {seed}: {grips:?}"
         );
-        assert_eq!(*grips.last().unwrap(), -0.4, "seed {seed}");
+        let closed = grips
+            .iter()
+            .position(|&g| g == -0.4)
+            .expect("the hand closes");
+        if let Some(release) = grips[closed..].iter().position(|&g| g == 1.0) {
+            assert!(
+                grips[closed + release..].iter().all(|&g| g == 1.0),
+                "seed {seed}: let go once: {grips:?}"
+            );
+        }
         if e.info().success() {
             assert!(lifted, "seed {seed}: stood up without leaving the table");
             successes += 1;
         }
     }
-    // 15 of seeds 0–19 at step 50; 56 of seeds 0–99 (docs/solvers.md §9).
-    assert!(successes >= 12, "{successes} of 20");
+    // 12 of seeds 0–19 at step 50 (17 at any step); 79 of seeds 0–99 at any step
+    // (docs/solvers.md §9). The loose-grip swing is chaotic: a margin for another CPU's last bits.
+    assert!(successes >= 10, "{successes} of 20");
 }

@@ -16,8 +16,8 @@
 //! pitches ≈ 0.01 rad per step while holding it), so it lets the peg turn in a loose grip as
 //! it lifts, stands it on its lower end with the hand over that end and lets go once it leans
 //! less than 0.25 rad, where it rights itself. Measured: 79/100 on seeds 0–99 (76 on 100–199,
-//! 700/1000 on the held-out 7000–7999); the ManiSkill replay (0 of 50, 18 ending the same)
-//! predates the release.
+//! 700/1000 on the held-out 7000–7999); replayed open loop in ManiSkill (seeds 1000–1049), 0 of
+//! 50 succeed there and 27 end the same.
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -185,7 +185,7 @@ const FETCH_DROPPED_TILT: f64 = 1.2;
 /// corner within [`FETCH_RELEASE_FOOT`] of the table (m): a 0.24 × 0.05 box standing on an
 /// edge rights itself onto its end below atan(0.025 / 0.12) ≈ 0.2 rad, and the opening
 /// fingers carry it a little further. Successes of seeds 0–99: 61 releasing at 0.2 against 56
-/// holding on (before the other changes of 1 December), 77 and 79 at 0.2 and 0.25 with them.
+/// holding on (before the other changes), 77 and 79 at 0.2 and 0.25 with them.
 const FETCH_RELEASE_TILT: f64 = 0.25;
 const FETCH_RELEASE_FOOT: f64 = 0.005;
 
