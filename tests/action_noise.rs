@@ -35,9 +35,14 @@ fn rollout(out: &Path, args: &[&str]) -> serde_json::Value {
 /// the executed action minus the label, divided by σ; entries with σ = 0 are checked to be
 /// the label itself.
 fn check_labels(path: &Path, sigma: &[f32]) -> Vec<f64> {
+    check_policy_labels(path, sigma, "solver")
+}
+
+/// [`check_labels`] for the built-in policy `policy` (`solver` or `expert`).
+fn check_policy_labels(path: &Path, sigma: &[f32], policy: &str) -> Vec<f64> {
     let rec = read(path).unwrap();
     let mut env = mjskill::make(&rec.meta.env_id, rec.meta.config().unwrap()).unwrap();
-    let mut solver = make_policy("solver", &env, 0).unwrap();
+    let mut solver = make_policy(policy, &env, 0).unwrap();
     let (low, high) = (
         env.action_space().low.clone(),
         env.action_space().high.clone(),
@@ -132,6 +137,54 @@ fn labels_are_the_solvers_actions_and_the_env_executes_them_with_noise() {
             .unwrap();
         assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     }
+}
+
+#[test]
+fn expert_demos_label_every_recorded_state_with_the_state_experts_action() {
+    // `--policy expert`: the Fetch's PlaceSphere expert converted to joint positions, the mode
+    // its policies are cloned in; each label is the expert's action for the state reached.
+    let out = common::scratch("fetch_expert.mcap");
+    let spec = "arm=0.005,gripper=0,body=0,base=0";
+    let sigma = [vec![0.005; 7], vec![0.0; 6]].concat();
+    let s = rollout(
+        &out,
+        &[
+            "--env",
+            "PlaceSphere-v1",
+            "--robot",
+            "fetch",
+            "--policy",
+            "expert",
+            "--control-mode",
+            "pd_joint_pos",
+            "--episodes",
+            "2",
+            "--action-noise",
+            spec,
+        ],
+    );
+    assert_eq!(s["policy"], "expert", "{s}");
+    let got: Vec<f32> = serde_json::from_value(s["action_noise"].clone()).unwrap();
+    assert_eq!(got, sigma, "{s}");
+    check_policy_labels(&out, &sigma, "expert");
+    // A pair without an expert is refused, naming those that have one.
+    let o = mjskill()
+        .args([
+            "rollout",
+            "--env",
+            "StackCube-v1",
+            "--policy",
+            "expert",
+            "--out",
+        ])
+        .arg(common::scratch("none.mcap"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("no state expert for StackCube-v1 with panda"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -429,7 +429,7 @@ fn malformed_and_missing_files_are_errors_naming_the_file() {
             .unwrap(),
     );
     assert!(
-        err.contains("solver, random, zero, or a policy file (FILE.onnx)"),
+        err.contains("solver, expert, random, zero, or a policy file (FILE.onnx)"),
         "{err}"
     );
 }

@@ -30,7 +30,7 @@ fn policy_errors_name_the_problem() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("telepathy") && e.contains("solver, random, zero"),
+        e.contains("telepathy") && e.contains("solver, expert, random, zero"),
         "{e}"
     );
     // A mode the solver's actions cannot be converted to (velocities) names both modes and

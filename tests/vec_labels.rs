@@ -164,21 +164,12 @@ fn labels_without_labellers_are_refused_with_nothing_stepped() {
 
 #[test]
 fn a_pair_without_an_expert_sets_no_labellers_and_names_the_pairs() {
-    let mut v = VecEnv::new(
-        "PokeCube-v1",
-        EnvConfig {
-            robot: Some("fetch".into()),
-            ..Default::default()
-        },
-        2,
-        1,
-    )
-    .unwrap();
+    let mut v = VecEnv::new("StackCube-v1", EnvConfig::default(), 2, 1).unwrap();
     let err = set_state_experts(&mut v).unwrap_err();
     assert!(matches!(err, SolverError::NoStateExpert { .. }), "{err}");
     let msg = err.to_string();
     assert!(
-        msg.contains("PokeCube-v1 with fetch")
+        msg.contains("StackCube-v1 with panda")
             && msg.contains("PickCube-v1 with panda")
             && msg.contains("PickCubeSO100-v1 with so100"),
         "{msg}"

@@ -52,9 +52,9 @@ def test_a_label_is_the_same_for_the_same_state_and_in_the_env_mode():
 
 
 def test_a_pair_without_an_expert_is_a_value_error_naming_it():
-    env = gym.make("mjskill/PokeCube-v1", robot_uids="fetch")
+    env = gym.make("mjskill/StackCube-v1")
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch; "
+    with pytest.raises(ValueError, match="no state expert for StackCube-v1 with panda; "
                                          "available: PickCube-v1 with panda"):
         env.unwrapped.expert_action()
 
@@ -106,11 +106,11 @@ def test_a_vector_env_without_an_expert_is_a_value_error_naming_it():
     from mjskill import GaussianMlp, MjskillVectorEnv
     from rollout_case import params
 
-    vec = MjskillVectorEnv("PokeCube-v1", num_envs=2, robot_uids="fetch")
+    vec = MjskillVectorEnv("StackCube-v1", num_envs=2)
     vec.reset(seed=0)
-    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch"):
+    with pytest.raises(ValueError, match="no state expert for StackCube-v1 with panda"):
         vec.expert_actions()
     buf = vec.rollout_buffers(3, labels=True)
     p = params(*vec.single_observation_space.shape, *vec.single_action_space.shape)
-    with pytest.raises(ValueError, match="no state expert for PokeCube-v1 with fetch"):
+    with pytest.raises(ValueError, match="no state expert for StackCube-v1 with panda"):
         vec.rollout(GaussianMlp(**p), 0, buf)

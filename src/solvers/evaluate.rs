@@ -256,7 +256,8 @@ pub struct EvalReport {
     pub mean_first_success_step: Option<f64>,
 }
 
-/// Builds the env for a policy: the solver dictates its control mode.
+/// Builds the env for a policy: the solver (or the state expert) dictates its control mode,
+/// unless `config` names another it converts to.
 pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env, EvalError> {
     let robot = match &config.robot {
         Some(r) => r.clone(),
@@ -266,9 +267,10 @@ pub fn make_env(env_id: &str, mut config: EnvConfig, policy: &str) -> Result<Env
         match config.control_mode.as_deref() {
             None => config.control_mode = Some(required.to_string()),
             Some(m) if m == required => {}
-            // The scripted solvers run in other modes through `ModeConverted`, which reports
-            // a mode it cannot convert to when the policy is built.
-            Some(m) if policy == "solver" => {
+            // The scripted solvers and the state experts run in other modes through
+            // `ModeConverted`, which reports a mode it cannot convert to when the policy is
+            // built.
+            Some(m) if policy == "solver" || policy == "expert" => {
                 crate::robots::spec(&robot)?.control_mode(m)?;
             }
             Some(m) => {

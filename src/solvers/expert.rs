@@ -15,12 +15,14 @@
 //! function of the state): joint position targets come out within π of the current angle on
 //! continuous joints.
 //!
-//! Pairs ([`STATE_EXPERTS`]): PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda, and
-//! PickCube-v1 (with PickCubeSO100-v1 and PickCubeWidowXAI-v1) with the SO100 and the WidowX
-//! AI (`joint_ik::JointIkPickCubeExpert`, in `pd_joint_pos`); any other is a clear error naming the
+//! Pairs ([`STATE_EXPERTS`]): PickCube-v1, PlaceSphere-v1 and PokeCube-v1 with the Panda and
+//! with the Fetch (`fetch_expert.rs`, in `pd_ee_delta_pose`), and PickCube-v1 (with
+//! PickCubeSO100-v1 and PickCubeWidowXAI-v1) with the SO100 and the WidowX AI
+//! (`joint_ik::JointIkPickCubeExpert`, in `pd_joint_pos`); any other is a clear error naming the
 //! pair and the ones that have an expert.
 use nalgebra::Vector3;
 
+use super::fetch_expert::{FetchPickCubeExpert, FetchPlaceSphereExpert, FetchPokeCubeExpert};
 use super::joint_ik::{self, JointIkPickCubeExpert};
 use super::{
     body_id, body_xyz, ee_action, tcp_link_xyz, tcp_xyz, Gripper, ModeConverted, Policy,
@@ -38,10 +40,13 @@ use super::poke_cube::{
 };
 
 /// The (env id, robot) pairs that have a state expert, in its own control mode.
-pub const STATE_EXPERTS: [(&str, &str, &str); 7] = [
+pub const STATE_EXPERTS: [(&str, &str, &str); 10] = [
     ("PickCube-v1", "panda", "pd_ee_delta_pos"),
     ("PlaceSphere-v1", "panda", "pd_ee_delta_pos"),
     ("PokeCube-v1", "panda", "pd_ee_delta_pos"),
+    ("PickCube-v1", "fetch", "pd_ee_delta_pose"),
+    ("PlaceSphere-v1", "fetch", "pd_ee_delta_pose"),
+    ("PokeCube-v1", "fetch", "pd_ee_delta_pose"),
     ("PickCube-v1", "so100", "pd_joint_pos"),
     ("PickCubeSO100-v1", "so100", "pd_joint_pos"),
     ("PickCube-v1", "widowxai", "pd_joint_pos"),
@@ -122,6 +127,9 @@ fn native(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
             env,
             joint_ik::WIDOWXAI,
         )?)),
+        ("PickCube-v1", "fetch") => Ok(Box::new(FetchPickCubeExpert::new(env)?)),
+        ("PlaceSphere-v1", "fetch") => Ok(Box::new(FetchPlaceSphereExpert::new(env)?)),
+        ("PokeCube-v1", "fetch") => Ok(Box::new(FetchPokeCubeExpert::new(env)?)),
         ("PickCube-v1", _) => Ok(Box::new(PickCubeExpert::new(env, PANDA_GRIPPER)?)),
         ("PokeCube-v1", _) => Ok(Box::new(PokeCubeExpert::new(env, PANDA_GRIPPER)?)),
         _ => Ok(Box::new(PlaceSphereExpert::new(env, PANDA_GRIPPER)?)),
@@ -140,8 +148,8 @@ impl StateExpert for Labeller {
 
 /// What every grasping expert reads off the state: the TCP, the gripper's gap, the grasp flag.
 #[derive(Debug, Clone, Copy)]
-struct Grip {
-    gripper: Gripper,
+pub(super) struct Grip {
+    pub(super) gripper: Gripper,
     /// qpos addresses of the two finger joints (their sum is the gap).
     fingers: [usize; 2],
     /// Their dof addresses (the gap's rate).
@@ -149,7 +157,7 @@ struct Grip {
 }
 
 impl Grip {
-    fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
+    pub(super) fn new(env: &Env, gripper: Gripper) -> Result<Self, SolverError> {
         let joints = &env.robot().joints;
         let spec = env.robot_spec();
         let ks: Vec<usize> = (0..joints.len())
@@ -167,16 +175,20 @@ impl Grip {
         })
     }
 
-    fn gap(&self, env: &Env) -> f64 {
+    pub(super) fn gap(&self, env: &Env) -> f64 {
         let q = env.data().qpos();
         q[self.fingers[0]] + q[self.fingers[1]]
     }
 
     /// The object is grasped (the task's flag) and the gripper has closed on it.
-    fn holds(&self, env: &Env) -> bool {
+    pub(super) fn holds(&self, env: &Env) -> bool {
+        env.info().flag(env.grasp_info_key()) && !self.closing(env)
+    }
+
+    /// The fingers are still closing ([`HELD_SPEED`] or faster).
+    pub(super) fn closing(&self, env: &Env) -> bool {
         let v = env.data().qvel();
-        let closing = -(v[self.finger_dofs[0]] + v[self.finger_dofs[1]]);
-        env.info().flag(env.grasp_info_key()) && closing < HELD_SPEED
+        -(v[self.finger_dofs[0]] + v[self.finger_dofs[1]]) >= HELD_SPEED
     }
 
     /// The TCP target and gripper action that bring an open gripper onto the grasp point

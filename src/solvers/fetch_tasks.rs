@@ -39,31 +39,31 @@ use crate::env::Env;
 use crate::mujoco::BodyId;
 
 /// Orientation tolerance before leaving the approach (rad).
-const ROT_TOL: f64 = 0.1;
+pub(super) const ROT_TOL: f64 = 0.1;
 /// Torso height while poking (m; the table pose has 0.386): low to reach along the table.
-const TORSO_LOW: f64 = 0.22;
+pub(super) const TORSO_LOW: f64 = 0.22;
 /// Torso command per unit error (a full step overshoots).
-const TORSO_GAIN: f64 = 0.5;
+pub(super) const TORSO_GAIN: f64 = 0.5;
 
 /// The sphere is released only within this horizontal distance of the bin centre (m): the
 /// Fetch's lowering drifts sideways, and a sphere released off-centre keeps rolling between
 /// the wall edges.
-const RELEASE_ALIGN: f64 = 0.001;
+pub(super) const RELEASE_ALIGN: f64 = 0.001;
 /// The lowered sphere is held until it moves slower than this (m/s; half `is_obj_static`'s
 /// 0.01 m/s), then released. The arm still creeps (≈ 1 cm/s) while it centres the sphere over
 /// the bin, and a sphere let go at that speed rolls on (MuJoCo has no rolling resistance), so
 /// it was still moving at step 50 in 7 % of the episodes (seeds 0–99).
-const RELEASE_SPEED: f64 = 0.005;
+pub(super) const RELEASE_SPEED: f64 = 0.005;
 
 /// Once the carried or lowered sphere has stalled short of the bin centre (the farthest bins,
 /// at the edge of the arm's reach): the horizontal distance to the bin centre that ends the
 /// carry and allows the release (m), and the height of the sphere centre over the bin origin
 /// below which it is released (m: resting on the bin's wall edge, it rolls in).
-const ALIGN_STALLED: f64 = 0.012;
-const RELEASE_BELOW_STALLED: f64 = 0.033;
+pub(super) const ALIGN_STALLED: f64 = 0.012;
+pub(super) const RELEASE_BELOW_STALLED: f64 = 0.033;
 /// The sphere has stalled after this many steps moving less than [`STALL_MOVE`] (m) each.
 const STALL_STEPS: usize = 2;
-const STALL_MOVE: f64 = 0.002;
+pub(super) const STALL_MOVE: f64 = 0.002;
 
 /// docs/solvers.md §7.2 with Fetch.
 #[derive(Debug)]
@@ -153,23 +153,23 @@ impl Policy for FetchPlaceSphere {
 
 /// Shortest position command while poking (action units): shorter ones are lost to the
 /// arm's sag under gravity and the descent onto the peg stalls.
-const POKE_MIN_STEP: f64 = 0.1;
+pub(super) const POKE_MIN_STEP: f64 = 0.1;
 /// Fetch grasps the peg near its tail end (the peg's half length is 0.12 m): the finger
 /// midpoint 1 cm behind the tail, the 6 cm fingers holding the last 2.1 cm of the peg, so that
 /// the head still reaches the farthest goals (x ≈ 0.42). At the 0.01 s step a grip on the
 /// last 1.1 cm (−0.14) lets the peg twist out of the fingers as soon as it is moved sideways
 /// (a quarter of the episodes, seeds 0–399), and holding 1 cm more (−0.12) leaves the goals
 /// beyond x ≈ 0.41 out of reach.
-const POKE_GRASP_OFFSET_X: f64 = -0.13;
+pub(super) const POKE_GRASP_OFFSET_X: f64 = -0.13;
 /// Orientation tolerance before leaving the approach above the peg (rad). The wrist turns
 /// the gripper from the table pose's 60° to its 5° pitch at only ≈ 0.045 rad per step, and it
 /// keeps turning during the descent and the close (8 steps), so the descent starts 0.3 rad
 /// (17°) early: with the 0.1 rad of [`ROT_TOL`] the push ends 4 steps later and 1–4 % of the
 /// episodes run out of time (seeds 0–399).
-const POKE_ROT_TOL: f64 = 0.3;
+pub(super) const POKE_ROT_TOL: f64 = 0.3;
 /// The head is behind the cube within 1 cm (the spec's 5 mm): the last millimetres of the
 /// sideways move converge slowly, and the push corrects the rest on its way to the cube.
-const POKE_PRE_PUSH_TOL: f64 = 0.01;
+pub(super) const POKE_PRE_PUSH_TOL: f64 = 0.01;
 /// While it moves the peg, the TCP is held this much above its height at the grasp (m; the
 /// spec's phases keep the current height): the lifted tail takes most of the peg's weight off
 /// the table, so the sliding peg's friction neither twists it in the grip nor swallows the
@@ -177,14 +177,14 @@ const POKE_PRE_PUSH_TOL: f64 = 0.01;
 /// shoulder (the longest reach). Without the lift the sideways move of the dragged peg takes
 /// up to 16 steps (0.5 % of the episodes run out of time) and 2 % still strain at the edge
 /// of the reach at step 50 (seeds 0–399).
-const POKE_LIFT: f64 = 0.02;
+pub(super) const POKE_LIFT: f64 = 0.02;
 /// Fetch stops the push earlier (the cube still ends within the goal radius), sparing reach.
-const POKE_PUSH_SHORT: f64 = 0.062;
+pub(super) const POKE_PUSH_SHORT: f64 = 0.062;
 
 /// The descent onto the peg is done: centred across the fingers (y) within 4 mm, within 1 cm
 /// in height (the arm stalls a few mm above its target with the fingers already around the
 /// peg's upper half) and 1.2 cm along the fingers.
-fn descended_on_peg(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
+pub(super) fn descended_on_peg(target: Vector3<f64>, tcp: Vector3<f64>) -> bool {
     let e = target - tcp;
     e.y.abs() < 0.004 && e.z.abs() < 0.01 && e.x.abs() < 0.012
 }

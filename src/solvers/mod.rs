@@ -12,6 +12,7 @@ mod evaluate;
 pub mod expert;
 pub(crate) mod fetch;
 pub(crate) mod fetch_arm;
+pub(crate) mod fetch_expert;
 pub(crate) mod fetch_tasks;
 pub(crate) mod joint_ik;
 pub(crate) mod lift_peg_upright;
@@ -124,8 +125,10 @@ pub enum SolverError {
     },
 }
 
-/// The policy names `rollout` and `eval` accept.
-pub const POLICIES: [&str; 3] = ["solver", "random", "zero"];
+/// The policy names `rollout` and `eval` accept: the scripted solver, the state expert (its
+/// action a function of the state, docs/solvers.md §8.2; the pairs in [`STATE_EXPERTS`]),
+/// uniform random and all-zero actions.
+pub const POLICIES: [&str; 4] = ["solver", "expert", "random", "zero"];
 
 /// A policy: fills an action for the env's current state.
 pub trait Policy: std::fmt::Debug + Send {
@@ -147,6 +150,14 @@ pub trait Policy: std::fmt::Debug + Send {
 /// where the robot has EE controllers; SO100 and WidowX AI have none upstream, so their
 /// solvers command joint positions (`pd_joint_pos`) from an IK of their own.
 pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
+    if policy == "expert" {
+        // The state expert's own mode; a pair without one needs none (building the policy
+        // reports it).
+        return STATE_EXPERTS
+            .iter()
+            .find(|(e, r, _)| *e == env_id && *r == robot)
+            .map(|&(_, _, mode)| mode);
+    }
     if policy != "solver" {
         return None;
     }
@@ -174,10 +185,33 @@ pub fn make_policy(name: &str, env: &Env, seed: u64) -> Result<Box<dyn Policy>, 
         "zero" => Ok(Box::new(Zero)),
         "random" => Ok(Box::new(Random(rand::rngs::StdRng::seed_from_u64(seed)))),
         "solver" => solver(env),
+        "expert" => Ok(Box::new(ExpertPolicy(state_expert(env)?))),
         _ => Err(SolverError::UnknownPolicy {
             name: name.to_string(),
             valid: format!("{}, or a policy file (FILE.onnx)", POLICIES.join(", ")),
         }),
+    }
+}
+
+/// The state expert ([`state_expert`]) as a policy (`--policy expert`): demonstrations whose
+/// every action is the label DAgger asks the same expert for, so cloning and DAgger learn from
+/// one teacher.
+#[derive(Debug)]
+pub struct ExpertPolicy(Box<dyn StateExpert>);
+
+impl Policy for ExpertPolicy {
+    fn reset(&mut self, _env: &Env) {}
+
+    /// The expert's label; where labelling fails (only a converted expert's shadow env can),
+    /// zeros. The episode loops call [`Policy::try_act`], which returns that error instead.
+    fn act(&mut self, env: &Env, action: &mut [f32]) {
+        if self.0.label(env, action).is_err() {
+            action.fill(0.0);
+        }
+    }
+
+    fn try_act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError> {
+        self.0.label(env, action)
     }
 }
 

@@ -32,7 +32,7 @@ const PRE_PUSH_TOL: f64 = 0.005;
 /// The push stops with the head this far short of the goal centre (m).
 pub(super) const PUSH_SHORT_OF_GOAL: f64 = 0.02;
 /// Push tolerance (m).
-const PUSH_TOL: f64 = 0.004;
+pub(super) const PUSH_TOL: f64 = 0.004;
 /// Action limit while pushing (a fast push launches the cube).
 pub(super) const PUSH_LIMIT: f64 = 0.3;
 

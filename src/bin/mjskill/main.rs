@@ -123,8 +123,9 @@ pub enum Command {
         /// Env, robot and control mode.
         #[command(flatten)]
         target: EnvArgs,
-        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
-        /// env, robot and modes are the defaults.
+        /// Policy: solver, expert (the state expert, docs/solvers.md §8.2), random, zero, or a
+        /// policy file (FILE.onnx, docs/training.md), whose env, robot and modes are the
+        /// defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (seeds seed, seed+1, ...; the last must be a 32-bit seed).
@@ -148,8 +149,9 @@ pub enum Command {
         /// Reward mode: normalized_dense, dense, sparse or none.
         #[arg(long, default_value = "normalized_dense")]
         reward_mode: String,
-        /// Policy: solver, random, zero, or a policy file (FILE.onnx, docs/training.md), whose
-        /// env, robot and modes are the defaults.
+        /// Policy: solver, expert (the state expert, docs/solvers.md §8.2), random, zero, or a
+        /// policy file (FILE.onnx, docs/training.md), whose env, robot and modes are the
+        /// defaults.
         #[arg(long, default_value = "solver")]
         policy: String,
         /// Episodes (1 or more; the last seed must be a 32-bit seed).
