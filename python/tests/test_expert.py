@@ -30,11 +30,15 @@ def test_the_experts_are_listed_and_solve_their_pairs():
     for env_id, robot, mode in mjskill.STATE_EXPERTS:
         env = gym.make(f"mjskill/{env_id}", robot_uids=robot, control_mode=mode,
                        max_episode_steps=None)
-        assert sum(run(env, s) for s in range(7300, 7310)) >= 9, env_id
+        # The Fetch's experts finish at step 42 on average, and its random base commands drive
+        # the robot away from the table: measured 9, 7 and 10 of 10 from the reset (PickCube,
+        # PlaceSphere, PokeCube) and 4, 7 and 7 after five random actions.
+        fetch = robot == "fetch"
+        assert sum(run(env, s) for s in range(7300, 7310)) >= (6 if fetch else 9), env_id
         # From wherever five random actions left the arm. Five absolute joint targets
         # (pd_joint_pos, the SO100's and WidowX AI's experts) throw it much further than five
         # end-effector deltas: measured 6 and 7 of 10 there, 9-10 for the Panda's.
-        least = 5 if mode == "pd_joint_pos" else 8
+        least = 3 if fetch else 5 if mode == "pd_joint_pos" else 8
         assert sum(run(env, s, random_steps=5) for s in range(7310, 7320)) >= least, env_id
 
 
