@@ -73,14 +73,19 @@ pub trait StateExpert: std::fmt::Debug + Send {
     fn label(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError>;
 }
 
+/// The own control mode of the state expert of (`env_id`, `robot`), if the pair has one.
+pub fn expert_mode(env_id: &str, robot: &str) -> Option<&'static str> {
+    STATE_EXPERTS
+        .iter()
+        .find(|(e, r, _)| *e == env_id && *r == robot)
+        .map(|&(_, _, mode)| mode)
+}
+
 /// The state expert of `env`'s (env, robot) pair, in `env`'s control mode (converted from the
 /// expert's own where they differ).
 pub fn state_expert(env: &Env) -> Result<Box<dyn StateExpert>, SolverError> {
     let robot = env.robot_spec().uid();
-    let Some(&(_, _, mode)) = STATE_EXPERTS
-        .iter()
-        .find(|(e, r, _)| *e == env.id() && *r == robot)
-    else {
+    let Some(mode) = expert_mode(env.id(), robot) else {
         return Err(SolverError::NoStateExpert {
             env: env.id(),
             robot,

@@ -153,10 +153,7 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
     if policy == "expert" {
         // The state expert's own mode; a pair without one needs none (building the policy
         // reports it).
-        return STATE_EXPERTS
-            .iter()
-            .find(|(e, r, _)| *e == env_id && *r == robot)
-            .map(|&(_, _, mode)| mode);
+        return expert::expert_mode(env_id, robot);
     }
     if policy != "solver" {
         return None;
