@@ -73,7 +73,7 @@ OBS_CLIP = 10.0
 #: Options a resumed run cannot change: they define the network or its data.
 RUN_DEFINING = ("env_id", "robot", "control_mode", "seed", "hidden", "demos",
                 "include_failed", "relative_labels", "absolute_gripper", "gripper_qvel",
-                "batch_size", "obs_noise",
+                "hide_obs", "batch_size", "obs_noise",
                 "dagger_episodes", "dagger_beta", "dagger_seed")
 
 #: log.csv's columns.
@@ -119,6 +119,11 @@ def parse_args(argv=None, check=True):
     p.add_argument("--gripper-qvel", choices=("hide", "observe"), default="hide",
                    help="hide the gripper joints' velocities from the policy (default; "
                         "PhysX reports a residual there, docs/outcome-physics.md) or observe them")
+    p.add_argument("--hide-obs", metavar="INDEX", type=non_negative, nargs="+", default=[],
+                   help="observation entries the policy does not see, by index into the state "
+                        "observation (e.g. the Fetch's base and head joints, whose positions "
+                        "and velocities the task does not need); with --relative-labels a "
+                        "hidden joint position's target is learned absolute")
     p.add_argument("--dagger-rounds", type=non_negative, default=0,
                    help="DAgger rounds after the cloning epochs (0: cloning only); each runs "
                         "the policy, labels its states with the env's state expert and trains "
@@ -357,6 +362,8 @@ def main(argv=None):
             if args.absolute_gripper:
                 gripper = set(base._native.spec()["gripper_joints"])
                 residual = [None if i in gripper else i for i in residual]
+            # A position the policy does not see cannot be added back to its target.
+            residual = [None if i in args.hide_obs else i for i in residual]
             if all(i is None for i in residual):
                 sys.exit(f"error: --relative-labels: no action entry of {robot} in {mode} is "
                          "a joint's absolute position target; relative labels are for joint "
@@ -388,7 +395,11 @@ def main(argv=None):
         run_argv = with_values(run_argv, "--demos", [os.path.abspath(f) for f in args.demos])
     if ckpt is not None:
         rundir.check_checkpoint_is_the_runs(out, command, robot, mode)
-    hidden = grip if args.gripper_qvel == "hide" else []
+    bad = [i for i in args.hide_obs if i >= obs_dim]
+    if bad:
+        sys.exit(f"error: --hide-obs {' '.join(map(str, bad))}: {args.env_id} with {robot} in "
+                 f"{mode} observes {obs_dim} values (indices 0..{obs_dim - 1})")
+    hidden = sorted(set((grip if args.gripper_qvel == "hide" else []) + list(args.hide_obs)))
 
     # The data: every recorded step of the successful episodes, labelled with the expert's
     # own action where recorded.

@@ -180,6 +180,43 @@ def test_absolute_gripper_keeps_the_gripper_labels_absolute(demo_files, tmp_path
     assert "--absolute-gripper" in metadata(out / "policy.onnx")["training_command"]
 
 
+def test_hidden_observation_entries_do_not_reach_the_policy(demo_files, tmp_path):
+    """--hide-obs: the named entries are zeroed before the network (in the file too), and a
+    hidden joint position's target is learned absolute, since the file cannot add back a
+    position it does not read."""
+    pytest.importorskip("torch")
+    ort = need("onnxruntime")
+    out = tmp_path / "run"
+    # The SO100's shoulder pan: its position (entry 0) and velocity (entry 6).
+    r = imitate(*SMALL, "--demos", str(demo_files / "so100.mcap"), "--relative-labels",
+                "--hide-obs", "0", "6", "--epochs", "2", "--eval-every", "2", "--out", str(out))
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "relative labels on action entries [1, 2, 3, 4, 5]" in r.stdout, r.stdout[-2000:]
+    # With the jaw's velocity (entry 11), which the policy never sees by default.
+    assert metadata(out / "policy.onnx")["hidden_obs"] == "0,6,11"
+    d = demos_mod.load([str(demo_files / "so100.mcap")], None, None, None)
+    obs = d.all_obs[:20].copy()
+    s = ort.InferenceSession(str(out / "policy.onnx"), providers=["CPUExecutionProvider"])
+    name = s.get_inputs()[0].name
+    before = s.run(None, {name: obs})[0]
+    moved = obs.copy()
+    moved[:, [0, 6]] += 0.3
+    after = s.run(None, {name: moved})[0]
+    np.testing.assert_array_equal(before, after)
+    # A visible entry does reach it.
+    moved[:, 1] += 0.3
+    assert np.abs(s.run(None, {name: moved})[0] - before).max() > 1e-4
+
+
+def test_a_hidden_entry_beyond_the_observation_is_refused(demo_files, tmp_path):
+    r = imitate(*SMALL, "--demos", str(demo_files / "so100.mcap"), "--hide-obs", "3", "999",
+                "--out", str(tmp_path / "run"))
+    assert r.returncode == 1, r.stderr[-2000:]
+    assert "--hide-obs 999: PickCubeSO100-v1 with so100 in pd_joint_pos observes" in r.stderr, \
+        r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
+
+
 def test_relative_labels_in_a_mode_without_absolute_joint_targets_are_refused(demo_files,
                                                                                tmp_path):
     pytest.importorskip("torch")
