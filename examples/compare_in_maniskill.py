@@ -17,6 +17,15 @@ seed three ways:
   targets PhysX holds) and the same action; the largest arm-joint error after that one step,
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
 
+With the open loop it also finds which of the policy's readings turn small state differences
+into different actions: at each step before the open-loop states part, the policy acts on
+ManiSkill's observation and on mjskill's, and then on ManiSkill's with one reading at a time
+(a joint's position or velocity, named by ManiSkill's joint names, or another entry of the
+state observation) taken from mjskill's. The step with the largest action difference and the
+readings that move the action most there are reported (`open_action_gap`). A reading the
+task does not need (the Fetch's head, docs/training.md) shows up there, and
+`examples/imitate.py --hide-obs` hides it.
+
 Its successes are success at the last step (`success_at_end` of eval_in_maniskill.py, whose
 headline figure is success at any step, as `mjskill eval`'s is).
 
@@ -44,6 +53,56 @@ TOLERANCES = {"arm_qpos": 0.01, "gripper_qpos": 0.002, "tcp_pos": 0.005, "obj_po
 #: The task flags compared step by step (those the env's `info` has).
 FLAGS = ("is_grasped", "is_obj_grasped", "is_robot_static", "is_cube_placed",
          "is_obj_placed", "is_obj_on_goal", "success")
+
+
+#: Readings reported per episode in `open_action_gap`, the largest first.
+TOP_READINGS = 3
+
+
+def reading_groups(layout, joint_names):
+    """{reading: observation indices} of a state observation: one reading per joint in the
+    `agent/qpos` and `agent/qvel` entries (named `agent/qpos/<joint>`), one per other entry
+    of `layout` ((name, start, end) triples, mjskill's `obs_layout`)."""
+    groups = {}
+    for name, start, end in layout:
+        if name in ("agent/qpos", "agent/qvel") and end - start == len(joint_names):
+            for k, joint in enumerate(joint_names):
+                groups[f"{name}/{joint}"] = [start + k]
+        else:
+            groups[name] = list(range(start, end))
+    return groups
+
+
+def action_readings(policy_fn, obs_ref, obs_other, groups):
+    """How far each reading moves the action: the largest |change| of `policy_fn`'s action
+    when `obs_ref` takes that reading's entries from `obs_other`. Returns (the largest
+    |difference| between the actions on the two observations, [(reading, change), ...]
+    sorted from the largest change)."""
+    obs_ref = np.asarray(obs_ref, np.float32).reshape(-1)
+    obs_other = np.asarray(obs_other, np.float32).reshape(-1)
+    base = np.asarray(policy_fn(obs_ref), np.float64)
+    gap = float(np.max(np.abs(np.asarray(policy_fn(obs_other), np.float64) - base)))
+    moves = []
+    for name, idx in groups.items():
+        o = obs_ref.copy()
+        o[idx] = obs_other[idx]
+        moves.append((name, float(np.max(np.abs(np.asarray(policy_fn(o), np.float64) - base)))))
+    moves.sort(key=lambda m: -m[1])
+    return gap, moves
+
+
+def largest_action_gap(policy_fn, ms_obs, mj_obs, groups, until):
+    """`action_readings` at each step before `until` (the open loop's first parting step,
+    1-based, or None for every step): the step (0-based: the observation after that many
+    actions) with the largest action difference, its size, and its top readings."""
+    steps = range(len(ms_obs) if until is None else min(len(ms_obs), until))
+    best = None
+    for t in steps:
+        gap, moves = action_readings(policy_fn, ms_obs[t], mj_obs[t], groups)
+        if best is None or gap > best["gap"]:
+            best = {"step": t, "gap": round(gap, 6),
+                    "readings": [[n, round(v, 6)] for n, v in moves[:TOP_READINGS]]}
+    return best
 
 
 def ms_scalar(x):
@@ -124,26 +183,29 @@ def first_part(ms_snaps, mj_snaps, arm):
 def run_maniskill(env, policy, seed, low, high, obj_name, tcp):
     sess, inp, rank = policy
     obs, _ = env.reset(seed=seed)
-    states, actions, snaps = [], [], []
+    states, actions, snaps, seen = [], [], [], []
     while True:
         states.append(ms_state_dict(env))
+        seen.append(to_numpy(obs).reshape(-1).astype(np.float32))
         a = act(sess, inp, rank, obs, low, high)
         obs, _, _, trunc, info = env.step(a[None])
         actions.append(a)
         snaps.append(ms_snapshot(env, obs, info, obj_name, tcp))
         if bool(ms_scalar(trunc)):
-            return states, actions, snaps
+            return states, actions, snaps, seen
 
 
 def run_mjskill(env, seed, actions, policy, obj_name, tcp, low, high):
-    """Closed loop when `policy` is given, else the actions open loop."""
+    """Closed loop when `policy` is given, else the actions open loop. Returns the snapshots
+    after each step and the observations before each."""
     obs, _ = env.reset(seed=seed)
-    snaps = []
+    snaps, seen = [], []
     for t in range(len(actions)):
+        seen.append(np.asarray(obs, np.float32).reshape(-1))
         a = act(*policy, obs, low, high) if policy is not None else actions[t]
         obs, _, _, _, info = env.step(a)
         snaps.append(mj_snapshot(env, obs, info, obj_name, tcp))
-    return snaps
+    return snaps, seen
 
 
 def resync_errors(env, seed, states, actions, ms_snaps, arm):
@@ -192,21 +254,30 @@ def main():
     # The TCP position: the first 3 entries of the state observation's tcp_pose.
     tcp = next((slice(a, a + 3) for name, a, _ in spec["obs_layout"] if "tcp_pose" in name),
                None)
+    joint_names = [j.name for j in ms.unwrapped.agent.robot.get_active_joints()]
+    groups = reading_groups(spec["obs_layout"], joint_names)
+
+    def policy_fn(o):
+        return act(sess, inp, rank, o, low, high)
 
     lines, out = [], open(a.json, "w") if a.json else None
     for k in range(a.episodes):
         seed = a.seed + k
-        states, actions, ms_snaps = run_maniskill(ms, policy, seed, low, high, obj_name, tcp)
-        closed = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high)
-        open_ = run_mjskill(mj, seed, actions, None, obj_name, tcp, low, high)
+        states, actions, ms_snaps, ms_obs = run_maniskill(ms, policy, seed, low, high,
+                                                          obj_name, tcp)
+        closed, _ = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high)
+        open_, open_obs = run_mjskill(mj, seed, actions, None, obj_name, tcp, low, high)
         errs, held = resync_errors(mj, seed, states, actions, ms_snaps, arm)
+        open_part = first_part(ms_snaps, open_, arm)
         line = {
             "seed": seed,
             "maniskill_success": ms_snaps[-1].flags.get("success"),
             "mjskill_success": closed[-1].flags.get("success"),
             "open_loop_success": open_[-1].flags.get("success"),
             "closed_first_part": first_part(ms_snaps, closed, arm),
-            "open_first_part": first_part(ms_snaps, open_, arm),
+            "open_first_part": open_part,
+            "open_action_gap": largest_action_gap(
+                policy_fn, ms_obs, open_obs, groups, open_part["step"] if open_part else None),
             "one_step_arm_error_first": errs[0],
             "one_step_arm_error_median": float(np.median(errs)),
             "one_step_arm_error_held_median": float(np.median([e for e, h in zip(errs, held)
@@ -238,6 +309,10 @@ def main():
         "closed_most_common_quantity": most_common("closed_first_part"),
         "open_median_first_part_step": median_step("open_first_part"),
         "open_most_common_quantity": most_common("open_first_part"),
+        "open_action_gap_median": float(np.median(
+            [ln["open_action_gap"]["gap"] for ln in lines])),
+        "open_action_gap_most_common_reading": collections.Counter(
+            ln["open_action_gap"]["readings"][0][0] for ln in lines).most_common(1)[0][0],
         "one_step_arm_error_first_median": float(np.median(
             [ln["one_step_arm_error_first"] for ln in lines])),
         "one_step_arm_error_median": float(np.median(

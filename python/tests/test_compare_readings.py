@@ -1,0 +1,60 @@
+"""examples/compare_in_maniskill.py's attribution of an action difference to the policy's
+readings (`open_action_gap`), without ManiSkill: the observation's readings, named per
+joint, and which of them moves a policy's action, on policies whose answer is known."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "examples"))
+import compare_in_maniskill as cmp  # noqa: E402
+
+LAYOUT = [("agent/qpos", 0, 2), ("agent/qvel", 2, 4), ("extra/tcp_pose", 4, 11)]
+
+
+def linear(w):
+    w = np.asarray(w, np.float64)
+    return lambda o: w @ np.asarray(o, np.float64)
+
+
+def test_joint_readings_are_named_by_joint_and_the_rest_by_entry():
+    g = cmp.reading_groups(LAYOUT, ["head_tilt_joint", "elbow_flex_joint"])
+    assert g == {"agent/qpos/head_tilt_joint": [0], "agent/qpos/elbow_flex_joint": [1],
+                 "agent/qvel/head_tilt_joint": [2], "agent/qvel/elbow_flex_joint": [3],
+                 "extra/tcp_pose": list(range(4, 11))}
+    # Names that do not match the entry's size leave it whole.
+    assert cmp.reading_groups(LAYOUT, ["only_one"])["agent/qpos"] == [0, 1]
+
+
+def test_the_reading_that_moves_the_action_most_comes_first():
+    groups = cmp.reading_groups(LAYOUT, ["head", "elbow"])
+    # The action reads the head's position 50 times as strongly as the elbow's.
+    w = np.zeros((2, 11))
+    w[0, 0], w[1, 1], w[1, 4] = 50.0, 1.0, 3.0
+    ref = np.zeros(11)
+    other = ref.copy()
+    other[0], other[1], other[4] = 0.002, 0.002, 0.001
+    gap, moves = cmp.action_readings(linear(w), ref, other, groups)
+    assert np.isclose(gap, 0.1), gap
+    assert moves[0][0] == "agent/qpos/head" and np.isclose(moves[0][1], 0.1), moves
+    assert moves[1][0] == "extra/tcp_pose" and np.isclose(moves[1][1], 0.003), moves
+    assert moves[2][0] == "agent/qpos/elbow" and np.isclose(moves[2][1], 0.002), moves
+    # Readings that differ in nothing move nothing.
+    assert dict(moves)["agent/qvel/head"] == 0.0
+
+
+def test_the_largest_gap_is_looked_for_only_before_the_states_part():
+    groups = cmp.reading_groups(LAYOUT, ["head", "elbow"])
+    policy = linear(np.eye(11)[:2])
+    ms = [np.zeros(11) for _ in range(4)]
+    mj = [np.zeros(11) for _ in range(4)]
+    mj[1][1] = 0.01  # the elbow, after one step
+    mj[3][0] = 0.5  # the head, after three steps (the states have parted by then)
+    best = cmp.largest_action_gap(policy, ms, mj, groups, until=3)
+    assert best["step"] == 1 and np.isclose(best["gap"], 0.01), best
+    assert best["readings"][0] == ["agent/qpos/elbow", 0.01], best
+    assert len(best["readings"]) == cmp.TOP_READINGS
+    best = cmp.largest_action_gap(policy, ms, mj, groups, until=None)
+    assert best["step"] == 3 and best["readings"][0][0] == "agent/qpos/head", best
