@@ -346,6 +346,10 @@ def main(argv=None):
         base = probe_env.unwrapped
         robot, mode, max_steps = base.robot_uids, base.control_mode, probe_env.spec.max_episode_steps
         obs_dim = probe_env.observation_space.shape[0]
+        bad = [i for i in args.hide_obs if i >= obs_dim]
+        if bad:
+            sys.exit(f"error: --hide-obs {' '.join(map(str, bad))}: {args.env_id} with {robot} "
+                     f"in {mode} observes {obs_dim} values (indices 0..{obs_dim - 1})")
         act_dim = probe_env.action_space.shape[0]
         low = probe_env.action_space.low.astype(np.float32)
         high = probe_env.action_space.high.astype(np.float32)
@@ -395,10 +399,6 @@ def main(argv=None):
         run_argv = with_values(run_argv, "--demos", [os.path.abspath(f) for f in args.demos])
     if ckpt is not None:
         rundir.check_checkpoint_is_the_runs(out, command, robot, mode)
-    bad = [i for i in args.hide_obs if i >= obs_dim]
-    if bad:
-        sys.exit(f"error: --hide-obs {' '.join(map(str, bad))}: {args.env_id} with {robot} in "
-                 f"{mode} observes {obs_dim} values (indices 0..{obs_dim - 1})")
     hidden = sorted(set((grip if args.gripper_qvel == "hide" else []) + list(args.hide_obs)))
 
     # The data: every recorded step of the successful episodes, labelled with the expert's
