@@ -14,7 +14,8 @@ use mjskill::solvers::PolicyFile;
 /// impulses; the Panda's three and the Fetch's two are cloned from the solvers'
 /// noise-injected episodes, docs/training.md, the Fetch's two again on 30 November with the
 /// base and the head hidden; the WidowX AI's two trained again the same day
-/// with the pinch's kick and the velocities PhysX reports under it, docs/physics.md).
+/// with the pinch's kick and the velocities PhysX reports under it, docs/physics.md; the
+/// SO100's two cloned the same day from its solver in `pd_joint_target_delta_pos`).
 const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
@@ -42,14 +43,14 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "PickCubeSO100-v1",
         "so100",
         "pd_joint_target_delta_pos",
-        0.92,
+        0.97,
     ),
     (
         "PickCube-v1__so100.onnx",
         "PickCube-v1",
         "so100",
         "pd_joint_target_delta_pos",
-        0.92,
+        0.97,
     ),
     (
         "PickCubeWidowXAI-v1__widowxai.onnx",
@@ -120,6 +121,7 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
         // A file retargeted to another name of the same env (PickCube-v1 with the SO100 is
         // PickCubeSO100-v1) keeps the command that trained it and says so in `derived`.
         let derived = m.props.iter().find(|(k, _)| k == "derived");
+        let retargeted = derived.is_some_and(|(_, d)| d.contains("retarget"));
         let trained_on = match derived {
             Some((_, d)) if d.contains("retarget") => {
                 let rest = m.training_command.split("--env-id ").nth(1).unwrap_or("");
@@ -144,10 +146,27 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
             // Files cloned since recordings keep their command also carry how their demos
             // were recorded (the Panda's three predate it).
             if let Some((_, c)) = m.props.iter().find(|(k, _)| k == "demos_command") {
-                assert!(
-                    c.starts_with(&format!("mjskill rollout --env {env_id} --robot {robot} ")),
-                    "{file}: {c}"
-                );
+                // A retargeted clone's demos were recorded under the other name.
+                let demos_env = if retargeted {
+                    let named = c.split("--env ").nth(1).unwrap_or("");
+                    let named = named.split(' ').next().unwrap_or("");
+                    assert_ne!(named, env_id, "{file}: retargeted to its own name");
+                    named
+                } else {
+                    env_id
+                };
+                // The robot is named, or is the env's default (PickCubeSO100-v1's SO100).
+                let default_robot = mjskill::make(demos_env, mjskill::EnvConfig::default())
+                    .unwrap()
+                    .robot_id()
+                    .uid();
+                let named = c.starts_with(&format!(
+                    "mjskill rollout --env {demos_env} --robot {robot} "
+                ));
+                let implied = default_robot == robot
+                    && c.starts_with(&format!("mjskill rollout --env {demos_env} "))
+                    && !c.contains("--robot ");
+                assert!(named || implied, "{file}: {c}");
             } else {
                 assert_eq!(robot, "panda", "{file}: no demos_command");
             }

@@ -268,6 +268,9 @@ pub const SOLVED: [(&str, &str); 22] = [
     ("PushT-v1", "panda_stick"),
 ];
 
+/// The accumulating joint-target mode, whose targets move at most one action bound per step.
+const TARGET_DELTA: &str = "pd_joint_target_delta_pos";
+
 /// The envs whose Panda solver turns the gripper (`pd_ee_delta_pose`).
 const STACK_CUBE: &str = "StackCube-v1";
 const LIFT_PEG_UPRIGHT: &str = "LiftPegUpright-v1";
@@ -290,6 +293,18 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
     let required = required_control_mode("solver", env.id(), robot).unwrap_or(mode);
+    if mode == TARGET_DELTA && matches!(robot, "so100" | "widowxai") {
+        // Targets that move at a bounded rate: the phases end on the commanded targets and
+        // the gripper keeps its tilt (docs/solvers.md §8.1).
+        return boxed(ModeConverted::new(env, required, |shadow| {
+            let r = if robot == "so100" {
+                joint_ik::SO100
+            } else {
+                joint_ik::WIDOWXAI
+            };
+            boxed(joint_ik::JointIkPickCube::new(shadow, r).map(|s| s.leading()))
+        }));
+    }
     if mode != required {
         return boxed(ModeConverted::new(env, required, native_solver));
     }
