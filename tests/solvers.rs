@@ -482,3 +482,43 @@ fn the_so100_solver_keeps_pace_with_rate_limited_targets() {
     let first = r.mean_first_success_step.unwrap();
     assert!(first < 28.0, "{r:?}");
 }
+
+/// The Fetch sets the sphere down on the bin's floor and lets go there (solvers/fetch_tasks.rs,
+/// `FLOOR_LOWER_TO`): the first step that opens the gripper after the grasp comes with the
+/// sphere's centre within 1 mm of resting on the floor (2.25 cm over the bin origin), where it
+/// used to be let go 3–6 mm above it, and the episode succeeds.
+#[test]
+fn the_fetch_lets_go_of_the_sphere_on_the_bins_floor() {
+    use mjskill::solvers::make_policy;
+    let config = robot_in("fetch", None);
+    let mut env = eval::make_env("PlaceSphere-v1", config, "solver").unwrap();
+    let mut policy = make_policy("solver", &env, 0).unwrap();
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    let part = |e: &mjskill::Env, key: &str| {
+        let (_, r) = e.obs_layout().iter().find(|(k, _)| k == key).unwrap();
+        e.obs()[r.clone()].to_vec()
+    };
+    for seed in [0u64, 1, 2] {
+        let (mut closed, mut released_at, mut success) = (false, None, false);
+        eval::run_episode(
+            &mut env,
+            policy.as_mut(),
+            Some(seed),
+            &mut action,
+            |e, a, _, _, _| {
+                let (sphere, bin) = (part(e, "extra/obj_pose"), part(e, "extra/bin_pos"));
+                // (the observation after the step; the gripper's action is entry 6)
+                closed |= a[6] < 0.0;
+                if closed && a[6] > 0.0 && released_at.is_none() {
+                    released_at = Some(sphere[2] - bin[2]);
+                }
+                success |= e.info().flag("success");
+                Ok(())
+            },
+        )
+        .unwrap();
+        let h = released_at.expect("the gripper never opened after the grasp");
+        assert!((0.0215..0.0245).contains(&h), "seed {seed}: {h}");
+        assert!(success, "seed {seed}");
+    }
+}

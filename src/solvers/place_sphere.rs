@@ -57,6 +57,8 @@ pub struct PlaceSphereSolver {
     /// lowered sphere until it is slower (the spec's phases have none: infinite, the phase
     /// falls through at once).
     pub release_speed: f64,
+    /// Lowering target of the sphere centre over the bin origin (m; the spec's 2.55 cm).
+    pub lower_to: f64,
     /// Sphere position at the previous step (its speed for [`Self::release_speed`]).
     last_sphere: Option<Vector3<f64>>,
     phases: Phases,
@@ -74,6 +76,7 @@ impl PlaceSphereSolver {
             align_tol: ALIGN_TOL,
             release_below: RELEASE_BELOW,
             release_speed: f64::INFINITY,
+            lower_to: LOWER_TO,
             last_sphere: None,
             phases: Phases::default(),
         })
@@ -107,6 +110,7 @@ impl PlaceSphereSolver {
         });
         self.last_sphere = Some(sphere);
         let release_speed = self.release_speed;
+        let lower_to = self.lower_to;
         self.phases.run(|phase, steps| {
             let (target, grip, done) = match phase {
                 0..=2 => g.phase(phase, steps, grasp, tcp, ready),
@@ -122,7 +126,7 @@ impl PlaceSphereSolver {
                     (t, close, (sphere.xy() - bin.xy()).norm() < align_tol)
                 }
                 5 => (
-                    tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
+                    tcp + (bin + Vector3::new(0.0, 0.0, lower_to) - sphere),
                     close,
                     sphere.z - bin.z < release_below
                         && (sphere.xy() - bin.xy()).norm() < release_align,
