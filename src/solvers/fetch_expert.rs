@@ -23,11 +23,12 @@ use super::fetch_arm::{
     descended_tilted, min_tcp_height, pitch_for_x, pitch_towards, ArmCommand, FetchArm, PITCH_FAR,
 };
 use super::fetch_tasks::{
-    descended_on_peg, ALIGN_STALLED, POKE_GRASP_OFFSET_X, POKE_LIFT, POKE_MIN_STEP,
-    POKE_PRE_PUSH_TOL, POKE_PUSH_SHORT, POKE_ROT_TOL, RELEASE_ALIGN, RELEASE_BELOW_STALLED,
-    RELEASE_SPEED, ROT_TOL as TASK_ROT_TOL, STALL_MOVE, TORSO_GAIN, TORSO_LOW,
+    descended_on_peg, ALIGN_STALLED, FLOOR_LOWER_TO, FLOOR_RELEASE_BELOW, POKE_GRASP_OFFSET_X,
+    POKE_LIFT, POKE_MIN_STEP, POKE_PRE_PUSH_TOL, POKE_PUSH_SHORT, POKE_ROT_TOL, RELEASE_ALIGN,
+    RELEASE_BELOW_STALLED, RELEASE_SPEED, ROT_TOL as TASK_ROT_TOL, STALL_MOVE, TORSO_GAIN,
+    TORSO_LOW,
 };
-use super::place_sphere::{ALIGN_TOL, CARRY_ABOVE_BIN, LIFT_TOL, LOWER_TO, RELEASE_BELOW};
+use super::place_sphere::{ALIGN_TOL, CARRY_ABOVE_BIN, LIFT_TOL};
 use super::poke_cube::{CUBE_HALF_DIAGONAL, PRE_PUSH_GAP, PUSH_LIMIT, PUSH_TOL};
 use super::{body_id, body_xyz, Gripper, Policy, SolverError, APPROACH_HEIGHT, FETCH_GRIPPER};
 use crate::env::Env;
@@ -215,7 +216,7 @@ impl Policy for FetchPlaceSphereExpert {
         let (align, release_align, release_below) = if stalled {
             (ALIGN_STALLED, ALIGN_STALLED, RELEASE_BELOW_STALLED)
         } else {
-            (ALIGN_TOL, RELEASE_ALIGN, RELEASE_BELOW)
+            (ALIGN_TOL, RELEASE_ALIGN, FLOOR_RELEASE_BELOW)
         };
         let lowering = xy < LOWERING_XY.max(align) && rel.z < CARRY_ABOVE_BIN - LIFT_TOL;
         let (target, grip, pitch) = if held {
@@ -224,7 +225,7 @@ impl Policy for FetchPlaceSphereExpert {
                 (tcp, if speed < RELEASE_SPEED { open } else { close })
             } else if xy < align || lowering {
                 (
-                    tcp + (bin + Vector3::new(0.0, 0.0, LOWER_TO) - sphere),
+                    tcp + (bin + Vector3::new(0.0, 0.0, FLOOR_LOWER_TO) - sphere),
                     close,
                 )
             } else if rel.z < CLEAR_ABOVE_BIN {
