@@ -15,7 +15,8 @@ use mjskill::solvers::PolicyFile;
 /// noise-injected episodes, docs/training.md, the Fetch's two again on 30 November with the
 /// base and the head hidden; the WidowX AI's two trained again the same day
 /// with the pinch's kick and the velocities PhysX reports under it, docs/physics.md; the
-/// SO100's two cloned the same day from its solver in `pd_joint_target_delta_pos`).
+/// SO100's two cloned the same day from its solver in `pd_joint_target_delta_pos`, and the
+/// Fetch's PlaceSphere from its solver that sets the sphere down on the bin's floor).
 const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
@@ -79,6 +80,13 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "fetch",
         "pd_joint_pos",
         0.98,
+    ),
+    (
+        "PlaceSphere-v1__fetch.onnx",
+        "PlaceSphere-v1",
+        "fetch",
+        "pd_joint_pos",
+        0.93,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
