@@ -142,6 +142,15 @@ pub const WIDOWXAI: JointIkRobot = JointIkRobot {
     hold: 4,
 };
 
+/// The description of a robot whose PickCube solver is this IK (`None` for the others).
+pub fn for_robot(uid: &str) -> Option<JointIkRobot> {
+    match uid {
+        "so100" => Some(SO100),
+        "widowxai" => Some(WIDOWXAI),
+        _ => None,
+    }
+}
+
 type Jac = SMatrix<f64, ROWS, MAX_ARM>;
 
 /// The PickCube policy for SO100 and WidowX AI in `pd_joint_pos`.

@@ -293,15 +293,10 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     let mode = env.control_mode();
     let required = required_control_mode("solver", env.id(), robot).unwrap_or(mode);
-    if mode == TARGET_DELTA && matches!(robot, "so100" | "widowxai") {
+    if let (TARGET_DELTA, Some(r)) = (mode, joint_ik::for_robot(robot)) {
         // Targets that move at a bounded rate: the phases end on the commanded targets and
         // the gripper keeps its tilt (docs/solvers.md §8.1).
         return boxed(ModeConverted::new(env, required, |shadow| {
-            let r = if robot == "so100" {
-                joint_ik::SO100
-            } else {
-                joint_ik::WIDOWXAI
-            };
             boxed(joint_ik::JointIkPickCube::new(shadow, r).map(|s| s.leading()))
         }));
     }
