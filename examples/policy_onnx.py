@@ -19,6 +19,13 @@ those of the same components, the others are kept):
 
     python examples/policy_onnx.py floor IN.onnx OUT.onnx --action 7:-0.545
 
+and averages several files for the same env, robot and modes into one (an ensemble: each
+member's graph runs on the same observation and the file outputs the mean of their actions;
+the first member's metadata is kept, and every member's training and demos commands are
+listed under ``ensemble_members``):
+
+    python examples/policy_onnx.py ensemble OUT.onnx A.onnx B.onnx C.onnx
+
 Every edit reads a regular file only (a FIFO or device is refused, never read), refuses a file
 whose metadata names a key twice, and writes OUT beside itself under a short temporary name
 (``.mjskill-PID-XXXXXXXX.tmp``, created exclusively, never through a link), renamed into
@@ -380,6 +387,130 @@ def floor_actions(src, dst, floors, note):
     return save_derived(model, dst, note)
 
 
+def action_bounds(src):
+    """The action space's bounds of the env that the policy file ``src`` names (mjskill's
+    gymnasium env, so the mjskill package must be installed)."""
+    import gymnasium as gym
+    import mjskill  # noqa: F401  (registers the mjskill/ envs)
+
+    meta = {p.key: p.value for p in load_policy(src).metadata_props}
+    env = gym.make(f"mjskill/{meta['env_id']}", robot_uids=meta["robot_uids"],
+                   control_mode=meta["control_mode"], obs_mode=meta["obs_mode"])
+    try:
+        space = env.action_space
+        return (np.asarray(space.low, np.float32), np.asarray(space.high, np.float32))
+    finally:
+        env.close()
+
+
+#: The metadata that members of an ensemble must share.
+ENSEMBLE_KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode")
+
+
+def ensemble(srcs, dst, note, low=None, high=None):
+    """Writes ``dst``, the mean of the policy files ``srcs`` (at least two, the same
+    ``ENSEMBLE_KEYS`` and input and output sizes): every member's nodes and initializers,
+    renamed ``m<i>_...``, read the one input, and their outputs, each clipped to the action
+    bounds ``low`` and ``high`` where given (as a runtime clips a single file's), are summed
+    and scaled by 1/N. The metadata is the first member's, with ``ensemble_members`` (a JSON list of each
+    member's ``training_command``, ``demos_command`` and ``hidden_obs``) and the ``note``
+    appended to ``derived``. Returns the ModelProto."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    if len(srcs) < 2:
+        raise ValueError(f"an ensemble needs at least two policy files, got {len(srcs)}")
+    models = [load_policy(s) for s in srcs]
+    metas = [{p.key: p.value for p in m.metadata_props} for m in models]
+    for src, meta in zip(srcs, metas):
+        missing = [k for k in METADATA_KEYS if k not in meta]
+        if missing:
+            raise ValueError(f"{src} lacks the metadata_props {', '.join(missing)}")
+        for k in ENSEMBLE_KEYS:
+            if meta[k] != metas[0][k]:
+                raise ValueError(f"{src} has {k} {meta[k]!r}, {srcs[0]} {metas[0][k]!r}: the "
+                                 "members of an ensemble share their env, robot and modes")
+
+    def dims(vi):
+        return [d.dim_value or d.dim_param for d in vi.type.tensor_type.shape.dim]
+
+    first = models[0].graph
+    for src, m in zip(srcs, models):
+        if len(m.graph.input) != 1 or len(m.graph.output) != 1:
+            raise ValueError(f"{src}: a policy file has one input and one output")
+        for a, b, what in ((m.graph.input[0], first.input[0], "input"),
+                           (m.graph.output[0], first.output[0], "output")):
+            if dims(a)[-1] != dims(b)[-1]:
+                raise ValueError(f"{src}: its {what} has {dims(a)[-1]} values, {srcs[0]}'s "
+                                 f"{dims(b)[-1]}")
+    inp = first.input[0].name
+    nodes, inits, outs = [], [], []
+    for i, m in enumerate(models):
+        g = m.graph
+        own_in = g.input[0].name
+
+        def rename(name, i=i, own_in=own_in):
+            if name == "":
+                return name
+            return inp if name == own_in else f"m{i}_{name}"
+
+        for t in g.initializer:
+            t2 = onnx.TensorProto()
+            t2.CopyFrom(t)
+            t2.name = rename(t.name)
+            inits.append(t2)
+        for n in g.node:
+            n2 = onnx.NodeProto()
+            n2.CopyFrom(n)
+            n2.input[:] = [rename(x) for x in n.input]
+            n2.output[:] = [rename(x) for x in n.output]
+            n2.name = rename(n.name) if n.name else f"m{i}_node{len(nodes)}"
+            nodes.append(n2)
+        out = rename(g.output[0].name)
+        if low is not None:
+            for bound, op in ((low, "Max"), (high, "Min")):
+                name = f"m{i}_bound_{op.lower()}"
+                # An unbounded entry (a continuous joint's target) gets float32's largest
+                # magnitude: policy files hold finite constants only.
+                big = np.finfo(np.float32).max
+                finite = np.clip(np.asarray(bound, np.float64), -big, big).astype(np.float32)
+                inits.append(numpy_helper.from_array(finite, name))
+                nodes.append(helper.make_node(op, [out, name], [out + "_" + op.lower()],
+                                              name=f"m{i}_clip_{op.lower()}"))
+                out = out + "_" + op.lower()
+        outs.append(out)
+    total = outs[0]
+    for k, o in enumerate(outs[1:], 1):
+        nxt = f"ensemble_sum{k}"
+        nodes.append(helper.make_node("Add", [total, o], [nxt], name=f"ensemble_add{k}"))
+        total = nxt
+    out_name = first.output[0].name
+    inits.append(numpy_helper.from_array(np.array(1.0 / len(models), np.float32),
+                                         "ensemble_scale"))
+    nodes.append(helper.make_node("Mul", [total, "ensemble_scale"], [out_name],
+                                  name="ensemble_mean"))
+    graph = helper.make_graph(nodes, "mjskill_policy_ensemble", [first.input[0]],
+                              [first.output[0]], inits)
+    model = helper.make_model(graph, opset_imports=list(models[0].opset_import))
+    model.ir_version = models[0].ir_version
+    keys = ("training_command", "demos_command", "hidden_obs", "epochs", "eval_success")
+    members = [{k: meta[k] for k in keys if k in meta} for meta in metas]
+    props = dict(metas[0])
+    # What no member reads; the members' own figures are listed per member.
+    hidden = [{int(i) for i in meta.get("hidden_obs", "").split(",") if i} for meta in metas]
+    props["hidden_obs"] = ",".join(str(i) for i in sorted(set.intersection(*hidden)))
+    for k in ("epochs", "eval_success"):
+        props.pop(k, None)
+    # The env steps of the members' distinct demos.
+    distinct = {meta.get("demos", src): int(meta.get("env_steps", 0) or 0)
+                for src, meta in zip(srcs, metas)}
+    props["env_steps"] = str(sum(distinct.values()))
+    if "algorithm" in props:
+        props["algorithm"] += f"; the mean of {len(models)} such files (ensemble_members)"
+    onnx.helper.set_model_props(model, props)
+    return save_derived(model, dst, note, ensemble_members=json.dumps(members))
+
+
 def main(argv=None):
     import argparse
 
@@ -401,8 +532,19 @@ def main(argv=None):
     f.add_argument("--action", required=True, action="append",
                    help="INDEX:LEAST, e.g. 7:-0.545 (repeatable)")
     f.add_argument("--note", default=None, help="text for the `derived` metadata")
+    e = sub.add_parser("ensemble", help="the mean of several files' actions, as one file")
+    e.add_argument("dst")
+    e.add_argument("srcs", nargs="+", help="the members (at least two)")
+    e.add_argument("--note", default=None, help="text for the `derived` metadata")
     a = p.parse_args(argv)
     try:
+        if a.command == "ensemble":
+            note = a.note or (f"ensemble of {len(a.srcs)} files by examples/policy_onnx.py "
+                              "ensemble: the mean of their actions, each clipped to the "
+                              "action space")
+            low, high = action_bounds(a.srcs[0])
+            ensemble(a.srcs, a.dst, note, low, high)
+            return
         if a.command == "floor":
             try:
                 floors = parse_floors(a.action)

@@ -86,7 +86,7 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "PlaceSphere-v1",
         "fetch",
         "pd_joint_pos",
-        0.93,
+        0.97,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
@@ -185,6 +185,17 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
                 "{file}: {}",
                 m.training_command
             );
+        }
+        // An ensemble (examples/policy_onnx.py ensemble) lists how each member was trained.
+        if let Some((_, list)) = m.props.iter().find(|(k, _)| k == "ensemble_members") {
+            let members: Vec<serde_json::Value> = serde_json::from_str(list).unwrap();
+            assert!(members.len() >= 2, "{file}: {list}");
+            for member in &members {
+                let cmd = member["training_command"].as_str().unwrap_or("");
+                assert!(cmd.starts_with("python examples/"), "{file}: {cmd}");
+            }
+            let derived = derived.map_or("", |(_, d)| d.as_str());
+            assert!(derived.contains("ensemble"), "{file}: {derived}");
         }
         let steps = m.props.iter().find(|(k, _)| k == "env_steps").unwrap();
         assert!(steps.1.parse::<u64>().unwrap() > 0, "{file}");

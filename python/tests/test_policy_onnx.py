@@ -217,3 +217,46 @@ def test_out_names_up_to_the_file_systems_limit_are_written(tmp_path, length):
     assert r.returncode == 0, r.stderr
     meta = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
     assert meta["env_id"] == "PickCubeWidowXAI-v1" and leftovers(tmp_path) == []
+
+
+def test_an_ensemble_is_the_mean_of_its_members_clipped_actions(tmp_path):
+    """examples/policy_onnx.py ensemble: one graph that gives the mean of the members' actions,
+    each clipped to the action bounds first (as a runtime clips a single file's), with an
+    unbounded entry left as it is; the metadata lists each member's command and hides only
+    what no member reads; members for another env are refused, naming the value."""
+    ort = pytest.importorskip("onnxruntime")
+    P = load_module()
+    meta = dict(env_id="PickCube-v1", robot_uids="so100", control_mode="pd_joint_pos",
+                obs_mode="state")
+    members, layers_of = [], []
+    for k, hidden in ((0, "1,2"), (1, "2,3")):
+        r = np.random.default_rng(10 + k)
+        layers = [(r.normal(size=(6, 4)), r.normal(size=4)),
+                  (r.normal(size=(4, 3)), 3 * r.normal(size=3))]
+        path = tmp_path / f"m{k}.onnx"
+        P.write_mlp_policy(path, layers, np.zeros(6), np.ones(6),
+                           dict(meta, training_command=f"python examples/imitate.py m{k}",
+                                hidden_obs=hidden), obs_clip=10.0)
+        members.append(path)
+        layers_of.append(layers)
+    low = np.array([-1.0, -np.inf, -0.5], np.float32)
+    high = np.array([1.0, np.inf, 0.5], np.float32)
+    out = tmp_path / "ens.onnx"
+    P.ensemble(members, out, "test", low, high)
+    x = np.random.default_rng(2).normal(0, 3, size=(64, 6)).astype(np.float32)
+    want = np.mean([np.clip(P.mlp_forward(x, layers, np.zeros(6), np.ones(6), 10.0), low, high)
+                    for layers in layers_of], axis=0)
+    s = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    np.testing.assert_allclose(s.run(None, {"obs": x})[0], want, atol=1e-5)
+    props = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    import json
+    listed = [m["training_command"] for m in json.loads(props["ensemble_members"])]
+    assert listed == ["python examples/imitate.py m0", "python examples/imitate.py m1"]
+    assert props["hidden_obs"] == "2" and "test" in props["derived"]
+    other = tmp_path / "other.onnx"
+    P.write_mlp_policy(other, layers_of[0], np.zeros(6), np.ones(6),
+                       dict(meta, env_id="PokeCube-v1", training_command="t"), obs_clip=10.0)
+    with pytest.raises(ValueError, match="'PokeCube-v1'"):
+        P.ensemble([members[0], other], tmp_path / "bad.onnx", "test")
+    with pytest.raises(ValueError, match="at least two"):
+        P.ensemble([members[0]], tmp_path / "bad.onnx", "test")
