@@ -20,9 +20,10 @@ those of the same components, the others are kept):
     python examples/policy_onnx.py floor IN.onnx OUT.onnx --action 7:-0.545
 
 and averages several files for the same env, robot and modes into one (an ensemble: each
-member's graph runs on the same observation and the file outputs the mean of their actions;
-the first member's metadata is kept, and every member's training and demos commands are
-listed under ``ensemble_members``):
+member's graph runs on the same observation, its action clipped to the env's action space,
+which this command reads from the mjskill package, and the file outputs the mean; the first
+member's metadata is kept, and every member's training and demos commands are listed under
+``ensemble_members``):
 
     python examples/policy_onnx.py ensemble OUT.onnx A.onnx B.onnx C.onnx
 
@@ -412,9 +413,11 @@ def ensemble(srcs, dst, note, low=None, high=None):
     ``ENSEMBLE_KEYS`` and input and output sizes): every member's nodes and initializers,
     renamed ``m<i>_...``, read the one input, and their outputs, each clipped to the action
     bounds ``low`` and ``high`` where given (as a runtime clips a single file's), are summed
-    and scaled by 1/N. The metadata is the first member's, with ``ensemble_members`` (a JSON list of each
-    member's ``training_command``, ``demos_command`` and ``hidden_obs``) and the ``note``
-    appended to ``derived``. Returns the ModelProto."""
+    and scaled by 1/N. The metadata is the first member's, with ``ensemble_members`` (a JSON
+    list of each member's ``training_command``, ``demos_command``, ``hidden_obs``, ``epochs``
+    and ``eval_success``), ``hidden_obs`` the entries no member reads, ``env_steps`` those of
+    the members' distinct demos, and the ``note`` appended to ``derived``. Returns the
+    ModelProto."""
     import onnx
     from onnx import helper, numpy_helper
 
@@ -445,6 +448,9 @@ def ensemble(srcs, dst, note, low=None, high=None):
                                  f"{dims(b)[-1]}")
     inp = first.input[0].name
     nodes, inits, outs = [], [], []
+    # An unbounded entry (a continuous joint's target) gets float32's largest magnitude:
+    # policy files hold finite constants only.
+    big = np.finfo(np.float32).max
     for i, m in enumerate(models):
         g = m.graph
         own_in = g.input[0].name
@@ -470,9 +476,6 @@ def ensemble(srcs, dst, note, low=None, high=None):
         if low is not None:
             for bound, op in ((low, "Max"), (high, "Min")):
                 name = f"m{i}_bound_{op.lower()}"
-                # An unbounded entry (a continuous joint's target) gets float32's largest
-                # magnitude: policy files hold finite constants only.
-                big = np.finfo(np.float32).max
                 finite = np.clip(np.asarray(bound, np.float64), -big, big).astype(np.float32)
                 inits.append(numpy_helper.from_array(finite, name))
                 nodes.append(helper.make_node(op, [out, name], [out + "_" + op.lower()],
@@ -542,7 +545,11 @@ def main(argv=None):
             note = a.note or (f"ensemble of {len(a.srcs)} files by examples/policy_onnx.py "
                               "ensemble: the mean of their actions, each clipped to the "
                               "action space")
-            low, high = action_bounds(a.srcs[0])
+            try:
+                low, high = action_bounds(a.srcs[0])
+            except ImportError as err:
+                raise SystemExit(f"error: ensemble reads the action bounds from the mjskill "
+                                 f"package, which is not importable here ({err})") from None
             ensemble(a.srcs, a.dst, note, low, high)
             return
         if a.command == "floor":
