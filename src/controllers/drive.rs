@@ -115,8 +115,10 @@ pub struct Drives {
     target_v: Vec<f64>,
     /// Mean forces of the last substep.
     force: Vec<f64>,
-    /// Unit vectors at the drives' dofs (n × nv) and their images under M⁻¹ (n × nv).
-    unit: Vec<f64>,
+    /// The drives' dofs, and every dof of the kinematic trees they lie in (ascending).
+    unit_dofs: Vec<usize>,
+    tree_dofs: Vec<usize>,
+    /// The columns of M⁻¹ at the drives' dofs (nv × n: row k for dof k).
     minv: Vec<f64>,
     /// The drives' response block W (n × n, row-major).
     w: Vec<f64>,
@@ -178,6 +180,16 @@ pub struct Drives {
     /// undriven dof of the robot): then the flag is part of the saved state.
     kicking: bool,
     can_kick: bool,
+    /// Whether every actuator of the model is one of these drives, so that the arm's
+    /// unconstrained acceleration can be had from the smooth forces alone (see
+    /// [`Drives::smooth_acceleration`]).
+    drives_only: bool,
+    /// The robot's bodies and dofs (ids), for that shortcut's check and forces.
+    robot_bodies: Vec<usize>,
+    robot_dofs: Vec<usize>,
+    /// The smooth forces with the drives off, and their acceleration (nv each).
+    smooth_force: Vec<f64>,
+    smooth_acc: Vec<f64>,
 }
 
 impl Drives {
@@ -250,10 +262,18 @@ impl Drives {
         // has equalities and the robot an undriven dof.
         let can_kick = model.neq() > 0
             && (0..nv).any(|k| !driven_dof[k] && robot_body[model.dof_bodyid()[k] as usize]);
-        let mut unit = vec![0.0; n * nv];
-        for (k, d) in dofs.iter().enumerate() {
-            unit[k * nv + d.dof] = 1.0;
-        }
+        let unit_dofs: Vec<usize> = dofs.iter().map(|d| d.dof).collect();
+        // The root dof of dof k's tree.
+        let dof_parent = model.dof_parentid();
+        let root = |mut k: usize| {
+            while dof_parent[k] >= 0 {
+                k = dof_parent[k] as usize;
+            }
+            k
+        };
+        let tree_dofs = (0..nv)
+            .filter(|&k| unit_dofs.iter().any(|&u| root(u) == root(k)))
+            .collect();
         let by_joint = joints
             .iter()
             .map(|j| drives.iter().position(|d| &d.joint == j))
@@ -261,12 +281,18 @@ impl Drives {
         // Upper bound of the folded rows: equality rows (a connect has 3, a weld 6, a joint
         // 1) plus the gripper contacts'.
         let max_rows = 6 * model.neq() + MAX_GRIPPER_CONTACTS;
+        let robot_bodies = (0..model.nbody()).filter(|&b| robot_body[b]).collect();
+        let robot_dofs = (0..nv)
+            .filter(|&k| robot_body[model.dof_bodyid()[k] as usize])
+            .collect();
+        let drives_only = model.nu() == n && model.na() == 0;
         Ok(Drives {
             by_joint,
             target_q: vec![0.0; n],
             target_v: vec![0.0; n],
             force: vec![0.0; n],
-            unit,
+            unit_dofs,
+            tree_dofs,
             minv: vec![0.0; n * nv],
             w: vec![0.0; n * n],
             mq: vec![0.0; n],
@@ -299,6 +325,11 @@ impl Drives {
             fold_yd: (0..=max_rows).map(|k| DMatrix::zeros(k, n)).collect(),
             kicking: false,
             can_kick,
+            drives_only,
+            robot_bodies,
+            robot_dofs,
+            smooth_force: vec![0.0; nv],
+            smooth_acc: vec![0.0; nv],
             dofs,
         })
     }
@@ -382,29 +413,18 @@ impl Drives {
             return;
         }
         let nv = data.model().nv();
-        data.solve_m(&mut self.minv, &self.unit, n);
+        data.solve_m_units(&mut self.minv, &self.unit_dofs, &self.tree_dofs);
         for (i, di) in self.dofs.iter().enumerate() {
-            for j in 0..n {
-                self.w[i * n + j] = self.minv[j * nv + di.dof];
-            }
+            self.w[i * n..(i + 1) * n].copy_from_slice(&self.minv[di.dof * n..(di.dof + 1) * n]);
         }
         self.gather_constraint_rows(data, nv);
         self.fold_in_constraint_rows(data, nv);
-        // The arm's unconstrained acceleration (Coriolis, gravity compensation, passive
-        // forces) with the drives switched off.
-        {
-            let ctrl = data.ctrl_mut();
-            for d in &self.dofs {
-                ctrl[d.actuator] = 0.0;
-            }
-        }
-        data.qfrc_applied_mut().fill(0.0);
-        data.smooth_acceleration();
-        let (qpos, qvel, qacc) = (data.qpos(), data.qvel(), data.qacc_smooth());
+        self.unconstrained_acceleration(data, true);
+        let (qpos, qvel) = (data.qpos(), data.qvel());
         for (i, d) in self.dofs.iter().enumerate() {
             self.mq[i] = qpos[d.qpos];
             self.mv[i] = qvel[d.dof];
-            self.acc[i] = if d.arm { qacc[d.dof] } else { 0.0 };
+            self.acc[i] = if d.arm { self.smooth_acc[d.dof] } else { 0.0 };
         }
         let dt = h / MICRO_STEPS as f64;
         self.force_sum.fill(0.0);
@@ -415,7 +435,7 @@ impl Drives {
         // substep (its free inertia is 1 / W_ii).
         for (i, d) in self.dofs.iter().enumerate() {
             self.micro_force[i] = if self.pinching[i] {
-                let kd = d.kd.min(1.0 / (h * self.minv[i * nv + d.dof]));
+                let kd = d.kd.min(1.0 / (h * self.minv[d.dof * n + i]));
                 (d.kp * (self.target_q[i] - qpos[d.qpos]) + d.kd * self.target_v[i]
                     - kd * qvel[d.dof])
                     .clamp(-d.force_limit, d.force_limit)
@@ -500,6 +520,55 @@ impl Drives {
         for (f, mc) in data.qfrc_applied_mut().iter_mut().zip(&self.mc) {
             *f = mc / (h * h);
         }
+    }
+
+    /// The robot's unconstrained acceleration (Coriolis, passive forces) with the drives
+    /// switched off, at the robot's dofs (the other entries are not written): what MuJoCo's
+    /// `mj_fwdActuation` and `mj_fwdAcceleration` give with the drives' controls and
+    /// `qfrc_applied` at zero. Call after [`Data::step1`]; it may leave the controls and
+    /// `qfrc_applied` at zero, which [`Drives::apply`] then overwrites.
+    ///
+    /// With `shortcut`, where every actuator is a drive and no robot body carries an applied
+    /// wrench, it skips those two calls (a twentieth of a Fetch substep): the robot's smooth
+    /// force is then `qfrc_passive − qfrc_bias`, plus MuJoCo's zero actuator and applied
+    /// forces (the `+ 0.0`, which turns a −0 into +0 as MuJoCo's sums do), and the props'
+    /// wrenches reach only their own kinematic trees, so `M⁻¹` of that force at the robot's
+    /// dofs is MuJoCo's `qacc_smooth` bit for bit.
+    pub(crate) fn unconstrained_acceleration(&mut self, data: &mut Data, shortcut: bool) -> &[f64] {
+        let xfrc = data.xfrc_applied();
+        let wrenched = self
+            .robot_bodies
+            .iter()
+            .any(|&b| xfrc[6 * b..6 * b + 6].iter().any(|&x| x != 0.0));
+        if shortcut && self.drives_only && !wrenched {
+            let (passive, bias) = (data.qfrc_passive(), data.qfrc_bias());
+            for &k in &self.robot_dofs {
+                self.smooth_force[k] = passive[k] - bias[k] + 0.0;
+            }
+            data.solve_m(&mut self.smooth_acc, &self.smooth_force, 1);
+        } else {
+            let ctrl = data.ctrl_mut();
+            for d in &self.dofs {
+                ctrl[d.actuator] = 0.0;
+            }
+            data.qfrc_applied_mut().fill(0.0);
+            data.smooth_acceleration();
+            self.smooth_acc.copy_from_slice(data.qacc_smooth());
+        }
+        &self.smooth_acc
+    }
+
+    /// Whether [`Drives::unconstrained_acceleration`] can take its shortcut: every actuator
+    /// of the model is one of these drives.
+    #[cfg(test)]
+    pub(crate) fn drives_only(&self) -> bool {
+        self.drives_only
+    }
+
+    /// The robot's dofs (ascending).
+    #[cfg(test)]
+    pub(crate) fn robot_dofs(&self) -> &[usize] {
+        &self.robot_dofs
     }
 
     /// Collects the constraint rows [`Drives::fold_in_constraint_rows`] folds into `W`,

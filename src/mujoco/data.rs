@@ -516,6 +516,77 @@ impl Data {
         }
     }
 
+    /// Columns of `M⁻¹` at `units`, with the factorisation of the last [`Data::step1`] /
+    /// [`Data::forward`]: `x[k·n + c]` becomes `(M⁻¹)[k, units[c]]` (n = `units.len()`; nv
+    /// rows of n, row k for dof k). `trees` lists, ascending, every dof of the kinematic
+    /// trees the units lie in (with each dof its ancestors and descendants); the other rows
+    /// are zero, as they are in `M⁻¹`.
+    ///
+    /// The same arithmetic as [`Data::solve_m`] on the unit vectors (`mj_solveLD`'s
+    /// operations on each entry in its order, bit for bit), without the work that a unit
+    /// vector makes void: the backward pass visits only each unit's ancestors, where alone
+    /// its vector is not zero, and the other passes only the units' trees, all columns side
+    /// by side. Panics on a dof out of range or `x` shorter than `nv·n`.
+    pub fn solve_m_units(&self, x: &mut [f64], units: &[usize], trees: &[usize]) {
+        let m = &*self.model;
+        let (nv, n) = (m.nv(), units.len());
+        assert!(
+            x.len() >= nv * n,
+            "solve_m_units needs nv×{n} = {} values in x",
+            nv * n
+        );
+        let (madr, parent, simple) = (m.dof_madr(), m.dof_parentid(), m.dof_simplenum());
+        let raw = self.raw();
+        let ld: &[f64] = view!(raw.qLD, m.n_m());
+        let diag_inv: &[f64] = view!(raw.qLDiagInv, nv);
+        let x = &mut x[..nv * n];
+        x.fill(0.0);
+        for (c, &u) in units.iter().enumerate() {
+            x[u * n + c] = 1.0;
+            // x ← L'⁻¹ x: only the unit's ancestors are ever non-zero, visited from the
+            // unit up as MuJoCo's descending loop meets them.
+            let mut i = u as c_int;
+            while i >= 0 {
+                let iu = i as usize;
+                let tmp = x[iu * n + c];
+                if simple[iu] == 0 && tmp != 0.0 {
+                    let mut adr = madr[iu] as usize + 1;
+                    let mut j = parent[iu];
+                    while j >= 0 {
+                        x[j as usize * n + c] -= ld[adr] * tmp;
+                        adr += 1;
+                        j = parent[j as usize];
+                    }
+                }
+                i = parent[iu];
+            }
+        }
+        // x ← D⁻¹ x, then x ← L⁻¹ x over the trees, a row (all columns) at a time.
+        for &k in trees {
+            for v in &mut x[k * n..(k + 1) * n] {
+                *v *= diag_inv[k];
+            }
+        }
+        for &k in trees {
+            if simple[k] != 0 {
+                continue;
+            }
+            // A dof's ancestors come before it.
+            let (above, rest) = x.split_at_mut(k * n);
+            let row = &mut rest[..n];
+            let mut adr = madr[k] as usize + 1;
+            let mut j = parent[k];
+            while j >= 0 {
+                let (l, ju) = (ld[adr], j as usize);
+                for (v, a) in row.iter_mut().zip(&above[ju * n..(ju + 1) * n]) {
+                    *v -= l * a;
+                }
+                adr += 1;
+                j = parent[ju];
+            }
+        }
+    }
+
     /// `res = M vec` with the joint-space inertia of the last [`Data::step1`] /
     /// [`Data::forward`] (`mj_mulM`); both slices hold nv values.
     pub fn mul_m(&self, res: &mut [f64], vec: &[f64]) {

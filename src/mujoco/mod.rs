@@ -410,6 +410,10 @@ model_arrays! {
     dof_damping: f64 = |m: &sys::mjModel| m.nv;
     /// Body of every dof.
     dof_bodyid: c_int = |m: &sys::mjModel| m.nv;
+    /// Parent dof of every dof (-1 at a tree's root).
+    dof_parentid: c_int = |m: &sys::mjModel| m.nv;
+    /// Number of consecutive simple dofs (diagonal inertia) from every dof on.
+    dof_simplenum: c_int = |m: &sys::mjModel| m.nv;
     /// Geom type of every geom (`mjtGeom`).
     geom_type: c_int = |m: &sys::mjModel| m.ngeom;
     /// Body of every geom.
@@ -653,6 +657,20 @@ pub use data::{Contact, Data};
 mod edit;
 mod ids;
 pub use ids::{ActuatorId, BodyId, CameraId, GeomId, JointId, MocapId, Pose};
+
+impl Model {
+    /// Address of every dof's row of the inertia in MuJoCo's sparse layout (`dof_Madr`: the
+    /// row's diagonal in `qM` and `qLD`, followed by its ancestors' entries).
+    pub fn dof_madr(&self) -> &[c_int] {
+        let m = self.raw();
+        view!(m.dof_Madr, m.nv)
+    }
+
+    /// Size of the sparse inertia (`nM`: the entries of `qM` and `qLD`).
+    pub fn n_m(&self) -> usize {
+        self.raw().nM as usize
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -4,6 +4,7 @@
 //! API and of the command line are in `tests/`.
 mod clearance;
 mod common;
+mod drives;
 mod fetch;
 mod fetch_tasks;
 mod foundation;
