@@ -19,6 +19,12 @@ those of the same components, the others are kept):
 
     python examples/policy_onnx.py floor IN.onnx OUT.onnx --action 7:-0.545
 
+and snaps action components to the action space's bounds at a threshold (the component
+becomes its upper bound from the threshold on and its lower bound below it; the bounds are
+read from the mjskill package):
+
+    python examples/policy_onnx.py snap IN.onnx OUT.onnx --action 7:-0.75
+
 and averages several files for the same env, robot and modes into one (an ensemble: each
 member's graph runs on the same observation, its action clipped to the env's action space,
 which this command reads from the mjskill package, and the file outputs the mean; the first
@@ -200,43 +206,47 @@ def save_weights_json(path, layers, obs_mean, obs_std, obs_clip):
         )
 
 
-def parse_floor(text):
+def parse_floor(text, value="LEAST", example="7:-0.545", meaning="least value"):
     """``INDEX:LEAST`` (e.g. ``7:-0.545``) as (index, least): an index >= 0 and a finite
     least value that float32 holds (the file stores float32). ValueError otherwise, naming
-    the text and the form expected."""
+    the text and the form expected. ``value``, ``example`` and ``meaning`` name the number in
+    the messages (``snap`` reads ``INDEX:THRESHOLD`` the same way)."""
     parts = str(text).split(":")
-    form = f"{text!r}: expected INDEX:LEAST, e.g. 7:-0.545"
+    form = f"{text!r}: expected INDEX:{value}, e.g. {example}"
     if len(parts) != 2:
         raise ValueError(form)
     try:
         k, v = int(parts[0]), float(parts[1])
     except ValueError:
         raise ValueError(form) from None
-    check_floor(k, v, repr(str(text)))
+    check_floor(k, v, repr(str(text)), meaning)
     return k, v
 
 
-def check_floor(k, v, what=None):
-    """ValueError unless ``k`` is an action index >= 0 and ``v`` a finite least value within
-    float32's range; ``what`` names them in the message (default ``k:v``)."""
+def check_floor(k, v, what=None, meaning="least value"):
+    """ValueError unless ``k`` is an action index >= 0 and ``v`` a finite least value (or
+    other ``meaning``) within float32's range; ``what`` names them in the message (default
+    ``k:v``)."""
     what = what or f"{k}:{v}"
     if k < 0:
         raise ValueError(f"{what}: the action index {k} is negative")
     f32 = float(np.finfo(np.float32).max)
     if not np.isfinite(v) or abs(v) > f32:
-        raise ValueError(f"{what}: the least value must be a finite number within "
+        raise ValueError(f"{what}: the {meaning} must be a finite number within "
                          f"float32's range (±{f32:.4g})")
 
 
-def parse_floors(texts):
+def parse_floors(texts, value="LEAST", example="7:-0.545", meaning="least value",
+                 what="floor"):
     """A list of ``INDEX:LEAST`` as a dict index -> least; an index given twice is a
-    ValueError (even with the same value: one floor per component)."""
+    ValueError (even with the same value: one floor per component). The other arguments
+    name the number as :func:`parse_floor` does, and ``what`` the edit."""
     floors = {}
     for t in texts:
-        k, v = parse_floor(t)
+        k, v = parse_floor(t, value, example, meaning)
         if k in floors:
             raise ValueError(f"action index {k} is given twice ({k}:{floors[k]:g} and {t}); "
-                             "give each component one floor")
+                             f"give each component one {what}")
         floors[k] = v
     return floors
 
@@ -388,6 +398,70 @@ def floor_actions(src, dst, floors, note):
     return save_derived(model, dst, note)
 
 
+def snap_actions(src, dst, thresholds, note, low, high):
+    """Writes ``src`` as ``dst`` with some action components snapped to their bounds:
+    ``thresholds`` maps an action index to a threshold, and that component becomes
+    ``high[index]`` where the graph's output reaches the threshold and ``low[index]`` below
+    it (``Less`` and ``Where`` on the output; the other components are left as they are).
+    For a gripper a clone drives through partial openings, each of which feeds the next
+    observation: snapped, the first sign of opening opens it fully (docs/training.md). The
+    bounds ``low`` and ``high`` are the action space's (:func:`action_bounds`); a component
+    without finite bounds cannot be snapped. A file snapped before is refused. Records
+    ``action_snap`` (JSON: index -> threshold, low, high) and the ``note`` (appended to
+    ``derived``). Returns the ModelProto."""
+    from onnx import helper, numpy_helper
+
+    model = load_policy(src)
+    g = model.graph
+    meta = {p.key: p.value for p in model.metadata_props}
+    if "action_snap" in meta:
+        raise ValueError(f"{src} is snapped already (action_snap {meta['action_snap']}); "
+                         "snap the file it was made from")
+    out = g.output[0]
+    act_dim = out.type.tensor_type.shape.dim[-1].dim_value
+    low = np.asarray(low, np.float32)
+    high = np.asarray(high, np.float32)
+    if low.shape != (act_dim,) or high.shape != (act_dim,):
+        raise ValueError(f"the action bounds have {low.size} and {high.size} entries; "
+                         f"{src} acts with {act_dim}")
+    if not thresholds:
+        raise ValueError("no action component to snap")
+    for k, t in thresholds.items():
+        check_floor(int(k), float(t), f"{k}:{t}", "threshold")
+        if not k < act_dim:
+            raise ValueError(f"action index {k} out of range 0..{act_dim - 1}")
+        if not (np.isfinite(low[k]) and np.isfinite(high[k])
+                and abs(low[k]) < np.finfo(np.float32).max
+                and abs(high[k]) < np.finfo(np.float32).max):
+            raise ValueError(f"action component {k} is unbounded ({low[k]:g} to {high[k]:g}): "
+                             "only a component with finite bounds can be snapped")
+    mask = np.zeros(act_dim, bool)
+    thr = np.zeros(act_dim, np.float32)
+    for k, t in thresholds.items():
+        mask[k] = True
+        thr[k] = t
+    old = out.name
+    raw = old + "_unsnapped"
+    for node in g.node:
+        node.output[:] = [raw if o == old else o for o in node.output]
+    # The unsnapped components' bounds are not read (and may be infinite, which a policy
+    # file's constants may not be): zeros in their place.
+    g.initializer.extend([
+        numpy_helper.from_array(thr, "snap_threshold"),
+        numpy_helper.from_array(np.where(mask, low, 0).astype(np.float32), "snap_low"),
+        numpy_helper.from_array(np.where(mask, high, 0).astype(np.float32), "snap_high"),
+        numpy_helper.from_array(mask, "snap_mask"),
+    ])
+    g.node.extend([
+        helper.make_node("Less", [raw, "snap_threshold"], ["snap_below"]),
+        helper.make_node("Where", ["snap_below", "snap_low", "snap_high"], ["snap_bound"]),
+        helper.make_node("Where", ["snap_mask", "snap_bound", raw], [old]),
+    ])
+    record = {str(k): {"threshold": float(np.float32(t)), "low": float(low[k]),
+                       "high": float(high[k])} for k, t in sorted(thresholds.items())}
+    return save_derived(model, dst, note, action_snap=json.dumps(record))
+
+
 def action_bounds(src):
     """The action space's bounds of the env that the policy file ``src`` names (mjskill's
     gymnasium env, so the mjskill package must be installed)."""
@@ -535,6 +609,13 @@ def main(argv=None):
     f.add_argument("--action", required=True, action="append",
                    help="INDEX:LEAST, e.g. 7:-0.545 (repeatable)")
     f.add_argument("--note", default=None, help="text for the `derived` metadata")
+    sn = sub.add_parser("snap", help="action components snapped to their bounds at a threshold")
+    sn.add_argument("src")
+    sn.add_argument("dst")
+    sn.add_argument("--action", required=True, action="append",
+                    help="INDEX:THRESHOLD, e.g. 7:-0.75 (repeatable): the component becomes "
+                         "its upper bound from the threshold on, its lower bound below it")
+    sn.add_argument("--note", default=None, help="text for the `derived` metadata")
     e = sub.add_parser("ensemble", help="the mean of several files' actions, as one file")
     e.add_argument("dst")
     e.add_argument("srcs", nargs="+", help="the members (at least two)")
@@ -551,6 +632,20 @@ def main(argv=None):
                 raise SystemExit(f"error: ensemble reads the action bounds from the mjskill "
                                  f"package, which is not importable here ({err})") from None
             ensemble(a.srcs, a.dst, note, low, high)
+            return
+        if a.command == "snap":
+            try:
+                snaps = parse_floors(a.action, "THRESHOLD", "7:-0.75", "threshold", "threshold")
+            except ValueError as e:
+                sn.error(f"--action {e}")
+            note = a.note or ("actions snapped to their bounds by examples/policy_onnx.py snap: "
+                              + ", ".join(f"{k} at {v:g}" for k, v in sorted(snaps.items())))
+            try:
+                low, high = action_bounds(a.src)
+            except ImportError as err:
+                raise SystemExit(f"error: snap reads the action bounds from the mjskill "
+                                 f"package, which is not importable here ({err})") from None
+            snap_actions(a.src, a.dst, snaps, note, low, high)
             return
         if a.command == "floor":
             try:

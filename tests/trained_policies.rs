@@ -86,7 +86,7 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "PlaceSphere-v1",
         "fetch",
         "pd_joint_pos",
-        0.97,
+        0.99,
     ),
     (
         "PickCube-v1__xarm6_robotiq.onnx",
@@ -196,6 +196,38 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
             }
             let derived = derived.map_or("", |(_, d)| d.as_str());
             assert!(derived.contains("ensemble"), "{file}: {derived}");
+        }
+        // A snapped component (examples/policy_onnx.py snap) takes the action space's bounds,
+        // at a threshold between them.
+        if let Some((_, snap)) = m.props.iter().find(|(k, _)| k == "action_snap") {
+            let config = mjskill::EnvConfig {
+                robot: Some(robot.to_string()),
+                control_mode: Some(mode.to_string()),
+                ..mjskill::EnvConfig::default()
+            };
+            let space = mjskill::make(env_id, config)
+                .unwrap()
+                .action_space()
+                .clone();
+            let snaps: serde_json::Map<String, serde_json::Value> =
+                serde_json::from_str(snap).unwrap();
+            assert!(!snaps.is_empty(), "{file}: {snap}");
+            for (k, s) in &snaps {
+                let k: usize = k.parse().unwrap();
+                let (lo, hi, t) = (
+                    s["low"].as_f64().unwrap(),
+                    s["high"].as_f64().unwrap(),
+                    s["threshold"].as_f64().unwrap(),
+                );
+                assert_eq!(
+                    (lo, hi),
+                    (space.low[k] as f64, space.high[k] as f64),
+                    "{file}"
+                );
+                assert!(lo < t && t < hi, "{file}: threshold {t}");
+            }
+            let derived = derived.map_or("", |(_, d)| d.as_str());
+            assert!(derived.contains("snap"), "{file}: {derived}");
         }
         let steps = m.props.iter().find(|(k, _)| k == "env_steps").unwrap();
         assert!(steps.1.parse::<u64>().unwrap() > 0, "{file}");

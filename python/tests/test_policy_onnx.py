@@ -260,3 +260,46 @@ def test_an_ensemble_is_the_mean_of_its_members_clipped_actions(tmp_path):
         P.ensemble([members[0], other], tmp_path / "bad.onnx", "test")
     with pytest.raises(ValueError, match="at least two"):
         P.ensemble([members[0]], tmp_path / "bad.onnx", "test")
+
+
+def test_a_snapped_component_takes_its_bounds_at_the_threshold(tmp_path):
+    """examples/policy_onnx.py snap: the snapped component is its upper bound where the graph's
+    output reaches the threshold and its lower bound below it, in onnxruntime as in the
+    reference; the others pass unchanged; the metadata records the snap; a file snapped
+    before, an unbounded or out-of-range component and a bad threshold are refused, naming
+    the value."""
+    import json
+
+    ort = pytest.importorskip("onnxruntime")
+    P = load_module()
+    src = small_policy(tmp_path / "p.onnx", act_dim=3, obs_dim=5)
+    low = np.array([-np.inf, -1.0, -0.5], np.float32)
+    high = np.array([np.inf, 1.0, 0.25], np.float32)
+    out = tmp_path / "snap.onnx"
+    P.snap_actions(src, out, {1: -0.5, 2: 0.1}, "test", low, high)
+    x = np.random.default_rng(3).normal(0, 2, size=(256, 5)).astype(np.float32)
+    raw = ort.InferenceSession(str(src), providers=["CPUExecutionProvider"]).run(None, {"obs": x})[0]
+    got = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).run(None, {"obs": x})[0]
+    np.testing.assert_array_equal(got[:, 0], raw[:, 0])
+    np.testing.assert_array_equal(got[:, 1], np.where(raw[:, 1] < -0.5, -1.0, 1.0))
+    np.testing.assert_array_equal(got[:, 2], np.where(raw[:, 2] < 0.1, -0.5, 0.25))
+    # The random observations fall on both sides of both thresholds.
+    assert 0 < (raw[:, 1] < -0.5).sum() < len(x) and 0 < (raw[:, 2] < 0.1).sum() < len(x)
+    props = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    assert json.loads(props["action_snap"]) == {
+        "1": {"threshold": -0.5, "low": -1.0, "high": 1.0},
+        "2": {"threshold": np.float32(0.1).item(), "low": -0.5, "high": 0.25}}
+    assert props["derived"].endswith("test")
+    with pytest.raises(ValueError, match="snapped already"):
+        P.snap_actions(out, tmp_path / "again.onnx", {1: 0.0}, "t", low, high)
+    with pytest.raises(ValueError, match="component 0 is unbounded"):
+        P.snap_actions(src, tmp_path / "bad.onnx", {0: 0.0}, "t", low, high)
+    with pytest.raises(ValueError, match="action index 3 out of range"):
+        P.snap_actions(src, tmp_path / "bad.onnx", {3: 0.0}, "t", low, high)
+    with pytest.raises(ValueError, match="threshold must be a finite number"):
+        P.snap_actions(src, tmp_path / "bad.onnx", {1: float("nan")}, "t", low, high)
+    assert not (tmp_path / "bad.onnx").exists() and not (tmp_path / "again.onnx").exists()
+    r = cli("snap", src, tmp_path / "cli.onnx", "--action", "1:x")
+    assert r.returncode != 0 and "expected INDEX:THRESHOLD, e.g. 7:-0.75" in r.stderr
+    r = cli("snap", src, tmp_path / "cli.onnx", "--action", "1:0", "--action", "1:0.5")
+    assert r.returncode != 0 and "give each component one threshold" in r.stderr

@@ -78,7 +78,8 @@ pub struct Profile {
     pub substep_us: f64,
     /// Per MuJoCo stage that ran: µs per substep, share of the substep, calls per substep.
     /// `position` holds the `pos_*` stages; `actuation` and `acceleration` include the
-    /// drives' own calls (their unconstrained acceleration).
+    /// drives' own calls (their unconstrained acceleration) where the drives make them (a
+    /// robot with an actuator that is no drive, or a wrench on a robot link).
     pub stages: std::collections::BTreeMap<String, Stage>,
     /// The substep's time outside MuJoCo's timed stages (the drives' own arithmetic, the
     /// integration, the kinematics update after each env step), µs and share.
@@ -433,12 +434,14 @@ mod tests {
         let p = r.profile.expect("--profile reports a profile");
         assert!(p.substep_us > 0.0 && p.contacts > 0.0 && p.constraint_rows > 0.0);
         assert!(p.solver_iterations >= 1.0 && p.solver_iterations_max >= 1);
-        // Every substep runs the position stages once, and the drives add one call of
-        // actuation and acceleration to step2's.
+        // Every substep runs the position stages once, and the acceleration stage once: the
+        // drives take their unconstrained acceleration from the smooth forces, without
+        // MuJoCo's actuation and acceleration calls (docs/speed.md).
         for (stage, calls) in [
             ("pos_collision", 1.0),
             ("constraint", 1.0),
-            ("acceleration", 2.0),
+            ("acceleration", 1.0),
+            ("actuation", 1.0),
         ] {
             let s = &p.stages[stage];
             assert_eq!(s.calls, calls, "{stage}");
