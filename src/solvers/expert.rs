@@ -240,12 +240,19 @@ impl Policy for PickCubeExpert {
     fn act(&mut self, env: &Env, action: &mut [f32]) {
         let tcp = tcp_xyz(env);
         let cube = body_xyz(env, self.cube);
-        let (target, grip) = if self.grip.holds(env) {
-            (body_xyz(env, self.goal), self.grip.gripper.close)
+        // Carried at the solver's speed (`pick_cube::CARRY_SPEED`), for the same reason.
+        let (target, grip, limit) = if self.grip.holds(env) {
+            let close = self.grip.gripper.close;
+            (
+                body_xyz(env, self.goal),
+                close,
+                super::pick_cube::CARRY_SPEED,
+            )
         } else {
-            self.grip.grasp(env, cube, tcp)
+            let (target, grip) = self.grip.grasp(env, cube, tcp);
+            (target, grip, 1.0)
         };
-        ee_action(target, tcp, 1.0, grip, action);
+        ee_action(target, tcp, limit, grip, action);
     }
 }
 
