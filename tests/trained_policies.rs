@@ -30,7 +30,7 @@ const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
         "PlaceSphere-v1",
         "panda",
         "pd_ee_delta_pos",
-        0.93,
+        1.00,
     ),
     (
         "PokeCube-v1__panda.onnx",
