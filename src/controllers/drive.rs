@@ -161,7 +161,7 @@ pub struct Drives {
     /// The correction as an nv-vector and its product with M.
     cvec: Vec<f64>,
     mc: Vec<f64>,
-    /// The constraint rows folded into `W` this substep (see [`Drives::fold_in_constraints`]):
+    /// The constraint rows folded into `W` this substep (see [`Drives::fold_in_constraint_rows`]):
     /// their Jacobian rows (k × nv), M⁻¹ images (k × nv) and compliances `R` (k).
     fold_j: Vec<f64>,
     fold_y: Vec<f64>,
@@ -182,7 +182,7 @@ pub struct Drives {
     can_kick: bool,
     /// Whether every actuator of the model is one of these drives, so that the arm's
     /// unconstrained acceleration can be had from the smooth forces alone (see
-    /// [`Drives::smooth_acceleration`]).
+    /// [`Drives::unconstrained_acceleration`]).
     drives_only: bool,
     /// The robot's bodies and dofs (ids), for that shortcut's check and forces.
     robot_bodies: Vec<usize>,
