@@ -115,7 +115,8 @@ pub struct Drives {
     target_v: Vec<f64>,
     /// Mean forces of the last substep.
     force: Vec<f64>,
-    /// The drives' dofs, and every dof of the kinematic trees they lie in (ascending).
+    /// The drives' dofs, and every dof of the kinematic trees they lie in (ascending): where
+    /// `M⁻¹` of a drive's unit force, or of the robot's smooth force, is not zero.
     unit_dofs: Vec<usize>,
     tree_dofs: Vec<usize>,
     /// The columns of M⁻¹ at the drives' dofs (nv × n: row k for dof k).
@@ -184,9 +185,6 @@ pub struct Drives {
     /// unconstrained acceleration can be had from the smooth forces alone (see
     /// [`Drives::unconstrained_acceleration`]).
     drives_only: bool,
-    /// The robot's bodies and dofs (ids), for that shortcut's check and forces.
-    robot_bodies: Vec<usize>,
-    robot_dofs: Vec<usize>,
     /// The smooth forces with the drives off, and their acceleration (nv each).
     smooth_force: Vec<f64>,
     smooth_acc: Vec<f64>,
@@ -281,10 +279,6 @@ impl Drives {
         // Upper bound of the folded rows: equality rows (a connect has 3, a weld 6, a joint
         // 1) plus the gripper contacts'.
         let max_rows = 6 * model.neq() + MAX_GRIPPER_CONTACTS;
-        let robot_bodies = (0..model.nbody()).filter(|&b| robot_body[b]).collect();
-        let robot_dofs = (0..nv)
-            .filter(|&k| robot_body[model.dof_bodyid()[k] as usize])
-            .collect();
         let drives_only = model.nu() == n && model.na() == 0;
         Ok(Drives {
             by_joint,
@@ -326,8 +320,6 @@ impl Drives {
             kicking: false,
             can_kick,
             drives_only,
-            robot_bodies,
-            robot_dofs,
             smooth_force: vec![0.0; nv],
             smooth_acc: vec![0.0; nv],
             dofs,
@@ -523,7 +515,8 @@ impl Drives {
     }
 
     /// The robot's unconstrained acceleration (Coriolis, passive forces) with the drives
-    /// switched off, at the robot's dofs (the other entries are not written): what MuJoCo's
+    /// switched off, at the drives' kinematic trees' dofs (the other entries are not
+    /// written): what MuJoCo's
     /// `mj_fwdActuation` and `mj_fwdAcceleration` give with the drives' controls and
     /// `qfrc_applied` at zero. Call after [`Data::step1`]; it may leave the controls and
     /// `qfrc_applied` at zero, which [`Drives::apply`] then overwrites.
@@ -536,13 +529,13 @@ impl Drives {
     /// dofs is MuJoCo's `qacc_smooth` bit for bit.
     pub(crate) fn unconstrained_acceleration(&mut self, data: &mut Data, shortcut: bool) -> &[f64] {
         let xfrc = data.xfrc_applied();
-        let wrenched = self
-            .robot_bodies
-            .iter()
-            .any(|&b| xfrc[6 * b..6 * b + 6].iter().any(|&x| x != 0.0));
+        let wrenched = xfrc
+            .chunks_exact(6)
+            .zip(&self.robot_body)
+            .any(|(wrench, &robot)| robot && wrench.iter().any(|&x| x != 0.0));
         if shortcut && self.drives_only && !wrenched {
             let (passive, bias) = (data.qfrc_passive(), data.qfrc_bias());
-            for &k in &self.robot_dofs {
+            for &k in &self.tree_dofs {
                 self.smooth_force[k] = passive[k] - bias[k] + 0.0;
             }
             data.solve_m(&mut self.smooth_acc, &self.smooth_force, 1);
@@ -565,10 +558,10 @@ impl Drives {
         self.drives_only
     }
 
-    /// The robot's dofs (ascending).
+    /// The dofs of the drives' kinematic trees (ascending).
     #[cfg(test)]
-    pub(crate) fn robot_dofs(&self) -> &[usize] {
-        &self.robot_dofs
+    pub(crate) fn tree_dofs(&self) -> &[usize] {
+        &self.tree_dofs
     }
 
     /// Collects the constraint rows [`Drives::fold_in_constraint_rows`] folds into `W`,

@@ -38,7 +38,7 @@ fn scenes() -> impl Iterator<Item = (RobotId, Data, crate::controllers::Drives)>
 fn the_drives_columns_of_the_inverse_inertia_are_mujocos_bit_for_bit() {
     for (robot, mut d, drives) in scenes() {
         let nv = d.model().nv();
-        let units: Vec<usize> = drives.robot_dofs().to_vec();
+        let units: Vec<usize> = drives.tree_dofs().to_vec();
         let n = units.len();
         assert!(n > 0 && n < nv, "{robot:?}: the box is a tree of its own");
         let mut unit = vec![0.0; n * nv];
@@ -48,7 +48,7 @@ fn the_drives_columns_of_the_inverse_inertia_are_mujocos_bit_for_bit() {
         let mut want = vec![0.0; n * nv];
         d.solve_m(&mut want, &unit, n);
         let mut got = vec![f64::NAN; n * nv];
-        d.solve_m_units(&mut got, &units, drives.robot_dofs());
+        d.solve_m_units(&mut got, &units, drives.tree_dofs());
         for (c, &u) in units.iter().enumerate() {
             for k in 0..nv {
                 let (g, w) = (got[k * n + c], want[c * nv + k]);
@@ -72,7 +72,7 @@ fn the_unconstrained_acceleration_shortcut_is_mujocos_bit_for_bit() {
             drives.drives_only(),
             "{robot:?}: an actuator that is no drive"
         );
-        let dofs = drives.robot_dofs().to_vec();
+        let dofs = drives.tree_dofs().to_vec();
         let mut fast = d.clone();
         let got = drives.unconstrained_acceleration(&mut fast, true).to_vec();
         let mut slow = d.clone();
