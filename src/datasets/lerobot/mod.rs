@@ -296,7 +296,7 @@ fn check_output_dir(dir: &Path) -> Result<(), DatasetError> {
     Ok(())
 }
 
-/// The cameras of the recording `path` to export (`video`: as [`write`]'s).
+/// The cameras of the recording `path` to export (`video`: as [`write()`]'s).
 fn recording_cameras(path: &Path, video: Option<bool>) -> Result<Vec<Camera>, DatasetError> {
     let raw = crate::record::read_raw(path)?;
     if video == Some(false) {

@@ -183,7 +183,7 @@ impl ImageStats {
 }
 
 /// The per-episode columns of one feature's statistics, in LeRobot's order (`min`, `max`,
-/// `mean`, `std`, `count`, quantiles): lists of float64 (images: 3 × [[x]], shape (3, 1, 1)),
+/// `mean`, `std`, `count`, quantiles): lists of float64 (images: 3 × `[[x]]`, shape (3, 1, 1)),
 /// `count` a list of one int64.
 pub(super) fn stats_columns(per_episode: &[Stats]) -> Vec<(&'static str, ArrayRef)> {
     use arrow_array::builder::{Float64Builder, Int64Builder};
