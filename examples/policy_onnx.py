@@ -33,6 +33,15 @@ member's metadata is kept, and every member's training and demos commands are li
 
     python examples/policy_onnx.py ensemble OUT.onnx A.onnx B.onnx C.onnx
 
+and bounds the controller target that an action component moves, while an observed vector is
+short (the SO100's jaw target kept at −0.77 rad or more within 1 cm of the goal: a lighter
+squeeze where PhysX reports a pinch as arm motion, docs/training.md). The target is an entry
+of the flat state observation, named by its part and position; how far one unit of the
+action moves it is measured in the mjskill env that the file names:
+
+    python examples/policy_onnx.py ease IN.onnx OUT.onnx --action 5 \
+        --target agent/controller/target_qpos:5 --least -0.77 --near extra/obj_to_goal_pos:0.01
+
 Every edit reads a regular file only (a FIFO or device is refused, never read), refuses a file
 whose metadata names a key twice, and writes OUT beside itself under a short temporary name
 (``.mjskill-PID-XXXXXXXX.tmp``, created exclusively, never through a link), renamed into
@@ -478,6 +487,154 @@ def action_bounds(src):
         env.close()
 
 
+def state_layout(src):
+    """The flat state observation's parts of the env that the policy file ``src`` names:
+    ``{name: (start, end)}`` (mjskill's gymnasium env, so the mjskill package must be
+    installed). A file whose obs mode is not ``state`` is a ValueError."""
+    meta = {p.key: p.value for p in load_policy(src).metadata_props}
+    if meta.get("obs_mode") != "state":
+        raise ValueError(f"{src} acts on obs_mode {meta.get('obs_mode')!r}; only a file that "
+                         "reads the flat 'state' observation can be eased")
+    env = _make_env(meta)
+    try:
+        return {name: (a, b) for name, a, b in env.unwrapped._layout.parts}
+    finally:
+        env.close()
+
+
+def _make_env(meta):
+    import gymnasium as gym
+    import mjskill  # noqa: F401  (registers the mjskill/ envs)
+
+    return gym.make(f"mjskill/{meta['env_id']}", robot_uids=meta["robot_uids"],
+                    control_mode=meta["control_mode"], obs_mode=meta["obs_mode"])
+
+
+def observed_entry(layout, text, what):
+    """``NAME:K`` (entry K of the state observation's part NAME) as a flat index, or ``NAME``
+    (a whole part) as its (start, end); errors name the valid parts."""
+    name, _, k = text.rpartition(":") if what == "entry" else (text, "", "")
+    if name not in layout:
+        raise ValueError(f"{text!r}: the state observation has no part {name!r}; valid: "
+                         + ", ".join(layout))
+    start, end = layout[name]
+    if what != "entry":
+        return start, end
+    try:
+        k = int(k)
+    except ValueError:
+        raise ValueError(f"{text!r}: expected NAME:K with K an integer, e.g. "
+                         "agent/controller/target_qpos:5") from None
+    if not 0 <= k < end - start:
+        raise ValueError(f"{text!r}: {name} has {end - start} entries (0..{end - start - 1})")
+    return start + k
+
+
+def target_scale(src, action, target):
+    """How far one unit of action component ``action`` moves the flat state observation's
+    entry ``target`` in the env that ``src`` names, measured: from a reset (seed 0), a step
+    of +1 on that component and then one of +0.5, the others 0. The second move must be half
+    the first (a target that the action moves by a fixed scale, such as a target-delta
+    controller's), and the first not zero; otherwise a ValueError."""
+    meta = {p.key: p.value for p in load_policy(src).metadata_props}
+    env = _make_env(meta)
+    try:
+        n = env.action_space.shape[0]
+        if not 0 <= action < n:
+            raise ValueError(f"action index {action} out of range 0..{n - 1}")
+        obs, _ = env.reset(seed=0)
+        moves = []
+        for u in (1.0, 0.5):
+            a = np.zeros(n, np.float32)
+            a[action] = u
+            nxt = env.step(a)[0]
+            moves.append(float(nxt[target]) - float(obs[target]))
+            obs = nxt
+    finally:
+        env.close()
+    first, second = moves
+    if abs(first) < 1e-6 or abs(second - 0.5 * first) > 1e-5 * max(1.0, abs(first)):
+        raise ValueError(f"action {action} does not move observation entry {target} by a "
+                         f"fixed scale (+1 moved it {first:g}, then +0.5 {second:g}); ease "
+                         "bounds a target that the action moves, such as a target-delta "
+                         "controller's (agent/controller/target_qpos)")
+    return first
+
+
+def ease_actions(src, dst, note, action, target, scale, bound, near, radius, most=False,
+                 names=None):
+    """Writes ``src`` as ``dst`` with action component ``action`` limited so that the target
+    it moves stays at or above ``bound`` (at or below it with ``most``) while the observed
+    vector ``near`` (flat indices start, end) is shorter than ``radius``: the target after the
+    step is ``obs[target] + scale · a``, so the component is raised (or lowered) to
+    ``(bound − obs[target]) / scale`` where it would pass the bound (``MatMul``, ``Max`` or
+    ``Min``, ``Less`` and ``Where`` on the output; elsewhere and for the other components the
+    graph's action is kept). A file eased before is refused. Records ``action_ease`` (JSON,
+    with ``names``, the target's and the vector's names, where given) and the ``note``
+    (appended to ``derived``). Returns the ModelProto."""
+    from onnx import helper, numpy_helper
+
+    model = load_policy(src)
+    g = model.graph
+    meta = {p.key: p.value for p in model.metadata_props}
+    if "action_ease" in meta:
+        raise ValueError(f"{src} is eased already (action_ease {meta['action_ease']}); ease "
+                         "the file it was made from")
+    obs_dim = g.input[0].type.tensor_type.shape.dim[-1].dim_value
+    act_dim = g.output[0].type.tensor_type.shape.dim[-1].dim_value
+    start, end = near
+    if not 0 <= action < act_dim:
+        raise ValueError(f"action index {action} out of range 0..{act_dim - 1}")
+    if not 0 <= target < obs_dim or not 0 <= start < end <= obs_dim:
+        raise ValueError(f"observation entries {target} and {start}..{end} must lie in "
+                         f"0..{obs_dim - 1}")
+    for label, v in (("bound", bound), ("radius", radius), ("scale", scale)):
+        if not np.isfinite(v) or abs(v) >= np.finfo(np.float32).max:
+            raise ValueError(f"the {label} must be a finite float32, not {v!r}")
+    if not radius > 0 or scale == 0:
+        raise ValueError(f"the radius must be positive ({radius:g}) and the scale not zero")
+    # The limit on the action: (bound - obs[target]) / scale, for every component (only
+    # `action`'s is used).
+    c = np.zeros((obs_dim, act_dim), np.float32)
+    c[target, action] = -1.0 / scale
+    b = np.zeros(act_dim, np.float32)
+    b[action] = bound / scale
+    # Raising the action raises the target where scale > 0: a least bound is a floor on it.
+    op = "Max" if (scale > 0) != most else "Min"
+    s = np.zeros((obs_dim, 1), np.float32)
+    s[start:end, 0] = 1.0
+    mask = np.zeros(act_dim, bool)
+    mask[action] = True
+    out = g.output[0].name
+    raw = out + "_uneased"
+    inp = g.input[0].name
+    for node in g.node:
+        node.output[:] = [raw if o == out else o for o in node.output]
+    g.initializer.extend([
+        numpy_helper.from_array(c, "ease_c"),
+        numpy_helper.from_array(b, "ease_b"),
+        numpy_helper.from_array(s, "ease_near"),
+        numpy_helper.from_array(np.array([radius * radius], np.float32), "ease_r2"),
+        numpy_helper.from_array(mask, "ease_mask"),
+    ])
+    g.node.extend([
+        helper.make_node("MatMul", [inp, "ease_c"], ["ease_cx"]),
+        helper.make_node("Add", ["ease_cx", "ease_b"], ["ease_limit"]),
+        helper.make_node(op, [raw, "ease_limit"], ["ease_bounded"]),
+        helper.make_node("Mul", [inp, inp], ["ease_sq"]),
+        helper.make_node("MatMul", ["ease_sq", "ease_near"], ["ease_d2"]),
+        helper.make_node("Less", ["ease_d2", "ease_r2"], ["ease_close"]),
+        helper.make_node("And", ["ease_close", "ease_mask"], ["ease_use"]),
+        helper.make_node("Where", ["ease_use", "ease_bounded", raw], [out]),
+    ])
+    record = {"action": action, "target": target, "scale": float(np.float32(scale)),
+              ("most" if most else "least"): float(np.float32(bound)),
+              "near": [start, end], "radius": float(np.float32(radius))}
+    if names is not None:
+        record["target_name"], record["near_name"] = names
+    return save_derived(model, dst, note, action_ease=json.dumps(record))
+
+
 #: The metadata that members of an ensemble must share.
 ENSEMBLE_KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode")
 
@@ -616,6 +773,22 @@ def main(argv=None):
                     help="INDEX:THRESHOLD, e.g. 7:-0.75 (repeatable): the component becomes "
                          "its upper bound from the threshold on, its lower bound below it")
     sn.add_argument("--note", default=None, help="text for the `derived` metadata")
+    ea = sub.add_parser("ease", help="bound the controller target an action component "
+                        "moves, while an observed vector is short (a lighter squeeze near the "
+                        "goal)")
+    ea.add_argument("src")
+    ea.add_argument("dst")
+    ea.add_argument("--action", type=int, required=True, help="the action component's index")
+    ea.add_argument("--target", required=True,
+                    help="NAME:K, the observed target the component moves: entry K of the "
+                         "state observation's part NAME, e.g. agent/controller/target_qpos:5")
+    eb = ea.add_mutually_exclusive_group(required=True)
+    eb.add_argument("--least", type=float, help="the least value the target may take")
+    eb.add_argument("--most", type=float, help="the most it may take")
+    ea.add_argument("--near", required=True,
+                    help="NAME:RADIUS: only while the state observation's part NAME (a vector, "
+                         "e.g. extra/obj_to_goal_pos) is shorter than RADIUS")
+    ea.add_argument("--note", default=None, help="text for the `derived` metadata")
     e = sub.add_parser("ensemble", help="the mean of several files' actions, as one file")
     e.add_argument("dst")
     e.add_argument("srcs", nargs="+", help="the members (at least two)")
@@ -632,6 +805,30 @@ def main(argv=None):
                 raise SystemExit(f"error: ensemble reads the action bounds from the mjskill "
                                  f"package, which is not importable here ({err})") from None
             ensemble(a.srcs, a.dst, note, low, high)
+            return
+        if a.command == "ease":
+            part, _, r = a.near.rpartition(":")
+            try:
+                radius = float(r)
+            except ValueError:
+                ea.error(f"--near {a.near!r}: expected NAME:RADIUS, e.g. "
+                         "extra/obj_to_goal_pos:0.01")
+            most = a.most is not None
+            bound = a.most if most else a.least
+            try:
+                layout = state_layout(a.src)
+                target = observed_entry(layout, a.target, "entry")
+                near = observed_entry(layout, part, "part")
+                scale = target_scale(a.src, a.action, target)
+            except ImportError as err:
+                raise SystemExit(f"error: ease reads the observation layout and the action's "
+                                 f"scale from the mjskill package, which is not importable "
+                                 f"here ({err})") from None
+            note = a.note or (f"action {a.action} eased by examples/policy_onnx.py ease: "
+                              f"{a.target} {'<=' if most else '>='} {bound:g} while "
+                              f"|{part}| < {radius:g}")
+            ease_actions(a.src, a.dst, note, a.action, target, scale, bound, near, radius,
+                         most, (a.target, part))
             return
         if a.command == "snap":
             try:

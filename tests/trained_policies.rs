@@ -16,8 +16,9 @@ use mjskill::solvers::PolicyFile;
 /// base and the head hidden; the WidowX AI's two trained again the same day
 /// with the pinch's kick and the velocities PhysX reports under it, docs/physics.md, and on
 /// 1 December until 100 % of `ppo.py`'s evaluation episodes succeeded; the
-/// SO100's two cloned the same day from its solver in `pd_joint_target_delta_pos`, and the
-/// Fetch's PlaceSphere from its solver that sets the sphere down on the bin's floor).
+/// SO100's two cloned the same day from its solver in `pd_joint_target_delta_pos` (their jaw
+/// eased at the goal on 1 December, `examples/policy_onnx.py ease`), and the Fetch's
+/// PlaceSphere from its solver that sets the sphere down on the bin's floor).
 const SHIPPED: &[(&str, &str, &str, &str, f64)] = &[
     (
         "PickCube-v1__panda.onnx",
@@ -229,6 +230,48 @@ fn shipped_policies_are_the_listed_ones_and_describe_themselves() {
             }
             let derived = derived.map_or("", |(_, d)| d.as_str());
             assert!(derived.contains("snap"), "{file}: {derived}");
+        }
+        // An eased component (examples/policy_onnx.py ease) bounds the target it moves near a
+        // goal: the recorded indices are the named parts' entries of the env's state
+        // observation, and one unit of the action moves that target by the recorded scale.
+        if let Some((_, ease)) = m.props.iter().find(|(k, _)| k == "action_ease") {
+            let config = mjskill::EnvConfig {
+                robot: Some(robot.to_string()),
+                control_mode: Some(mode.to_string()),
+                ..mjskill::EnvConfig::default()
+            };
+            let mut env = mjskill::make(env_id, config).unwrap();
+            let e: serde_json::Value = serde_json::from_str(ease).unwrap();
+            let part = |name: &str| {
+                env.obs_layout()
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .unwrap_or_else(|| panic!("{file}: no observation part {name}"))
+                    .1
+                    .clone()
+            };
+            let (target_part, k) = e["target_name"].as_str().unwrap().rsplit_once(':').unwrap();
+            let target = part(target_part).start + k.parse::<usize>().unwrap();
+            assert_eq!(e["target"].as_u64(), Some(target as u64), "{file}: {ease}");
+            let near = part(e["near_name"].as_str().unwrap());
+            assert_eq!(
+                e["near"],
+                serde_json::json!([near.start, near.end]),
+                "{file}: {ease}"
+            );
+            let action = e["action"].as_u64().unwrap() as usize;
+            let before = env.reset(Some(0)).0[target];
+            let mut a = vec![0.0; env.action_space().low.len()];
+            a[action] = 1.0;
+            let after = env.step(&a).unwrap().obs[target];
+            let scale = e["scale"].as_f64().unwrap();
+            assert!(
+                ((after - before) as f64 - scale).abs() < 1e-6,
+                "{file}: one unit moved the target {}, recorded {scale}",
+                after - before
+            );
+            let derived = derived.map_or("", |(_, d)| d.as_str());
+            assert!(derived.contains("ease"), "{file}: {derived}");
         }
         let steps = m.props.iter().find(|(k, _)| k == "env_steps").unwrap();
         assert!(steps.1.parse::<u64>().unwrap() > 0, "{file}");

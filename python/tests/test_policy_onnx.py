@@ -1,7 +1,9 @@
 """examples/policy_onnx.py's edits (issue 48): floors refuse NaN, inf and malformed values,
 in-place edits are written beside the target and renamed (a failed write leaves the input
 whole), non-regular files are refused unread, duplicated metadata keys are refused, and a
-floored file can be floored again. Needs numpy and onnx only (not the mjskill package)."""
+floored file can be floored again, and ensembles, snaps and eases compute what they say. Needs
+numpy and onnx only, but for ease's command line, which reads the observation layout and the
+action's scale from the mjskill package."""
 
 import importlib.util
 import os
@@ -303,3 +305,82 @@ def test_a_snapped_component_takes_its_bounds_at_the_threshold(tmp_path):
     assert r.returncode != 0 and "expected INDEX:THRESHOLD, e.g. 7:-0.75" in r.stderr
     r = cli("snap", src, tmp_path / "cli.onnx", "--action", "1:0", "--action", "1:0.5")
     assert r.returncode != 0 and "give each component one threshold" in r.stderr
+
+
+def test_an_eased_component_keeps_its_target_within_the_bound_near_the_goal(tmp_path):
+    """examples/policy_onnx.py ease: where the observed vector is shorter than the radius, the
+    eased component moves just far enough that ``obs[target] + scale · action`` stays within
+    the bound (raised for a least bound, lowered for a most bound, the other way round for a
+    negative scale), in onnxruntime as in the reference; elsewhere, and for the other
+    components, the graph's action passes unchanged; the metadata records the bound; a file
+    eased before and out-of-range entries are refused."""
+    import json
+
+    ort = pytest.importorskip("onnxruntime")
+    P = load_module()
+    src = small_policy(tmp_path / "p.onnx", act_dim=3, obs_dim=6)
+    x = np.random.default_rng(4).normal(0, 1, size=(2048, 6)).astype(np.float32)
+    d2 = (x[:, 3:5].astype(np.float64) ** 2).sum(axis=1)
+    x = x[np.abs(d2 - 1.0) > 1e-3]  # off the radius, where float32 sums could tip either way
+    close = (x[:, 3:5].astype(np.float64) ** 2).sum(axis=1) < 1.0
+    raw = ort.InferenceSession(str(src), providers=["CPUExecutionProvider"]).run(None, {"obs": x})[0]
+    for k, (scale, bound, most) in enumerate([(0.5, 0.2, False), (0.5, -0.3, True),
+                                              (-0.25, 0.1, False)]):
+        out = tmp_path / f"eased{k}.onnx"
+        P.ease_actions(src, out, "test", 1, 0, scale, bound, (3, 5), 1.0, most, ("t:0", "v"))
+        got = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).run(
+            None, {"obs": x})[0]
+        limit = (bound - x[:, 0].astype(np.float64)) / scale
+        bounded = (np.maximum if (scale > 0) != most else np.minimum)(raw[:, 1], limit)
+        np.testing.assert_allclose(got[:, 1], np.where(close, bounded, raw[:, 1]),
+                                   rtol=1e-5, atol=1e-5)
+        np.testing.assert_array_equal(got[:, [0, 2]], raw[:, [0, 2]])
+        target = x[close, 0] + scale * got[close, 1].astype(np.float64)
+        assert (target <= bound + 1e-5).all() if most else (target >= bound - 1e-5).all()
+        # Near the goal some actions were moved and some already lay within the bound.
+        moved = close & (np.abs(got[:, 1] - raw[:, 1]) > 1e-6)
+        assert 0 < moved.sum() < close.sum(), (moved.sum(), close.sum())
+        props = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+        rec = json.loads(props["action_ease"])
+        assert rec == {"action": 1, "target": 0, "scale": scale,
+                       ("most" if most else "least"): np.float32(bound).item(),
+                       "near": [3, 5], "radius": 1.0, "target_name": "t:0", "near_name": "v"}
+        assert props["derived"].endswith("test")
+    with pytest.raises(ValueError, match="eased already"):
+        P.ease_actions(out, tmp_path / "again.onnx", "t", 1, 0, 0.5, 0.2, (3, 5), 1.0)
+    with pytest.raises(ValueError, match="action index 3 out of range"):
+        P.ease_actions(src, tmp_path / "bad.onnx", "t", 3, 0, 0.5, 0.2, (3, 5), 1.0)
+    with pytest.raises(ValueError, match="must lie in 0..5"):
+        P.ease_actions(src, tmp_path / "bad.onnx", "t", 1, 6, 0.5, 0.2, (3, 5), 1.0)
+    with pytest.raises(ValueError, match="radius must be positive"):
+        P.ease_actions(src, tmp_path / "bad.onnx", "t", 1, 0, 0.5, 0.2, (3, 5), 0.0)
+    with pytest.raises(ValueError, match="the bound must be a finite float32"):
+        P.ease_actions(src, tmp_path / "bad.onnx", "t", 1, 0, 0.5, float("nan"), (3, 5), 1.0)
+    assert not (tmp_path / "bad.onnx").exists() and not (tmp_path / "again.onnx").exists()
+
+
+def test_ease_reads_the_target_and_its_scale_from_the_files_env(tmp_path):
+    """The command line names the target and the vector by the state observation's parts,
+    which it resolves in the mjskill env the file names, and measures how far one unit of the
+    action moves the target there (the SO100's jaw in ``pd_joint_target_delta_pos``: 0.2 rad);
+    a part the observation lacks is refused naming the valid ones, and an action that does not
+    move the target is refused."""
+    import json
+
+    src = REPO / "tests" / "data" / "policies" / "PickCubeSO100-v1__so100.onnx"
+    out = tmp_path / "eased.onnx"
+    args = ["--least", "-0.77", "--near", "extra/obj_to_goal_pos:0.01"]
+    r = cli("ease", src, out, "--action", "5", "--target", "agent/controller/target_qpos:5",
+            *args)
+    assert r.returncode == 0, r.stderr
+    rec = json.loads({p.key: p.value for p in onnx.load(str(out)).metadata_props}["action_ease"])
+    assert rec["target"] == 17 and rec["near"] == [39, 42] and rec["action"] == 5
+    assert abs(rec["scale"] - 0.2) < 1e-6 and rec["least"] == np.float32(-0.77).item()
+    r = cli("ease", src, tmp_path / "bad.onnx", "--action", "5", "--target",
+            "agent/target:5", *args)
+    assert r.returncode != 0 and "no part 'agent/target'" in r.stderr
+    assert "agent/controller/target_qpos" in r.stderr
+    r = cli("ease", src, tmp_path / "bad.onnx", "--action", "0", "--target",
+            "agent/controller/target_qpos:5", *args)
+    assert r.returncode != 0 and "does not move observation entry 17" in r.stderr
+    assert not (tmp_path / "bad.onnx").exists()
