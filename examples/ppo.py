@@ -694,6 +694,10 @@ def main(argv=None):
         if demos is not None:
             extra["demos"] = (f"{len(demos.episodes)} episodes, {demos.steps} steps: "
                               + " ".join(os.path.basename(f) for f in demos.files))
+            if demos.commands:
+                # The `mjskill rollout` commands that recorded them, as examples/imitate.py
+                # records its demos'.
+                extra["demos_command"] = " ; ".join(demos.commands)
         if args.simulator != "mjskill":
             extra["simulator"] = args.simulator
         meta = metadata(

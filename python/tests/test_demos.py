@@ -156,6 +156,7 @@ def test_a_run_from_demos_trains_in_their_mode_and_resumes(demo_files, tmp_path)
     # No --control-mode: the demos' mode.
     assert meta["control_mode"] == "pd_ee_delta_pos" and meta["robot_uids"] == "panda"
     assert "3 episodes" in meta["demos"] and "--demos" in meta["training_command"]
+    assert meta["demos_command"].startswith("mjskill rollout "), meta["demos_command"]
     ck = torch.load(out / "checkpoint.pt", weights_only=True)
     assert int(ck["global_step"]) == 96
     # --resume keeps the demos (from the saved options) and continues without a second warm
