@@ -407,6 +407,17 @@ def floor_actions(src, dst, floors, note):
     return save_derived(model, dst, note)
 
 
+def load_unedited(src, key, verb, done):
+    """Reads the policy file ``src`` for an edit that records ``key`` in its metadata; a file
+    that carries it already (edited that way before) is a ValueError."""
+    model = load_policy(src)
+    meta = {p.key: p.value for p in model.metadata_props}
+    if key in meta:
+        raise ValueError(f"{src} is {done} already ({key} {meta[key]}); {verb} the file it was "
+                         "made from")
+    return model
+
+
 def snap_actions(src, dst, thresholds, note, low, high):
     """Writes ``src`` as ``dst`` with some action components snapped to their bounds:
     ``thresholds`` maps an action index to a threshold, and that component becomes
@@ -420,12 +431,8 @@ def snap_actions(src, dst, thresholds, note, low, high):
     ``derived``). Returns the ModelProto."""
     from onnx import helper, numpy_helper
 
-    model = load_policy(src)
+    model = load_unedited(src, "action_snap", "snap", "snapped")
     g = model.graph
-    meta = {p.key: p.value for p in model.metadata_props}
-    if "action_snap" in meta:
-        raise ValueError(f"{src} is snapped already (action_snap {meta['action_snap']}); "
-                         "snap the file it was made from")
     out = g.output[0]
     act_dim = out.type.tensor_type.shape.dim[-1].dim_value
     low = np.asarray(low, np.float32)
@@ -474,12 +481,7 @@ def snap_actions(src, dst, thresholds, note, low, high):
 def action_bounds(src):
     """The action space's bounds of the env that the policy file ``src`` names (mjskill's
     gymnasium env, so the mjskill package must be installed)."""
-    import gymnasium as gym
-    import mjskill  # noqa: F401  (registers the mjskill/ envs)
-
-    meta = {p.key: p.value for p in load_policy(src).metadata_props}
-    env = gym.make(f"mjskill/{meta['env_id']}", robot_uids=meta["robot_uids"],
-                   control_mode=meta["control_mode"], obs_mode=meta["obs_mode"])
+    env = _make_env({p.key: p.value for p in load_policy(src).metadata_props})
     try:
         space = env.action_space
         return (np.asarray(space.low, np.float32), np.asarray(space.high, np.float32))
@@ -574,12 +576,8 @@ def ease_actions(src, dst, note, action, target, scale, bound, near, radius, mos
     (appended to ``derived``). Returns the ModelProto."""
     from onnx import helper, numpy_helper
 
-    model = load_policy(src)
+    model = load_unedited(src, "action_ease", "ease", "eased")
     g = model.graph
-    meta = {p.key: p.value for p in model.metadata_props}
-    if "action_ease" in meta:
-        raise ValueError(f"{src} is eased already (action_ease {meta['action_ease']}); ease "
-                         "the file it was made from")
     obs_dim = g.input[0].type.tensor_type.shape.dim[-1].dim_value
     act_dim = g.output[0].type.tensor_type.shape.dim[-1].dim_value
     start, end = near
