@@ -489,21 +489,6 @@ def action_bounds(src):
         env.close()
 
 
-def state_layout(src):
-    """The flat state observation's parts of the env that the policy file ``src`` names:
-    ``{name: (start, end)}`` (mjskill's gymnasium env, so the mjskill package must be
-    installed). A file whose obs mode is not ``state`` is a ValueError."""
-    meta = {p.key: p.value for p in load_policy(src).metadata_props}
-    if meta.get("obs_mode") != "state":
-        raise ValueError(f"{src} acts on obs_mode {meta.get('obs_mode')!r}; only a file that "
-                         "reads the flat 'state' observation can be eased")
-    env = _make_env(meta)
-    try:
-        return {name: (a, b) for name, a, b in env.unwrapped._layout.parts}
-    finally:
-        env.close()
-
-
 def _make_env(meta):
     import gymnasium as gym
     import mjskill  # noqa: F401  (registers the mjskill/ envs)
@@ -512,16 +497,22 @@ def _make_env(meta):
                     control_mode=meta["control_mode"], obs_mode=meta["obs_mode"])
 
 
-def observed_entry(layout, text, what):
-    """``NAME:K`` (entry K of the state observation's part NAME) as a flat index, or ``NAME``
-    (a whole part) as its (start, end); errors name the valid parts."""
-    name, _, k = text.rpartition(":") if what == "entry" else (text, "", "")
+def observed_part(layout, name):
+    """The flat (start, end) of the state observation's part ``name`` in ``layout``
+    (``{name: (start, end)}``); an unknown name is a ValueError naming the valid ones."""
     if name not in layout:
-        raise ValueError(f"{text!r}: the state observation has no part {name!r}; valid: "
+        raise ValueError(f"the state observation has no part {name!r}; valid: "
                          + ", ".join(layout))
-    start, end = layout[name]
-    if what != "entry":
-        return start, end
+    return layout[name]
+
+
+def observed_entry(layout, text):
+    """``NAME:K``, entry K of the state observation's part NAME, as a flat index."""
+    name, _, k = text.rpartition(":")
+    try:
+        start, end = observed_part(layout, name)
+    except ValueError as e:
+        raise ValueError(f"{text!r}: {e}") from None
     try:
         k = int(k)
     except ValueError:
@@ -532,15 +523,24 @@ def observed_entry(layout, text, what):
     return start + k
 
 
-def target_scale(src, action, target):
-    """How far one unit of action component ``action`` moves the flat state observation's
-    entry ``target`` in the env that ``src`` names, measured: from a reset (seed 0), a step
-    of +1 on that component and then one of +0.5, the others 0. The second move must be half
-    the first (a target that the action moves by a fixed scale, such as a target-delta
-    controller's), and the first not zero; otherwise a ValueError."""
+def ease_probe(src, action, target, near):
+    """What ``ease`` reads from the mjskill env that the policy file ``src`` names (so the
+    mjskill package must be installed): the flat index of the observed target ``target``
+    (``NAME:K``), the flat (start, end) of the vector ``near`` (a part's name), and how far one
+    unit of action component ``action`` moves the target, measured: from a reset (seed 0), a
+    step of +1 on that component and then one of +0.5, the others 0. The second move must be
+    half the first (a target that the action moves by a fixed scale, such as a target-delta
+    controller's) and the first not zero. A file whose obs mode is not ``state``, an unknown
+    part or entry and an action that does not move the target are ValueErrors."""
     meta = {p.key: p.value for p in load_policy(src).metadata_props}
+    if meta.get("obs_mode") != "state":
+        raise ValueError(f"{src} acts on obs_mode {meta.get('obs_mode')!r}; only a file that "
+                         "reads the flat 'state' observation can be eased")
     env = _make_env(meta)
     try:
+        layout = {name: (a, b) for name, a, b in env.unwrapped._layout.parts}
+        index = observed_entry(layout, target)
+        span = observed_part(layout, near)
         n = env.action_space.shape[0]
         if not 0 <= action < n:
             raise ValueError(f"action index {action} out of range 0..{n - 1}")
@@ -550,17 +550,17 @@ def target_scale(src, action, target):
             a = np.zeros(n, np.float32)
             a[action] = u
             nxt = env.step(a)[0]
-            moves.append(float(nxt[target]) - float(obs[target]))
+            moves.append(float(nxt[index]) - float(obs[index]))
             obs = nxt
     finally:
         env.close()
     first, second = moves
     if abs(first) < 1e-6 or abs(second - 0.5 * first) > 1e-5 * max(1.0, abs(first)):
-        raise ValueError(f"action {action} does not move observation entry {target} by a "
+        raise ValueError(f"action {action} does not move observation entry {index} by a "
                          f"fixed scale (+1 moved it {first:g}, then +0.5 {second:g}); ease "
                          "bounds a target that the action moves, such as a target-delta "
                          "controller's (agent/controller/target_qpos)")
-    return first
+    return index, span, first
 
 
 def ease_actions(src, dst, note, action, target, scale, bound, near, radius, most=False,
@@ -814,10 +814,7 @@ def main(argv=None):
             most = a.most is not None
             bound = a.most if most else a.least
             try:
-                layout = state_layout(a.src)
-                target = observed_entry(layout, a.target, "entry")
-                near = observed_entry(layout, part, "part")
-                scale = target_scale(a.src, a.action, target)
+                target, near, scale = ease_probe(a.src, a.action, a.target, part)
             except ImportError as err:
                 raise SystemExit(f"error: ease reads the observation layout and the action's "
                                  f"scale from the mjskill package, which is not importable "
