@@ -220,12 +220,18 @@ fn the_fetchs_solver_stands_the_loosely_held_peg_on_its_lower_end() {
             lifted |= part(&e, "extra/obj_pose")[2] > 0.1;
         }
         // Open, then the loose grip (−0.4) from the close on, never the full −1 (a far peg is
-        // dragged back at −0.8 and gripped afresh through 0); once the stood peg is let go,
-        // the hand stays open.
+        // dragged back at −0.8 and gripped afresh through 0; a lifted peg that has not swung
+        // gets one step eased to 0.3); once the stood peg is let go, the hand stays open.
         assert_eq!(grips[0], 1.0, "seed {seed}");
         assert!(
-            grips.iter().all(|&g| [1.0, -0.4, -0.8, 0.0].contains(&g)),
+            grips
+                .iter()
+                .all(|&g| [1.0, -0.4, -0.8, 0.0, 0.3].contains(&g)),
             "seed {seed}: {grips:?}"
+        );
+        assert!(
+            grips.iter().filter(|&&g| g == 0.3).count() <= 1,
+            "seed {seed}: the swing's ease is one step: {grips:?}"
         );
         let closed = grips
             .iter()
@@ -242,7 +248,7 @@ fn the_fetchs_solver_stands_the_loosely_held_peg_on_its_lower_end() {
             successes += 1;
         }
     }
-    // 20 of seeds 0–19 at step 50 (20 at any step); 91 of seeds 0–99 at any step, 90 at
+    // 17 of seeds 0–19 at step 50 (18 at any step); 93 of seeds 0–99 at any step, 90 at
     // step 50 (docs/solvers.md §7.7, §9). The loose-grip swing is chaotic: a margin for another CPU's last bits.
     assert!(successes >= 10, "{successes} of 20");
 }

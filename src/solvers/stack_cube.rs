@@ -274,6 +274,7 @@ impl Policy for FetchStackCube {
             target,
             tcp,
             pitch: self.pitch,
+            yaw: 0.0,
             torso: self.arm.torso(env),
             torso_gain: 1.0,
             grip,
