@@ -379,9 +379,13 @@ const MEASURED: [(&str, [f64; 12]); 22] = [
     // LiftPegUpright: 2026-11-29, from record_push_pull.py's files.
     (
         "LiftPegUpright-v1__fetch",
+        // Object error of steps 26–50: 1.42e-3 before the scene's no-slip pass (1 December
+        // 2026; LiftPegUpright's NOSLIP_ITERATIONS): the smooth walks push the lying peg along
+        // the table, where static friction holds it a little longer than PhysX's (the
+        // one-step object error is unchanged; docs/physics.md, "Static friction").
         [
             1.39e-03, 6.20e-03, 2.78e-02, 3.87e-04, 3.79e-03, 1.46e-02, 1.09e-06, 1.15e-06,
-            1.42e-03, 2.88e-03, 7.91e-04, 1.43e-04,
+            3.12e-03, 2.88e-03, 7.91e-04, 1.43e-04,
         ],
     ),
     (
@@ -485,6 +489,9 @@ fn open_loop_replay_tracks_maniskill_within_the_measured_agreement() {
         let name = format!("{}__{}", f.env_id, f.robot);
         let want = MEASURED.iter().find(|(n, _)| *n == name).unwrap().1;
         let got = agreement(&f);
+        // The figures as MEASURED spells them, for an intended change (--nocapture).
+        let figures: Vec<String> = got.iter().map(|x| format!("{x:.2e}")).collect();
+        println!("(\"{name}\", [{}]),", figures.join(", "));
         for k in 0..12 {
             if got[k] > 1.3 * want[k] {
                 failures.push(format!(
@@ -621,4 +628,37 @@ fn held_states_imported_with_the_actions_drive_targets_evaluate_as_in_maniskill(
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// LiftPegUpright's static friction (docs/physics.md, "Static friction"): ManiSkill's four
+/// motion-planning episodes grip the lying peg loosely and lift it; PhysX's peg pivots in the
+/// grip while the table drags its far end, then holds while the hand holds still. Replayed
+/// open loop, mjskill's peg follows PhysX's from step 26 to the end within 12–31 mm (mean)
+/// and 0.20–0.50 rad (worst step) with the scene's no-slip pass; without it the peg crept
+/// round in the grip under gravity: 18–43 mm and 0.48–0.60 rad.
+#[test]
+fn the_loosely_held_peg_holds_in_the_grip_as_physxs_does() {
+    let f = files()
+        .into_iter()
+        .find(|f| f.env_id == "LiftPegUpright-v1" && f.robot == "panda")
+        .expect("the LiftPegUpright-v1 Panda reference file");
+    let report = replay_file(&f, FidelityOptions::default()).unwrap();
+    let mut seen = 0;
+    for e in report
+        .episodes
+        .iter()
+        .filter(|e| e.source.starts_with("motion"))
+    {
+        let late = &e.per_step[25..];
+        let pos = late.iter().map(|s| s.obj_pos).sum::<f64>() / late.len() as f64;
+        let rot = late.iter().map(|s| s.obj_rot).fold(0.0, f64::max);
+        println!("seed {}: mean {pos:.4} m, worst {rot:.3} rad", e.seed);
+        assert!(
+            pos < 0.035 && rot < 0.54,
+            "seed {}: {pos} m, {rot} rad",
+            e.seed
+        );
+        seen += 1;
+    }
+    assert_eq!(seen, 4, "ManiSkill's four motion-planning episodes");
 }

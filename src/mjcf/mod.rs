@@ -782,6 +782,17 @@ impl Scene {
         })
     }
 
+    /// Runs MuJoCo's no-slip pass (`noslip_iterations`, 0 by default) after each step's
+    /// constraint solve: a Gauss–Seidel pass over the friction rows without their softness,
+    /// so that a contact whose friction can hold does not creep under a steady load (MuJoCo's
+    /// soft friction otherwise slips at a rate proportional to it; PhysX's does not). A task
+    /// that needs it asks for it in its scene; docs/physics.md says which and why.
+    pub fn set_noslip_iterations(&mut self, iterations: u32) {
+        self.root
+            .section("option")
+            .set("noslip_iterations", iterations);
+    }
+
     /// Explicit contact pairs between every collision geom of the robot's finger links (those
     /// with their own material friction) and the geom `object`: condim 4 with the combined
     /// friction μ = (finger material + 0.3)/2 and torsional friction μ·`patch_radius` (PhysX's

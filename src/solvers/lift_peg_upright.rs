@@ -8,20 +8,21 @@
 //! the peg's axis to the vertical, and lowers the peg onto its end once upright, where it is
 //! held.
 //!
-//! Measured (0.01 s step): 97/100 on seeds 0–99 (94 on 100–199). Replayed open loop in
-//! ManiSkill, 8 of 50 episodes end the same: PhysX's peg does not swing as MuJoCo's does in
-//! the loose grip (docs/solvers.md §9).
+//! Measured (0.01 s step, with the scene's no-slip pass): 95/100 on seeds 0–99 (94 on
+//! 100–199). Replayed open loop in ManiSkill, 39 and 41 of 50 episodes end the same (seeds
+//! 0–49, 1000–1049; 9 and 9 before the pass, when the loosely held peg crept round in
+//! MuJoCo's fingers; docs/solvers.md §9).
 //!
 //! The Fetch's solver ([`FetchLiftPeg`]) cannot turn the peg with its hand (its gripper
 //! pitches ≈ 0.01 rad per step while holding it), so it lets the peg turn in a loose grip as
 //! it lifts, lowers it onto its lower end, moves the hand over that end and lets go once it
 //! leans less than 0.25 rad and the hand has stopped, where it rights itself; pegs beyond
 //! x = 0.07 are first dragged back along the table. Its fingers meet the peg's faces at an
-//! angle, and ease once if the lifted peg has not swung. Measured: 93/100 on seeds 0–99 (89
-//! on 100–199, 86 on 200–299; 910, 901 and 900 of 1000 on the held-out 7000–7999, 9000–9999
+//! angle, and ease once if the lifted peg has not swung. Measured: 96/100 on seeds 0–99 (90
+//! on 100–199, 91 on 200–299; 915, 894 and 925 of 1000 on the held-out 7000–7999, 9000–9999
 //! and 11000–11999; before the angle and the ease: 91, 81, 83 and 798 of 7000–7999).
 //! Replayed open loop in ManiSkill (seeds 1000–1049, as joint targets): 0 of 50 succeed
-//! there and 8 end the same (docs/solvers.md §7.7).
+//! there and 6 end the same (docs/solvers.md §7.7).
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::{UnitQuaternion, Vector3};
