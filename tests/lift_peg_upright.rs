@@ -184,9 +184,12 @@ fn the_pandas_solver_stands_the_peg_upright_with_the_spec_rewards() {
     for seed in 0..6 {
         e.reset(Some(seed));
         policy.reset(&e);
-        let mut lifted = false;
+        let (mut lifted, mut closed, mut let_go) = (false, false, false);
         for t in 0..50 {
             policy.act(&e, &mut action);
+            // The fingers close on the peg, then let go of it standing nearly upright.
+            closed |= action[6] < 0.0;
+            let_go |= closed && action[6] == 1.0;
             let reward = e.step(&action).unwrap().reward as f64;
             let (free, held) = (spec_dense_reward(&e, false), spec_dense_reward(&e, true));
             assert!(
@@ -199,10 +202,11 @@ fn the_pandas_solver_stands_the_peg_upright_with_the_spec_rewards() {
         if e.info().success() {
             successes += 1;
             assert_eq!(e.dense_reward(), 3.0, "seed {seed}");
+            assert!(let_go, "seed {seed}: stood upright without letting go");
         }
     }
-    // 97 of seeds 0–99 (docs/solvers.md §9).
-    assert!(successes >= 5, "{successes} of 6");
+    // 93 of seeds 0–99 at any step, 88 at step 50 (docs/solvers.md §9).
+    assert!(successes >= 4, "{successes} of 6");
 }
 
 #[test]

@@ -60,7 +60,8 @@ const REACH_WEIGHT: f64 = 1.0 / 5.0;
 /// loosely 0.1 m from its centre pivots in PhysX's fingers only while something turns it and
 /// then holds, where MuJoCo's soft friction lets it creep round under gravity. The Panda
 /// solver's episodes (seeds 1000–1049, 0–49) replayed in ManiSkill end the same in 41 and 39
-/// of 50 with 10 iterations, 9 and 9 without; ManiSkill's four motion-planning episodes keep
+/// of 50 with 10 iterations, 9 and 9 without (46 and 49 since it lets go of the standing
+/// peg); ManiSkill's four motion-planning episodes keep
 /// their outcomes, their peg orientation within 0.20–0.50 rad of PhysX's at the worst step
 /// (0.48–0.60 without; 0.31–0.53 with 5 iterations, 0.14–0.35 with 20, where the Panda's
 /// solver falls to 85 of seeds 0–99).
