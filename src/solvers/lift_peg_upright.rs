@@ -254,15 +254,15 @@ const FETCH_STAND_FOOT_AIR: f64 = 0.025;
 /// The Fetch's gripper turns this far about the vertical from the peg's axis (rad), so that its
 /// fingers meet the peg's side faces at an angle: closed squarely on them (yaw 0) the lifted
 /// peg stayed level in 41 % of the episodes whose peg lay within 1 mrad of square to the
-/// fingers after the grasp, against 14 % of the others. Successes of seeds 0–2999 (with
-/// [`FETCH_SWING_EASE`]): 2620, 2703 and 2653 with 0.05, 0.055 and 0.06 (without the ease:
+/// fingers after the grasp, against 14 % of the others. Successes of seeds 0–2999, measured
+/// before the task's no-slip pass (with [`FETCH_SWING_EASE`]): 2620, 2703 and 2653 with 0.05, 0.055 and 0.06 (without the ease:
 /// 2428 at 0, 2487, 2631, 2601, 2566, 2650 and 2593 from 0.035 to 0.06 by 0.005; 2568, 2624,
 /// 2522 and 2632 at −0.055, −0.06, −0.065 and −0.07).
 const FETCH_GRASP_YAW: f64 = 0.055;
 /// A peg still more than [`FETCH_SWING_TILT`] from the vertical after this many steps of the
 /// lift (rad) has not swung: the fingers ease to [`FETCH_SWING_EASE`] for one step, which lets
 /// it turn, then close to [`FETCH_LOOSE_GRIP`] again. Successes of seeds 0–2999 (with the
-/// yaw): 2509, 2703 and 2675 easing at step 5, 6 and 7; 2686, 2703 and 2691 from 0.6, 0.7
+/// yaw, before the no-slip pass): 2509, 2703 and 2675 easing at step 5, 6 and 7; 2686, 2703 and 2691 from 0.6, 0.7
 /// and 0.8 rad; 2703 and 2714 easing to 0 and 0.3.
 const FETCH_SWING_STEP: usize = 6;
 const FETCH_SWING_TILT: f64 = 0.7;
