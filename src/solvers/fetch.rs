@@ -151,7 +151,6 @@ impl Policy for FetchPickCube {
             target,
             tcp,
             pitch,
-            yaw: 0.0,
             torso,
             torso_gain: if carrying { CARRY_TORSO_GAIN } else { 1.0 },
             grip,

@@ -82,11 +82,9 @@ pub struct ArmCommand {
     pub target: Vector3<f64>,
     /// Current TCP position.
     pub tcp: Vector3<f64>,
-    /// Gripper pitch wanted (rad below the horizontal; roll 0) ...
+    /// Gripper pitch wanted (rad below the horizontal; yaw and roll 0; [`FetchArm::drive_to`]
+    /// takes any orientation).
     pub pitch: f64,
-    /// ... and yaw (rad about the vertical, counter-clockwise seen from above; 0 for every
-    /// solver but the LiftPegUpright one, whose fingers meet the peg's faces at an angle).
-    pub yaw: f64,
     /// Torso height target (m).
     pub torso: f64,
     /// Torso command per unit error (1: the whole error in one step).
@@ -127,24 +125,36 @@ impl FetchArm {
         env.data().qpos()[env.robot().joints.qpos_adr[3]]
     }
 
-    /// Orientation error (rad) of the gripper from `pitch` (yaw 0).
-    pub fn rot_err(&self, env: &Env, pitch: f64) -> f64 {
-        self.rot_err_yawed(env, pitch, 0.0)
+    /// The gripper's orientation (world).
+    pub fn gripper_quat(&self, env: &Env) -> UnitQuaternion<f64> {
+        body_quat(env, self.gripper_link)
     }
 
-    /// Orientation error (rad) of the gripper from `pitch` and `yaw`.
-    pub fn rot_err_yawed(&self, env: &Env, pitch: f64, yaw: f64) -> f64 {
-        (oriented(pitch, yaw) * body_quat(env, self.gripper_link).inverse()).angle()
+    /// Orientation error (rad) of the gripper from `pitch`.
+    pub fn rot_err(&self, env: &Env, pitch: f64) -> f64 {
+        (pitched(pitch) * body_quat(env, self.gripper_link).inverse()).angle()
     }
 
     /// Writes the 12 actions: the position (clamped to the reach at the current pitch), the
-    /// rotation towards `cmd.pitch` and `cmd.yaw`, the gripper, the head held, the torso towards
+    /// rotation towards `cmd.pitch`, the gripper, the head held, the torso towards
     /// `cmd.torso`, the base towards `BASE_FORWARD` with yaw 0.
     pub fn drive(&mut self, env: &Env, cmd: ArmCommand, action: &mut [f32]) {
+        self.drive_to(env, cmd, pitched(cmd.pitch), action);
+    }
+
+    /// [`FetchArm::drive`] towards the gripper orientation `goal` (world) instead of
+    /// `cmd.pitch`.
+    pub fn drive_to(
+        &mut self,
+        env: &Env,
+        cmd: ArmCommand,
+        goal: UnitQuaternion<f64>,
+        action: &mut [f32],
+    ) {
         let data = env.data();
         env.robot().joints.qpos(data, &mut self.q);
         let cur = body_quat(env, self.gripper_link);
-        let rot_err = (oriented(cmd.pitch, cmd.yaw) * cur.inverse()).scaled_axis();
+        let rot_err = (goal * cur.inverse()).scaled_axis();
         // Keep the target within reach at the gripper's current pitch (the IK keeps the
         // orientation up to one rotation step): with the table pose's steep pitch most
         // targets ahead are out of reach and the IK would fail (the arm then holds still).
@@ -172,14 +182,9 @@ impl FetchArm {
     }
 }
 
-/// The gripper orientation with pitch `pitch` (rad below the horizontal), then turned by `yaw`
-/// about the vertical; roll 0.
-fn oriented(pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
-    let pitched = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch);
-    if yaw == 0.0 {
-        return pitched;
-    }
-    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw) * pitched
+/// The gripper orientation with pitch `pitch` (rad below the horizontal), yaw and roll 0.
+fn pitched(pitch: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch)
 }
 
 /// Gripper pitch for an object at table x (rad below the horizontal): steep ([`PITCH_NEAR`])

@@ -14,16 +14,12 @@
 //! (seeds 0–49, 1000–1049, 2000–2049; 9 of 50 before the pass, when the loosely held peg
 //! crept round in MuJoCo's fingers; docs/solvers.md §7.7, §9).
 //!
-//! The Fetch's solver ([`FetchLiftPeg`]) cannot turn the peg with its hand (its gripper
-//! pitches ≈ 0.01 rad per step while holding it), so it lets the peg turn in a loose grip as
-//! it lifts, lowers it onto its lower end, moves the hand over that end and lets go once it
-//! leans less than 0.25 rad and the hand has stopped, where it rights itself; pegs beyond
-//! x = 0.07 are first dragged back along the table. Its fingers meet the peg's faces at an
-//! angle, and ease once if the lifted peg has not swung. Measured: 96/100 on seeds 0–99 (90
-//! on 100–199, 91 on 200–299; 915, 894 and 925 of 1000 on the held-out 7000–7999, 9000–9999
-//! and 11000–11999; before the angle and the ease: 91, 81, 83 and 798 of 7000–7999).
-//! Replayed open loop in ManiSkill (seeds 1000–1049, as joint targets): 0 of 50 succeed
-//! there and 6 end the same (docs/solvers.md §7.7).
+//! The Fetch's solver ([`FetchLiftPeg`], `pd_joint_pos`) grips the peg firmly, tilted as its
+//! PickCube, lifts it and rolls its wrist half a turn: the peg, turned with the hand, now
+//! hangs below the fingers, and the hand turns it upright, stands it on its end and lets go.
+//! Measured: 100/100 on seeds 0–99, 100–199, 1000–1099 and 2000–2099, 1000 of 1000 on the
+//! held-out 7000–7999. Replayed open loop in ManiSkill, 50 of 50 episodes end the same (seeds
+//! 1000–1049; docs/solvers.md §7.7).
 use std::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -37,7 +33,7 @@ use super::{
     body_id, body_quat, body_xyz, tcp_link_xyz, tcp_xyz, write_pos, write_rot, Grasp, Gripper,
     Phases, Policy, ACTION_SCALE, CLOSE_STEPS, FETCH_GRIPPER,
 };
-use crate::env::Env;
+use crate::env::{make, Env, EnvConfig, ObsMode};
 use crate::mujoco::BodyId;
 use crate::tasks::lift_peg_upright::{PEG_HALF_LENGTH, PEG_HALF_WIDTH};
 
@@ -171,7 +167,8 @@ impl Policy for PandaLiftPeg {
     }
 }
 
-/// The Fetch grips the peg this far from its centre, on the robot's side (m).
+/// The Fetch grips the peg this far from its centre, on the robot's side (m): rolled over, the
+/// far 0.22 m of the peg hang below the fingers.
 const FETCH_GRASP_OFFSET: f64 = 0.1;
 /// The Fetch's approach point above the grasp point (m), raised by [`FETCH_APPROACH_CONE`]
 /// times the TCP's horizontal distance from it, as the Fetch's StackCube approach ...
@@ -179,124 +176,111 @@ const FETCH_APPROACH_HEIGHT: f64 = 0.03;
 const FETCH_APPROACH_CONE: f64 = 1.0;
 /// ... and by this times the torso's travel still to come down to [`TORSO_PICK`]: the torso
 /// drops at full speed while the arm dives, and without it the TCP overshot the approach
-/// point by 3–4 cm and the palm knocked the peg away (7 of seeds 0–99 never lifted; 26, 10
-/// and 0 with 0.5, 1 and 1.5).
+/// point by 3–4 cm and the palm knocked the peg away (measured with the loose-grip solver of
+/// 30 November: 7 of seeds 0–99 never lifted; 26, 10 and 0 with 0.5, 1 and 1.5).
 const FETCH_APPROACH_TORSO: f64 = 1.5;
 /// The approach is also done once the diving arm is already below the approach point within
 /// this of the grasp point horizontally (m): climbing back costs 8 of the 50 steps.
 const FETCH_DIVE_TOL: f64 = 0.01;
 /// Shortest position command of the descent (action units).
 const FETCH_MIN_STEP: f64 = 0.1;
-/// The Fetch's grip (normalised finger target; −1 closes): light enough that the lifted peg
-/// turns in the fingers towards hanging, firm enough to carry it (−0.3 drops it more often,
-/// −0.5 holds it rigidly: 26, 52 and 6 % of seeds 0–49).
-const FETCH_LOOSE_GRIP: f32 = -0.4;
-/// TCP height of the lift (m above the table).
-const FETCH_LIFT_HEIGHT: f64 = 0.26;
-/// The gripper's pitch from the lift on (rad below the horizontal): about the pick's, so the
-/// hand barely turns while the peg swings (successes of seeds 0–99 with the release: 53, 57,
-/// 61, 69 and 41 with 0.3, 0.45, 0.6, 0.75 and 0.9).
-const FETCH_LIFT_PITCH: f64 = 0.75;
-/// The lift ends once the peg hangs within this of the vertical (rad) ...
-const FETCH_STAND_TILT: f64 = 0.6;
-/// ... or after this many steps: a peg that stopped turning short of it (held in the air in
-/// 7–13 of 100 seeds) is stood on the table all the same.
-const FETCH_LIFT_STEPS: usize = 16;
-/// A peg lying this far from the vertical (rad) in the stand phase has dropped: hold still.
-const FETCH_DROPPED_TILT: f64 = 1.2;
-/// The stand phase lets go once the peg is within this of the vertical (rad) with its lowest
-/// corner within [`FETCH_RELEASE_FOOT`] of the table (m): a 0.24 × 0.05 box standing on an
-/// edge rights itself onto its end below atan(0.025 / 0.12) ≈ 0.2 rad, and the opening
-/// fingers carry it a little further. Successes of seeds 0–99: 61 releasing at 0.2 against 56
-/// holding on (before the other changes), 77 and 79 at 0.2 and 0.25 with them.
-const FETCH_RELEASE_TILT: f64 = 0.25;
-const FETCH_RELEASE_FOOT: f64 = 0.005;
-/// ... and the TCP moved less than this in the last step (m): let go while the hand still
-/// moves over the foot (about 3 cm a step), the peg rights itself past the vertical and rocks;
-/// held until the hand has stopped, it stands nearer the vertical and stays. Seeds 0–99 and
-/// 100–199, successes at any step / upright at step 50: 91/23, 81/20 without it; 91/38, 81/35
-/// at 0.02; 91/67, 81/54 at 0.015; 91/86, 81/77 at 0.01; 91/89, 81/79 at 0.0075; 91/90,
-/// 81/79 at 0.005; 91/89, 81/79 at 0.003 and 0.002; 90/88, 81/79 at 0.001. Seeds 0–999 and
-/// 1000–1999: 808/209, 811/214 without it; 816/765, 815/766 at 0.01; 816/786, 814/793 at
-/// 0.0075; 816/798, 812/797 at 0.005; 816/796, 812/798 at 0.003.
+/// The Fetch's grip (−1 closes): firm, so that the peg turns with the hand in PhysX and MuJoCo
+/// alike. Successes of seeds 3000–3499: 500, 498 and 316 with −1, −0.8 and −0.6.
+const FETCH_GRIP: f32 = -1.0;
+/// TCP height of the lift (m above the table): the rolled peg's lower end, 0.22 m below the
+/// fingers, clears the table. 500 of seeds 3000–3499 with 0.25, 0.27 and 0.3.
+const FETCH_ROLL_HEIGHT: f64 = 0.27;
+/// The lift is done this close under [`FETCH_ROLL_HEIGHT`] (m) ...
+const FETCH_LIFT_TOL: f64 = 0.02;
+/// ... or after this many steps; the roll gives up after as many.
+const FETCH_PHASE_STEPS: usize = 10;
+/// The lift takes the TCP back to at most this x (m): a peg gripped at a flat pitch (far
+/// pegs: 0.5 rad) needs the gripper pitched to about 1.07 rad to stand, and further forward
+/// the wrist is then out of reach (the turn stalls 0.1–0.27 rad short). Successes of seeds
+/// 0–99: 85 without, 93, 100, 100 and 100 at −0.08, −0.1, −0.12 and −0.14; of 3000–3499: 497,
+/// 500 and 500 at −0.1, −0.12 and −0.15.
+const FETCH_STAND_X: f64 = -0.12;
+/// The roll: the wrist turns half a turn about the gripper's axis, its target this much
+/// further each step (rad). Half a turn reflects the peg about the gripper's axis, so a peg
+/// gripped at pitch p hangs 2p below the horizontal: upright for the near pegs' 45°, 0.3–0.6
+/// rad short for the far ones, which the hand then turns. Successes of seeds 3000–3499: 500,
+/// 500, 431 and 43 with 0.4, 0.8, 1.6 and 3.2 (a wrist flung round shakes the peg loose).
+const FETCH_ROLL_STEP: f64 = 0.8;
+/// The roll is done within this of half a turn (rad).
+const FETCH_ROLL_TOL: f64 = 0.1;
+/// The wrist roll: its index in the Fetch's `pd_joint_pos` action (the arm's seventh joint) and
+/// among the robot's joints (docs/robots.md).
+const FETCH_WRIST_ROLL_ACTION: usize = 6;
+const FETCH_WRIST_ROLL_JOINT: usize = 12;
+/// While the rolled peg leans more than this (rad) its lowest corner is held
+/// [`FETCH_FOOT_CLEAR`] above the table (m); then it is stood on its end.
+const FETCH_STAND_TILT: f64 = 0.1;
+const FETCH_FOOT_CLEAR: f64 = 0.01;
+/// With the peg's lowest corner within this of the table (m), the hand moves at most
+/// [`FETCH_SLOW_LIMIT`] of the action range (1 cm) a step.
+const FETCH_SLOW_FOOT: f64 = 0.03;
+const FETCH_SLOW_LIMIT: f64 = 0.1;
+/// The fingers let go once the peg stands ([`STANDING_TOL`]) within [`RELEASE_TILT`] of
+/// upright and the TCP moved less than this in the last step (m): let go while the hand still
+/// moves down, the peg is slammed onto its end and topples after its success (seeds 0–99,
+/// before [`FETCH_STAND_X`]: 85 successes, 62 upright at step 50; at rest, with the slowed
+/// descent and the hand held still afterwards: 85 and 85).
 const FETCH_RELEASE_SPEED: f64 = 0.005;
-/// Pegs whose centre lies beyond this x at the start (m) are first dragged back along the
-/// table: their lower end otherwise stands ahead of the hand's reach. Successes of seeds 0–999
-/// and 1000–1999 (with the lowering of [`FETCH_STAND_FOOT_AIR`]): 771/765, 780/776, 803/800,
-/// 803/805 and 805/802 from 0.04, 0.05, 0.06, 0.07 and 0.08 (dragged to −0.02 from 0.06 on);
-/// 769/768 without the drag.
-const FETCH_DRAG_FROM_X: f64 = 0.07;
-/// ... until the peg's centre is within [`FETCH_DRAG_TOL`] of this x (m). Seeds 0–999 and
-/// 1000–1999 from 0.06: 782/774, 790/787, 803/800, 794/794 and 795/786 to 0.02, 0, −0.02,
-/// −0.04 and −0.06.
-const FETCH_DRAG_TO_X: f64 = -0.02;
-const FETCH_DRAG_TOL: f64 = 0.01;
-/// The drag gives up after this many steps (it takes 3–5).
-const FETCH_DRAG_STEPS: usize = 12;
-/// The drag's grip (−1 closes): firm, so the peg slides on the table rather than in the
-/// fingers. Seeds 0–999 and 1000–1999: 798/805, 808/811 and 803/805 with −0.6, −0.8 and −1.
-const FETCH_DRAG_GRIP: f32 = -0.8;
-/// After the drag the fingers ease to this for one step and close to [`FETCH_LOOSE_GRIP`] for
-/// [`CLOSE_STEPS`] (a fresh loose grasp): kept at the firm grip's squeeze, or just switched
-/// to −0.4, the lifted peg turns little and stands leaning (761/749 switching to −0.4 after a
-/// −1 drag, 774/764 dragging at −0.4; 723/741 opening fully to 1 for the step).
-const FETCH_REGRASP_EASE: f32 = 0.0;
-/// The stand phase first only lowers the peg while its lowest corner is more than this above
-/// the table (m), then moves the hand over the lower end: moved over the lower end in the air,
-/// the rigidly held peg travelled with the hand to its reach and stood leaning, or swung past
-/// the vertical and slipped out. Successes of seeds 0–99, 100–199, 200–299, 300–399 (before
-/// the drag): 79/76/72/67 moving at once, 82/77/72/72, 86/78/75/73, 88/81/77/72,
-/// 87/80/75/73, 87/81/76/73 and 75/76/70/63 with 0.015, 0.02, 0.025, 0.03, 0.04 and 0.06;
-/// 0–999 and 1000–1999 with the drag: 793/792, 803/805 and 803/803 with 0.02, 0.025 and 0.03
-/// (moving a third of the way over in the air instead of standing still: 4–10 fewer of 100).
-const FETCH_STAND_FOOT_AIR: f64 = 0.025;
 
-/// The Fetch's gripper turns this far about the vertical from the peg's axis (rad), so that its
-/// fingers meet the peg's side faces at an angle: closed squarely on them (yaw 0) the lifted
-/// peg stayed level in 41 % of the episodes whose peg lay within 1 mrad of square to the
-/// fingers after the grasp, against 14 % of the others. Successes of seeds 0–2999, measured
-/// before the task's no-slip pass (with [`FETCH_SWING_EASE`]): 2620, 2703 and 2653 with 0.05, 0.055 and 0.06 (without the ease:
-/// 2428 at 0, 2487, 2631, 2601, 2566, 2650 and 2593 from 0.035 to 0.06 by 0.005; 2568, 2624,
-/// 2522 and 2632 at −0.055, −0.06, −0.065 and −0.07).
-const FETCH_GRASP_YAW: f64 = 0.055;
-/// A peg still more than [`FETCH_SWING_TILT`] from the vertical after this many steps of the
-/// lift (rad) has not swung: the fingers ease to [`FETCH_SWING_EASE`] for one step, which lets
-/// it turn, then close to [`FETCH_LOOSE_GRIP`] again. Successes of seeds 0–2999 (with the
-/// yaw, before the no-slip pass): 2509, 2703 and 2675 easing at step 5, 6 and 7; 2686, 2703 and 2691 from 0.6, 0.7
-/// and 0.8 rad; 2703 and 2714 easing to 0 and 0.3.
-const FETCH_SWING_STEP: usize = 6;
-const FETCH_SWING_TILT: f64 = 0.7;
-const FETCH_SWING_EASE: f32 = 0.3;
-
-/// The Fetch's LiftPegUpright solver (`pd_ee_delta_pose` through [`FetchArm`]): 0–2 the
-/// grasp (tilted, as its PickCube), 3 drag a far peg back along the table with a firm grip,
-/// 4 grasp it loosely afresh (3 and 4 only for pegs beyond [`FETCH_DRAG_FROM_X`]), 5 lift
-/// until the loosely held peg hangs, 6 lower it onto its lower end, then move the hand above
-/// that end, 7 let go once it leans little enough to right itself and the hand has stopped.
+/// The Fetch's LiftPegUpright solver (`pd_joint_pos`): 0–2 the grasp (tilted, as its
+/// PickCube, firm), 3 lift (back to [`FETCH_STAND_X`]), 4 roll the wrist half a turn (the
+/// peg now hangs below the fingers), 5 turn the peg upright and stand it on its end; the
+/// fingers let go once it stands upright and the hand has stopped.
+///
+/// Its arm commands are [`FetchArm`]'s end-effector deltas, turned into joint targets by a
+/// shadow env in `pd_ee_delta_pose` (as [`super::ModeConverted`] does); only the roll is set
+/// in joint space, where the wrist turns in a few steps rather than the 60 that the
+/// end-effector mode's 0.1 rad bound and the arm's lag would take.
 #[derive(Debug)]
 pub struct FetchLiftPeg {
     peg: BodyId,
     arm: FetchArm,
+    /// The same env in `pd_ee_delta_pose`, synchronised every step, and its action.
+    shadow: Env,
+    ee_action: Vec<f32>,
     phases: Phases,
     /// Gripper pitch and grasp height above the peg's centre for this episode.
     pitch: f64,
     grasp_height: f64,
-    /// Whether this episode's peg is dragged back first (phases 3–4).
-    drag: bool,
+    /// The wrist roll's position when the roll started (rad).
+    roll_from: f64,
+    /// Whether the fingers have let go of the standing peg.
+    released: bool,
     /// The TCP's position at the previous step (its speed decides the release).
     prev_tcp: Vector3<f64>,
 }
 
 impl FetchLiftPeg {
-    /// Resolves the peg and the Fetch's arm of a LiftPegUpright env.
+    /// The Fetch's solver for `env`, which must be in `pd_joint_pos`.
     pub fn new(env: &Env) -> Result<Self, super::SolverError> {
+        let mode = "pd_ee_delta_pose";
+        let config = EnvConfig {
+            control_mode: Some(mode.to_string()),
+            obs_mode: ObsMode::State,
+            ..env.config().clone()
+        };
+        let shadow = make(env.id(), config).map_err(|e| super::SolverError::WrongControlMode {
+            robot: env.robot_spec().uid(),
+            required: mode.to_string(),
+            mode: env.control_mode().to_string(),
+            why: e.to_string(),
+        })?;
+        let ee_action = vec![0.0; shadow.action_space().shape[0]];
         Ok(FetchLiftPeg {
             peg: body_id(env.model(), "peg")?,
             arm: FetchArm::new(env)?,
+            shadow,
+            ee_action,
             phases: Phases::default(),
             pitch: 0.0,
             grasp_height: 0.0,
-            drag: false,
+            roll_from: 0.0,
+            released: false,
             prev_tcp: Vector3::zeros(),
         })
     }
@@ -318,106 +302,128 @@ fn peg_foot(peg: Vector3<f64>, q: UnitQuaternion<f64>) -> f64 {
             + PEG_HALF_WIDTH * m[(2, 2)].abs())
 }
 
+/// One step's plan of [`FetchLiftPeg`]: the TCP target, the gripper action, the gripper
+/// orientation wanted (None: the grasp pitch) and the wrist roll's joint target (None: the
+/// end-effector command's).
+type FetchPlan = (Vector3<f64>, f32, Option<UnitQuaternion<f64>>, Option<f64>);
+
 impl Policy for FetchLiftPeg {
     fn reset(&mut self, env: &Env) {
         self.phases.reset();
         let peg = body_xyz(env, self.peg);
         (self.pitch, self.grasp_height) = pick_pitch_and_height(peg + fetch_grasp_offset());
-        self.drag = peg.x > FETCH_DRAG_FROM_X;
+        self.released = false;
         self.prev_tcp = tcp_xyz(env);
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) {
-        let tcp = tcp_xyz(env);
-        let peg = body_xyz(env, self.peg);
+        if self.try_act(env, action).is_err() {
+            action.fill(0.0);
+        }
+    }
+
+    fn try_act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), super::SolverError> {
+        let fail = |e: crate::env::EnvError| super::SolverError::WrongControlMode {
+            robot: env.robot_spec().uid(),
+            required: "pd_joint_pos".to_string(),
+            mode: env.control_mode().to_string(),
+            why: e.to_string(),
+        };
+        self.shadow.sync_from(env).map_err(fail)?;
+        let s = &self.shadow;
+        let tcp = tcp_xyz(s);
+        let peg = body_xyz(s, self.peg);
         let grasp = peg + fetch_grasp_offset() + Vector3::new(0.0, 0.0, self.grasp_height);
-        let q = body_quat(env, self.peg);
+        let q = body_quat(s, self.peg);
         let axis = q * Vector3::x();
         let tilt = axis.z.abs().min(1.0).acos();
         let foot = peg_foot(peg, q);
-        let lifting = self.phases.phase >= 5;
-        let drag = self.drag;
-        let pitch = if lifting {
-            FETCH_LIFT_PITCH
-        } else {
-            self.pitch
-        };
-        let ready = self.arm.rot_err_yawed(env, pitch, FETCH_GRASP_YAW) < FETCH_ROT_TOL;
-        let torso_to_come = (self.arm.torso(env) - TORSO_PICK).max(0.0);
-        let close = FETCH_LOOSE_GRIP;
+        let roll = s.data().qpos()[s.robot().joints.qpos_adr[FETCH_WRIST_ROLL_JOINT]];
+        if self.phases.phase < 4 {
+            self.roll_from = roll;
+        }
+        let roll_from = self.roll_from;
+        let ready = self.arm.rot_err(s, self.pitch) < FETCH_ROT_TOL;
+        let torso_to_come = (self.arm.torso(s) - TORSO_PICK).max(0.0);
+        let hand = self.arm.gripper_quat(s);
+        // The turn that stands the rolled peg's lower half straight down.
+        let down = if axis.z > 0.0 { -axis } else { axis };
+        let upright = UnitQuaternion::rotation_between(&down, &-Vector3::z())
+            .unwrap_or_else(UnitQuaternion::identity);
+        let (target, grip, goal, roll_target): FetchPlan =
+            self.phases.run(|phase, steps| match phase {
+                0..=2 => {
+                    let (mut t, mut grip, mut done) = GRASP.phase(phase, steps, grasp, tcp, ready);
+                    if phase == 0 {
+                        let cone = FETCH_APPROACH_CONE * (grasp.xy() - tcp.xy()).norm();
+                        let above =
+                            FETCH_APPROACH_HEIGHT + cone + FETCH_APPROACH_TORSO * torso_to_come;
+                        t = grasp + Vector3::new(0.0, 0.0, above);
+                        let dived = (tcp.xy() - grasp.xy()).norm() < FETCH_DIVE_TOL && tcp.z < t.z;
+                        done = ready && (approached_tilted(t, tcp) || dived);
+                    }
+                    if phase == 2 {
+                        grip = FETCH_GRIP;
+                    }
+                    ((t, grip, None, None), done)
+                }
+                3 => {
+                    let t = Vector3::new(tcp.x.min(FETCH_STAND_X), grasp.y, FETCH_ROLL_HEIGHT);
+                    let done =
+                        tcp.z > FETCH_ROLL_HEIGHT - FETCH_LIFT_TOL || steps >= FETCH_PHASE_STEPS;
+                    ((t, FETCH_GRIP, None, None), done)
+                }
+                4 => {
+                    let turned = (roll - (roll_from + PI)).abs() < FETCH_ROLL_TOL;
+                    let r = roll_from + (FETCH_ROLL_STEP * (steps + 1) as f64).min(PI);
+                    let done = turned || steps >= FETCH_PHASE_STEPS;
+                    ((tcp, FETCH_GRIP, Some(hand), Some(r)), done)
+                }
+                _ => {
+                    let clear = if tilt > FETCH_STAND_TILT {
+                        FETCH_FOOT_CLEAR
+                    } else {
+                        0.0
+                    };
+                    let t = Vector3::new(tcp.x.min(FETCH_STAND_X), tcp.y, tcp.z + clear - foot);
+                    ((t, FETCH_GRIP, Some(upright * hand), None), false)
+                }
+            });
+        let standing = (peg.z - PEG_HALF_LENGTH).abs() < STANDING_TOL;
         let resting = (tcp - self.prev_tcp).norm() < FETCH_RELEASE_SPEED;
         self.prev_tcp = tcp;
-        let (target, grip) = self.phases.run(|phase, steps| match phase {
-            0..=2 => {
-                let (mut t, mut grip, mut done) = GRASP.phase(phase, steps, grasp, tcp, ready);
-                if phase == 0 {
-                    let cone = FETCH_APPROACH_CONE * (grasp.xy() - tcp.xy()).norm();
-                    let above = FETCH_APPROACH_HEIGHT + cone + FETCH_APPROACH_TORSO * torso_to_come;
-                    t = grasp + Vector3::new(0.0, 0.0, above);
-                    let dived = (tcp.xy() - grasp.xy()).norm() < FETCH_DIVE_TOL && tcp.z < t.z;
-                    done = ready && (approached_tilted(t, tcp) || dived);
-                }
-                if phase == 2 {
-                    grip = close;
-                }
-                ((t, grip), done)
-            }
-            3 => {
-                // Drag the peg back at grasp height.
-                let t = Vector3::new(tcp.x + FETCH_DRAG_TO_X - peg.x, grasp.y, grasp.z);
-                let done =
-                    !drag || peg.x < FETCH_DRAG_TO_X + FETCH_DRAG_TOL || steps >= FETCH_DRAG_STEPS;
-                ((t, FETCH_DRAG_GRIP), done)
-            }
-            4 => {
-                // Ease the grip, then close loosely afresh, in place.
-                let t = Vector3::new(tcp.x, grasp.y, grasp.z);
-                let grip = if steps == 0 {
-                    FETCH_REGRASP_EASE
-                } else {
-                    close
-                };
-                ((t, grip), !drag || steps > CLOSE_STEPS)
-            }
-            5 => {
-                let t = Vector3::new(tcp.x, grasp.y, FETCH_LIFT_HEIGHT);
-                let done = tilt < FETCH_STAND_TILT || steps >= FETCH_LIFT_STEPS;
-                let level = steps == FETCH_SWING_STEP && tilt > FETCH_SWING_TILT;
-                ((t, if level { FETCH_SWING_EASE } else { close }), done)
-            }
-            6 if tilt > FETCH_DROPPED_TILT => ((tcp, close), false),
-            6 => {
-                // The peg's centre to its standing height; once its lower end is down, the
-                // hand above that end.
-                let down = if axis.z > 0.0 { -axis } else { axis };
-                let bottom = peg + down * PEG_HALF_LENGTH;
-                let xy = if foot > FETCH_STAND_FOOT_AIR {
-                    tcp.xy()
-                } else {
-                    bottom.xy()
-                };
-                let t = Vector3::new(xy.x, xy.y, tcp.z + PEG_HALF_LENGTH - peg.z);
-                let done = tilt < FETCH_RELEASE_TILT && foot < FETCH_RELEASE_FOOT && resting;
-                ((t, close), done)
-            }
-            // Let go: the peg rights itself onto its end.
-            _ => ((tcp, FETCH_GRIPPER.open), false),
-        });
+        self.released |= self.phases.phase >= 5 && standing && tilt < RELEASE_TILT && resting;
+        let (target, grip) = if self.released {
+            (tcp, FETCH_GRIPPER.open)
+        } else {
+            (target, grip)
+        };
+        let lifting = self.phases.phase >= 3;
+        let slow = self.phases.phase >= 5 && foot < FETCH_SLOW_FOOT;
         let cmd = ArmCommand {
             target,
             tcp,
-            pitch,
-            yaw: FETCH_GRASP_YAW,
+            pitch: self.pitch,
             torso: if lifting { TORSO_CARRY } else { TORSO_PICK },
             torso_gain: if lifting { CARRY_TORSO_GAIN } else { 1.0 },
             grip,
-            limit: 1.0,
+            limit: if slow { FETCH_SLOW_LIMIT } else { 1.0 },
             min_step: if self.phases.phase == 1 {
                 FETCH_MIN_STEP
             } else {
                 0.0
             },
         };
-        self.arm.drive(env, cmd, action);
+        match goal {
+            Some(g) => self.arm.drive_to(s, cmd, g, &mut self.ee_action),
+            None => self.arm.drive(s, cmd, &mut self.ee_action),
+        }
+        self.shadow.step(&self.ee_action).map_err(fail)?;
+        env.convert_action(&self.shadow, &self.ee_action, action)
+            .map_err(fail)?;
+        if let Some(r) = roll_target {
+            action[FETCH_WRIST_ROLL_ACTION] = r as f32;
+        }
+        Ok(())
     }
 }

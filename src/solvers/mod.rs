@@ -148,7 +148,8 @@ pub trait Policy: std::fmt::Debug + Send {
 /// solvers drive the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the
 /// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1 and LiftPegUpright-v1)
 /// where the robot has EE controllers; SO100 and WidowX AI have none upstream, so their
-/// solvers command joint positions (`pd_joint_pos`) from an IK of their own.
+/// solvers command joint positions (`pd_joint_pos`) from an IK of their own, and so does
+/// Fetch in LiftPegUpright-v1, whose wrist rolls in joint space.
 pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
     if policy == "expert" {
         // The state expert's own mode; a pair without one needs none (building the policy
@@ -162,6 +163,10 @@ pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<
     let robot = RobotId::parse(robot).ok()?;
     Some(match robot {
         RobotId::So100 | RobotId::WidowxAi => "pd_joint_pos",
+        // Fetch rolls its wrist half a turn in joint space to stand the peg (its other
+        // commands are end-effector deltas turned into joint targets;
+        // solvers/lift_peg_upright.rs).
+        RobotId::Fetch if env_id == LIFT_PEG_UPRIGHT => "pd_joint_pos",
         // Fetch must turn its gripper to reach the cube (solvers/fetch.rs); the xArm6 turns
         // its gripper to the cube's faces (solvers/xarm6.rs), and so does the Panda to stack
         // (solvers/stack_cube.rs) and to stand the peg up (solvers/lift_peg_upright.rs).

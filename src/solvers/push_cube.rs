@@ -282,7 +282,6 @@ impl Policy for FetchPush {
             target,
             tcp,
             pitch: self.pitch,
-            yaw: 0.0,
             // The torso goes down once the approach is done: lowering it while the gripper
             // turns drives the TCP below the approach point and costs 10 steps.
             torso: if self.slide.phases.phase == 0 {
@@ -365,7 +364,6 @@ impl Policy for FetchPull {
             target,
             tcp,
             pitch: self.pitch,
-            yaw: 0.0,
             torso: TORSO_PICK,
             torso_gain: 1.0,
             grip,

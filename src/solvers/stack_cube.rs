@@ -274,7 +274,6 @@ impl Policy for FetchStackCube {
             target,
             tcp,
             pitch: self.pitch,
-            yaw: 0.0,
             torso: self.arm.torso(env),
             torso_gain: 1.0,
             grip,
