@@ -256,8 +256,17 @@ pub struct FetchLiftPeg {
 }
 
 impl FetchLiftPeg {
-    /// The Fetch's solver for `env`, which must be in `pd_joint_pos`.
+    /// The Fetch's solver for `env`, which must be in `pd_joint_pos` (its roll is a joint
+    /// target).
     pub fn new(env: &Env) -> Result<Self, super::SolverError> {
+        if env.control_mode() != "pd_joint_pos" {
+            return Err(super::SolverError::WrongControlMode {
+                robot: env.robot_spec().uid(),
+                required: "pd_joint_pos".to_string(),
+                mode: env.control_mode().to_string(),
+                why: "the wrist's roll is set as a joint target".to_string(),
+            });
+        }
         let mode = "pd_ee_delta_pose";
         let config = EnvConfig {
             control_mode: Some(mode.to_string()),

@@ -168,3 +168,21 @@ fn pokecube_solver_pokes_the_cube() {
     let wins = solver_successes("PokeCube-v1", 0..10);
     assert!(wins >= 9, "{wins}/10");
 }
+
+#[test]
+fn the_fetchs_liftpeg_solver_needs_joint_targets_for_its_roll() {
+    use crate::solvers::lift_peg_upright::FetchLiftPeg;
+    use crate::solvers::SolverError;
+    // Built directly in an end-effector mode it refuses, naming the mode it drives.
+    let e = env("LiftPegUpright-v1", "fetch", Some("pd_ee_delta_pose"));
+    match FetchLiftPeg::new(&e) {
+        Err(SolverError::WrongControlMode { required, mode, .. }) => {
+            assert_eq!(
+                (required.as_str(), mode.as_str()),
+                ("pd_joint_pos", "pd_ee_delta_pose")
+            );
+        }
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+    assert!(FetchLiftPeg::new(&env("LiftPegUpright-v1", "fetch", Some("pd_joint_pos"))).is_ok());
+}
