@@ -7,6 +7,64 @@
 use super::{Policy, SolverError};
 use crate::env::{make, Env, EnvConfig, ObsMode};
 
+/// The same env in another control mode, kept on an env's state: a policy acts on it in its
+/// own mode, and the env gets the action of its mode that sets the joint targets the shadow's
+/// controller set ([`Env::sync_from`], [`Env::convert_action`]). Used by [`ModeConverted`]
+/// and by solvers that set some joint targets themselves (the Fetch's LiftPegUpright roll).
+#[derive(Debug)]
+pub(crate) struct Shadow {
+    /// The shadow env ...
+    pub env: Env,
+    /// ... and its action, written by the policy that drives it.
+    pub action: Vec<f32>,
+    /// The shadow's mode.
+    mode: String,
+}
+
+impl Shadow {
+    /// `env`'s env and robot in `mode` (state observations).
+    pub fn new(env: &Env, mode: &str) -> Result<Shadow, SolverError> {
+        let config = EnvConfig {
+            control_mode: Some(mode.to_string()),
+            obs_mode: ObsMode::State,
+            ..env.config().clone()
+        };
+        let shadow = make(env.id(), config).map_err(|e| refusal(env, mode, e.to_string()))?;
+        let action = vec![0.0; shadow.action_space().shape[0]];
+        Ok(Shadow {
+            env: shadow,
+            action,
+            mode: mode.to_string(),
+        })
+    }
+
+    /// Takes `env`'s state.
+    pub fn sync(&mut self, env: &Env) -> Result<(), SolverError> {
+        self.env
+            .sync_from(env)
+            .map_err(|e| refusal(env, &self.mode, e.to_string()))
+    }
+
+    /// Steps the shadow with [`Shadow::action`] and writes `env`'s action that sets the
+    /// same joint targets into `out`.
+    pub fn step_into(&mut self, env: &Env, out: &mut [f32]) -> Result<(), SolverError> {
+        let fail = |e: crate::env::EnvError| refusal(env, &self.mode, e.to_string());
+        self.env.step(&self.action).map_err(fail)?;
+        env.convert_action(&self.env, &self.action, out)
+            .map_err(fail)
+    }
+}
+
+/// The refusal of a policy in `mode` to drive `env`.
+fn refusal(env: &Env, mode: &str, why: String) -> SolverError {
+    SolverError::WrongControlMode {
+        robot: env.robot_spec().uid(),
+        required: mode.to_string(),
+        mode: env.control_mode().to_string(),
+        why,
+    }
+}
+
 /// A policy in its own control mode driving an env of another mode of the same robot. Every
 /// step a shadow env in the policy's mode takes the env's state ([`Env::sync_from`]), the
 /// policy acts on the shadow, the shadow steps, and the env's action is the one that sets the
@@ -16,10 +74,7 @@ use crate::env::{make, Env, EnvConfig, ObsMode};
 #[derive(Debug)]
 pub struct ModeConverted {
     inner: Box<dyn Policy>,
-    shadow: Env,
-    native: Vec<f32>,
-    /// The policy's own mode (the shadow's).
-    mode: String,
+    shadow: Shadow,
 }
 
 impl ModeConverted {
@@ -29,37 +84,20 @@ impl ModeConverted {
         mode: &str,
         build: impl FnOnce(&Env) -> Result<Box<dyn Policy>, SolverError>,
     ) -> Result<ModeConverted, SolverError> {
-        let refuse = |why: String| SolverError::WrongControlMode {
-            robot: env.robot_spec().uid(),
-            required: mode.to_string(),
-            mode: env.control_mode().to_string(),
-            why,
-        };
-        let config = EnvConfig {
-            control_mode: Some(mode.to_string()),
-            obs_mode: ObsMode::State,
-            ..env.config().clone()
-        };
-        let shadow = make(env.id(), config).map_err(|e| refuse(e.to_string()))?;
-        let inner = build(&shadow)?;
-        let native = vec![0.0; shadow.action_space().shape[0]];
+        let shadow = Shadow::new(env, mode)?;
+        let inner = build(&shadow.env)?;
         // Refused now (not at the first step) when a part can be neither copied nor inverted.
         let mut out = vec![0.0; env.action_space().shape[0]];
-        env.convert_action(&shadow, &native, &mut out)
-            .map_err(|e| refuse(e.to_string()))?;
-        Ok(ModeConverted {
-            inner,
-            shadow,
-            native,
-            mode: mode.to_string(),
-        })
+        env.convert_action(&shadow.env, &shadow.action, &mut out)
+            .map_err(|e| refusal(env, mode, e.to_string()))?;
+        Ok(ModeConverted { inner, shadow })
     }
 }
 
 impl Policy for ModeConverted {
     fn reset(&mut self, env: &Env) {
-        if self.shadow.sync_from(env).is_ok() {
-            self.inner.reset(&self.shadow);
+        if self.shadow.sync(env).is_ok() {
+            self.inner.reset(&self.shadow.env);
         }
     }
 
@@ -70,16 +108,9 @@ impl Policy for ModeConverted {
     }
 
     fn try_act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), SolverError> {
-        let fail = |e: crate::env::EnvError| SolverError::WrongControlMode {
-            robot: env.robot_spec().uid(),
-            required: self.mode.clone(),
-            mode: env.control_mode().to_string(),
-            why: e.to_string(),
-        };
-        self.shadow.sync_from(env).map_err(fail)?;
-        self.inner.try_act(&self.shadow, &mut self.native)?;
-        self.shadow.step(&self.native).map_err(fail)?;
-        env.convert_action(&self.shadow, &self.native, action)
-            .map_err(fail)
+        self.shadow.sync(env)?;
+        self.inner
+            .try_act(&self.shadow.env, &mut self.shadow.action)?;
+        self.shadow.step_into(env, action)
     }
 }

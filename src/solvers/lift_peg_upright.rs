@@ -31,9 +31,9 @@ use super::fetch::{
 use super::fetch_arm::{ArmCommand, FetchArm};
 use super::{
     body_id, body_quat, body_xyz, tcp_link_xyz, tcp_xyz, write_pos, write_rot, Grasp, Gripper,
-    Phases, Policy, ACTION_SCALE, CLOSE_STEPS, FETCH_GRIPPER,
+    Phases, Policy, Shadow, ACTION_SCALE, CLOSE_STEPS, FETCH_GRIPPER,
 };
-use crate::env::{make, Env, EnvConfig, ObsMode};
+use crate::env::Env;
 use crate::mujoco::BodyId;
 use crate::tasks::lift_peg_upright::{PEG_HALF_LENGTH, PEG_HALF_WIDTH};
 
@@ -233,16 +233,15 @@ const FETCH_RELEASE_SPEED: f64 = 0.005;
 /// fingers let go once it stands upright and the hand has stopped.
 ///
 /// Its arm commands are [`FetchArm`]'s end-effector deltas, turned into joint targets by a
-/// shadow env in `pd_ee_delta_pose` (as [`super::ModeConverted`] does); only the roll is set
+/// shadow env in `pd_ee_delta_pose` ([`Shadow`], as [`super::ModeConverted`] does); only the roll is set
 /// in joint space, where the wrist turns in a few steps rather than the 60 that the
 /// end-effector mode's 0.1 rad bound and the arm's lag would take.
 #[derive(Debug)]
 pub struct FetchLiftPeg {
     peg: BodyId,
     arm: FetchArm,
-    /// The same env in `pd_ee_delta_pose`, synchronised every step, and its action.
-    shadow: Env,
-    ee_action: Vec<f32>,
+    /// The same env in `pd_ee_delta_pose`, synchronised every step.
+    shadow: Shadow,
     phases: Phases,
     /// Gripper pitch and grasp height above the peg's centre for this episode.
     pitch: f64,
@@ -267,24 +266,10 @@ impl FetchLiftPeg {
                 why: "the wrist's roll is set as a joint target".to_string(),
             });
         }
-        let mode = "pd_ee_delta_pose";
-        let config = EnvConfig {
-            control_mode: Some(mode.to_string()),
-            obs_mode: ObsMode::State,
-            ..env.config().clone()
-        };
-        let shadow = make(env.id(), config).map_err(|e| super::SolverError::WrongControlMode {
-            robot: env.robot_spec().uid(),
-            required: mode.to_string(),
-            mode: env.control_mode().to_string(),
-            why: e.to_string(),
-        })?;
-        let ee_action = vec![0.0; shadow.action_space().shape[0]];
         Ok(FetchLiftPeg {
             peg: body_id(env.model(), "peg")?,
             arm: FetchArm::new(env)?,
-            shadow,
-            ee_action,
+            shadow: Shadow::new(env, "pd_ee_delta_pose")?,
             phases: Phases::default(),
             pitch: 0.0,
             grasp_height: 0.0,
@@ -332,14 +317,8 @@ impl Policy for FetchLiftPeg {
     }
 
     fn try_act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), super::SolverError> {
-        let fail = |e: crate::env::EnvError| super::SolverError::WrongControlMode {
-            robot: env.robot_spec().uid(),
-            required: "pd_joint_pos".to_string(),
-            mode: env.control_mode().to_string(),
-            why: e.to_string(),
-        };
-        self.shadow.sync_from(env).map_err(fail)?;
-        let s = &self.shadow;
+        self.shadow.sync(env)?;
+        let s = &self.shadow.env;
         let tcp = tcp_xyz(s);
         let peg = body_xyz(s, self.peg);
         let grasp = peg + fetch_grasp_offset() + Vector3::new(0.0, 0.0, self.grasp_height);
@@ -424,12 +403,10 @@ impl Policy for FetchLiftPeg {
             },
         };
         match goal {
-            Some(g) => self.arm.drive_to(s, cmd, g, &mut self.ee_action),
-            None => self.arm.drive(s, cmd, &mut self.ee_action),
+            Some(g) => self.arm.drive_to(s, cmd, g, &mut self.shadow.action),
+            None => self.arm.drive(s, cmd, &mut self.shadow.action),
         }
-        self.shadow.step(&self.ee_action).map_err(fail)?;
-        env.convert_action(&self.shadow, &self.ee_action, action)
-            .map_err(fail)?;
+        self.shadow.step_into(env, action)?;
         if let Some(r) = roll_target {
             action[FETCH_WRIST_ROLL_ACTION] = r as f32;
         }

@@ -32,6 +32,7 @@ pub(crate) mod stack_cube;
 pub(crate) mod xarm6;
 
 pub use convert::ModeConverted;
+use convert::Shadow;
 pub use evaluate::{
     check_seed_range, evaluate, evaluate_spec, make_env, run_episode, EpisodeResult, EvalError,
     EvalReport, PolicySpec, DEFAULT_ENV,
