@@ -149,8 +149,10 @@ pub trait Policy: std::fmt::Debug + Send {
 /// solvers drive the end effector (`pd_ee_delta_pos`; Fetch and the xArm6 also turn the
 /// gripper, in `pd_ee_delta_pose`, and so does the Panda in StackCube-v1 and LiftPegUpright-v1)
 /// where the robot has EE controllers; SO100 and WidowX AI have none upstream, so their
-/// solvers command joint positions (`pd_joint_pos`) from an IK of their own, and so does
-/// Fetch in LiftPegUpright-v1, whose wrist rolls in joint space.
+/// solvers command joint positions (`pd_joint_pos`) from an IK of their own. Fetch's
+/// LiftPegUpright-v1 solver commands joint positions too: it rolls its wrist as a joint target
+/// and turns its end-effector commands into joint targets through a `pd_ee_delta_pose` shadow
+/// env.
 pub fn required_control_mode(policy: &str, env_id: &str, robot: &str) -> Option<&'static str> {
     if policy == "expert" {
         // The state expert's own mode; a pair without one needs none (building the policy
