@@ -132,7 +132,7 @@ impl FetchArm {
 
     /// Orientation error (rad) of the gripper from `pitch`.
     pub fn rot_err(&self, env: &Env, pitch: f64) -> f64 {
-        (pitched(pitch) * body_quat(env, self.gripper_link).inverse()).angle()
+        (pitched(pitch) * self.gripper_quat(env).inverse()).angle()
     }
 
     /// Writes the 12 actions: the position (clamped to the reach at the current pitch), the
@@ -153,7 +153,7 @@ impl FetchArm {
     ) {
         let data = env.data();
         env.robot().joints.qpos(data, &mut self.q);
-        let cur = body_quat(env, self.gripper_link);
+        let cur = self.gripper_quat(env);
         let rot_err = (goal * cur.inverse()).scaled_axis();
         // Keep the target within reach at the gripper's current pitch (the IK keeps the
         // orientation up to one rotation step): with the table pose's steep pitch most
