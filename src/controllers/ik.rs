@@ -11,9 +11,7 @@
 //! (`false`) unless it got under [`EPS`]. So a redundant arm takes the same path through its
 //! null space as ManiSkill's, and the joint targets agree to float rounding (docs/physics.md,
 //! "IK"). Fixed-size matrices: a solve allocates nothing.
-use nalgebra::{
-    Isometry3, Matrix3, Matrix6, SMatrix, Translation3, Unit, UnitQuaternion, Vector3, Vector6,
-};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 
 use super::desc::{JointKind, RobotDesc};
 use super::ControllerError;
@@ -67,8 +65,6 @@ struct Movable {
     q_index: Option<usize>,
     active: bool,
 }
-
-type Jac = SMatrix<f64, 6, MAX_CHAIN>;
 
 impl Chain {
     /// The chain from the root link of `robot` to `ee_link`, where `arm` lists the joints the
@@ -185,7 +181,7 @@ impl Chain {
         let mut best = q;
         let mut best_err = f64::INFINITY;
         let mut success = false;
-        let mut jac = Jac::zeros();
+        let mut cols = [Vector6::zeros(); MAX_CHAIN];
         let mut axes = [(Vector3::zeros(), Vector3::zeros()); MAX_CHAIN];
         for it in 0..=MAX_ITERATIONS {
             // The last movable joint's frame, and every joint's origin and axis in the root.
@@ -212,27 +208,34 @@ impl Chain {
                 break;
             }
             // The joint Jacobian in the frame (Pinocchio's LOCAL), masked.
-            let (p, r_inv) = (t.translation.vector, t.rotation.inverse());
-            jac.fill(0.0);
-            for (c, (m, (o, a))) in self.movable.iter().zip(&axes).enumerate().take(n) {
-                if !m.active {
-                    continue;
-                }
-                let (lin, ang) = match m.kind {
-                    JointKind::Prismatic => (*a, Vector3::zeros()),
-                    _ => (a.cross(&(p - o)), *a),
-                };
-                jac.fixed_view_mut::<3, 1>(0, c).copy_from(&(r_inv * lin));
-                jac.fixed_view_mut::<3, 1>(3, c).copy_from(&(r_inv * ang));
-            }
-            // J = −Jlog6(error⁻¹) J_local; v = −Jᵀ (J Jᵀ + damp)⁻¹ err; q += dt v.
+            // The joint Jacobian in the frame (Pinocchio's LOCAL, masked), turned into the
+            // error's by J = −Jlog6(error⁻¹) J_local, a column at a time; then
+            // v = −Jᵀ (J Jᵀ + damp)⁻¹ err and q += dt v.
+            let (p, r_inv) = (
+                t.translation.vector,
+                t.rotation.inverse().to_rotation_matrix(),
+            );
             let inv = err_pose.inverse();
-            let j: Jac = -(jlog6(&-w, &inv.translation.vector) * jac);
-            let jjt: Matrix6<f64> = j * j.transpose() + Matrix6::identity() * DAMP;
+            let jlog = jlog6(&-w, &inv.translation.vector);
+            let mut jjt = Matrix6::identity() * DAMP;
+            for (c, (m, (o, a))) in self.movable.iter().zip(&axes).enumerate() {
+                cols[c] = if m.active {
+                    let (lin, ang) = match m.kind {
+                        JointKind::Prismatic => (*a, Vector3::zeros()),
+                        _ => (a.cross(&(p - o)), *a),
+                    };
+                    let (lin, ang) = (r_inv * lin, r_inv * ang);
+                    let local = Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z);
+                    -(jlog * local)
+                } else {
+                    Vector6::zeros()
+                };
+                jjt += cols[c] * cols[c].transpose();
+            }
             let Some(chol) = jjt.cholesky() else { break };
-            let v = j.transpose() * chol.solve(&err);
-            for (qk, vk) in q.iter_mut().zip(v.iter()).take(n) {
-                *qk -= CLIK_DT * vk;
+            let s = chol.solve(&err);
+            for (qk, col) in q.iter_mut().zip(&cols).take(n) {
+                *qk -= CLIK_DT * col.dot(&s);
             }
         }
         for (m, &b) in self.movable.iter().zip(&best) {
