@@ -14,12 +14,20 @@ mod common;
 
 use std::path::Path;
 
-use common::env_in as make;
+use common::{env_in as make, json_f32s, json_f64s};
 
 /// Largest difference (rad, or m for prismatic joints) allowed between mjskill's and
 /// ManiSkill's targets of a robot's joints: float32 rounding of targets near 2.5 rad is
 /// 1.2e-7, and the two solvers' arithmetic differs in the last bits of each of ~70 iterations.
 const TOLERANCE: f64 = 1e-5;
+
+/// The largest |a[k] − b[k]|.
+fn largest_difference(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
 
 #[test]
 fn end_effector_actions_set_the_joint_targets_maniskills_ik_sets() {
@@ -37,37 +45,19 @@ fn end_effector_actions_set_the_joint_targets_maniskills_ik_sets() {
         );
         let mut env = make(id, robot, mode);
         env.reset(Some(case["seed"].as_u64().unwrap()));
-        let action: Vec<f32> = case["action"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect();
+        let action = json_f32s(&case["action"]);
         let before = env.drive_targets().qpos;
         let targets = env.action_drive_targets(&action).unwrap().qpos;
-        let expected: Vec<f64> = case["target_qpos"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect();
+        let expected = json_f64s(&case["target_qpos"]);
         assert_eq!(targets.len(), expected.len(), "{id} {robot} {mode}");
         // The action moves the arm's targets by far more than the tolerance, so a solver that
         // ignored it, or stopped elsewhere in the null space, fails.
-        let moved = before
-            .iter()
-            .zip(&targets)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let moved = largest_difference(&before, &targets);
         assert!(
             moved > 1e-3,
             "{id} {robot} {mode}: targets moved only {moved}"
         );
-        let err = targets
-            .iter()
-            .zip(&expected)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let err = largest_difference(&targets, &expected);
         assert!(
             err < TOLERANCE,
             "{id} {robot} {mode} seed {}: targets {err:.2e} from ManiSkill's",

@@ -14,7 +14,7 @@ mod common;
 
 use std::path::Path;
 
-use common::env_in as make;
+use common::{env_in as make, json_f32s};
 
 /// Largest arm-joint error (rad) allowed after the first step, and after any of the five.
 const FIRST_STEP: f64 = 2.5e-3;
@@ -44,12 +44,7 @@ fn free_arm_motion_ends_each_step_where_physx_does() {
             .zip(case["qpos"].as_array().unwrap())
             .enumerate()
         {
-            let action: Vec<f32> = a
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap() as f32)
-                .collect();
+            let action = json_f32s(a);
             env.step(&action).unwrap();
             let sd = env.get_state_dict();
             let art = sd.articulations.values().next().unwrap();
@@ -99,12 +94,7 @@ fn held_widowxai_wrist_drifts_where_physx_does() {
         let sd = mjskill::StateDict::from_json(&case["state_dict"]).unwrap();
         env.set_state_dict(&sd).unwrap();
         let start = sd.articulations.values().next().unwrap()[13..19].to_vec();
-        let action: Vec<f32> = case["action"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect();
+        let action = json_f32s(&case["action"]);
         let reported = case["qvel"].as_array().unwrap();
         for (q, v) in case["qpos"].as_array().unwrap().iter().zip(reported) {
             let obs = env.step(&action).unwrap().obs.to_vec();

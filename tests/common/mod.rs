@@ -178,6 +178,20 @@ pub fn close(got: &[f32], want: &[f64], tol: f64, what: &str) {
     }
 }
 
+/// A JSON array of numbers as `f32`s (an action recorded from ManiSkill).
+pub fn json_f32s(v: &serde_json::Value) -> Vec<f32> {
+    json_f64s(v).into_iter().map(|x| x as f32).collect()
+}
+
+/// A JSON array of numbers as `f64`s.
+pub fn json_f64s(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
 /// The env `id` with `robot` in control mode `mode`.
 pub fn env_in(id: &str, robot: &str, mode: &str) -> mjskill::Env {
     mjskill::make(
