@@ -207,7 +207,6 @@ impl Chain {
             if it == MAX_ITERATIONS {
                 break;
             }
-            // The joint Jacobian in the frame (Pinocchio's LOCAL), masked.
             // The joint Jacobian in the frame (Pinocchio's LOCAL, masked), turned into the
             // error's by J = −Jlog6(error⁻¹) J_local, a column at a time; then
             // v = −Jᵀ (J Jᵀ + damp)⁻¹ err and q += dt v.
