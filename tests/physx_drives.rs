@@ -69,8 +69,11 @@ fn free_arm_motion_ends_each_step_where_physx_does() {
 
 /// Largest arm-joint error (rad) allowed over two held WidowX AI steps: PhysX's wrist drifts up
 /// to 32 mrad in them; mjskill without the pinch's kick drifted as far the other way (67 mrad
-/// from ManiSkill's), with it 5.0e-3 at most (the 0.0 m carriage target, the hardest squeeze).
-const HELD_STEP: f64 = 6e-3;
+/// from ManiSkill's), with it 5.0e-3 at most. The WidowX AI's no-slip pass (which holds the cube
+/// still in the carriages' grip) takes the largest to 9.4e-3: seed 10001's second step at the
+/// 0.0 m carriage target, the hardest squeeze; 4.2e-3 at the 0.01 m target that the solver and
+/// the policies use.
+const HELD_STEP: f64 = 1e-2;
 
 /// Largest difference (rad/s) allowed between the arm velocities mjskill's observation reports
 /// in those steps and those ManiSkill reports (PhysX's force-free drive velocity): 0.065

@@ -222,6 +222,10 @@ pub struct RobotOptions {
     /// Penetration (m) at which the links a gripper joint moves let go of an object they
     /// have sunk into ([`crate::controllers::Drives`]); `None`: never.
     pub gripper_release_depth: Option<f64>,
+    /// MuJoCo's no-slip pass in every scene with this robot ([`Scene::set_noslip_iterations`];
+    /// 0: none): a gripper whose grasp PhysX holds rigidly while MuJoCo's soft friction lets the
+    /// held object turn (the WidowX AI, docs/outcome-physics.md).
+    pub noslip_iterations: u32,
 }
 
 impl Default for RobotOptions {
@@ -245,6 +249,7 @@ impl Default for RobotOptions {
             firm_contact: Vec::new(),
             contact_solimp: Vec::new(),
             gripper_release_depth: None,
+            noslip_iterations: 0,
         }
     }
 }
@@ -446,6 +451,9 @@ impl Scene {
         let root_body = self.link_body(robot, robot.root, opts, mesh_bytes, &opts.base)?;
         self.worldbody().push(root_body);
         self.fingers.extend(opts.material_friction.iter().cloned());
+        if opts.noslip_iterations > 0 {
+            self.set_noslip_iterations(opts.noslip_iterations);
+        }
 
         // Contact exclusions: every URDF parent–child pair (PhysX never collides a link with its
         // parent; MuJoCo's own parent filter skips bodies welded to the world, such as a fixed
@@ -786,11 +794,14 @@ impl Scene {
     /// constraint solve: a Gauss–Seidel pass over the friction rows without their softness,
     /// so that a contact whose friction can hold does not creep under a steady load (MuJoCo's
     /// soft friction otherwise slips at a rate proportional to it; PhysX's does not). A task
-    /// that needs it asks for it in its scene; docs/physics.md says which and why.
+    /// that needs it asks for it in its scene, a robot in its [`RobotOptions`]; the scene
+    /// keeps the larger of the counts asked for. docs/physics.md says which and why.
     pub fn set_noslip_iterations(&mut self, iterations: u32) {
-        self.root
-            .section("option")
-            .set("noslip_iterations", iterations);
+        let option = self.root.section("option");
+        let current = attr(option, "noslip_iterations")
+            .and_then(|v| v.parse::<u32>().ok())
+            .unwrap_or(0);
+        option.set("noslip_iterations", iterations.max(current));
     }
 
     /// Explicit contact pairs between every collision geom of the robot's finger links (those

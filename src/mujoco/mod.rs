@@ -605,6 +605,10 @@ impl Model {
     pub fn integrator(&self) -> i32 {
         self.raw().opt.integrator
     }
+    /// Iterations of the no-slip pass after each constraint solve (`opt.noslip_iterations`).
+    pub fn noslip_iterations(&self) -> usize {
+        self.raw().opt.noslip_iterations as usize
+    }
     /// Offscreen buffer size from `<visual><global offwidth offheight>`.
     pub fn offscreen_size(&self) -> (usize, usize) {
         let g = &self.raw().vis.global;

@@ -35,6 +35,9 @@ const JOINT_DELTA: f32 = 0.1;
 /// Carriage opening range of the (normalised, absolute) gripper action (m).
 const GRIPPER_RANGE: (f32, f32) = (0.0, 0.044);
 
+/// MuJoCo's no-slip iterations in every WidowX AI scene (those of LiftPegUpright's scene).
+const NOSLIP_ITERATIONS: u32 = 10;
+
 /// WidowX AI control modes (docs/robots.md §6), default first.
 pub const CONTROL_MODES: [ControlMode; 3] = super::JOINT_POS_MODES;
 
@@ -78,7 +81,12 @@ pub static WIDOWXAI: RobotSpec = RobotSpec {
     cameras: &[],
     // The carriage coupling (URDF mimic → MuJoCo joint equality) gets the stiffest stable
     // solref, standing in for the PhysX tendon of 1e5 N/m that alone holds the undriven right
-    // carriage against the grasp force.
-    customize: |o| o.stiff_mimic = true,
+    // carriage against the grasp force. The no-slip pass keeps the cube from turning in the
+    // carriages' grip, which PhysX holds rigidly (docs/outcome-physics.md, "The WidowX AI's
+    // grip").
+    customize: |o| {
+        o.stiff_mimic = true;
+        o.noslip_iterations = NOSLIP_ITERATIONS;
+    },
     clear_of_world: &[],
 };

@@ -187,6 +187,28 @@ fn scripted_grasp_closes_on_the_cube_and_lifts_it() {
 }
 
 #[test]
+fn every_widowxai_scene_runs_the_no_slip_pass_and_a_task_can_ask_for_more() {
+    // The robot's pass (docs/outcome-physics.md, "The WidowX AI's grip") in both of its tasks;
+    // the Panda's PickCube runs none, and LiftPegUpright's own pass stays where a robot asks
+    // for fewer: the scene keeps the larger count.
+    for id in ["PickCubeWidowXAI-v1", "PickCube-v1"] {
+        let e = common::env_with_robot(id, "widowxai").unwrap();
+        assert_eq!(e.model().noslip_iterations(), 10, "{id}");
+    }
+    let e = common::env_with_robot("PickCube-v1", "panda").unwrap();
+    assert_eq!(e.model().noslip_iterations(), 0);
+    let mut scene = crate::mjcf::Scene::new("noslip", 0.01);
+    scene.set_noslip_iterations(10);
+    scene.set_noslip_iterations(3);
+    let (mjcf, _) = scene.finish_with_physics();
+    assert!(
+        mjcf.xml.contains("noslip_iterations=\"10\""),
+        "{}",
+        mjcf.xml
+    );
+}
+
+#[test]
 fn unsupported_robot_and_env_combinations_are_errors_listing_the_robots() {
     let with = common::env_with_robot;
     let err = with("PickCubeWidowXAI-v1", "so100")
