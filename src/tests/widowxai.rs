@@ -189,8 +189,8 @@ fn scripted_grasp_closes_on_the_cube_and_lifts_it() {
 #[test]
 fn every_widowxai_scene_runs_the_no_slip_pass_and_a_task_can_ask_for_more() {
     // The robot's pass (docs/outcome-physics.md, "The WidowX AI's grip") in both of its tasks;
-    // the Panda's PickCube runs none, and LiftPegUpright's own pass stays where a robot asks
-    // for fewer: the scene keeps the larger count.
+    // the Panda's PickCube runs none. A scene asked twice (by its task and by its robot) keeps
+    // the larger count, so a robot that asks for fewer never lowers a task's pass.
     for id in ["PickCubeWidowXAI-v1", "PickCube-v1"] {
         let e = common::env_with_robot(id, "widowxai").unwrap();
         assert_eq!(e.model().noslip_iterations(), 10, "{id}");
