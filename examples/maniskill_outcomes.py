@@ -11,7 +11,9 @@ freshly made env per episode, `reset(seed=seed)` then the actions):
 * solver: mjskill's scripted solver episodes, recorded with `mjskill rollout --policy solver`
   and exported with `mjskill export --format maniskill` (Fetch with
   `--control-mode pd_joint_pos`: ManiSkill cannot build Fetch's EE modes, so the exported
-  actions are the joint targets mjskill's controller set).
+  actions are the joint targets mjskill's controller set; PushT-v1 and PegInsertionSide-v1
+  too, whose solvers' absolute targets carry over where `pd_ee_delta_pose`'s deltas from the
+  measured hand add up the two simulators' loaded-arm differences, docs/outcome-physics.md).
 * motionplanning: ManiSkill's own motion-planning demos, made with
   `python -m mani_skill.examples.motionplanning.<panda|xarm6|so100>.run` (seeds 0..N-1,
   the SO100's from 9).
@@ -78,7 +80,7 @@ SOLVER_PAIRS = [
     ("StackCube-v1", "panda_wristcam", None),
     ("LiftPegUpright-v1", "panda", None),
     ("LiftPegUpright-v1", "fetch", "pd_joint_pos"),
-    ("PegInsertionSide-v1", "panda_wristcam", None),
+    ("PegInsertionSide-v1", "panda_wristcam", "pd_joint_pos"),
     ("PushT-v1", "panda_stick", "pd_joint_pos"),
 ]
 
