@@ -116,6 +116,8 @@ const EXPECTED: &[Expected] = &[
             ("is_grasped", 498),
         ],
     },
+    // PickCube / panda (2026-12-01, twenty-third session): the solver holds the cube at half
+    // the squeeze (`solvers::pick_cube::PANDA_CLOSE`); 50 of 50 end the same on seeds 0-49.
     Expected {
         file: "solver__PickCube-v1__panda",
         episodes: 10,
@@ -123,12 +125,12 @@ const EXPECTED: &[Expected] = &[
         mjskill_successes: 10,
         same_outcome: 10,
         steps: 500,
-        steps_all_flags_agree: 489,
+        steps_all_flags_agree: 493,
         flags: &[
             ("success", 499),
-            ("is_obj_placed", 500),
-            ("is_robot_static", 496),
-            ("is_grasped", 493),
+            ("is_obj_placed", 496),
+            ("is_robot_static", 500),
+            ("is_grasped", 497),
         ],
     },
     Expected {

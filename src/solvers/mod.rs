@@ -318,7 +318,13 @@ fn solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
 fn native_solver(env: &Env) -> Result<Box<dyn Policy>, SolverError> {
     let robot = env.robot_spec().uid();
     match (env.id(), robot) {
-        ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(env, PANDA_GRIPPER)),
+        ("PickCube-v1", "panda") => boxed(pick_cube::PickCubeSolver::new(
+            env,
+            Gripper {
+                close: pick_cube::PANDA_CLOSE,
+                ..PANDA_GRIPPER
+            },
+        )),
         ("PickCube-v1", "fetch") => boxed(fetch::FetchPickCube::new(env)),
         ("PickCube-v1", "xarm6_robotiq") => boxed(xarm6::Xarm6PickCube::new(env)),
         ("PickCube-v1" | "PickCubeSO100-v1", "so100") => {

@@ -15,6 +15,17 @@ use crate::mujoco::BodyId;
 /// replays (seeds 0–49, 1000–1049) instead of 47 and 46 (docs/outcome-physics.md).
 pub const CARRY_SPEED: f64 = 0.3;
 
+/// The Panda's gripper action while it holds the cube: a finger target of 7.5 mm, which squeezes
+/// the 2 cm half-width cube with about half the force of the fully closed −1 (−0.01 m target).
+/// A cube closed on two of its vertical edges (it lay turned to the fingers) loads the wrist
+/// through the pads' rims in MuJoCo's box–box contacts, and the wrist's turn (joint 7) drifts
+/// in proportion to the squeeze under `pd_ee_delta_pos`, which never turns it back: fully
+/// closed, it reached 0.14–0.20 rad/s by step 50 and the cube turned to a face grasp, so the
+/// episode lost `is_robot_static` at its end where ManiSkill's replay held still; at −0.3 the
+/// drift stays under 0.07 rad/s, and the episodes replayed in ManiSkill end the same in 50 of
+/// 50 on five seed sets instead of 47–49 (docs/outcome-physics.md).
+pub const PANDA_CLOSE: f32 = -0.3;
+
 /// The PickCube policy.
 #[derive(Debug)]
 pub struct PickCubeSolver {
