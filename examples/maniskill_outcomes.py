@@ -100,7 +100,7 @@ DEMO_PAIRS = [
 FIXED_ROBOT = {"PickCubeSO100-v1", "PickCubeWidowXAI-v1"}
 
 # Arm joints at the front of each robot's pd_joint_pos action (the rest is gripper), for --perturb.
-ARM_JOINTS = {"panda": 7, "panda_stick": 7, "fetch": 7, "xarm6_robotiq": 6, "so100": 5, "widowxai": 6}
+ARM_JOINTS = {"panda": 7, "panda_wristcam": 7, "panda_stick": 7, "fetch": 7, "xarm6_robotiq": 6, "so100": 5, "widowxai": 6}
 
 
 def f32_text(x):
