@@ -14,7 +14,7 @@
 //!
 //! The third is for the episodes' sake in ManiSkill (docs/outcome-physics.md): the lift and the
 //! carry speed up and slow down at most [`CARRY_ACCEL`] a step, because PhysX's fingers let the
-//! peg tip head-down under a hard start (3–9°, which jams it at the hole's mouth); and once the
+//! peg tip head-down under a hard start (3–4°, which jams it at the hole's mouth); and once the
 //! head has entered the mouth, the hand runs a small spiral about the hole's axis
 //! ([`SEARCH_RADIUS`]) before it pushes. Here the peg is already in the mouth and the spiral
 //! only leans it on the walls; replayed open loop in ManiSkill, where the peg sits a few
