@@ -142,6 +142,16 @@ class MjskillEnv(gym.Env):
         any other is a ``ValueError`` naming the pair and those that have one."""
         return self._native.expert_action()
 
+    def solver_action(self) -> np.ndarray:
+        """The scripted solver's next action (``mjskill rollout --policy solver``) for the
+        current state, in this env's control mode (converted from the solver's own). Unlike
+        :meth:`expert_action` the solver keeps the plan it makes over an episode: it is built
+        at the first call after each :meth:`reset` (and after unpickling) and then asked once
+        per step. Between calls the state may come from elsewhere (:meth:`set_state_dict`), so
+        it can run closed loop on another simulator's states
+        (``examples/solver_in_maniskill.py``)."""
+        return self._native.solver_action()
+
     @property
     def elapsed_steps(self) -> int:
         return self._native.elapsed_steps()

@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use mjskill::record::Recorder;
-use mjskill::solvers::{set_state_experts, state_expert, StateExpert};
+use mjskill::solvers::{make_policy, set_state_experts, state_expert, Policy, StateExpert};
 use mjskill::VecEnv;
 use mjskill::{Env, EnvConfig, EnvError, EnvState};
 use numpy::ndarray::ArrayView2;
@@ -253,6 +253,9 @@ struct PyEnv {
     env: Mutex<Env>,
     /// The state expert (`expert_action`), built on first use.
     expert: Mutex<Option<Box<dyn StateExpert>>>,
+    /// The scripted solver (`solver_action`), built at the first call after each reset: it
+    /// keeps the plan it makes over the episode, as `--policy solver` runs it.
+    solver: Mutex<Option<Box<dyn Policy>>>,
 }
 
 impl PyEnv {
@@ -274,7 +277,31 @@ impl PyEnv {
         Ok(PyEnv {
             env: Mutex::new(env),
             expert: Mutex::new(None),
+            solver: Mutex::new(None),
         })
+    }
+
+    /// The scripted solver's next action (`--policy solver`) for the current state, in this
+    /// env's control mode. The solver is built at the first call after a reset and keeps the
+    /// plan it makes over the episode; between calls the state may be set from elsewhere
+    /// (`set_state_dict`), as when it runs closed loop on another simulator's states.
+    fn solver_action<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let env = self.lock(py)?;
+        let mut solver = lock_without_gil(py, &self.solver)?;
+        let action = (|| {
+            if solver.is_none() {
+                let mut policy = make_policy("solver", &env, 0)?;
+                policy.reset(&env);
+                *solver = Some(policy);
+            }
+            let mut a = vec![0.0f32; env.action_space().shape[0]];
+            if let Some(policy) = solver.as_mut() {
+                policy.try_act(&env, &mut a)?;
+            }
+            Ok::<_, mjskill::solvers::SolverError>(a)
+        })();
+        let action = action.map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(PyArray1::from_vec(py, action))
     }
 
     /// The state expert's action for the current state (`mjskill.solvers::state_expert`):
@@ -316,6 +343,8 @@ impl PyEnv {
         let env = &mut *g;
         py.detach(|| env.try_reset_with(seed, reconfigure).map(|_| ()))
             .map_err(value_err)?;
+        // A new episode: the solver plans afresh at its next call.
+        *lock_without_gil(py, &self.solver)? = None;
         Ok((PyArray1::from_slice(py, env.obs()), info_dict(py, env)?))
     }
 
