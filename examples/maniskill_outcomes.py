@@ -143,17 +143,10 @@ def read_h5(h5_path):
 _ENVS = {}
 
 
-def replay(env_id, robot, mode, seed, actions, reuse=False, target_noise=None):
-    """Replays `actions` open loop in a ManiSkill env: per-step boolean info flags, final
-    success and the final positions of the dynamic actors. The env is made fresh for the
-    episode, or with `reuse` made once per (env, robot, mode) and reset for every episode,
-    as ManiSkill's replay_trajectory tool does (PhysX CPU keeps contact caches across
-    resets, so the two can differ slightly). `target_noise` = (rng, sigma) adds N(0, sigma)
-    to the arm joint targets the arm controller sets at every step (for end-effector modes,
-    whose actions are not joint targets)."""
+def maniskill_env(env_id, robot, mode):
+    """A fresh single ManiSkill env (PhysX CPU, state observations, dense reward)."""
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401 (registers the envs)
-    import torch
 
     kw = dict(
         obs_mode="state",
@@ -167,11 +160,24 @@ def replay(env_id, robot, mode, seed, actions, reuse=False, target_noise=None):
         kw["render_backend"] = "none"
     if env_id not in FIXED_ROBOT:
         kw["robot_uids"] = robot
+    return gym.make(env_id, **kw)
+
+
+def replay(env_id, robot, mode, seed, actions, reuse=False, target_noise=None):
+    """Replays `actions` open loop in a ManiSkill env: per-step boolean info flags, final
+    success and the final positions of the dynamic actors. The env is made fresh for the
+    episode, or with `reuse` made once per (env, robot, mode) and reset for every episode,
+    as ManiSkill's replay_trajectory tool does (PhysX CPU keeps contact caches across
+    resets, so the two can differ slightly). `target_noise` = (rng, sigma) adds N(0, sigma)
+    to the arm joint targets the arm controller sets at every step (for end-effector modes,
+    whose actions are not joint targets)."""
+    import torch
+
     key = (env_id, robot, mode)
     if reuse and key in _ENVS:
         env = _ENVS[key]
     else:
-        env = gym.make(env_id, **kw)
+        env = maniskill_env(env_id, robot, mode)
         if reuse:
             _ENVS[key] = env
     arm = getattr(env.unwrapped.agent.controller, "controllers", {}).get("arm")

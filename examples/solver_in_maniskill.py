@@ -17,16 +17,17 @@ The episodes' actions are then replayed open loop from the same seed:
 * in ManiSkill as they are (`exact`: PhysX CPU repeats itself; every episode should end as it
   did closed loop);
 * in ManiSkill with N(0, SIGMA) rad added to every arm joint target of every step, for each
-  `--perturb SIGMA` (seeded noise): ManiSkill against itself, the agreement that a simulator
+  `--perturb SIGMA` (seeded noise, as `maniskill_outcomes.py --perturb` adds it): ManiSkill
+  against itself, the agreement that a simulator
   which is not PhysX bit for bit can expect on these action sequences (docs/outcome-physics.md);
 * in mjskill (`mjskill`): ManiSkill's closed-loop episodes replayed here, the reverse of
   `examples/maniskill_outcomes.py`'s forward direction.
 
 Success is `success` at the last step, as the outcome tables count it; the closed-loop line also
 gives success at any step. Prints one JSON line per pair; `--json FILE` also writes them. Each
-pair's envs are made once and reused in order (PhysX CPU keeps contact caches across resets,
-so the exact replay runs in a fresh env of its own, episodes in the same order). Needs numpy,
-mani_skill and the mjskill Python package in one environment.
+pair's envs are made once and reset for every episode; PhysX CPU keeps contact caches across
+resets, so the replays run in a fresh env of their own, the exact ones first and in the closed
+loop's order. Needs numpy, mani_skill and the mjskill Python package in one environment.
 """
 
 import argparse
@@ -38,20 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from compare_in_maniskill import ms_scalar, ms_state_dict  # noqa: E402
-from maniskill_outcomes import ARM_JOINTS, FIXED_ROBOT  # noqa: E402
-
-
-def make_maniskill(env_id, robot, mode):
-    import gymnasium as gym
-    import mani_skill.envs  # noqa: F401  (registers ManiSkill's envs)
-
-    kw = dict(obs_mode="state", control_mode=mode, num_envs=1, sim_backend="physx_cpu")
-    # PushT-v1's table scene whitens the table's render shapes, which need a renderer.
-    if env_id != "PushT-v1":
-        kw["render_backend"] = "none"
-    if env_id not in FIXED_ROBOT:
-        kw["robot_uids"] = robot
-    return gym.make(env_id, **kw)
+from maniskill_outcomes import ARM_JOINTS, maniskill_env, replay  # noqa: E402
 
 
 def make_mjskill(env_id, robot, mode):
@@ -78,13 +66,13 @@ def closed_loop(ms, mj, seed):
             return np.array(actions), success
 
 
-def replay(env, seed, actions, batched):
-    """Final success of `actions` replayed open loop from `seed`."""
+def replay_mjskill(env, seed, actions):
+    """Final success of `actions` replayed open loop from `seed` in a mjskill env."""
     env.reset(seed=seed)
     info = {}
     for a in actions:
-        _, _, _, _, info = env.step(a[None] if batched else a)
-    return bool(ms_scalar(info["success"])) if batched else bool(info["success"])
+        _, _, _, _, info = env.step(a)
+    return bool(info["success"])
 
 
 def main():
@@ -117,38 +105,46 @@ def main():
     out = open(a.json, "w") if a.json else None
     for env_id, robot in pairs:
         mode = a.control_mode
-        ms, mj = make_maniskill(env_id, robot, mode), make_mjskill(env_id, robot, mode)
+        ms, mj = maniskill_env(env_id, robot, mode), make_mjskill(env_id, robot, mode)
         seeds = range(a.seed, a.seed + a.episodes)
         episodes = [closed_loop(ms, mj, s) for s in seeds]
+        ms.close()
         final = [succ[-1] for _, succ in episodes]
         line = {"env": env_id, "robot": robot, "control_mode": mode, "seeds": [seeds[0], seeds[-1]],
                 "closed_loop_success_at_end": sum(final),
                 "closed_loop_success_any_step": sum(any(succ) for _, succ in episodes)}
 
-        exact_env = make_maniskill(env_id, robot, mode)
-        exact = [replay(exact_env, s, acts, True) for s, (acts, _) in zip(seeds, episodes)]
+        # One fresh env for every replay of the pair (maniskill_outcomes.replay's `reuse`),
+        # the exact replays first, in the closed loop's order.
+        exact = [replay(env_id, robot, mode, s, acts, reuse=True)[1]
+                 for s, (acts, _) in zip(seeds, episodes)]
         line["exact_replay_same"] = sum(x == f for x, f in zip(exact, final))
 
-        n_arm = ARM_JOINTS[robot]
+        # The noise as `maniskill_outcomes.py --perturb` adds it: on the arm's part of a
+        # `pd_joint_pos` action (its targets), else on the targets the arm controller sets.
         rng = np.random.default_rng(a.noise_seed)
+        n_arm = ARM_JOINTS[robot]
         line["maniskill_against_itself"] = {}
         for sigma in a.perturb:
             same = 0
             for s, (acts, _), f in zip(seeds, episodes, final):
-                noisy = acts.copy()
-                noisy[:, :n_arm] += rng.normal(0.0, sigma, noisy[:, :n_arm].shape).astype(np.float32)
-                same += replay(exact_env, s, noisy, True) == f
+                if mode == "pd_joint_pos":
+                    noisy = acts.copy()
+                    noisy[:, :n_arm] += rng.normal(0.0, sigma, noisy[:, :n_arm].shape)
+                    pert = replay(env_id, robot, mode, s, noisy, reuse=True)[1]
+                else:
+                    pert = replay(env_id, robot, mode, s, acts, reuse=True,
+                                  target_noise=(rng, sigma))[1]
+                same += pert == f
             line["maniskill_against_itself"][f"{sigma:g}"] = {"same_final_success": same}
 
-        mine = [replay(mj, s, acts, False) for s, (acts, _) in zip(seeds, episodes)]
+        mine = [replay_mjskill(mj, s, acts) for s, (acts, _) in zip(seeds, episodes)]
+        mj.close()
         line["mjskill_replay"] = {"successes": sum(mine),
                                   "same_final_success": sum(x == f for x, f in zip(mine, final))}
         print(json.dumps(line), flush=True)
         if out:
             out.write(json.dumps(line) + "\n")
-        ms.close()
-        mj.close()
-        exact_env.close()
 
 
 if __name__ == "__main__":
