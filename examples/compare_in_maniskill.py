@@ -16,6 +16,13 @@ seed three ways:
 * resync: before every step mjskill takes ManiSkill's state (poses, velocities, the drive
   targets PhysX holds) and the same action; the largest arm-joint error after that one step,
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
+* physx steps (`--physx-steps`, the other way round): mjskill runs the policy closed loop
+  again, and each of its steps is also taken by PhysX: a freshly reset ManiSkill env gets
+  mjskill's state before the step (poses, velocities, controller and drive targets) and the
+  same action. `physx_step_success` is ManiSkill's success on those steps, `static_differs`
+  the number of steps where ManiSkill's `is_robot_static` is not mjskill's. It tells how
+  much of a gap the velocities PhysX reports from a state account for: they fail
+  `is_robot_static` on a still, pinching SO100 (docs/outcome-physics.md).
 
 With the open loop it also finds which of the policy's readings turn small state differences
 into different actions: at each step before the open-loop states part, the policy acts on
@@ -150,6 +157,49 @@ def mj_snapshot(env, obs, info, obj_name, tcp):
     return Snapshot(art[13:13 + n], tcp_pos, obj, info)
 
 
+def ms_set_state(env, sd, tensor):
+    """Sets a ManiSkill env (one sub-scene) to a state dict of mjskill's `get_state_dict`
+    layout: actor and articulation states, the controller's state and the drive targets.
+    `tensor` turns a float32 array into what ManiSkill takes (`torch.as_tensor`)."""
+
+    def batched(x):
+        if isinstance(x, dict):
+            return {k: batched(v) for k, v in x.items()}
+        return tensor(np.asarray(x, np.float32)[None])
+
+    u = env.unwrapped
+    u.set_state_dict({"actors": batched(sd["actors"]),
+                      "articulations": batched(sd["articulations"])})
+    if "controller" in sd:
+        u.agent.set_controller_state(batched(sd["controller"]))
+    robot = u.agent.robot
+    joints = robot.get_active_joints()
+    robot.set_joint_drive_targets(batched(sd["drive"]["target_qpos"]), joints)
+    robot.set_joint_drive_velocity_targets(batched(sd["drive"]["target_qvel"]), joints)
+
+
+def physx_steps(ms, mj, seed, policy, low, high, tensor):
+    """mjskill's closed-loop episode with each step also taken by PhysX from mjskill's state
+    (see the module docs; `tensor` as for `ms_set_state`). Returns ManiSkill's success at the
+    last step and at any step, and the number of steps where ManiSkill's `is_robot_static`
+    differs from mjskill's."""
+    obs, _ = mj.reset(seed=seed)
+    last, any_, differ = False, False, 0
+    while True:
+        sd = mj.unwrapped.get_state_dict()
+        action = act(*policy, obs, low, high)
+        obs, _, _, trunc, info = mj.step(action)
+        ms.reset(seed=seed)
+        ms_set_state(ms, sd, tensor)
+        _, _, _, _, ms_info = ms.step(tensor(np.asarray(action, np.float32)[None]))
+        last = bool(ms_scalar(ms_info["success"]))
+        any_ |= last
+        if "is_robot_static" in info:
+            differ += bool(ms_scalar(ms_info["is_robot_static"])) != bool(info["is_robot_static"])
+        if trunc:
+            return last, any_, differ
+
+
 def robot_key(env):
     return next(iter(env.unwrapped.get_state_dict()["articulations"]))
 
@@ -228,6 +278,9 @@ def main():
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--seed", type=int, default=10000, help="seed of the first episode")
     p.add_argument("--json", help="also write the JSON lines to this file")
+    p.add_argument("--physx-steps", action="store_true",
+                   help="also take each of mjskill's closed-loop steps in PhysX from "
+                        "mjskill's state (about one ManiSkill reset and step per step)")
     a = p.parse_args()
     if a.episodes < 1:
         sys.exit(f"--episodes must be at least 1, not {a.episodes}")
@@ -237,6 +290,7 @@ def main():
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401  (registers ManiSkill's envs)
     import mjskill  # noqa: F401  (registers mjskill's envs)
+    import torch  # ManiSkill's own dependency
 
     env_id, robot = meta["env_id"], meta["robot_uids"]
     kw = dict(obs_mode="state", control_mode=meta["control_mode"])
@@ -283,6 +337,10 @@ def main():
             "one_step_arm_error_held_median": float(np.median([e for e, h in zip(errs, held)
                                                                if h])) if any(held) else None,
         }
+        if a.physx_steps:
+            (line["physx_step_success"], line["physx_step_success_any"],
+             line["static_differs"]) = physx_steps(ms, mj, seed, policy, low, high,
+                                                   torch.as_tensor)
         lines.append(line)
         print(json.dumps(line), flush=True)
         if out:
@@ -318,6 +376,11 @@ def main():
         "one_step_arm_error_median": float(np.median(
             [ln["one_step_arm_error_median"] for ln in lines])),
     }
+    if a.physx_steps:
+        summary["physx_step_successes"] = sum(ln["physx_step_success"] for ln in lines)
+        summary["physx_step_successes_any"] = sum(ln["physx_step_success_any"] for ln in lines)
+        summary["static_differs_median"] = float(np.median([ln["static_differs"]
+                                                            for ln in lines]))
     print(json.dumps(summary))
     if out:
         out.write(json.dumps(summary) + "\n")
