@@ -6,7 +6,7 @@ TCP, object, a task flag) whose difference passes its tolerance.
     python examples/compare_in_maniskill.py policy.onnx --episodes 10 --seed 10000
 
 ManiSkill runs the policy closed loop on its own observations. mjskill then takes the same
-seed three ways:
+seed three ways, or four:
 
 * closed: the policy closed loop on mjskill's observations, as `mjskill eval` runs it; its
   success and the first step where its state parts from ManiSkill's. This is what a user
@@ -16,10 +16,9 @@ seed three ways:
 * resync: before every step mjskill takes ManiSkill's state (poses, velocities, the drive
   targets PhysX holds) and the same action; the largest arm-joint error after that one step,
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
-* physx steps (`--physx-steps`, the other way round): mjskill runs the policy closed loop
-  again, and each of its steps is also taken by PhysX: a freshly reset ManiSkill env gets
-  mjskill's state before the step (poses, velocities, controller and drive targets) and the
-  same action. `physx_step_success` is ManiSkill's success on those steps, `static_differs`
+* physx steps (`--physx-steps`, the other way round): each step of mjskill's closed loop is
+  also taken by PhysX: a freshly reset ManiSkill env gets mjskill's state before the step
+  (poses, velocities, controller and drive targets) and the same action. `physx_step_success` is ManiSkill's success on those steps, `static_differs`
   the number of steps where ManiSkill's `is_robot_static` is not mjskill's. It tells how
   much of a gap the velocities PhysX reports from a state account for: they fail
   `is_robot_static` on a still, pinching SO100 (docs/outcome-physics.md).
@@ -178,26 +177,22 @@ def ms_set_state(env, sd, tensor):
     robot.set_joint_drive_velocity_targets(batched(sd["drive"]["target_qvel"]), joints)
 
 
-def physx_steps(ms, mj, seed, policy, low, high, tensor):
-    """mjskill's closed-loop episode with each step also taken by PhysX from mjskill's state
-    (see the module docs; `tensor` as for `ms_set_state`). Returns ManiSkill's success at the
-    last step and at any step, and the number of steps where ManiSkill's `is_robot_static`
-    differs from mjskill's."""
-    obs, _ = mj.reset(seed=seed)
+def physx_steps(ms, seed, record, snaps, tensor):
+    """Each of mjskill's steps taken by PhysX from mjskill's state (see the module docs):
+    `record` holds the state dicts before the steps and the actions (`run_mjskill`), `snaps`
+    mjskill's snapshots after them; `tensor` as for `ms_set_state`. Returns ManiSkill's
+    success at the last step and at any step, and the number of steps where ManiSkill's
+    `is_robot_static` differs from mjskill's."""
     last, any_, differ = False, False, 0
-    while True:
-        sd = mj.unwrapped.get_state_dict()
-        action = act(*policy, obs, low, high)
-        obs, _, _, trunc, info = mj.step(action)
+    for (sd, action), snap in zip(record, snaps):
         ms.reset(seed=seed)
         ms_set_state(ms, sd, tensor)
-        _, _, _, _, ms_info = ms.step(tensor(np.asarray(action, np.float32)[None]))
+        _, _, _, _, ms_info = ms.step(tensor(action[None]))
         last = bool(ms_scalar(ms_info["success"]))
         any_ |= last
-        if "is_robot_static" in info:
-            differ += bool(ms_scalar(ms_info["is_robot_static"])) != bool(info["is_robot_static"])
-        if trunc:
-            return last, any_, differ
+        if "is_robot_static" in snap.flags:
+            differ += bool(ms_scalar(ms_info["is_robot_static"])) != snap.flags["is_robot_static"]
+    return last, any_, differ
 
 
 def robot_key(env):
@@ -245,14 +240,17 @@ def run_maniskill(env, policy, seed, low, high, obj_name, tcp):
             return states, actions, snaps, seen
 
 
-def run_mjskill(env, seed, actions, policy, obj_name, tcp, low, high):
+def run_mjskill(env, seed, actions, policy, obj_name, tcp, low, high, record=None):
     """Closed loop when `policy` is given, else the actions open loop. Returns the snapshots
-    after each step and the observations before each."""
+    after each step and the observations before each. A `record` list gets each step's
+    state dict before it and its action."""
     obs, _ = env.reset(seed=seed)
     snaps, seen = [], []
     for t in range(len(actions)):
         seen.append(np.asarray(obs, np.float32).reshape(-1))
         a = act(*policy, obs, low, high) if policy is not None else actions[t]
+        if record is not None:
+            record.append((env.unwrapped.get_state_dict(), np.asarray(a, np.float32)))
         obs, _, _, _, info = env.step(a)
         snaps.append(mj_snapshot(env, obs, info, obj_name, tcp))
     return snaps, seen
@@ -319,7 +317,8 @@ def main():
         seed = a.seed + k
         states, actions, ms_snaps, ms_obs = run_maniskill(ms, policy, seed, low, high,
                                                           obj_name, tcp)
-        closed, _ = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high)
+        record = [] if a.physx_steps else None
+        closed, _ = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high, record)
         open_, open_obs = run_mjskill(mj, seed, actions, None, obj_name, tcp, low, high)
         errs, held = resync_errors(mj, seed, states, actions, ms_snaps, arm)
         open_part = first_part(ms_snaps, open_, arm)
@@ -339,8 +338,7 @@ def main():
         }
         if a.physx_steps:
             (line["physx_step_success"], line["physx_step_success_any"],
-             line["static_differs"]) = physx_steps(ms, mj, seed, policy, low, high,
-                                                   torch.as_tensor)
+             line["static_differs"]) = physx_steps(ms, seed, record, closed, torch.as_tensor)
         lines.append(line)
         print(json.dumps(line), flush=True)
         if out:

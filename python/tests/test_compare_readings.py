@@ -60,38 +60,6 @@ def test_the_largest_gap_is_looked_for_only_before_the_states_part():
     assert best["step"] == 3 and best["readings"][0][0] == "agent/qpos/head", best
 
 
-class _Sess:
-    """An ONNX session stand-in whose action is the observation's first entry."""
-
-    def run(self, _outputs, feed):
-        (o,) = feed.values()
-        return [np.asarray(o, np.float32).reshape(1, -1)[:, :1]]
-
-
-class _Mjskill:
-    """mjskill's side: three steps whose observation counts them; static after steps 2 and 3."""
-
-    def __init__(self):
-        self.unwrapped = self
-        self.t = 0
-
-    def reset(self, seed):
-        self.t = 0
-        return np.array([0.0, 0.0], np.float32), {}
-
-    def get_state_dict(self):
-        return {"actors": {"cube": np.full(13, self.t, np.float32)},
-                "articulations": {"robot": np.full(3, self.t, np.float32)},
-                "controller": {"target_qpos": np.full(2, self.t, np.float32)},
-                "drive": {"target_qpos": np.full(2, 10 + self.t, np.float32),
-                          "target_qvel": np.zeros(2, np.float32)}}
-
-    def step(self, action):
-        self.t += 1
-        info = {"is_robot_static": self.t >= 2, "success": self.t >= 2}
-        return np.array([self.t, 0.0], np.float32), 0.0, False, self.t == 3, info
-
-
 class _ManiSkill:
     """ManiSkill's side: records what it is set to; stepped from the state of t = 1 (before
     mjskill's second step), its robot is static and the task succeeds; from the others not."""
@@ -128,19 +96,31 @@ class _ManiSkill:
         return None, 0.0, False, False, info
 
 
+def _state(t):
+    """A state dict of mjskill's layout whose every entry tells the step t it was taken at."""
+    return {"actors": {"cube": np.full(13, t, np.float32)},
+            "articulations": {"robot": np.full(3, t, np.float32)},
+            "controller": {"target_qpos": np.full(2, t, np.float32)},
+            "drive": {"target_qpos": np.full(2, 10 + t, np.float32),
+                      "target_qvel": np.zeros(2, np.float32)}}
+
+
 def test_physx_steps_take_each_of_mjskill_s_steps_from_its_state():
-    ms, mj = _ManiSkill(), _Mjskill()
-    low, high = np.array([-10.0], np.float32), np.array([10.0], np.float32)
-    last, any_, differ = cmp.physx_steps(ms, mj, 7, (_Sess(), "obs", 2), low, high, np.asarray)
+    ms = _ManiSkill()
+    record = [(_state(t), np.array([t + 0.5], np.float32)) for t in range(3)]
+    # mjskill's robot is static after its second and third steps.
+    snaps = [cmp.Snapshot(np.zeros(2), None, None, {"is_robot_static": t >= 1})
+             for t in range(3)]
+    last, any_, differ = cmp.physx_steps(ms, 7, record, snaps, np.asarray)
     # Each step: a fresh reset, mjskill's state before the step (t = 0, 1, 2), its controller
-    # and drive targets, then the action mjskill took (the observation before the step).
+    # and drive targets, then the action mjskill took.
     assert ms.log == [
         ("reset", 7), ("state", 0), ("controller", 0.0), ("drive", 10.0, ("j0", "j1")),
-        ("step", 0.0),
+        ("step", 0.5),
         ("reset", 7), ("state", 1), ("controller", 1.0), ("drive", 11.0, ("j0", "j1")),
-        ("step", 1.0),
+        ("step", 1.5),
         ("reset", 7), ("state", 2), ("controller", 2.0), ("drive", 12.0, ("j0", "j1")),
-        ("step", 2.0),
+        ("step", 2.5),
     ], ms.log
     # ManiSkill's success from those states: not at the last step, but at one before it.
     assert (last, any_) == (False, True)
