@@ -18,10 +18,11 @@ seed three ways, or four:
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
 * physx steps (`--physx-steps`, the other way round): each step of mjskill's closed loop is
   also taken by PhysX: a freshly reset ManiSkill env gets mjskill's state before the step
-  (poses, velocities, controller and drive targets) and the same action. `physx_step_success` is ManiSkill's success on those steps, `static_differs`
-  the number of steps where ManiSkill's `is_robot_static` is not mjskill's. It tells how
-  much of a gap the velocities PhysX reports from a state account for: they fail
-  `is_robot_static` on a still, pinching SO100 (docs/outcome-physics.md).
+  (poses, velocities, controller and drive targets) and the same action.
+  `physx_step_success` is ManiSkill's success on those steps, `static_differs` the number of
+  steps where ManiSkill's `is_robot_static` is not mjskill's. It tells how much of a gap the
+  velocities PhysX reports from a state account for: they fail `is_robot_static` on a still,
+  pinching SO100 (docs/outcome-physics.md).
 
 With the open loop it also finds which of the policy's readings turn small state differences
 into different actions: at each step before the open-loop states part, the policy acts on
