@@ -280,6 +280,8 @@ def main():
     p.add_argument("--physx-steps", action="store_true",
                    help="also take each of mjskill's closed-loop steps in PhysX from "
                         "mjskill's state (about one ManiSkill reset and step per step)")
+    p.add_argument("--pinch-solver", default="mujoco",
+                   help="mjskill's pinch_solver: mujoco (default) or physx_tgs")
     a = p.parse_args()
     if a.episodes < 1:
         sys.exit(f"--episodes must be at least 1, not {a.episodes}")
@@ -296,7 +298,7 @@ def main():
     ms_robot = {} if env_id in FIXED_ROBOT else dict(robot_uids=robot)
     ms = gym.make(env_id, num_envs=1, sim_backend="physx_cpu", render_backend="none",
                   **ms_robot, **kw)
-    mj = gym.make(f"mjskill/{env_id}", robot_uids=robot, **kw)
+    mj = gym.make(f"mjskill/{env_id}", robot_uids=robot, pinch_solver=a.pinch_solver, **kw)
     space = ms.unwrapped.single_action_space
     low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
     obj_name = next((k for k in ("cube", "obj", "sphere") if k in
@@ -356,6 +358,7 @@ def main():
     summary = {
         "summary": True, "policy": a.policy, "env": env_id, "robot": robot,
         "control_mode": meta["control_mode"], "episodes": a.episodes, "seed": a.seed,
+        "pinch_solver": a.pinch_solver,
         "maniskill_successes": sum(bool(ln["maniskill_success"]) for ln in lines),
         "mjskill_successes": sum(bool(ln["mjskill_success"]) for ln in lines),
         "same_outcome": sum(bool(ln["maniskill_success"]) == bool(ln["mjskill_success"])
@@ -374,6 +377,9 @@ def main():
             [ln["one_step_arm_error_first"] for ln in lines])),
         "one_step_arm_error_median": float(np.median(
             [ln["one_step_arm_error_median"] for ln in lines])),
+        "one_step_arm_error_held_median": float(np.median(
+            [ln["one_step_arm_error_held_median"] for ln in lines
+             if ln["one_step_arm_error_held_median"] is not None] or [np.nan])),
     }
     if a.physx_steps:
         summary["physx_step_successes"] = sum(ln["physx_step_success"] for ln in lines)

@@ -56,15 +56,16 @@ pub(crate) mod tasks;
 #[cfg(test)]
 mod tests;
 
+pub use controllers::convex;
 pub use controllers::desc::RobotError as UrdfError;
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::vec::MAX_NUM_ENVS;
 pub use env::{
     default_robot, depth_to_mm, make, registry, scene_mjcf, ActionPart, BoxSpace, CameraImage,
-    DriveTargets, Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, PointCloud,
-    RewardMode, RolloutBuffers, SimConfig, StateDict, StateDictError, Step, Textures, VecEnv,
-    VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS, MAX_POLICY_STEP,
+    DriveTargets, Env, EnvConfig, EnvError, EnvId, EnvInfo, EnvState, Info, ObsMode, PinchSolver,
+    PointCloud, RewardMode, RolloutBuffers, SimConfig, StateDict, StateDictError, Step, Textures,
+    VecEnv, VecPolicy, CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS, MAX_POLICY_STEP,
 };
 pub use mjcf::{Mjcf, SceneError};
 pub use models::ModelFileError;

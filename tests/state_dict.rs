@@ -217,7 +217,10 @@ fn sim_freq_sets_the_physics_step_and_bad_rates_are_errors() {
     let fine = make(
         "PickCube-v1",
         EnvConfig {
-            sim: SimConfig { sim_freq: 500 },
+            sim: SimConfig {
+                sim_freq: 500,
+                ..Default::default()
+            },
             ..Default::default()
         },
     )
@@ -227,7 +230,10 @@ fn sim_freq_sets_the_physics_step_and_bad_rates_are_errors() {
         let err = make(
             "PickCube-v1",
             EnvConfig {
-                sim: SimConfig { sim_freq: bad },
+                sim: SimConfig {
+                    sim_freq: bad,
+                    ..Default::default()
+                },
                 ..Default::default()
             },
         )
@@ -238,7 +244,10 @@ fn sim_freq_sets_the_physics_step_and_bad_rates_are_errors() {
     // Both rates solve the task: the same solver episode succeeds at either.
     for sim_freq in [100, 500] {
         let config = EnvConfig {
-            sim: SimConfig { sim_freq },
+            sim: SimConfig {
+                sim_freq,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let r = mjskill::solvers::evaluate("PickCube-v1", config, "solver", 3, 0).unwrap();

@@ -225,7 +225,10 @@ fn mujoco_warnings_of_each_env_are_reported_and_cleared_by_reset() {
     // Absolute joint targets 100× beyond the action space at one 0.05 s substep diverge.
     let cfg = EnvConfig {
         control_mode: Some("pd_joint_pos".into()),
-        sim: mjskill::SimConfig { sim_freq: 20 },
+        sim: mjskill::SimConfig {
+            sim_freq: 20,
+            ..Default::default()
+        },
         max_episode_steps: Some(1000),
         ..Default::default()
     };

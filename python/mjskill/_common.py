@@ -21,6 +21,9 @@ ENV_KWARGS: dict[str, Any] = dict(_native.ENV_KWARGS)
 DEFAULT_QPOS_NOISE: float = ENV_KWARGS["robot_init_qpos_noise"]
 """Std-dev of the initial joint noise (ManiSkill's ``robot_init_qpos_noise``)."""
 DEFAULT_SIM_FREQ: int = ENV_KWARGS["sim_freq"]
+#: Who takes the physics steps in which a gripper pinches the object: ``"mujoco"`` (the
+#: default) or ``"physx_tgs"`` (a replica of PhysX's step; so100; docs/physics.md).
+DEFAULT_PINCH_SOLVER: str = ENV_KWARGS["pinch_solver"]
 """Physics steps per second."""
 RENDER_FPS: int = _native.CONTROL_FREQ
 """Frames per second of rendered episodes: one per control step."""

@@ -34,6 +34,7 @@ from gymnasium.vector.utils import batch_space
 from . import _native
 from ._common import (
     DEFAULT_QPOS_NOISE,
+    DEFAULT_PINCH_SOLVER,
     DEFAULT_SIM_FREQ,
     RENDER_FPS,
     RENDER_MODES,
@@ -132,6 +133,7 @@ class MjskillBatchedEnv(gym.Env):
         max_episode_steps: int | None = None,
         robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         sim_freq: int = DEFAULT_SIM_FREQ,
+        pinch_solver: str = DEFAULT_PINCH_SOLVER,
         depth_dtype: str = "float32",
         array_backend: str = "torch",
         sim_backend: str = "auto",

@@ -16,6 +16,7 @@ from gymnasium.vector.utils import batch_space
 from . import _native
 from ._common import (
     DEFAULT_QPOS_NOISE,
+    DEFAULT_PINCH_SOLVER,
     DEFAULT_SIM_FREQ,
     DEPTH_DTYPES,
     MAX_SEED,
@@ -64,6 +65,7 @@ class MjskillEnv(gym.Env):
         max_episode_steps: int | None = None,
         robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         sim_freq: int = DEFAULT_SIM_FREQ,
+        pinch_solver: str = DEFAULT_PINCH_SOLVER,
         depth_dtype: str = "float32",
         reconfiguration_freq: int | None = None,
     ):
@@ -258,6 +260,7 @@ class MjskillVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         robot_init_qpos_noise: float = DEFAULT_QPOS_NOISE,
         sim_freq: int = DEFAULT_SIM_FREQ,
+        pinch_solver: str = DEFAULT_PINCH_SOLVER,
         render_mode: str | None = None,
         depth_dtype: str = "float32",
         reconfiguration_freq: int | None = None,

@@ -96,7 +96,7 @@ pub(crate) fn count_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<usize>
 /// ManiSkill's env keyword arguments, the one declaration for `Env`, `VecEnv` and
 /// `record_episodes` (which take them as `**kwargs`) and for the Python classes (which read
 /// them, with their defaults, as `ENV_KWARGS`).
-const ENV_KWARGS: [&str; 8] = [
+const ENV_KWARGS: [&str; 9] = [
     "robot_uids",
     "obs_mode",
     "control_mode",
@@ -105,6 +105,7 @@ const ENV_KWARGS: [&str; 8] = [
     "robot_init_qpos_noise",
     "sim_freq",
     "reconfiguration_freq",
+    "pinch_solver",
 ];
 
 /// Episode length that means "no limit" (`max_episode_steps` of envs whose time limit is
@@ -124,6 +125,7 @@ pub(crate) fn env_kwargs_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>>
     d.set_item(ENV_KWARGS[5], c.robot_init_qpos_noise)?;
     d.set_item(ENV_KWARGS[6], c.sim.sim_freq)?;
     d.set_item(ENV_KWARGS[7], c.reconfiguration_freq)?;
+    d.set_item(ENV_KWARGS[8], c.sim.pinch_solver.name())?;
     Ok(d)
 }
 
@@ -192,6 +194,10 @@ pub(crate) fn config(kwargs: Option<&Bound<'_, PyDict>>, callee: &str) -> PyResu
                 );
                 // Beyond u32 here; within it, SimConfig's own check names the valid rates.
                 cfg.sim.sim_freq = int_arg(&value, &key, 0, u32::MAX as i128, &valid)? as u32;
+            }
+            "pinch_solver" => {
+                let name = str_arg(&value, &key)?;
+                cfg.sim.pinch_solver = mjskill::PinchSolver::parse(&name).map_err(value_err)?;
             }
             "reconfiguration_freq" => {
                 let valid = "resets between redraws of a task's per-episode shapes: 0 (never \

@@ -63,6 +63,7 @@
 use nalgebra::DMatrix;
 
 use super::desc::Drive;
+use super::tgs::{JawPart, PinchReplica, ReplicaDrive};
 use crate::mujoco::{Data, Model, ObjType};
 
 /// Implicit micro-steps of the drive dynamics per physics substep: ManiSkill's
@@ -188,6 +189,9 @@ pub struct Drives {
     /// The smooth forces with the drives off, and their acceleration (nv each).
     smooth_force: Vec<f64>,
     smooth_acc: Vec<f64>,
+    /// The replica of PhysX's step that takes the physics steps in which the gripper pinches
+    /// the object (opt-in, [`Drives::enable_pinch_replica`]).
+    pinch: Option<Box<PinchReplica>>,
 }
 
 impl Drives {
@@ -322,8 +326,54 @@ impl Drives {
             drives_only,
             smooth_force: vec![0.0; nv],
             smooth_acc: vec![0.0; nv],
+            pinch: None,
             dofs,
         })
+    }
+
+    /// Lets PhysX's step ([`super::tgs`]) take every physics step in which both jaws touch
+    /// `object_body` (a free box, `object_geom`): `parts` are the jaws' convex parts, each
+    /// with its body and jaw (0 or 1). Errors say what does not fit.
+    pub fn enable_pinch_replica(
+        &mut self,
+        model: &Model,
+        parts: Vec<JawPart>,
+        object_body: usize,
+        object_geom: usize,
+    ) -> Result<(), String> {
+        let drives = self
+            .dofs
+            .iter()
+            .map(|d| {
+                let local = self
+                    .tree_dofs
+                    .iter()
+                    .position(|&k| k == d.dof)
+                    .expect("a drive's dof lies in its tree");
+                ReplicaDrive {
+                    local,
+                    kp: d.kp,
+                    kd: d.kd,
+                    force_limit: d.force_limit,
+                }
+            })
+            .collect();
+        let replica = PinchReplica::new(
+            model,
+            self.robot_body.clone(),
+            &self.tree_dofs,
+            drives,
+            parts,
+            object_body,
+            object_geom,
+        )?;
+        self.pinch = Some(Box::new(replica));
+        Ok(())
+    }
+
+    /// Whether the last physics step was taken by the pinch replica.
+    pub fn pinch_replica_active(&self) -> bool {
+        self.pinch.as_ref().is_some_and(|p| p.active())
     }
 
     /// Number of drives.
@@ -805,6 +855,13 @@ impl Drives {
     pub fn step(&mut self, data: &mut Data) {
         let h = data.model().timestep();
         data.step1();
+        if let Some(p) = self.pinch.as_deref_mut() {
+            if p.pinches(data) {
+                p.step(data, &self.target_q, &self.target_v);
+            } else {
+                p.idle();
+            }
+        }
         self.release_deep_contacts(data);
         self.apply(data, h);
         data.step2();
@@ -813,6 +870,10 @@ impl Drives {
             v[d.dof] -= c / h;
             // PhysX's per-axis speed limit of articulation joints (`maxJointVelocity`).
             v[d.dof] = v[d.dof].clamp(-MAX_JOINT_VELOCITY, MAX_JOINT_VELOCITY);
+        }
+        // The pinch replica's step replaces MuJoCo's for the robot and the object.
+        if let Some(p) = self.pinch.as_deref() {
+            p.write(data);
         }
     }
 

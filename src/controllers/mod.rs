@@ -11,6 +11,7 @@
 //! Arithmetic follows upstream's float32 path: actions are f32, normalised parts clip to
 //! [−1, 1] and rescale in f32, deltas are added to the f32 measured position. Targets go to
 //! the robot's [`Drives`], which turn them into forces.
+pub mod convex;
 pub mod desc;
 pub mod drive;
 pub mod error;
@@ -22,6 +23,7 @@ pub mod pd_ee_pose;
 pub mod pd_joint_pos;
 pub mod pd_joint_pos_vel;
 pub mod pd_joint_vel;
+pub mod tgs;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 

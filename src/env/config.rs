@@ -150,6 +150,16 @@ pub enum EnvError {
          {CONTROL_FREQ} and 100000 (e.g. 100, 200, 500)"
     )]
     BadSimFreq(u32),
+    /// `pinch_solver` "physx_tgs" for a robot or task it cannot take.
+    #[error("pinch_solver \"physx_tgs\" cannot run {robot} in {env}: {reason}")]
+    PinchSolverUnsupported {
+        /// Env id.
+        env: String,
+        /// Robot uid.
+        robot: String,
+        /// Why (and what it needs).
+        reason: String,
+    },
     /// A [`VecEnv`](super::VecEnv) of zero envs.
     #[error("a VecEnv needs at least one env")]
     NoEnvs,
@@ -499,6 +509,54 @@ pub use crate::mjcf::CONTROL_FREQ;
 pub struct SimConfig {
     /// Physics steps per second; a positive multiple of [`CONTROL_FREQ`].
     pub sim_freq: u32,
+    /// Who takes the physics steps in which the gripper pinches the task's object.
+    #[serde(default)]
+    pub pinch_solver: PinchSolver,
+}
+
+/// Who takes the physics steps in which a gripper pinches the task's object
+/// (docs/physics.md, "The pinch in PhysX's step").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PinchSolver {
+    /// MuJoCo's step, as every other step (the default).
+    #[default]
+    Mujoco,
+    /// A replica of PhysX's TGS step for the robot and the pinched object, from the jaws'
+    /// convex parts (robots with `models/<robot>/convex_parts.json`: so100). Experimental:
+    /// it reproduces PhysX's stall and reported velocities, and does not yet hold every
+    /// grasp PhysX holds (docs/outcome-physics.md).
+    PhysxTgs,
+}
+
+impl PinchSolver {
+    /// The solvers by name.
+    pub const ALL: [(&'static str, PinchSolver); 2] = [
+        ("mujoco", PinchSolver::Mujoco),
+        ("physx_tgs", PinchSolver::PhysxTgs),
+    ];
+
+    /// Parses a solver name; an error names the valid ones.
+    pub fn parse(s: &str) -> Result<PinchSolver, EnvError> {
+        Self::ALL
+            .iter()
+            .find(|(n, _)| *n == s)
+            .map(|(_, v)| *v)
+            .ok_or_else(|| EnvError::UnknownMode {
+                what: "pinch_solver",
+                got: s.to_string(),
+                valid: names(&Self::ALL),
+            })
+    }
+
+    /// The solver's name.
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, v)| *v == self)
+            .map(|(n, _)| *n)
+            .expect("every solver is named")
+    }
 }
 
 impl SimConfig {
@@ -528,6 +586,7 @@ impl Default for SimConfig {
     fn default() -> Self {
         SimConfig {
             sim_freq: Self::DEFAULT_SIM_FREQ,
+            pinch_solver: PinchSolver::Mujoco,
         }
     }
 }

@@ -17,8 +17,8 @@ pub mod state_dict;
 mod types;
 pub mod vec;
 pub use config::{
-    EnvConfig, EnvError, ObsMode, RewardMode, SimConfig, Textures, CONSTRUCTION_SEED, CONTROL_FREQ,
-    DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
+    EnvConfig, EnvError, ObsMode, PinchSolver, RewardMode, SimConfig, Textures, CONSTRUCTION_SEED,
+    CONTROL_FREQ, DEFAULT_QPOS_NOISE, MAX_EPISODE_STEPS,
 };
 pub use registry::{default_robot, registry, scene_mjcf, EnvId, EnvInfo};
 pub use render::{depth_to_mm, CameraImage, PointCloud};
@@ -94,6 +94,42 @@ impl Sim {
     }
 }
 
+/// Hands the steps in which the gripper pinches the task's object to PhysX's step replica
+/// ([`PinchSolver::PhysxTgs`]); errors say why the robot or task cannot take it.
+fn enable_pinch_replica(
+    model: &Model,
+    drives: &mut Drives,
+    rs: &RobotSpec,
+    env: &str,
+    object: crate::mujoco::BodyId,
+) -> Result<(), EnvError> {
+    let unsupported = |reason: String| EnvError::PinchSolverUnsupported {
+        env: env.to_string(),
+        robot: rs.uid().to_string(),
+        reason,
+    };
+    let parts = rs
+        .convex_parts(model)
+        .map_err(unsupported)?
+        .ok_or_else(|| {
+            unsupported(format!(
+                "the robot ships no models/{}/{} (robots that do: so100)",
+                rs.uid(),
+                crate::robots::CONVEX_PARTS_FILE
+            ))
+        })?;
+    let body = object.index();
+    let geom = (0..model.ngeom())
+        .find(|&g| {
+            model.geom_bodyid()[g] as usize == body
+                && model.geom_type()[g] == crate::mujoco::GEOM_BOX
+        })
+        .ok_or_else(|| unsupported("the task's object is not a box".to_string()))?;
+    drives
+        .enable_pinch_replica(model, parts, body, geom)
+        .map_err(unsupported)
+}
+
 /// One environment.
 #[derive(Debug)]
 pub struct Env {
@@ -160,6 +196,10 @@ impl Env {
         } = scene;
         let data = Data::new(model.clone())?;
         task.resolve(&model)?;
+        let mut drives = drives;
+        if config.sim.pinch_solver == PinchSolver::PhysxTgs {
+            enable_pinch_replica(&model, &mut drives, rs, spec.id.id(), task.grasp_object())?;
+        }
         let actors = state_dict::resolve_actors(&model, task.actor_names())?;
         let n = robot.joints.len();
         let keys = task.info_keys();

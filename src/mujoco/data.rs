@@ -493,6 +493,55 @@ impl Data {
         }
     }
 
+    /// Translational and rotational Jacobians (3×nv each, row-major) of the world point
+    /// `point` moving with body `body` (`mj_jac`), at the kinematics of the last
+    /// [`Data::step1`] / [`Data::forward`]; written into the caller's buffers.
+    pub fn jac_point(&self, body: usize, point: [f64; 3], jacp: &mut [f64], jacr: &mut [f64]) {
+        let nv = self.model.nv();
+        assert!(body < self.model.nbody(), "body id {body} out of range");
+        assert!(
+            jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
+            "Jacobian buffers need 3*nv = {} values",
+            3 * nv
+        );
+        // SAFETY: body id valid; buffers hold at least 3*nv values each; point holds 3.
+        unsafe {
+            sys::mj_jac(
+                self.model.ptr,
+                self.ptr,
+                jacp.as_mut_ptr(),
+                jacr.as_mut_ptr(),
+                point.as_ptr(),
+                body as c_int,
+            )
+        }
+    }
+
+    /// The dense joint-space inertia (nv×nv, row-major) of the last [`Data::step1`] /
+    /// [`Data::forward`] (`mj_fullM`), armature included.
+    pub fn full_m(&self, dst: &mut [f64]) {
+        let nv = self.model.nv();
+        assert!(
+            dst.len() >= nv * nv,
+            "full_m needs nv*nv = {} values",
+            nv * nv
+        );
+        // SAFETY: dst holds nv*nv values; mj_fullM only reads qM.
+        unsafe { sys::mj_fullM(self.model.ptr, dst.as_mut_ptr(), (*self.ptr).qM) }
+    }
+
+    /// Advances the positions `qpos` (nq values) by the velocities `qvel` (nv) over `dt`
+    /// (`mj_integratePos`: quaternions of free and ball joints on the sphere).
+    pub fn integrate_pos(&self, qpos: &mut [f64], qvel: &[f64], dt: f64) {
+        let (nq, nv) = (self.model.nq(), self.model.nv());
+        assert!(
+            qpos.len() >= nq && qvel.len() >= nv,
+            "integrate_pos needs nq = {nq} positions and nv = {nv} velocities"
+        );
+        // SAFETY: qpos holds nq values and qvel nv; mj_integratePos reads only the model.
+        unsafe { sys::mj_integratePos(self.model.ptr, qpos.as_mut_ptr(), qvel.as_ptr(), dt) }
+    }
+
     /// Solves `M x = y` for `n` right-hand sides (`mj_solveM`), with the factorisation of the
     /// joint-space inertia computed by the last [`Data::step1`] / [`Data::forward`]. `y` and
     /// `x` hold `n` vectors of length nv one after another. `x` and `y` may not overlap.

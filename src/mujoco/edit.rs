@@ -11,9 +11,6 @@ use std::sync::Arc;
 
 use super::*;
 
-/// MuJoCo's `mjGEOM_BOX`.
-const GEOM_BOX: c_int = 6;
-
 impl Clone for Model {
     fn clone(&self) -> Model {
         // SAFETY: self.ptr is a valid model; with a null destination mj_copyModel allocates a

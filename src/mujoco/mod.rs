@@ -155,6 +155,9 @@ impl ObjType {
     }
 }
 
+/// MuJoCo's `mjGEOM_BOX` (a value of [`Model::geom_type`]).
+pub const GEOM_BOX: c_int = sys::mjtGeom__mjGEOM_BOX as c_int;
+
 /// Joint types (`mjtJoint`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum JointType {
@@ -390,6 +393,8 @@ model_arrays! {
     body_ipos: f64 = |m: &sys::mjModel| m.nbody * 3;
     /// Orientation of the inertial frame relative to the body frame, 4 per body.
     body_iquat: f64 = |m: &sys::mjModel| m.nbody * 4;
+    /// First joint of every body (-1 for a body without joints).
+    body_jntadr: c_int = |m: &sys::mjModel| m.nbody;
     /// Number of dofs of every body.
     body_dofnum: c_int = |m: &sys::mjModel| m.nbody;
     /// Joint type of every joint (`mjtJoint`).
@@ -408,6 +413,8 @@ model_arrays! {
     dof_armature: f64 = |m: &sys::mjModel| m.nv;
     /// Damping of every dof.
     dof_damping: f64 = |m: &sys::mjModel| m.nv;
+    /// Joint of every dof.
+    dof_jntid: c_int = |m: &sys::mjModel| m.nv;
     /// Body of every dof.
     dof_bodyid: c_int = |m: &sys::mjModel| m.nv;
     /// Parent dof of every dof (-1 at a tree's root).

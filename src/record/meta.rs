@@ -74,6 +74,9 @@ pub struct Meta {
     pub timestep: f64,
     /// Physics steps per control step.
     pub substeps: usize,
+    /// Who took the pinch's physics steps ([`crate::env::PinchSolver`]); absent: MuJoCo.
+    #[serde(default, skip_serializing_if = "is_mujoco")]
+    pub pinch_solver: crate::env::PinchSolver,
     /// mjskill version that wrote the file.
     pub version: String,
     /// Action space.
@@ -86,6 +89,11 @@ pub struct Meta {
     /// to record the same demonstrations again. Absent in files of other writers.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub command: Option<String>,
+}
+
+/// Whether the pinch solver is MuJoCo's (the default, not written).
+fn is_mujoco(s: &crate::env::PinchSolver) -> bool {
+    *s == crate::env::PinchSolver::Mujoco
 }
 
 const STRING_KEYS: &[&str] = &[
@@ -118,6 +126,7 @@ impl Meta {
             max_episode_steps: env.max_episode_steps(),
             timestep: env.model().timestep(),
             substeps: env.substeps(),
+            pinch_solver: cfg.sim.pinch_solver,
             version: env!("CARGO_PKG_VERSION").to_string(),
             action_space: space(env.action_space()),
             observation_space: space(env.observation_space()),
@@ -185,6 +194,7 @@ impl Meta {
     pub fn sim(&self) -> crate::env::SimConfig {
         crate::env::SimConfig {
             sim_freq: self.substeps as u32 * crate::env::CONTROL_FREQ,
+            pinch_solver: self.pinch_solver,
         }
     }
 

@@ -300,6 +300,10 @@ impl MountedCamera {
     }
 }
 
+/// The gripper's convex collision parts next to a robot's URDF (read by
+/// [`RobotSpec::convex_parts`]).
+pub const CONVEX_PARTS_FILE: &str = "convex_parts.json";
+
 /// Everything mjskill knows about one robot besides its URDF.
 #[derive(Debug, Clone)]
 pub struct RobotSpec {
@@ -355,6 +359,49 @@ impl RobotSpec {
     /// ManiSkill's uid of the robot.
     pub fn uid(&self) -> &'static str {
         self.id.uid()
+    }
+
+    /// The gripper's convex collision parts (`models/<uid>/convex_parts.json`), resolved in
+    /// `model`: `(body, jaw, part)` with jaw 0 for the first link the file names and 1 for
+    /// the second. `Ok(None)`: the robot ships none. Errors name the file and what is wrong.
+    pub fn convex_parts(
+        &self,
+        model: &Model,
+    ) -> Result<Option<Vec<crate::controllers::tgs::JawPart>>, String> {
+        use crate::controllers::convex::{ConvexPart, ConvexPartsFile};
+        let path = format!("{}/{}", self.uid(), CONVEX_PARTS_FILE);
+        let Ok(text) = crate::models::text(&path) else {
+            return Ok(None);
+        };
+        let file: ConvexPartsFile =
+            serde_json::from_str(text).map_err(|e| format!("models/{path}: {e}"))?;
+        let mut links: Vec<&str> = Vec::new();
+        let mut out = Vec::with_capacity(file.parts.len());
+        for p in &file.parts {
+            let body = model
+                .id(ObjType::Body, &p.link)
+                .ok_or_else(|| format!("models/{path}: no link {:?} in the model", p.link))?;
+            let jaw = match links.iter().position(|l| *l == p.link) {
+                Some(k) => k,
+                None => {
+                    links.push(&p.link);
+                    links.len() - 1
+                }
+            };
+            if jaw > 1 {
+                return Err(format!(
+                    "models/{path}: parts on {} links ({}); a gripper has two jaws",
+                    links.len(),
+                    links.join(", ")
+                ));
+            }
+            out.push((
+                body,
+                jaw,
+                ConvexPart::new(p).map_err(|e| format!("models/{path}: {e}"))?,
+            ));
+        }
+        Ok(Some(out))
     }
 
     /// The root pose in the table scene.

@@ -147,6 +147,20 @@ enum Command {
     /// mesh visual of an upstream URDF), --mesh (one mesh, e.g. the table) or --texture (a
     /// PNG re-encoded and downsampled).
     ConvertVisuals(ConvertVisualsArgs),
+    /// Write a gripper's convex collision parts (vertices and hull triangles, link frame) as
+    /// the JSON file PhysX's step replica reads (`models/<robot>/convex_parts.json`).
+    ConvexParts {
+        /// LINK=MESH: a convex hull mesh (binary/ASCII STL or OBJ) of LINK's collision, in
+        /// the link frame; repeat in the order PhysX solves them (first jaw first).
+        #[arg(long = "part", required = true)]
+        parts: Vec<String>,
+        /// Where the parts came from (stored in the file).
+        #[arg(long)]
+        source: String,
+        /// Output file.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 fn main() {
@@ -168,7 +182,58 @@ fn run(cli: Cli) -> Result<(), CliError> {
             scale,
         } => fit_primitives(&mesh, &shape, parts, segments, crop.as_deref(), scale),
         Command::ConvertVisuals(args) => args.run(),
+        Command::ConvexParts { parts, source, out } => convex_parts(&parts, &source, &out),
     }
+}
+
+/// Reads each LINK=MESH hull, merges its repeated vertices and writes the parts file.
+fn convex_parts(parts: &[String], source: &str, out: &std::path::Path) -> Result<(), CliError> {
+    use mjskill::convex::{ConvexPart, ConvexPartFile, ConvexPartsFile};
+    let mut file = ConvexPartsFile {
+        source: source.to_string(),
+        parts: Vec::with_capacity(parts.len()),
+    };
+    for p in parts {
+        let (link, mesh) = p
+            .split_once('=')
+            .ok_or_else(|| format!("--part {p:?}: expected LINK=MESH"))?;
+        let bytes = mjskill::files::read(std::path::Path::new(mesh)).map_err(|e| e.to_string())?;
+        let tris = meshes::read_triangles(&bytes, mesh)?;
+        let mut vertices: Vec<[f64; 3]> = Vec::new();
+        let mut triangles = Vec::with_capacity(tris.len());
+        for t in &tris {
+            let mut idx = [0usize; 3];
+            for (k, v) in t.iter().enumerate() {
+                let v = [v.x, v.y, v.z];
+                idx[k] = match vertices
+                    .iter()
+                    .position(|u| u.iter().zip(&v).all(|(a, b)| (a - b).abs() < 1e-9))
+                {
+                    Some(i) => i,
+                    None => {
+                        vertices.push(v);
+                        vertices.len() - 1
+                    }
+                };
+            }
+            triangles.push(idx);
+        }
+        let part = ConvexPartFile {
+            link: link.to_string(),
+            vertices,
+            triangles,
+        };
+        let checked = ConvexPart::new(&part).map_err(|e| format!("{mesh}: {e}"))?;
+        out!(
+            "{link}: {} vertices, {} faces ({mesh})",
+            checked.vertices.len(),
+            checked.faces.len()
+        );
+        file.parts.push(part);
+    }
+    let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
+    std::fs::write(out, text + "\n").map_err(|e| format!("{}: {e}", out.display()))?;
+    Ok(())
 }
 
 /// The arguments of `mjskill convert-visuals`.

@@ -21,7 +21,10 @@ pub fn import_maniskill(
     by: &str,
     sim_freq: u32,
 ) -> Result<ImportReport, DatasetError> {
-    let sim = SimConfig { sim_freq };
+    let sim = SimConfig {
+        sim_freq,
+        ..Default::default()
+    };
     sim.validate().map_err(|source| DatasetError::Invalid {
         msg: source.to_string(),
     })?;

@@ -51,6 +51,15 @@ pub struct EnvArgs {
     /// frequency. Higher is slower and closer to continuous-time dynamics.
     #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
     pub sim_freq: u32,
+    /// Who takes the physics steps in which the gripper pinches the object: mujoco, or
+    /// physx_tgs (a replica of PhysX's step; so100 only; experimental, docs/physics.md).
+    #[arg(long, default_value = "mujoco", value_parser = pinch_solver)]
+    pub pinch_solver: mjskill::PinchSolver,
+}
+
+/// Parses `--pinch-solver`.
+fn pinch_solver(s: &str) -> Result<mjskill::PinchSolver, String> {
+    mjskill::PinchSolver::parse(s).map_err(|e| e.to_string())
 }
 
 impl EnvArgs {
@@ -66,6 +75,7 @@ impl EnvArgs {
             control_mode: self.control_mode.clone(),
             sim: mjskill::SimConfig {
                 sim_freq: self.sim_freq,
+                pinch_solver: self.pinch_solver,
             },
             ..Default::default()
         }
@@ -437,7 +447,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
         } => fidelity::run(&fidelity::FidelityArgs {
             file,
             resync,
-            sim: mjskill::SimConfig { sim_freq },
+            sim: mjskill::SimConfig {
+                sim_freq,
+                ..Default::default()
+            },
             control_mode,
             summary,
             plot,
@@ -671,7 +684,10 @@ fn outcomes(
     table: bool,
 ) -> Result<(), CliError> {
     use mjskill::maniskill::outcome::{files, measure, OutcomeFile};
-    let sim = mjskill::SimConfig { sim_freq };
+    let sim = mjskill::SimConfig {
+        sim_freq,
+        ..Default::default()
+    };
     sim.validate()?;
     let paths = files(path)?;
     if paths.is_empty() {
