@@ -135,8 +135,9 @@ def ms_state_dict(env):
 class Snapshot:
     """The compared quantities of one simulator after a step."""
 
-    def __init__(self, qpos, tcp, obj, info):
+    def __init__(self, qpos, tcp, obj, info, qvel=None):
         self.qpos, self.tcp, self.obj = np.asarray(qpos, float), tcp, obj
+        self.qvel = None if qvel is None else np.asarray(qvel, float)
         self.flags = {k: bool(v) for k, v in info.items() if k in FLAGS}
 
 
@@ -145,7 +146,8 @@ def ms_snapshot(env, obs, info, obj_name, tcp):
     qpos = to_numpy(u.agent.robot.get_qpos())[0]
     obj = to_numpy(u.get_state_dict()["actors"][obj_name])[0][:3] if obj_name else None
     tcp_pos = to_numpy(obs).reshape(-1)[tcp] if tcp else None
-    return Snapshot(qpos, tcp_pos, obj, {k: ms_scalar(v) for k, v in info.items()})
+    qvel = to_numpy(u.agent.robot.get_qvel())[0]
+    return Snapshot(qpos, tcp_pos, obj, {k: ms_scalar(v) for k, v in info.items()}, qvel)
 
 
 def mj_snapshot(env, obs, info, obj_name, tcp):
@@ -270,6 +272,27 @@ def resync_errors(env, seed, states, actions, ms_snaps, arm):
     return errs, held
 
 
+def held_steps(seed, states, actions, ms_snaps, held, per_episode):
+    """Up to `per_episode` of an episode's held steps, spread evenly, as JSON-ready cases."""
+    steps = [t for t, h in enumerate(held) if h]
+    if len(steps) > per_episode:
+        steps = [steps[round(i * (len(steps) - 1) / (per_episode - 1))] if per_episode > 1
+                 else steps[0] for i in range(per_episode)]
+    out = []
+    for t in steps:
+        sd = states[t]
+        out.append({
+            "seed": seed, "step": t,
+            "state_dict": {k: ({n: np.asarray(x).tolist() for n, x in v.items()}
+                               if isinstance(v, dict) else v) for k, v in sd.items()},
+            "action": np.asarray(actions[t], float).tolist(),
+            "qpos": ms_snaps[t].qpos.tolist(),
+            "qvel": ms_snaps[t].qvel.tolist(),
+            "is_robot_static": ms_snaps[t].flags.get("is_robot_static"),
+        })
+    return out
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -280,6 +303,11 @@ def main():
     p.add_argument("--physx-steps", action="store_true",
                    help="also take each of mjskill's closed-loop steps in PhysX from "
                         "mjskill's state (about one ManiSkill reset and step per step)")
+    p.add_argument("--record-held", metavar="FILE",
+                   help="write ManiSkill's held steps (state dict with drive targets, action, "
+                        "qpos and reported qvel after the step) as JSON, for tests")
+    p.add_argument("--held-per-episode", type=int, default=3,
+                   help="with --record-held: held steps kept per episode (spread evenly)")
     p.add_argument("--pinch-solver", default="mujoco",
                    help="mjskill's pinch_solver: mujoco (default) or physx_tgs")
     a = p.parse_args()
@@ -316,6 +344,7 @@ def main():
         return act(sess, inp, rank, o, low, high)
 
     lines, out = [], open(a.json, "w") if a.json else None
+    held_cases = []
     for k in range(a.episodes):
         seed = a.seed + k
         states, actions, ms_snaps, ms_obs = run_maniskill(ms, policy, seed, low, high,
@@ -324,6 +353,9 @@ def main():
         closed, _ = run_mjskill(mj, seed, actions, policy, obj_name, tcp, low, high, record)
         open_, open_obs = run_mjskill(mj, seed, actions, None, obj_name, tcp, low, high)
         errs, held = resync_errors(mj, seed, states, actions, ms_snaps, arm)
+        if a.record_held:
+            held_cases += held_steps(seed, states, actions, ms_snaps, held,
+                                     a.held_per_episode)
         open_part = first_part(ms_snaps, open_, arm)
         line = {
             "seed": seed,
@@ -387,6 +419,17 @@ def main():
         summary["static_differs_median"] = float(np.median([ln["static_differs"]
                                                             for ln in lines]))
     print(json.dumps(summary))
+    if a.record_held:
+        import mani_skill
+        with open(a.record_held, "w") as f:
+            json.dump({"source": f"ManiSkill {mani_skill.__version__} (physx_cpu): {env_id}, "
+                                 f"{robot}, {meta['control_mode']}; the policy "
+                                 f"{Path(a.policy).name} closed loop from each seed; per held "
+                                 "step (is_grasped after it) the state before it with the drive "
+                                 "targets, its action, and the arm's qpos and reported qvel "
+                                 "after it (written by examples/compare_in_maniskill.py "
+                                 "--record-held)",
+                       "cases": held_cases}, f)
     if out:
         out.write(json.dumps(summary) + "\n")
         out.close()

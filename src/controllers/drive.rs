@@ -63,7 +63,7 @@
 use nalgebra::DMatrix;
 
 use super::desc::Drive;
-use super::tgs::{JawPart, PinchReplica, ReplicaDrive};
+use super::tgs::{JawPart, PinchReplica, ReplicaDrive, CACHED_PATCH_LEN};
 use crate::mujoco::{Data, Model, ObjType};
 
 /// Implicit micro-steps of the drive dynamics per physics substep: ManiSkill's
@@ -881,7 +881,9 @@ impl Drives {
     /// then, for a robot whose gripper lets go of deep contacts (the SO100's jaw, see
     /// `Drives::release_deep_contacts`), the release counters (per drive, the substeps in a
     /// row its gripper has been sunk deeper than the release depth), which decide the next
-    /// substeps' releases: with them a restored state continues bit for bit.
+    /// substeps' releases, then the pinch's kick flag where the robot can take it, then the
+    /// pinch replica's contact cache where it is enabled ([`PinchReplica::save`]): with them
+    /// a restored state continues bit for bit.
     pub fn save(&self, out: &mut Vec<f64>) {
         self.save_targets(out);
         if self.release_depth.is_some() {
@@ -890,11 +892,19 @@ impl Drives {
         if self.can_kick {
             out.push(if self.kicking { 1.0 } else { 0.0 });
         }
+        if let Some(p) = &self.pinch {
+            p.save(out);
+        }
     }
 
     /// Number of values [`Drives::save`] writes.
     pub fn save_len(&self) -> usize {
-        self.targets_len() + self.counters_len() + usize::from(self.can_kick)
+        self.targets_len() + self.counters_len() + usize::from(self.can_kick) + self.cache_len()
+    }
+
+    /// Number of values of the pinch replica's contact cache in a saved state.
+    fn cache_len(&self) -> usize {
+        self.pinch.as_ref().map_or(0, |p| p.save_len())
     }
 
     /// Number of release counters [`Drives::save`] writes (0 for a robot without a release
@@ -920,44 +930,68 @@ impl Drives {
         2 * self.dofs.len()
     }
 
-    /// Checks the release counters and the kick flag of `s`, a state of [`Drives::save_len`]
-    /// (or [`Drives::targets_len`]) values: each counter must be a whole number from 0 to
-    /// `u32::MAX`, the flag 0 or 1. The error gives the value's index in `s`, the value and
-    /// the valid range.
+    /// Checks the release counters, the kick flag and the pinch replica's contact cache of
+    /// `s`, a state of [`Drives::save_len`] (or [`Drives::targets_len`]) values: each counter
+    /// must be a whole number from 0 to `u32::MAX`, the flag 0 or 1, the cache's anchor
+    /// counts 0, 1 or 2, its broken flags 0 or 1 and its values finite. The error gives the
+    /// value's index in `s`, the value and the valid range.
     pub fn check_saved(&self, s: &[f64]) -> Result<(), (usize, f64, String)> {
         let from = self.targets_len();
         let counters = from..from + self.counters_len();
+        let kick = counters.end..counters.end + usize::from(self.can_kick);
         for (i, &x) in s.iter().enumerate().skip(from) {
-            if !counters.contains(&i) {
+            if kick.contains(&i) {
                 if x != 0.0 && x != 1.0 {
                     return Err((i, x, "is not a pinch's kick flag (0 or 1)".to_string()));
                 }
-                continue;
-            }
-            if !(0.0..=f64::from(u32::MAX)).contains(&x) || x.fract() != 0.0 {
-                return Err((
-                    i,
-                    x,
-                    format!(
-                        "is not a jaw release count (a whole number of substeps from 0 to {})",
-                        u32::MAX
-                    ),
-                ));
+            } else if counters.contains(&i) {
+                if !(0.0..=f64::from(u32::MAX)).contains(&x) || x.fract() != 0.0 {
+                    return Err((
+                        i,
+                        x,
+                        format!(
+                            "is not a jaw release count (a whole number of substeps from 0 to {})",
+                            u32::MAX
+                        ),
+                    ));
+                }
+            } else {
+                let k = (i - kick.end) % CACHED_PATCH_LEN;
+                if k == 0 && ![0.0, 1.0, 2.0].contains(&x) {
+                    return Err((
+                        i,
+                        x,
+                        "is not a cached friction patch's anchor count (0, 1 or 2)".to_string(),
+                    ));
+                }
+                if k == 1 && x != 0.0 && x != 1.0 {
+                    return Err((
+                        i,
+                        x,
+                        "is not a cached friction patch's broken flag (0 or 1)".to_string(),
+                    ));
+                }
+                if !x.is_finite() {
+                    return Err((i, x, "is not a finite contact-cache value".to_string()));
+                }
             }
         }
         Ok(())
     }
 
-    /// Forgets the last substep's contacts (see `Drives::release_deep_contacts`): at a reset
-    /// nothing is sunk into anything yet.
+    /// Forgets the last substep's contacts (see `Drives::release_deep_contacts`) and the pinch
+    /// replica's contact cache: at a reset nothing is sunk into anything yet.
     pub fn forget_contacts(&mut self) {
         self.deep_substeps.fill(0);
         self.kicking = false;
+        if let Some(p) = self.pinch.as_deref_mut() {
+            p.forget_contacts();
+        }
     }
 
     /// Restores what [`Drives::save`] wrote; a state of [`Drives::targets_len`] values (the
-    /// targets alone) restores the release counters at zero. Counters must have passed
-    /// [`Drives::check_saved`] (others are clamped into range).
+    /// targets alone) restores the release counters at zero and forgets the contact cache.
+    /// Counters must have passed [`Drives::check_saved`] (others are clamped into range).
     pub fn load(&mut self, s: &[f64]) {
         self.load_targets(s);
         self.forget_contacts();
@@ -967,8 +1001,13 @@ impl Drives {
                 // In range after check_saved; `as` saturates anything else.
                 *c = x as u32;
             }
+            let at = from + self.counters_len();
             if self.can_kick {
-                self.kicking = s[self.save_len() - 1] != 0.0;
+                self.kicking = s[at] != 0.0;
+            }
+            let at = at + usize::from(self.can_kick);
+            if let Some(p) = self.pinch.as_deref_mut() {
+                p.load(&s[at..]);
             }
         }
     }

@@ -32,8 +32,13 @@
 //!    out), the drives frozen. Positions do not move; the velocities it leaves are the ones
 //!    PhysX reports and steps on with.
 //!
-//! The anchors are made fresh at every step: PhysX's contact cache, which keeps them across
-//! steps, is not modelled. Nothing here allocates after [`PinchReplica::new`].
+//! PhysX's contact cache is kept as PhysX keeps it (`getFrictionPatches`): a jaw part's
+//! friction anchors carry over to the next step unless its friction broke (was clamped in the
+//! velocity iteration), the bodies turned its normal by more than about 2.5°, an anchor pair
+//! came [`CORRELATION_DISTANCE`] apart along it, or the anchors no longer span a quarter of
+//! the new contacts' extent. A kept anchor pulls the two bodies back to where they touched
+//! when it was made. The cache is part of the env's saved state; a reset forgets it. Nothing
+//! here allocates after [`PinchReplica::new`].
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::convex::{box_manifold, BoxShape, ContactPoint, ConvexPart, ManifoldScratch};
@@ -84,12 +89,48 @@ struct Patch {
     start: usize,
     end: usize,
     friction: f64,
-    /// The patch's friction anchors: point indices (count 0..=2).
-    anchors: [usize; 2],
+    /// The jaw part whose contacts these are (its slot in the friction cache), or
+    /// `usize::MAX` for the object's scene contacts (never cached).
+    slot: usize,
+    /// The friction anchors (count 0..=2): on body 0 in its frame, on body 1 in its frame
+    /// (world coordinates for the world).
     anchor_count: usize,
+    anchor0: [Vector3<f64>; 2],
+    anchor1: [Vector3<f64>; 2],
     /// The prep's floor of the accumulated normal impulse.
     min_normal: f64,
+    /// Whether the last pass clamped the patch's friction (PhysX then drops its anchors).
+    broken: bool,
 }
+
+/// A jaw part's friction patch kept from the last step (PhysX's contact cache): its
+/// anchors, normal (in each body's frame) and whether its friction broke.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CachedPatch {
+    /// Anchors kept (0: no patch cached).
+    pub anchor_count: usize,
+    /// The anchors on body 0 (the jaw) and body 1 (the object), in their frames.
+    pub anchor0: [Vector3<f64>; 2],
+    /// See `anchor0`.
+    pub anchor1: [Vector3<f64>; 2],
+    /// The patch normal in body 0's and body 1's frames.
+    pub normal0: Vector3<f64>,
+    /// See `normal0`.
+    pub normal1: Vector3<f64>,
+    /// Whether the friction broke (was clamped) in the step's last pass.
+    pub broken: bool,
+}
+
+/// Values per cached patch in a saved state ([`PinchReplica::save`]).
+pub const CACHED_PATCH_LEN: usize = 2 + 4 * 3 + 2 * 3;
+
+/// PhysX's `frictionCorrelationDistance` (SAPIEN keeps PhysX's default): a cached anchor pair
+/// that has come apart along the normal by more is dropped.
+pub const CORRELATION_DISTANCE: f64 = 0.025;
+/// PhysX's `frictionOffsetThreshold` (default): contacts separated by more make no anchors.
+pub const FRICTION_OFFSET_THRESHOLD: f64 = 0.04;
+/// PhysX's `PXC_SAME_NORMAL`: normals within about 2.5° are the same patch's.
+pub const SAME_NORMAL: f64 = 0.999;
 
 /// One contact point's row data.
 #[derive(Debug, Clone, Copy, Default)]
@@ -107,6 +148,8 @@ struct PointRow {
 struct FrictionRow {
     vel_mult: f64,
     applied: f64,
+    /// The anchors' drift along the row at the start of the step.
+    error: f64,
 }
 
 /// The replica's state and scratch buffers.
@@ -156,6 +199,8 @@ pub struct PinchReplica {
     jbuf: Vec<f64>,
     wbuf: Vec<f64>,
     manifold: ManifoldScratch,
+    /// PhysX's contact cache: per jaw part, the friction patch of the last step.
+    cache: Vec<CachedPatch>,
     /// Whether the last step was taken by the replica.
     active: bool,
 }
@@ -200,6 +245,7 @@ impl PinchReplica {
         let n = dofs.len();
         let nv = model.nv();
         let max_vertices = parts.iter().map(|p| p.2.vertices.len()).max().unwrap_or(8);
+        let n_parts = parts.len();
         Ok(PinchReplica {
             parts,
             object_body,
@@ -234,6 +280,7 @@ impl PinchReplica {
             jbuf: vec![0.0; n],
             wbuf: vec![0.0; n],
             manifold: ManifoldScratch::new(max_vertices),
+            cache: vec![CachedPatch::default(); n_parts],
             active: false,
             dofs,
         })
@@ -264,7 +311,7 @@ impl PinchReplica {
         let (xpos, xmat) = (data.xpos(), data.xmat());
         let mut touching = [false; 2];
         let friction = 0.5 * (GRIPPER_FRICTION + DEFAULT_FRICTION);
-        for (body, side, part) in &self.parts {
+        for (slot, (body, side, part)) in self.parts.iter().enumerate() {
             if self.patches.len() == MAX_PATCHES || self.points.len() + 4 > MAX_POINTS {
                 break;
             }
@@ -287,6 +334,7 @@ impl PinchReplica {
                 start,
                 end: start + added,
                 friction,
+                slot,
                 ..Patch::default()
             });
         }
@@ -344,6 +392,7 @@ impl PinchReplica {
                     start: pair_start,
                     end: pair_start + 1,
                     friction: DEFAULT_FRICTION,
+                    slot: usize::MAX,
                     ..Patch::default()
                 });
             } else {
@@ -352,7 +401,175 @@ impl PinchReplica {
                 break;
             }
         }
+        for pi in 0..self.patches.len() {
+            self.grow_anchors(data, pi);
+        }
         true
+    }
+
+    /// The friction anchors of patch `pi`, as PhysX's `getFrictionPatches`,
+    /// `correlatePatches` and `growPatches` choose them: a jaw part's cached patch is kept
+    /// if its friction did not break, the bodies have not turned its normal by more than
+    /// about 2.5°, no anchor pair has come [`CORRELATION_DISTANCE`] apart along it, the new
+    /// contacts share its normal and (with two anchors) the anchors still span a quarter of
+    /// the contacts' extent; the anchors missing are the contacts farthest apart.
+    fn grow_anchors(&mut self, data: &Data, pi: usize) {
+        let patch = self.patches[pi];
+        let bodies = self.point_bodies[patch.start];
+        let (x0, r0) = body_pose(data, bodies.0);
+        let (x1, r1) = body_pose(data, bodies.1);
+        let normal = self.points[patch.start].normal;
+        let mut kept = 0;
+        let (mut a0, mut a1) = ([Vector3::zeros(); 2], [Vector3::zeros(); 2]);
+        if let Some(c) = self.cache.get(patch.slot) {
+            if c.anchor_count > 0 && !c.broken {
+                let rel = r0.transpose() * r1;
+                let same_normal = c.normal0.dot(&(rel * c.normal1)) > SAME_NORMAL;
+                let close = (0..c.anchor_count).all(|a| {
+                    let p1 = r0.transpose() * (x1 + r1 * c.anchor1[a] - x0);
+                    (c.anchor0[a] - p1).dot(&c.normal0).abs() < CORRELATION_DISTANCE
+                });
+                if same_normal && close && (r0 * c.normal0).dot(&normal) >= SAME_NORMAL {
+                    kept = c.anchor_count;
+                    a0 = c.anchor0;
+                    a1 = c.anchor1;
+                }
+            }
+        }
+        if kept == 2 {
+            let (mut lo, mut hi) = (self.points[patch.start].pos, self.points[patch.start].pos);
+            for p in &self.points[patch.start..patch.end] {
+                lo = lo.inf(&p.pos);
+                hi = hi.sup(&p.pos);
+            }
+            if (a0[0] - a0[1]).norm_squared() * 4.0 < (hi - lo).norm_squared() {
+                kept = 0;
+            }
+        }
+        if kept < 2 {
+            let mut world = [Vector3::zeros(); 2];
+            let mut count = 0;
+            if kept == 1 {
+                world[0] = x0 + r0 * a0[0];
+                count = 1;
+            }
+            let mut dist = 0.0;
+            for p in &self.points[patch.start..patch.end] {
+                if p.separation >= FRICTION_OFFSET_THRESHOLD {
+                    continue;
+                }
+                match count {
+                    0 => {
+                        world[0] = p.pos;
+                        count = 1;
+                    }
+                    1 => {
+                        let d = (p.pos - world[0]).norm_squared();
+                        if d > 1e-8 {
+                            world[1] = p.pos;
+                            count = 2;
+                            dist = d;
+                        }
+                    }
+                    _ => {
+                        let d0 = (p.pos - world[0]).norm_squared();
+                        let d1 = (p.pos - world[1]).norm_squared();
+                        if d0 > d1 {
+                            if d0 > dist {
+                                world[1] = p.pos;
+                                dist = d0;
+                            }
+                        } else if d1 > dist {
+                            world[0] = p.pos;
+                            dist = d1;
+                        }
+                    }
+                }
+            }
+            for j in kept..count {
+                a0[j] = r0.transpose() * (world[j] - x0);
+                a1[j] = r1.transpose() * (world[j] - x1);
+            }
+            kept = count;
+        }
+        let p = &mut self.patches[pi];
+        p.anchor_count = kept;
+        p.anchor0 = a0;
+        p.anchor1 = a1;
+    }
+
+    /// Keeps this step's jaw patches for the next (PhysX's contact cache) and forgets the
+    /// parts that made none.
+    fn store_cache(&mut self, data: &Data) {
+        for c in &mut self.cache {
+            *c = CachedPatch::default();
+        }
+        for p in &self.patches {
+            if p.slot == usize::MAX || p.anchor_count == 0 {
+                continue;
+            }
+            let bodies = self.point_bodies[p.start];
+            let (_, r0) = body_pose(data, bodies.0);
+            let (_, r1) = body_pose(data, bodies.1);
+            let n = self.points[p.start].normal;
+            self.cache[p.slot] = CachedPatch {
+                anchor_count: p.anchor_count,
+                anchor0: p.anchor0,
+                anchor1: p.anchor1,
+                normal0: r0.transpose() * n,
+                normal1: r1.transpose() * n,
+                broken: p.broken,
+            };
+        }
+    }
+
+    /// Forgets the contact cache (a reset, a restored state without one).
+    pub fn forget_contacts(&mut self) {
+        for c in &mut self.cache {
+            *c = CachedPatch::default();
+        }
+    }
+
+    /// Appends the contact cache to `out` ([`CACHED_PATCH_LEN`] values per jaw part).
+    pub fn save(&self, out: &mut Vec<f64>) {
+        for c in &self.cache {
+            out.push(c.anchor_count as f64);
+            out.push(if c.broken { 1.0 } else { 0.0 });
+            for v in c
+                .anchor0
+                .iter()
+                .chain(&c.anchor1)
+                .chain([&c.normal0, &c.normal1])
+            {
+                out.extend(v.iter());
+            }
+        }
+    }
+
+    /// Values [`PinchReplica::save`] appends.
+    pub fn save_len(&self) -> usize {
+        self.cache.len() * CACHED_PATCH_LEN
+    }
+
+    /// Restores the contact cache from [`PinchReplica::save`]'s values (`save_len` of them,
+    /// checked by the caller); an anchor count outside 0..=2 or a non-finite value forgets it.
+    pub fn load(&mut self, s: &[f64]) {
+        for (c, v) in self.cache.iter_mut().zip(s.chunks_exact(CACHED_PATCH_LEN)) {
+            let vec = |k: usize| Vector3::new(v[2 + 3 * k], v[3 + 3 * k], v[4 + 3 * k]);
+            let count = v[0];
+            *c = if v.iter().all(|x| x.is_finite()) && [0.0, 1.0, 2.0].contains(&count) {
+                CachedPatch {
+                    anchor_count: count as usize,
+                    broken: v[1] != 0.0,
+                    anchor0: [vec(0), vec(1)],
+                    anchor1: [vec(2), vec(3)],
+                    normal0: vec(4),
+                    normal1: vec(5),
+                }
+            } else {
+                CachedPatch::default()
+            };
+        }
     }
 
     /// Takes one PhysX step of length `dt` from the state of `data` (after
@@ -425,6 +642,7 @@ impl PinchReplica {
         }
         // The velocity iteration.
         self.solve_contacts(true, h);
+        self.store_cache(data);
         // The new positions.
         self.qpos_new[..qpos.len()].copy_from_slice(qpos);
         self.qvel_global.fill(0.0);
@@ -456,6 +674,7 @@ impl PinchReplica {
     /// Marks the replica idle for a step MuJoCo takes alone.
     pub fn idle(&mut self) {
         self.active = false;
+        self.forget_contacts();
     }
 
     /// The Jacobian row `dir · (J₀(p) − J₁(p))` over the local dofs into `out`.
@@ -472,6 +691,41 @@ impl PinchReplica {
         data.jac_point(bodies.0, pt, &mut self.jacp0, &mut self.jacr0);
         if bodies.1 != usize::MAX {
             data.jac_point(bodies.1, pt, &mut self.jacp1, &mut self.jacr1);
+        } else {
+            self.jacp1.fill(0.0);
+        }
+        for (a, &d) in self.dofs.iter().enumerate() {
+            out[a] = (0..3)
+                .map(|r| dir[r] * (self.jacp0[r * nv + d] - self.jacp1[r * nv + d]))
+                .sum();
+        }
+    }
+
+    /// The Jacobian row `dir · (J₀(p₀) − J₁(p₁))` over the local dofs into `out`: body 0's
+    /// point `p0` against body 1's `p1`.
+    fn row2(
+        &mut self,
+        data: &Data,
+        p0: &Vector3<f64>,
+        p1: &Vector3<f64>,
+        bodies: (usize, usize),
+        dir: &Vector3<f64>,
+        out: &mut [f64],
+    ) {
+        let nv = data.model().nv();
+        data.jac_point(
+            bodies.0,
+            [p0.x, p0.y, p0.z],
+            &mut self.jacp0,
+            &mut self.jacr0,
+        );
+        if bodies.1 != usize::MAX {
+            data.jac_point(
+                bodies.1,
+                [p1.x, p1.y, p1.z],
+                &mut self.jacp1,
+                &mut self.jacr1,
+            );
         } else {
             self.jacp1.fill(0.0);
         }
@@ -540,37 +794,12 @@ impl PinchReplica {
                 floor += ((-pen_inv - vrel) * self.rows[i].recip).max(0.0);
             }
             let count = (patch.end - patch.start) as f64;
-            // growPatches: the first point, then the point farthest from the anchors.
-            let mut anchors = [patch.start, patch.start];
-            let mut count_a = 1;
-            let mut best = 0.0;
-            for i in patch.start + 1..patch.end {
-                let d = (self.points[i].pos - self.points[anchors[0]].pos).norm_squared();
-                if count_a == 1 {
-                    if d > 1e-8 {
-                        anchors[1] = i;
-                        count_a = 2;
-                        best = d;
-                    }
-                } else {
-                    let d1 = (self.points[i].pos - self.points[anchors[1]].pos).norm_squared();
-                    if d > d1 {
-                        if d > best {
-                            anchors[1] = i;
-                            best = d;
-                        }
-                    } else if d1 > best {
-                        anchors[0] = i;
-                        best = d1;
-                    }
-                }
-            }
             let p = &mut self.patches[pi];
             p.min_normal = floor / count * 0.25;
-            p.anchors = anchors;
-            p.anchor_count = count_a;
+            p.broken = false;
+            let (anchor_count, anchor0, anchor1) = (p.anchor_count, p.anchor0, p.anchor1);
             // Two tangent directions per anchor, from the bodies' relative velocity.
-            let i0 = p.start;
+            let i0 = patch.start;
             let normal = self.points[i0].normal;
             let bodies = self.point_bodies[i0];
             let (lin0, lin1) = (body_linear(data, bodies.0), body_linear(data, bodies.1));
@@ -585,11 +814,13 @@ impl PinchReplica {
             }
             let t0 = t0.normalize();
             let t1 = normal.cross(&t0);
-            for (a, &anchor) in anchors.iter().enumerate().take(count_a) {
-                let pos = self.points[anchor].pos;
+            let (x0, r0) = body_pose(data, bodies.0);
+            let (x1, r1) = body_pose(data, bodies.1);
+            for a in 0..anchor_count {
+                let (p0, p1) = (x0 + r0 * anchor0[a], x1 + r1 * anchor1[a]);
                 for (k, t) in [t0, t1].iter().enumerate() {
                     let r = pi * 4 + a * 2 + k;
-                    self.row(data, &pos, bodies, t, &mut j);
+                    self.row2(data, &p0, &p1, bodies, t, &mut j);
                     let resp = self.response(&j, &mut w);
                     self.j_t[r * n..(r + 1) * n].copy_from_slice(&j);
                     self.w_t[r * n..(r + 1) * n].copy_from_slice(&w[..n]);
@@ -600,6 +831,7 @@ impl PinchReplica {
                             0.0
                         },
                         applied: 0.0,
+                        error: (p0 - p1).dot(t),
                     };
                 }
             }
@@ -641,6 +873,7 @@ impl PinchReplica {
                 axpy(&mut self.v, &self.w_n[i * n..(i + 1) * n], delta);
             }
             let normal = normal_sum.max(patch.min_normal);
+            // PhysX's improved patch friction: two anchors share the patch's cone.
             let scale = if patch.anchor_count == 2 { 0.5 } else { 1.0 };
             let limit = patch.friction * normal * scale;
             for a in 0..patch.anchor_count {
@@ -649,17 +882,21 @@ impl PinchReplica {
                 for (k, t) in total.iter_mut().enumerate() {
                     let r = r0 + k;
                     let jt = &self.j_t[r * n..(r + 1) * n];
-                    let err = dot(jt, &self.dq);
+                    let err = self.frows[r].error + dot(jt, &self.dq);
                     let vel = dot(jt, &self.v);
                     let bias = err * FRICTION_BIAS / h;
                     *t = self.frows[r].applied - self.frows[r].vel_mult * (vel + bias);
                 }
                 let mag = (total[0] * total[0] + total[1] * total[1]).sqrt();
-                let ratio = if mag > limit && mag > 0.0 {
+                let clamped = mag > limit;
+                let ratio = if clamped && mag > 0.0 {
                     limit / mag
                 } else {
                     1.0
                 };
+                if velocity_iteration {
+                    self.patches[pi].broken |= clamped;
+                }
                 for (k, t) in total.iter().enumerate() {
                     let r = r0 + k;
                     let new = t * ratio;
@@ -682,6 +919,18 @@ fn axpy(v: &mut [f64], w: &[f64], s: f64) {
     for (x, y) in v.iter_mut().zip(w) {
         *x += y * s;
     }
+}
+
+/// A body's frame in the world (the identity for the world, `usize::MAX`).
+fn body_pose(data: &Data, body: usize) -> (Vector3<f64>, Matrix3<f64>) {
+    if body == usize::MAX {
+        return (Vector3::zeros(), Matrix3::identity());
+    }
+    let (x, m) = (data.xpos(), data.xmat());
+    (
+        Vector3::new(x[3 * body], x[3 * body + 1], x[3 * body + 2]),
+        mat3(&m[9 * body..9 * body + 9]),
+    )
 }
 
 /// A body's linear velocity at its centre of mass (zero for the world).

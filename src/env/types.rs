@@ -78,7 +78,8 @@ pub struct EnvState {
     pub physics: Vec<f64>,
     /// Controller targets, then the drives' state: their targets and, for the SO100, its
     /// jaw's release counters, for a robot whose gripper moves a linkage (WidowX AI, xArm6)
-    /// whether its arm took the pinch's kick (`Drives::save`).
+    /// whether its arm took the pinch's kick, and with `pinch_solver = "physx_tgs"` the
+    /// replica's contact cache (`Drives::save`).
     pub controller: Vec<f64>,
     /// Steps since reset.
     pub elapsed_steps: u32,
