@@ -57,8 +57,8 @@ pub(crate) mod tasks;
 mod tests;
 
 pub use controllers::convex;
-pub use controllers::tgs;
 pub use controllers::desc::RobotError as UrdfError;
+pub use controllers::tgs;
 pub use controllers::{ControlMode, ControllerError, Drives};
 pub use env::checks::MAX_SEED;
 pub use env::vec::MAX_NUM_ENVS;

@@ -49,14 +49,22 @@ fn the_replica_takes_the_pinched_steps_only() {
         PinchSolver::PhysxTgs,
     );
     let (active, _) = solver_episode(&mut env, 5000);
-    let first = active.iter().position(|&a| a).expect("the solver pinches the cube");
+    let first = active
+        .iter()
+        .position(|&a| a)
+        .expect("the solver pinches the cube");
     // Reaching and closing come first, MuJoCo's steps.
     assert!(first >= 5, "the replica took step {first}");
     // Once the cube is held it stays held to the goal.
     let held = active.iter().filter(|&&a| a).count();
     assert!(held >= 25, "{held} of 50 steps pinched: {active:?}");
     // The default env never takes them.
-    let mut plain = make("PickCubeSO100-v1", "so100", "pd_joint_pos", PinchSolver::Mujoco);
+    let mut plain = make(
+        "PickCubeSO100-v1",
+        "so100",
+        "pd_joint_pos",
+        PinchSolver::Mujoco,
+    );
     let (active, _) = solver_episode(&mut plain, 5000);
     assert!(active.iter().all(|&a| !a));
 }
@@ -132,7 +140,10 @@ fn robots_without_convex_parts_and_unknown_solvers_are_refused() {
         "{e}"
     );
     let e = PinchSolver::parse("physx").unwrap_err().to_string();
-    assert!(e.contains("\"physx\"") && e.contains("mujoco, physx_tgs"), "{e}");
+    assert!(
+        e.contains("\"physx\"") && e.contains("mujoco, physx_tgs"),
+        "{e}"
+    );
     assert_eq!(PinchSolver::parse("physx_tgs").unwrap().name(), "physx_tgs");
     // A corrupt cache in a saved state is refused, naming the value.
     let mut env = make(
@@ -163,7 +174,8 @@ const MUJOCO_HELD_STEP_AT_LEAST: f64 = 0.008;
 #[test]
 fn held_so100_arm_stalls_where_physx_does() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_so100_pinch.json");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     let cases = v["cases"].as_array().unwrap();
     assert!(cases.len() >= 20, "{} cases", cases.len());
     let mut medians = Vec::new();
@@ -201,7 +213,11 @@ fn held_so100_arm_stalls_where_physx_does() {
         "held one-step arm error, median: replica {:.2e} rad, MuJoCo {:.2e} rad",
         medians[0], medians[1]
     );
-    assert!(medians[0] <= REPLICA_HELD_STEP, "replica: {:.2e}", medians[0]);
+    assert!(
+        medians[0] <= REPLICA_HELD_STEP,
+        "replica: {:.2e}",
+        medians[0]
+    );
     assert!(
         medians[1] >= MUJOCO_HELD_STEP_AT_LEAST,
         "MuJoCo: {:.2e}",

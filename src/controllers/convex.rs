@@ -248,13 +248,15 @@ impl ManifoldScratch {
 }
 
 /// The contact manifold of `part` (posed by the link's world position `pos` and rotation
-/// `rot`) against `bx`: at most [`MAX_MANIFOLD_POINTS`] points, appended to `out` (which is
-/// not cleared). Returns how many were added.
+/// `rot`) against `bx`: at most [`MAX_MANIFOLD_POINTS`] points separated by at most
+/// `max_separation` ([`SPECULATIVE_DISTANCE`] as PhysX), appended to `out` (which is not
+/// cleared). Returns how many were added.
 pub fn box_manifold(
     part: &ConvexPart,
     pos: &Vector3<f64>,
     rot: &Matrix3<f64>,
     bx: &BoxShape,
+    max_separation: f64,
     scratch: &mut ManifoldScratch,
     out: &mut Vec<ContactPoint>,
 ) -> usize {
@@ -298,7 +300,7 @@ pub fn box_manifold(
     let Some((box_ref, index, sign)) = best else {
         return 0;
     };
-    if best_sep > SPECULATIVE_DISTANCE {
+    if best_sep > max_separation {
         return 0;
     }
     s.points.clear();
@@ -328,7 +330,7 @@ pub fn box_manifold(
         }
         for p in &s.poly {
             let sep = n.dot(&(p - bx.center)) - bx.half[index];
-            if sep <= SPECULATIVE_DISTANCE {
+            if sep <= max_separation {
                 s.points.push(ContactPoint {
                     pos: *p,
                     normal: n,
@@ -365,7 +367,7 @@ pub fn box_manifold(
         }
         for p in &s.poly {
             let sep = m.dot(p) - d;
-            if sep <= SPECULATIVE_DISTANCE {
+            if sep <= max_separation {
                 s.points.push(ContactPoint {
                     pos: *p,
                     normal: -m,
@@ -517,7 +519,15 @@ mod tests {
         let pos = Vector3::new(0.02 + 0.005 - 0.001, 0.0, 0.0);
         let mut out = Vec::new();
         let mut s = ManifoldScratch::new(8);
-        let n = box_manifold(&part, &pos, &Matrix3::identity(), &bx, &mut s, &mut out);
+        let n = box_manifold(
+            &part,
+            &pos,
+            &Matrix3::identity(),
+            &bx,
+            SPECULATIVE_DISTANCE,
+            &mut s,
+            &mut out,
+        );
         assert_eq!(n, 4);
         for c in &out {
             assert!((c.separation + 0.001).abs() < 1e-12, "{c:?}");
@@ -534,7 +544,15 @@ mod tests {
         let pos = Vector3::new(0.02 + 0.01 - 0.0005, 0.02, 0.0);
         let mut out = Vec::new();
         let mut s = ManifoldScratch::new(8);
-        box_manifold(&part, &pos, &Matrix3::identity(), &bx, &mut s, &mut out);
+        box_manifold(
+            &part,
+            &pos,
+            &Matrix3::identity(),
+            &bx,
+            SPECULATIVE_DISTANCE,
+            &mut s,
+            &mut out,
+        );
         assert_eq!(out.len(), 4);
         assert!(out
             .iter()
@@ -553,6 +571,7 @@ mod tests {
             &pos,
             &Matrix3::identity(),
             &unit_box(),
+            SPECULATIVE_DISTANCE,
             &mut s,
             &mut out,
         );
@@ -564,10 +583,24 @@ mod tests {
             &pos,
             &Matrix3::identity(),
             &unit_box(),
+            SPECULATIVE_DISTANCE,
             &mut s,
             &mut out,
         );
         assert!(!out.is_empty() && out.iter().all(|c| (c.separation - 0.001).abs() < 1e-12));
+        // A larger reach takes the farther part too.
+        let pos = Vector3::new(0.02 + 0.01 + 0.003, 0.0, 0.0);
+        out.clear();
+        let n = box_manifold(
+            &part,
+            &pos,
+            &Matrix3::identity(),
+            &unit_box(),
+            0.004,
+            &mut s,
+            &mut out,
+        );
+        assert_eq!(n, 4);
     }
 
     #[test]
@@ -577,7 +610,15 @@ mod tests {
         let pos = Vector3::new(0.02 + 0.01, 0.0, 0.0);
         let mut out = Vec::new();
         let mut s = ManifoldScratch::new(8);
-        box_manifold(&part, &pos, &rot, &unit_box(), &mut s, &mut out);
+        box_manifold(
+            &part,
+            &pos,
+            &rot,
+            &unit_box(),
+            SPECULATIVE_DISTANCE,
+            &mut s,
+            &mut out,
+        );
         assert!(!out.is_empty() && out.len() <= MAX_MANIFOLD_POINTS);
         let deepest = out
             .iter()

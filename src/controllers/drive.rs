@@ -371,6 +371,12 @@ impl Drives {
         Ok(())
     }
 
+    /// The net contact force (world frame) the pinched object exerted on `body` in the last
+    /// physics step, where the pinch replica took it (`None` otherwise).
+    pub fn pinch_contact_force(&self, body: usize, dt: f64) -> Option<[f64; 3]> {
+        self.pinch.as_ref().and_then(|p| p.contact_force(body, dt))
+    }
+
     /// Whether the last physics step was taken by the pinch replica.
     pub fn pinch_replica_active(&self) -> bool {
         self.pinch.as_ref().is_some_and(|p| p.active())

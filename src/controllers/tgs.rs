@@ -41,7 +41,9 @@
 //! here allocates after [`PinchReplica::new`].
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
-use super::convex::{box_manifold, BoxShape, ContactPoint, ConvexPart, ManifoldScratch};
+use super::convex::{
+    box_manifold, BoxShape, ContactPoint, ConvexPart, ManifoldScratch, SPECULATIVE_DISTANCE,
+};
 use crate::mujoco::{Data, Model};
 
 /// PhysX TGS position iterations per step (ManiSkill's `solver_position_iterations`).
@@ -60,6 +62,9 @@ pub const CFM_SCALE: f64 = 0.025;
 pub const GRIPPER_FRICTION: f64 = 2.0;
 /// The default material's friction (every other shape).
 pub const DEFAULT_FRICTION: f64 = 0.3;
+/// ManiSkill's `patch_radius` and `min_patch_radius` of the gripper pads (m): the lever of
+/// PhysX's torsional friction on a patch with one anchor.
+pub const PATCH_RADIUS: f64 = 0.1;
 /// Most contact points the replica solves in one step (the jaws' parts make at most four
 /// each; the object's scene contacts fill the rest).
 pub const MAX_POINTS: usize = 48;
@@ -99,6 +104,10 @@ struct Patch {
     anchor1: [Vector3<f64>; 2],
     /// The prep's floor of the accumulated normal impulse.
     min_normal: f64,
+    /// The softening of its rows (the articulation link's CFM).
+    cfm: f64,
+    /// The torsional friction's lever (m; 0: none).
+    torsion: f64,
     /// Whether the last pass clamped the patch's friction (PhysX then drops its anchors).
     broken: bool,
 }
@@ -146,6 +155,8 @@ struct PointRow {
 /// One friction row (a tangent direction at an anchor).
 #[derive(Debug, Clone, Copy, Default)]
 struct FrictionRow {
+    /// The row's direction (world).
+    dir: Vector3<f64>,
     vel_mult: f64,
     applied: f64,
     /// The anchors' drift along the row at the start of the step.
@@ -319,7 +330,15 @@ impl PinchReplica {
             let pos = Vector3::new(xpos[3 * b], xpos[3 * b + 1], xpos[3 * b + 2]);
             let rot = mat3(&xmat[9 * b..9 * b + 9]);
             let start = self.points.len();
-            let added = box_manifold(part, &pos, &rot, &bx, &mut self.manifold, &mut self.points);
+            let added = box_manifold(
+                part,
+                &pos,
+                &rot,
+                &bx,
+                SPECULATIVE_DISTANCE,
+                &mut self.manifold,
+                &mut self.points,
+            );
             if added == 0 {
                 continue;
             }
@@ -590,10 +609,21 @@ impl PinchReplica {
                     self.full_m[da * nv + db] - if a == b { arm[da] } else { 0.0 };
             }
         }
-        self.minv.copy_from(&self.m_local);
-        if !self.minv.try_inverse_mut() {
-            self.active = false;
-            return;
+        // M⁻¹ by Cholesky, in the buffers made by `new` (the factor takes `m_local`'s
+        // storage and gives it back).
+        let m = std::mem::replace(&mut self.m_local, DMatrix::zeros(0, 0));
+        match nalgebra::Cholesky::new(m) {
+            Some(chol) => {
+                self.minv.fill_with_identity();
+                chol.solve_mut(&mut self.minv);
+                self.m_local = chol.unpack();
+            }
+            None => {
+                // Not positive definite (a degenerate model): MuJoCo keeps the step.
+                self.m_local = DMatrix::zeros(n, n);
+                self.active = false;
+                return;
+            }
         }
         let (passive, bias, qvel, qpos) = (
             data.qfrc_passive(),
@@ -671,6 +701,30 @@ impl PinchReplica {
         }
     }
 
+    /// The net contact force (world frame, N) the object exerted on `body` over the last
+    /// step, if the replica took it: the accumulated normal and friction impulses of the
+    /// body's jaw patches over the step's length, as PhysX reports contact forces.
+    pub fn contact_force(&self, body: usize, dt: f64) -> Option<[f64; 3]> {
+        if !self.active {
+            return None;
+        }
+        let mut f = Vector3::zeros();
+        for (pi, p) in self.patches.iter().enumerate() {
+            if self.point_bodies[p.start] != (body, self.object_body) {
+                continue;
+            }
+            for i in p.start..p.end {
+                f += self.points[i].normal * self.rows[i].applied;
+            }
+            for k in 0..2 * p.anchor_count {
+                let r = &self.frows[pi * 4 + k];
+                f += r.dir * r.applied;
+            }
+        }
+        f /= dt;
+        Some([f.x, f.y, f.z])
+    }
+
     /// Marks the replica idle for a step MuJoCo takes alone.
     pub fn idle(&mut self) {
         self.active = false;
@@ -736,6 +790,28 @@ impl PinchReplica {
         }
     }
 
+    /// The angular row `dir · (ω₀ − ω₁)` over the local dofs into `out`.
+    fn angular_row(
+        &mut self,
+        data: &Data,
+        bodies: (usize, usize),
+        dir: &Vector3<f64>,
+        out: &mut [f64],
+    ) {
+        let nv = data.model().nv();
+        data.jac_point(bodies.0, [0.0; 3], &mut self.jacp0, &mut self.jacr0);
+        if bodies.1 != usize::MAX {
+            data.jac_point(bodies.1, [0.0; 3], &mut self.jacp1, &mut self.jacr1);
+        } else {
+            self.jacr1.fill(0.0);
+        }
+        for (a, &d) in self.dofs.iter().enumerate() {
+            out[a] = (0..3)
+                .map(|r| dir[r] * (self.jacr0[r * nv + d] - self.jacr1[r * nv + d]))
+                .sum();
+        }
+    }
+
     /// The contact rows of this step: Jacobians, responses, biases, and the anchors.
     fn prepare_rows(&mut self, data: &Data, h: f64, dt: f64) {
         let n = self.dofs.len();
@@ -764,25 +840,35 @@ impl PinchReplica {
         };
         let mut j = std::mem::take(&mut self.jbuf);
         let mut w = std::mem::take(&mut self.wbuf);
-        for i in 0..self.points.len() {
-            let p = self.points[i];
-            let bodies = self.point_bodies[i];
-            self.row(data, &p.pos, bodies, &p.normal, &mut j);
-            let resp = self.response(&j, &mut w);
-            self.j_n[i * n..(i + 1) * n].copy_from_slice(&j);
-            self.w_n[i * n..(i + 1) * n].copy_from_slice(&w[..n]);
-            let cfm = cfm_of(self, bodies.0).max(cfm_of(self, bodies.1));
-            let recip = if resp > 0.0 { 1.0 / (resp + cfm) } else { 0.0 };
-            self.rows.push(PointRow {
-                separation: p.separation,
-                bias_coef: if p.separation > 0.0 {
-                    -1.0 / h
-                } else {
-                    -coef / h
-                },
-                recip,
-                applied: 0.0,
-            });
+        for pi in 0..self.patches.len() {
+            let bodies = self.point_bodies[self.patches[pi].start];
+            self.patches[pi].cfm = cfm_of(self, bodies.0).max(cfm_of(self, bodies.1));
+        }
+        for pi in 0..self.patches.len() {
+            let (start, end, cfm) = (
+                self.patches[pi].start,
+                self.patches[pi].end,
+                self.patches[pi].cfm,
+            );
+            for i in start..end {
+                let p = self.points[i];
+                let bodies = self.point_bodies[i];
+                self.row(data, &p.pos, bodies, &p.normal, &mut j);
+                let resp = self.response(&j, &mut w);
+                self.j_n[i * n..(i + 1) * n].copy_from_slice(&j);
+                self.w_n[i * n..(i + 1) * n].copy_from_slice(&w[..n]);
+                let recip = if resp > 0.0 { 1.0 / (resp + cfm) } else { 0.0 };
+                self.rows.push(PointRow {
+                    separation: p.separation,
+                    bias_coef: if p.separation > 0.0 {
+                        -1.0 / h
+                    } else {
+                        -coef / h
+                    },
+                    recip,
+                    applied: 0.0,
+                });
+            }
         }
         // Anchors and the prep's normal-impulse floor, per patch.
         for pi in 0..self.patches.len() {
@@ -825,8 +911,9 @@ impl PinchReplica {
                     self.j_t[r * n..(r + 1) * n].copy_from_slice(&j);
                     self.w_t[r * n..(r + 1) * n].copy_from_slice(&w[..n]);
                     self.frows[r] = FrictionRow {
+                        dir: *t,
                         vel_mult: if resp > f64::EPSILON {
-                            coef / resp
+                            coef / (resp + patch.cfm)
                         } else {
                             0.0
                         },
@@ -834,6 +921,36 @@ impl PinchReplica {
                         error: (p0 - p1).dot(t),
                     };
                 }
+            }
+            // PhysX's torsional friction on a one-anchor patch of a gripper pad (ManiSkill's
+            // `patch_radius` and `min_patch_radius`): the bodies' relative turn about the
+            // normal, within the cone times the patch radius.
+            let torsion = if anchor_count == 1 && patch.slot != usize::MAX {
+                let deepest = self.points[patch.start..patch.end]
+                    .iter()
+                    .map(|p| p.separation)
+                    .fold(0.0, f64::min);
+                PATCH_RADIUS.max((-deepest * PATCH_RADIUS).sqrt())
+            } else {
+                0.0
+            };
+            self.patches[pi].torsion = torsion;
+            if torsion > 0.0 {
+                let r = pi * 4 + 2;
+                self.angular_row(data, bodies, &normal, &mut j);
+                let resp = self.response(&j, &mut w);
+                self.j_t[r * n..(r + 1) * n].copy_from_slice(&j);
+                self.w_t[r * n..(r + 1) * n].copy_from_slice(&w[..n]);
+                self.frows[r] = FrictionRow {
+                    dir: Vector3::zeros(),
+                    vel_mult: if resp > f64::EPSILON {
+                        coef / (resp + patch.cfm)
+                    } else {
+                        0.0
+                    },
+                    applied: 0.0,
+                    error: 0.0,
+                };
             }
         }
         self.jbuf = j;
@@ -904,6 +1021,24 @@ impl PinchReplica {
                     self.frows[r].applied = new;
                     axpy(&mut self.v, &self.w_t[r * n..(r + 1) * n], delta);
                 }
+            }
+            if patch.torsion > 0.0 {
+                let r = pi * 4 + 2;
+                let jt = &self.j_t[r * n..(r + 1) * n];
+                let total = self.frows[r].applied - self.frows[r].vel_mult * dot(jt, &self.v);
+                let limit = patch.friction * normal * patch.torsion;
+                let clamped = total.abs() > limit;
+                let new = if clamped {
+                    total.clamp(-limit, limit)
+                } else {
+                    total
+                };
+                if velocity_iteration {
+                    self.patches[pi].broken |= clamped;
+                }
+                let delta = new - self.frows[r].applied;
+                self.frows[r].applied = new;
+                axpy(&mut self.v, &self.w_t[r * n..(r + 1) * n], delta);
             }
         }
     }

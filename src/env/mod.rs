@@ -634,6 +634,16 @@ impl Env {
             self.sim.task.grasp_object(),
             &mut self.sim.finger_forces,
         );
+        // Where PhysX's step replica took the last physics step, the fingers' forces are its
+        // contact impulses (MuJoCo's contacts did not move the robot or the object).
+        if let Some(fingers) = self.sim.robot.fingers {
+            let dt = self.sim.data.model().timestep();
+            for (k, f) in fingers.iter().enumerate() {
+                if let Some(force) = self.sim.drives.pinch_contact_force(f.index(), dt) {
+                    self.sim.finger_forces[k] = force;
+                }
+            }
+        }
         self.info.reconfigure = None;
         self.info.warnings = self.sim.data.warnings();
         self.sim.data.clear_warnings();
