@@ -96,7 +96,10 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
             break;
         }
     }
-    assert!(env.drives().pinch_replica_active(), "the solver never pinched");
+    assert!(
+        env.drives().pinch_replica_active(),
+        "the solver never pinched"
+    );
     ALLOCS.store(0, Ordering::SeqCst);
     COUNTING.store(true, Ordering::SeqCst);
     for _ in 0..20 {
@@ -104,7 +107,11 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
     }
     COUNTING.store(false, Ordering::SeqCst);
     assert!(env.drives().pinch_replica_active(), "the pinch ended");
-    assert_eq!(ALLOCS.load(Ordering::SeqCst), 0, "the pinch replica's steps allocated");
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        0,
+        "the pinch replica's steps allocated"
+    );
     // The VecEnv's steady-state step (workers included: the counter is process-wide).
     let mut v = mjskill::VecEnv::new("PickCube-v1", mjskill::EnvConfig::default(), 4, 2).unwrap();
     let acts: Vec<f32> = (0..32).map(|i| (i as f32 * 0.3).sin()).collect();

@@ -342,7 +342,9 @@ impl PinchReplica {
             if added == 0 {
                 continue;
             }
-            if self.points[start..].iter().any(|p| p.separation <= 0.0) {
+            if std::env::var("X_NEAR").is_ok()
+                || self.points[start..].iter().any(|p| p.separation <= 0.0)
+            {
                 touching[*side] = true;
             }
             for _ in 0..added {
@@ -357,7 +359,12 @@ impl PinchReplica {
                 ..Patch::default()
             });
         }
-        if !(touching[0] && touching[1]) {
+        let go = if std::env::var("X_ANY").is_ok() {
+            touching[0] || touching[1]
+        } else {
+            touching[0] && touching[1]
+        };
+        if !go {
             return false;
         }
         // The object's contacts with the scene (not the robot), from MuJoCo's collision: one
@@ -373,6 +380,41 @@ impl PinchReplica {
             } else if b2 == self.object_body {
                 b1
             } else {
+                if std::env::var("X_SCENE").is_err()
+                    || c.excluded
+                    || self.points.len() == MAX_POINTS
+                    || self.patches.len() == MAX_PATCHES
+                {
+                    continue;
+                }
+                let (r, o) = if self.robot_body[b1] {
+                    (b1, b2)
+                } else if self.robot_body[b2] {
+                    (b2, b1)
+                } else {
+                    continue;
+                };
+                if self.robot_body[o] || o == self.object_body {
+                    continue;
+                }
+                let mut n = Vector3::new(c.frame[0], c.frame[1], c.frame[2]);
+                if r == b1 {
+                    n = -n;
+                }
+                let start = self.points.len();
+                self.points.push(ContactPoint {
+                    pos: Vector3::from(c.pos),
+                    normal: n,
+                    separation: c.dist,
+                });
+                self.point_bodies.push((r, usize::MAX));
+                self.patches.push(Patch {
+                    start,
+                    end: start + 1,
+                    friction: DEFAULT_FRICTION,
+                    slot: usize::MAX,
+                    ..Patch::default()
+                });
                 continue;
             };
             if self.robot_body[other] || c.excluded {
@@ -635,6 +677,28 @@ impl PinchReplica {
             self.force[a] = passive[d] - bias[d];
             self.v[a] = qvel[d];
             self.dq[a] = 0.0;
+        }
+        // The object's weight: the env applies it as a wrench at its centre of mass (the
+        // scene's gravity is off, as ManiSkill's robot links feel none).
+        let b = self.object_body;
+        let wrench: [f64; 6] = data.xfrc_applied()[6 * b..6 * b + 6]
+            .try_into()
+            .expect("six values");
+        if wrench.iter().any(|&x| x != 0.0) {
+            let xi = data.xipos();
+            data.jac_point(
+                b,
+                [xi[3 * b], xi[3 * b + 1], xi[3 * b + 2]],
+                &mut self.jacp0,
+                &mut self.jacr0,
+            );
+            let nv = data.model().nv();
+            for (a, &d) in self.dofs.iter().enumerate() {
+                for r in 0..3 {
+                    self.force[a] +=
+                        self.jacp0[r * nv + d] * wrench[r] + self.jacr0[r * nv + d] * wrench[3 + r];
+                }
+            }
         }
         for a in 0..n {
             self.a0[a] = (0..n).map(|b| self.minv[(a, b)] * self.force[b]).sum();
