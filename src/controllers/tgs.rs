@@ -342,9 +342,7 @@ impl PinchReplica {
             if added == 0 {
                 continue;
             }
-            if std::env::var("X_NEAR").is_ok()
-                || self.points[start..].iter().any(|p| p.separation <= 0.0)
-            {
+            if self.points[start..].iter().any(|p| p.separation <= 0.0) {
                 touching[*side] = true;
             }
             for _ in 0..added {
@@ -359,12 +357,7 @@ impl PinchReplica {
                 ..Patch::default()
             });
         }
-        let go = if std::env::var("X_ANY").is_ok() {
-            touching[0] || touching[1]
-        } else {
-            touching[0] && touching[1]
-        };
-        if !go {
+        if !(touching[0] && touching[1]) {
             return false;
         }
         // The object's contacts with the scene (not the robot), from MuJoCo's collision: one
@@ -380,41 +373,6 @@ impl PinchReplica {
             } else if b2 == self.object_body {
                 b1
             } else {
-                if std::env::var("X_SCENE").is_err()
-                    || c.excluded
-                    || self.points.len() == MAX_POINTS
-                    || self.patches.len() == MAX_PATCHES
-                {
-                    continue;
-                }
-                let (r, o) = if self.robot_body[b1] {
-                    (b1, b2)
-                } else if self.robot_body[b2] {
-                    (b2, b1)
-                } else {
-                    continue;
-                };
-                if self.robot_body[o] || o == self.object_body {
-                    continue;
-                }
-                let mut n = Vector3::new(c.frame[0], c.frame[1], c.frame[2]);
-                if r == b1 {
-                    n = -n;
-                }
-                let start = self.points.len();
-                self.points.push(ContactPoint {
-                    pos: Vector3::from(c.pos),
-                    normal: n,
-                    separation: c.dist,
-                });
-                self.point_bodies.push((r, usize::MAX));
-                self.patches.push(Patch {
-                    start,
-                    end: start + 1,
-                    friction: DEFAULT_FRICTION,
-                    slot: usize::MAX,
-                    ..Patch::default()
-                });
                 continue;
             };
             if self.robot_body[other] || c.excluded {
