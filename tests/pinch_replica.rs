@@ -5,6 +5,8 @@
 //! the arm as PhysX does (`tests/data/maniskill_so100_pinch.json`).
 use std::path::Path;
 
+mod common;
+
 use mjskill::{Env, EnvConfig, PinchSolver, SimConfig, StateDict};
 
 fn make(env_id: &str, robot: &str, mode: &str, pinch: PinchSolver) -> Env {
@@ -223,4 +225,35 @@ fn held_so100_arm_stalls_where_physx_does() {
         "MuJoCo: {:.2e}",
         medians[1]
     );
+}
+
+/// A recording made with the replica stores the pinch solver, and replays bit for bit.
+#[test]
+fn recordings_keep_the_pinch_solver_and_replay_exactly() {
+    use mjskill::record::{self, Recorder};
+    let path = common::scratch("pinch_replica.mcap");
+    let mut env = make(
+        "PickCubeSO100-v1",
+        "so100",
+        "pd_joint_pos",
+        PinchSolver::PhysxTgs,
+    );
+    let mut rec = Recorder::create(&path, &env).unwrap();
+    rec.reset(&mut env, Some(5000)).unwrap();
+    let mut solver = mjskill::solvers::make_policy("solver", &env, 5000).unwrap();
+    solver.reset(&env);
+    let mut action = vec![0.0f32; env.action_space().shape[0]];
+    let mut pinched = 0;
+    for _ in 0..30 {
+        solver.act(&env, &mut action);
+        rec.step(&mut env, &action).unwrap();
+        pinched += usize::from(env.drives().pinch_replica_active());
+    }
+    rec.end_episode(false).unwrap();
+    rec.finish().unwrap();
+    assert!(pinched > 5, "{pinched} pinched steps");
+    let r = record::read(&path).unwrap();
+    assert_eq!(r.meta.sim().pinch_solver, PinchSolver::PhysxTgs);
+    let report = record::replay::replay(&path, 0.0, false).unwrap();
+    assert!(report.ok && report.max_obs_dev == 0.0, "{report:?}");
 }

@@ -104,6 +104,7 @@ const STRING_KEYS: &[&str] = &[
     "control_mode",
     "version",
     "command",
+    "pinch_solver",
 ];
 
 impl Meta {
