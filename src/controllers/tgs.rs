@@ -762,19 +762,7 @@ impl PinchReplica {
         dir: &Vector3<f64>,
         out: &mut [f64],
     ) {
-        let nv = data.model().nv();
-        let pt = [p.x, p.y, p.z];
-        data.jac_point(bodies.0, pt, &mut self.jacp0, &mut self.jacr0);
-        if bodies.1 != usize::MAX {
-            data.jac_point(bodies.1, pt, &mut self.jacp1, &mut self.jacr1);
-        } else {
-            self.jacp1.fill(0.0);
-        }
-        for (a, &d) in self.dofs.iter().enumerate() {
-            out[a] = (0..3)
-                .map(|r| dir[r] * (self.jacp0[r * nv + d] - self.jacp1[r * nv + d]))
-                .sum();
-        }
+        self.row2(data, p, p, bodies, dir, out);
     }
 
     /// The Jacobian row `dir · (J₀(p₀) − J₁(p₁))` over the local dofs into `out`: body 0's
