@@ -11,8 +11,9 @@
 //! `DyFrictionCorrelation.cpp` (`growPatches`) and the articulation drives
 //! (`DyCpuGpuArticulation.h`):
 //!
-//! 1. The unconstrained velocity: `v += dt·M⁻¹(passive − bias)`, once for the whole step.
-//!    `M` is PhysX's inertia, MuJoCo's without the armature.
+//! 1. The unconstrained velocity: `v += dt·M⁻¹(passive − bias + w)`, once for the whole
+//!    step, `w` the object's weight (the env's wrench; the robot's links feel no gravity, as
+//!    in ManiSkill). `M` is PhysX's inertia, MuJoCo's without the armature.
 //! 2. [`SUB_STEPS`] sub-steps of `h = dt/15`, each: every contact patch (the jaws' convex
 //!    parts against the object's box, [`super::convex::box_manifold`], the fixed jaw first;
 //!    then the object's contacts with the scene, from MuJoCo), its normal rows then its
@@ -25,7 +26,8 @@
 //!      with two tangent rows solved as a pair, pull their drift since the step began back
 //!      at `0.8/h`, weighted by `min(0.8, 2/√15)`, within the friction cone of the patch's
 //!      accumulated normal impulse (PhysX's improved patch friction halves the cone with two
-//!      anchors).
+//!      anchors; a pad's patch with one anchor adds torsional friction). The rows of a
+//!      robot link are softened by its CFM ([`CFM_SCALE`]).
 //!    * A drive is PhysX's implicit spring `kp (q* − q − h v') + kd (v* − v')`, its impulse
 //!      accumulated over the step and clamped to the force limit times `dt`.
 //! 3. One velocity iteration: the contacts again with penetration counted as zero (no push
@@ -37,8 +39,9 @@
 //! velocity iteration), the bodies turned its normal by more than about 2.5°, an anchor pair
 //! came [`CORRELATION_DISTANCE`] apart along it, or the anchors no longer span a quarter of
 //! the new contacts' extent. A kept anchor pulls the two bodies back to where they touched
-//! when it was made. The cache is part of the env's saved state; a reset forgets it. Nothing
-//! here allocates after [`PinchReplica::new`].
+//! when it was made. The cache is part of the env's saved state; a reset forgets it. The
+//! jaws' grasp forces (`is_grasped`) are the step's contact impulses
+//! ([`PinchReplica::contact_force`]). Nothing here allocates after [`PinchReplica::new`].
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::convex::{
