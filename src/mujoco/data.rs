@@ -450,16 +450,21 @@ impl Data {
         f
     }
 
-    /// Translational (3×nv) and rotational (3×nv) Jacobians of site `site`, row-major,
-    /// written into the caller's buffers (no allocation).
-    pub fn jac_site(&self, site: usize, jacp: &mut [f64], jacr: &mut [f64]) {
+    /// Panics unless `jacp` and `jacr` hold 3×nv values each (a caller's bug).
+    fn check_jacobian_buffers(&self, jacp: &[f64], jacr: &[f64]) {
         let nv = self.model.nv();
-        assert!(site < self.model.nsite(), "site id {site} out of range");
         assert!(
             jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
             "Jacobian buffers need 3*nv = {} values",
             3 * nv
         );
+    }
+
+    /// Translational (3×nv) and rotational (3×nv) Jacobians of site `site`, row-major,
+    /// written into the caller's buffers (no allocation).
+    pub fn jac_site(&self, site: usize, jacp: &mut [f64], jacr: &mut [f64]) {
+        assert!(site < self.model.nsite(), "site id {site} out of range");
+        self.check_jacobian_buffers(jacp, jacr);
         // SAFETY: site id valid; buffers hold at least 3*nv values each.
         unsafe {
             sys::mj_jacSite(
@@ -474,13 +479,8 @@ impl Data {
 
     /// Like [`Data::jac_site`] for the origin of body `body`.
     pub fn jac_body(&self, body: usize, jacp: &mut [f64], jacr: &mut [f64]) {
-        let nv = self.model.nv();
         assert!(body < self.model.nbody(), "body id {body} out of range");
-        assert!(
-            jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
-            "Jacobian buffers need 3*nv = {} values",
-            3 * nv
-        );
+        self.check_jacobian_buffers(jacp, jacr);
         // SAFETY: body id valid; buffers hold at least 3*nv values each.
         unsafe {
             sys::mj_jacBody(
@@ -497,13 +497,8 @@ impl Data {
     /// `point` moving with body `body` (`mj_jac`), at the kinematics of the last
     /// [`Data::step1`] / [`Data::forward`]; written into the caller's buffers.
     pub fn jac_point(&self, body: usize, point: [f64; 3], jacp: &mut [f64], jacr: &mut [f64]) {
-        let nv = self.model.nv();
         assert!(body < self.model.nbody(), "body id {body} out of range");
-        assert!(
-            jacp.len() >= 3 * nv && jacr.len() >= 3 * nv,
-            "Jacobian buffers need 3*nv = {} values",
-            3 * nv
-        );
+        self.check_jacobian_buffers(jacp, jacr);
         // SAFETY: body id valid; buffers hold at least 3*nv values each; point holds 3.
         unsafe {
             sys::mj_jac(
