@@ -2,6 +2,7 @@
 readings (`open_action_gap`), without ManiSkill: the observation's readings, named per
 joint, and which of them moves a policy's action, on policies whose answer is known."""
 
+import json
 import sys
 from pathlib import Path
 
@@ -126,3 +127,25 @@ def test_physx_steps_take_each_of_mjskill_s_steps_from_its_state():
     assert (last, any_) == (False, True)
     # Static: mjskill F, T, T; ManiSkill F, T, F: they differ at the last step only.
     assert differ == 1
+
+
+def test_held_steps_keep_a_few_spread_held_steps_as_json_ready_cases():
+    held = [False, True, True, True, True, False, True]
+    states = [{"actors": {"cube": np.arange(3.0) + t}, "drive": {"target_qpos": np.ones(2) * t}}
+              for t in range(len(held))]
+    actions = [np.full(2, t, np.float32) for t in range(len(held))]
+    snaps = [cmp.Snapshot(np.full(2, t), None, None, {"is_robot_static": t % 2 == 0},
+                          qvel=np.full(2, -t)) for t in range(len(held))]
+    cases = cmp.held_steps(7, states, actions, snaps, held, 3)
+    # The first, middle and last of the five held steps (1, 2, 3, 4, 6).
+    assert [c["step"] for c in cases] == [1, 3, 6]
+    c = cases[1]
+    assert c["seed"] == 7 and c["action"] == [3.0, 3.0]
+    assert c["state_dict"]["actors"]["cube"] == [3.0, 4.0, 5.0]
+    assert c["state_dict"]["drive"]["target_qpos"] == [3.0, 3.0]
+    assert c["qpos"] == [3.0, 3.0] and c["qvel"] == [-3.0, -3.0]
+    assert c["is_robot_static"] is False
+    # Fewer held steps than asked: all of them.
+    every = cmp.held_steps(7, states, actions, snaps, held, 9)
+    assert [c["step"] for c in every] == [1, 2, 3, 4, 6]
+    json.dumps(cases)
