@@ -25,6 +25,16 @@ fn make(env_id: &str, robot: &str, mode: &str, pinch: PinchSolver) -> Env {
     .unwrap()
 }
 
+/// PickCubeSO100-v1 in `pd_joint_pos` (the solver's mode) with the replica.
+fn so100_replica() -> Env {
+    make(
+        "PickCubeSO100-v1",
+        "so100",
+        "pd_joint_pos",
+        PinchSolver::PhysxTgs,
+    )
+}
+
 /// The scripted solver's episode: per step, whether the replica took the step's last physics
 /// step, and the state after it.
 fn solver_episode(env: &mut Env, seed: u64) -> (Vec<bool>, Vec<mjskill::EnvState>) {
@@ -44,12 +54,7 @@ fn solver_episode(env: &mut Env, seed: u64) -> (Vec<bool>, Vec<mjskill::EnvState
 
 #[test]
 fn the_replica_takes_the_pinched_steps_only() {
-    let mut env = make(
-        "PickCubeSO100-v1",
-        "so100",
-        "pd_joint_pos",
-        PinchSolver::PhysxTgs,
-    );
+    let mut env = so100_replica();
     let (active, _) = solver_episode(&mut env, 5000);
     let first = active
         .iter()
@@ -73,24 +78,14 @@ fn the_replica_takes_the_pinched_steps_only() {
 
 #[test]
 fn replica_episodes_repeat_and_restore_bit_for_bit() {
-    let mut env = make(
-        "PickCubeSO100-v1",
-        "so100",
-        "pd_joint_pos",
-        PinchSolver::PhysxTgs,
-    );
+    let mut env = so100_replica();
     let (active, a) = solver_episode(&mut env, 5001);
     let (_, b) = solver_episode(&mut env, 5001);
     assert_eq!(a, b, "the same seed and actions gave another episode");
     // A state saved mid-pinch (the contact cache included) continues as the episode did.
     let mid = active.iter().rposition(|&x| x).unwrap() - 5;
     assert!(active[mid]);
-    let mut fresh = make(
-        "PickCubeSO100-v1",
-        "so100",
-        "pd_joint_pos",
-        PinchSolver::PhysxTgs,
-    );
+    let mut fresh = so100_replica();
     fresh.reset(Some(5001));
     fresh.set_state(&a[mid]).unwrap();
     // pd_joint_pos: hold the drive targets where the episode left them.
@@ -148,12 +143,7 @@ fn robots_without_convex_parts_and_unknown_solvers_are_refused() {
     );
     assert_eq!(PinchSolver::parse("physx_tgs").unwrap().name(), "physx_tgs");
     // A corrupt cache in a saved state is refused, naming the value.
-    let mut env = make(
-        "PickCubeSO100-v1",
-        "so100",
-        "pd_joint_pos",
-        PinchSolver::PhysxTgs,
-    );
+    let mut env = so100_replica();
     env.reset(Some(0));
     let mut s = env.get_state();
     let n = s.controller.len();
@@ -232,12 +222,7 @@ fn held_so100_arm_stalls_where_physx_does() {
 fn recordings_keep_the_pinch_solver_and_replay_exactly() {
     use mjskill::record::{self, Recorder};
     let path = common::scratch("pinch_replica.mcap");
-    let mut env = make(
-        "PickCubeSO100-v1",
-        "so100",
-        "pd_joint_pos",
-        PinchSolver::PhysxTgs,
-    );
+    let mut env = so100_replica();
     let mut rec = Recorder::create(&path, &env).unwrap();
     rec.reset(&mut env, Some(5000)).unwrap();
     let mut solver = mjskill::solvers::make_policy("solver", &env, 5000).unwrap();

@@ -298,7 +298,6 @@ impl PinchReplica {
             rot: mat3(&gm[9 * g..9 * g + 9]),
             half: Vector3::new(size[3 * g], size[3 * g + 1], size[3 * g + 2]),
         };
-        let (xpos, xmat) = (data.xpos(), data.xmat());
         let mut touching = [false; 2];
         let friction = 0.5 * (GRIPPER_FRICTION + DEFAULT_FRICTION);
         for (slot, (body, side, part)) in self.parts.iter().enumerate() {
@@ -306,8 +305,7 @@ impl PinchReplica {
                 break;
             }
             let b = *body;
-            let pos = Vector3::new(xpos[3 * b], xpos[3 * b + 1], xpos[3 * b + 2]);
-            let rot = mat3(&xmat[9 * b..9 * b + 9]);
+            let (pos, rot) = body_pose(data, b);
             let start = self.points.len();
             let added = box_manifold(
                 part,
