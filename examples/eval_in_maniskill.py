@@ -9,8 +9,10 @@ simulators on the same initial states.
 
 Each episode runs to truncation (50 steps), as `mjskill eval` does; prints one JSON line with
 the success rate (success at any step), the success-at-end rate and the mean return, and with
---mjskill also `mjskill eval --policy`'s report on the same seeds. Needs numpy, onnxruntime
-and mani_skill (not mjskill).
+--mjskill also `mjskill eval --policy`'s report on the same seeds. PhysX keeps contact caches
+across resets, so the figures depend on what the env went through before each episode:
+`--history` runs the seeds in one env in order (the default, as `mjskill eval`), in reverse
+order, or each in a new env. Needs numpy, onnxruntime and mani_skill (not mjskill).
 """
 
 import argparse
@@ -21,6 +23,15 @@ import sys
 import numpy as np
 
 KEYS = ("env_id", "robot_uids", "control_mode", "obs_mode")
+#: `--history` choices: what each episode's env has been through before its reset.
+HISTORIES = ("sequential", "reversed", "fresh")
+
+
+def episode_seeds(seed, episodes, history):
+    """The seeds in the order the episodes run: `seed`, `seed + 1`, ... (reversed for
+    `--history reversed`)."""
+    seeds = list(range(seed, seed + episodes))
+    return seeds[::-1] if history == "reversed" else seeds
 #: ManiSkill's envs that fix their robot (gym.make refuses robot_uids for them).
 FIXED_ROBOT = {"PickCubeSO100-v1": "so100", "PickCubeWidowXAI-v1": "widowxai"}
 
@@ -64,6 +75,11 @@ def main():
     p.add_argument("--sim-backend", default="cpu", help="ManiSkill sim_backend (cpu or gpu)")
     p.add_argument("--reward-mode", default="normalized_dense")
     p.add_argument("--mjskill", help="mjskill binary: also run `mjskill eval --policy` on the seeds")
+    p.add_argument("--history", choices=HISTORIES, default="sequential",
+                   help="what each episode follows: sequential (default; one env, seeds in "
+                        "order, as `mjskill eval`), reversed (one env, seeds in reverse order) "
+                        "or fresh (a new env for every episode). PhysX keeps contact caches "
+                        "across resets, so the success rates depend on it (docs/outcome-physics.md)")
     p.add_argument("--per-episode", action="store_true",
                    help="also report each episode (seed, success at any step, at the end, "
                         "return) under `per_episode`")
@@ -78,9 +94,12 @@ def main():
     if robot == {} and FIXED_ROBOT[meta["env_id"]] != meta["robot_uids"]:
         sys.exit(f"policy file {a.policy}: {meta['env_id']} is for {FIXED_ROBOT[meta['env_id']]}, "
                  f"not {meta['robot_uids']}")
-    env = gym.make(meta["env_id"], num_envs=1, obs_mode="state", **robot,
-                   control_mode=meta["control_mode"], reward_mode=a.reward_mode,
-                   sim_backend=a.sim_backend)
+    def make():
+        return gym.make(meta["env_id"], num_envs=1, obs_mode="state", **robot,
+                        control_mode=meta["control_mode"], reward_mode=a.reward_mode,
+                        sim_backend=a.sim_backend)
+
+    env = make()
     space = env.unwrapped.single_action_space if hasattr(env.unwrapped, "single_action_space") \
         else env.action_space
     low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
@@ -91,8 +110,11 @@ def main():
                  f"ManiSkill's {meta['env_id']} gives {obs_dim}")
     successes = at_end = 0
     returns, first, episodes = [], [], []
-    for k in range(a.episodes):
-        obs, _ = env.reset(seed=a.seed + k)
+    for seed in episode_seeds(a.seed, a.episodes, a.history):
+        if a.history == "fresh" and episodes:
+            env.close()
+            env = make()
+        obs, _ = env.reset(seed=seed)
         ret, ever, t = 0.0, False, 0
         while True:
             obs, r, term, trunc, info = env.step(act(sess, inp, rank, obs, low, high)[None])
@@ -107,8 +129,9 @@ def main():
         successes += ever
         at_end += success
         returns.append(ret)
-        episodes.append({"seed": a.seed + k, "success": ever, "success_at_end": success,
+        episodes.append({"seed": seed, "success": ever, "success_at_end": success,
                          "return": ret})
+    episodes.sort(key=lambda e: e["seed"])
     report = {
         "simulator": "maniskill",
         "env": meta["env_id"],
@@ -117,6 +140,7 @@ def main():
         "policy": a.policy,
         "episodes": a.episodes,
         "seed": a.seed,
+        "history": a.history,
         "successes": int(successes),
         "success_rate": successes / a.episodes,
         "success_at_end_rate": at_end / a.episodes,
