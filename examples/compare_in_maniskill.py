@@ -16,6 +16,9 @@ seed three ways, or four:
 * resync: before every step mjskill takes ManiSkill's state (poses, velocities, the drive
   targets PhysX holds) and the same action; the largest arm-joint error after that one step,
   split by whether ManiSkill holds the object. This is the one-step error of the dynamics.
+  On the steps where it holds nothing, the largest error and the number of steps above 5 mrad
+  (`one_step_free_steps_over_5mrad`) show contacts the two simulators make differently before
+  a grasp (a jaw grazing the object as it descends, docs/outcome-physics.md).
 * physx steps (`--physx-steps`, the other way round): each step of mjskill's closed loop is
   also taken by PhysX: a freshly reset ManiSkill env gets mjskill's state before the step
   (poses, velocities, controller and drive targets) and the same action.
@@ -370,6 +373,9 @@ def main():
             "one_step_arm_error_median": float(np.median(errs)),
             "one_step_arm_error_held_median": float(np.median([e for e, h in zip(errs, held)
                                                                if h])) if any(held) else None,
+            "one_step_arm_error_free_max": max((e for e, h in zip(errs, held) if not h),
+                                               default=None),
+            "one_step_free_steps_over_5mrad": sum(e > 0.005 for e, h in zip(errs, held) if not h),
         }
         if a.physx_steps:
             (line["physx_step_success"], line["physx_step_success_any"],
@@ -412,6 +418,8 @@ def main():
         "one_step_arm_error_held_median": float(np.median(
             [ln["one_step_arm_error_held_median"] for ln in lines
              if ln["one_step_arm_error_held_median"] is not None] or [np.nan])),
+        "episodes_with_free_steps_over_5mrad": sum(
+            ln["one_step_free_steps_over_5mrad"] > 0 for ln in lines),
     }
     if a.physx_steps:
         summary["physx_step_successes"] = sum(ln["physx_step_success"] for ln in lines)
