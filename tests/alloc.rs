@@ -73,45 +73,54 @@ fn step_allocates_nothing_in_any_env_and_control_mode() {
             }
         }
     }
-    // PhysX's step replica for the pinch (pinch_solver = "physx_tgs"): the SO100's solver
-    // grasps the cube, then the held steps are counted.
-    let config = mjskill::EnvConfig {
-        robot: Some("so100".into()),
-        control_mode: Some("pd_joint_pos".into()),
-        sim: mjskill::SimConfig {
-            pinch_solver: mjskill::PinchSolver::PhysxTgs,
+    // PhysX's step replica for the pinch (pinch_solver = "physx_tgs"): the solver grasps (the
+    // SO100's cube: convex parts against a box; the Panda's sphere: finger boxes against a
+    // sphere), then the held steps are counted.
+    for (env_id, robot, mode, seed) in [
+        ("PickCubeSO100-v1", "so100", "pd_joint_pos", 5000),
+        ("PlaceSphere-v1", "panda", "pd_ee_delta_pos", 0),
+    ] {
+        let config = mjskill::EnvConfig {
+            robot: Some(robot.into()),
+            control_mode: Some(mode.into()),
+            sim: mjskill::SimConfig {
+                pinch_solver: mjskill::PinchSolver::PhysxTgs,
+                ..Default::default()
+            },
             ..Default::default()
-        },
-        ..Default::default()
-    };
-    let mut env = mjskill::make("PickCubeSO100-v1", config).unwrap();
-    env.reset(Some(5000));
-    let mut solver = mjskill::solvers::make_policy("solver", &env, 5000).unwrap();
-    solver.reset(&env);
-    let mut action = vec![0.0f32; env.action_space().shape[0]];
-    for _ in 0..50 {
-        solver.act(&env, &mut action);
-        env.step(&action).unwrap();
-        if env.drives().pinch_replica_active() {
-            break;
+        };
+        let mut env = mjskill::make(env_id, config).unwrap();
+        env.reset(Some(seed));
+        let mut solver = mjskill::solvers::make_policy("solver", &env, seed).unwrap();
+        solver.reset(&env);
+        let mut action = vec![0.0f32; env.action_space().shape[0]];
+        for _ in 0..50 {
+            solver.act(&env, &mut action);
+            env.step(&action).unwrap();
+            if env.drives().pinch_replica_active() {
+                break;
+            }
         }
+        assert!(
+            env.drives().pinch_replica_active(),
+            "{env_id} / {robot}: the solver never pinched"
+        );
+        ALLOCS.store(0, Ordering::SeqCst);
+        COUNTING.store(true, Ordering::SeqCst);
+        for _ in 0..5 {
+            env.step(&action).unwrap();
+        }
+        COUNTING.store(false, Ordering::SeqCst);
+        assert!(
+            env.drives().pinch_replica_active(),
+            "{env_id} / {robot}: the pinch ended"
+        );
+        assert_eq!(
+            ALLOCS.load(Ordering::SeqCst),
+            0,
+            "{env_id} / {robot}: the pinch replica's steps allocated"
+        );
     }
-    assert!(
-        env.drives().pinch_replica_active(),
-        "the solver never pinched"
-    );
-    ALLOCS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
-    for _ in 0..20 {
-        env.step(&action).unwrap();
-    }
-    COUNTING.store(false, Ordering::SeqCst);
-    assert!(env.drives().pinch_replica_active(), "the pinch ended");
-    assert_eq!(
-        ALLOCS.load(Ordering::SeqCst),
-        0,
-        "the pinch replica's steps allocated"
-    );
     // The VecEnv's steady-state step (workers included: the counter is process-wide).
     let mut v = mjskill::VecEnv::new("PickCube-v1", mjskill::EnvConfig::default(), 4, 2).unwrap();
     let acts: Vec<f32> = (0..32).map(|i| (i as f32 * 0.3).sin()).collect();

@@ -191,6 +191,46 @@ impl ConvexPart {
     }
 }
 
+impl ConvexPart {
+    /// A box of half extents `half` placed at `pos` with orientation `rot` (columns: its
+    /// axes) in `link`'s frame, as a convex part: the Panda's finger collisions are boxes in
+    /// ManiSkill's model too, so PhysX collides exactly these.
+    pub fn from_box(
+        link: &str,
+        half: [f64; 3],
+        pos: Vector3<f64>,
+        rot: Matrix3<f64>,
+    ) -> Result<ConvexPart, ConvexError> {
+        let corner = |i: usize| {
+            let s = Vector3::new(
+                if i & 1 == 0 { -half[0] } else { half[0] },
+                if i & 2 == 0 { -half[1] } else { half[1] },
+                if i & 4 == 0 { -half[2] } else { half[2] },
+            );
+            let v = pos + rot * s;
+            [v.x, v.y, v.z]
+        };
+        // Two triangles per face; ConvexPart::new orients and merges them.
+        let quads = [
+            [0, 2, 6, 4],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 3, 7, 6],
+            [0, 1, 3, 2],
+            [4, 5, 7, 6],
+        ];
+        let triangles = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        ConvexPart::new(&ConvexPartFile {
+            link: link.to_string(),
+            vertices: (0..8).map(corner).collect(),
+            triangles,
+        })
+    }
+}
+
 /// Orders the polygon `idx` counter-clockwise about `normal`.
 fn order_about(idx: &mut [usize], vertices: &[Vector3<f64>], normal: &Vector3<f64>) {
     let c = idx.iter().map(|&i| vertices[i]).sum::<Vector3<f64>>() / idx.len() as f64;
@@ -381,6 +421,84 @@ pub fn box_manifold(
     added
 }
 
+/// The contact of `part` (posed by its link's world position `pos` and rotation `rot`)
+/// with a sphere of `radius` centred at `center`, as PhysX makes a sphere's contact with a
+/// convex: one point, on the part's surface where it comes closest to the centre, with the
+/// normal from the sphere towards the part. Appended to `out` when separated by at most
+/// `max_separation`; returns how many points were added (0 or 1).
+pub fn sphere_manifold(
+    part: &ConvexPart,
+    pos: &Vector3<f64>,
+    rot: &Matrix3<f64>,
+    center: &Vector3<f64>,
+    radius: f64,
+    max_separation: f64,
+    out: &mut Vec<ContactPoint>,
+) -> usize {
+    // In the link frame.
+    let c = rot.transpose() * (center - pos);
+    let (mut deepest, mut deepest_d) = (0, f64::NEG_INFINITY);
+    for (i, f) in part.faces.iter().enumerate() {
+        let d = f.normal.dot(&c) - f.offset;
+        if d > deepest_d {
+            deepest_d = d;
+            deepest = i;
+        }
+    }
+    let (closest, normal, dist) = if deepest_d <= 0.0 {
+        // The centre is inside: out through the face it is nearest.
+        let f = &part.faces[deepest];
+        (c - f.normal * deepest_d, -f.normal, deepest_d)
+    } else {
+        // Outside: the nearest point over the faces it is in front of (inside the face's
+        // polygon, or on one of its edges).
+        let mut best = (c, f64::INFINITY);
+        for f in &part.faces {
+            let d = f.normal.dot(&c) - f.offset;
+            if d <= 0.0 {
+                continue;
+            }
+            let on_plane = c - f.normal * d;
+            let nv = f.vertices.len();
+            let inside = (0..nv).all(|e| {
+                let a = part.vertices[f.vertices[e]];
+                let b = part.vertices[f.vertices[(e + 1) % nv]];
+                (b - a).cross(&(on_plane - a)).dot(&f.normal) >= 0.0
+            });
+            if inside {
+                if d < best.1 {
+                    best = (on_plane, d);
+                }
+                continue;
+            }
+            for e in 0..nv {
+                let a = part.vertices[f.vertices[e]];
+                let b = part.vertices[f.vertices[(e + 1) % nv]];
+                let ab = b - a;
+                let t = ((c - a).dot(&ab) / ab.norm_squared().max(1e-300)).clamp(0.0, 1.0);
+                let q = a + ab * t;
+                let d = (c - q).norm();
+                if d < best.1 {
+                    best = (q, d);
+                }
+            }
+        }
+        let (q, d) = best;
+        let normal = if d > 1e-12 { (q - c) / d } else { Vector3::z() };
+        (q, normal, d)
+    };
+    let separation = dist - radius;
+    if separation > max_separation {
+        return 0;
+    }
+    out.push(ContactPoint {
+        pos: pos + rot * closest,
+        normal: rot * normal,
+        separation,
+    });
+    1
+}
+
 /// The box's eight corners.
 fn box_corners(bx: &BoxShape) -> [Vector3<f64>; 8] {
     let mut c = [Vector3::zeros(); 8];
@@ -461,6 +579,86 @@ fn reduce(pts: &mut [ContactPoint]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sphere_touches_a_box_part_at_its_nearest_point() {
+        let part = ConvexPart::from_box(
+            "finger",
+            [0.01, 0.02, 0.03],
+            Vector3::new(0.1, 0.0, 0.0),
+            Matrix3::identity(),
+        )
+        .unwrap();
+        assert_eq!(part.faces.len(), 6);
+        let (pos, rot) = (Vector3::zeros(), Matrix3::identity());
+        let mut out = Vec::new();
+        // Over the +x face, 1 mm into it.
+        let c = Vector3::new(0.11 + 0.019, 0.005, 0.0);
+        assert_eq!(
+            sphere_manifold(&part, &pos, &rot, &c, 0.02, 0.002, &mut out),
+            1
+        );
+        let p = out[0];
+        assert!((p.separation + 0.001).abs() < 1e-12, "{p:?}");
+        assert!((p.normal - Vector3::new(-1.0, 0.0, 0.0)).norm() < 1e-12);
+        assert!((p.pos - Vector3::new(0.11, 0.005, 0.0)).norm() < 1e-12);
+        // Off the +x+y edge, 1 mm clear: the nearest point is on the edge.
+        out.clear();
+        let dir = Vector3::new(1.0, 1.0, 0.0).normalize();
+        let edge = Vector3::new(0.11, 0.02, 0.01);
+        let c = edge + dir * 0.021;
+        assert_eq!(
+            sphere_manifold(&part, &pos, &rot, &c, 0.02, 0.002, &mut out),
+            1
+        );
+        assert!((out[0].separation - 0.001).abs() < 1e-12);
+        assert!((out[0].pos - edge).norm() < 1e-12);
+        assert!((out[0].normal + dir).norm() < 1e-12);
+        // Beyond the reach: none.
+        out.clear();
+        let c = Vector3::new(0.11 + 0.023, 0.0, 0.0);
+        assert_eq!(
+            sphere_manifold(&part, &pos, &rot, &c, 0.02, 0.002, &mut out),
+            0
+        );
+        // The centre inside the part: out through the nearest face (−z here).
+        let c = Vector3::new(0.1, 0.0, -0.025);
+        assert_eq!(
+            sphere_manifold(&part, &pos, &rot, &c, 0.02, 0.002, &mut out),
+            1
+        );
+        assert!((out[0].separation - (-0.005 - 0.02)).abs() < 1e-12);
+        assert!((out[0].normal - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn a_posed_box_part_follows_its_link() {
+        // The link turned a quarter about z and moved: the part's +x face now faces +y.
+        let part = ConvexPart::from_box(
+            "finger",
+            [0.01, 0.01, 0.01],
+            Vector3::zeros(),
+            Matrix3::identity(),
+        )
+        .unwrap();
+        let rot = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let pos = Vector3::new(0.0, 0.0, 0.5);
+        let c = Vector3::new(0.0, 0.0295, 0.5);
+        let mut out = Vec::new();
+        assert_eq!(
+            sphere_manifold(&part, &pos, &rot, &c, 0.02, 0.002, &mut out),
+            1
+        );
+        assert!((out[0].separation + 0.0005).abs() < 1e-12);
+        assert!((out[0].normal - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-12);
+        assert!(ConvexPart::from_box(
+            "x",
+            [0.0, 0.01, 0.01],
+            Vector3::zeros(),
+            Matrix3::identity()
+        )
+        .is_err());
+    }
 
     /// A unit-free cube part of half size `h` centred at the link origin.
     fn cube_part(h: f64) -> ConvexPart {

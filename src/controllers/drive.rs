@@ -334,7 +334,7 @@ impl Drives {
     }
 
     /// Lets PhysX's step ([`super::tgs`]) take every physics step in which both jaws touch
-    /// `object_body` (a free box, `object_geom`): `parts` are the jaws' convex parts, each
+    /// `object_body` (a free box or sphere, `object_geom`): `parts` are the jaws' convex parts, each
     /// with its body and jaw (0 or 1). Errors say what does not fit.
     pub fn enable_pinch_replica(
         &mut self,

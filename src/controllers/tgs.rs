@@ -15,7 +15,8 @@
 //!    step, `w` the object's weight (the env's wrench; the robot's links feel no gravity, as
 //!    in ManiSkill). `M` is PhysX's inertia, MuJoCo's without the armature.
 //! 2. [`SUB_STEPS`] sub-steps of `h = dt/15`, each: every contact patch (the jaws' convex
-//!    parts against the object's box, [`super::convex::box_manifold`], the fixed jaw first;
+//!    parts against the object's box or sphere, [`super::convex::box_manifold`] and
+//!    [`super::convex::sphere_manifold`], the first jaw's parts first;
 //!    then the object's contacts with the scene, from MuJoCo), its normal rows then its
 //!    friction anchors; then every joint drive in joint order; then the positions advance by
 //!    `h·v`.
@@ -45,7 +46,8 @@
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::convex::{
-    box_manifold, BoxShape, ContactPoint, ConvexPart, ManifoldScratch, SPECULATIVE_DISTANCE,
+    box_manifold, sphere_manifold, BoxShape, ContactPoint, ConvexPart, ManifoldScratch,
+    SPECULATIVE_DISTANCE,
 };
 use crate::mujoco::{Data, Model};
 
@@ -199,7 +201,7 @@ impl PinchReplica {
     /// A replica for the robot whose bodies are flagged in `robot_body`, with `robot_dofs`
     /// (the dofs of its kinematic tree), its `drives` (local indices into `robot_dofs`), the
     /// jaws' convex parts (`(body, side, part)`; side 0 and 1 are the two jaws) and the object
-    /// held: `object_body` with its box geom `object_geom`, on a free joint. Errors name what
+    /// held: `object_body` with its box or sphere geom `object_geom`, on a free joint. Errors name what
     /// does not fit.
     pub fn new(
         model: &Model,
@@ -216,10 +218,11 @@ impl PinchReplica {
                 "the pinched object (body {object_body}) is not a free body"
             ));
         }
-        if model.geom_type()[object_geom] != crate::mujoco::GEOM_BOX {
+        let ty = model.geom_type()[object_geom];
+        if ty != crate::mujoco::GEOM_BOX && ty != crate::mujoco::GEOM_SPHERE {
             return Err(format!(
-                "the pinched object's geom {object_geom} is not a box; the replica's manifold is \
-                 a box against convex parts"
+                "the pinched object's geom {object_geom} is neither a box nor a sphere; the \
+                 replica's manifolds are a box or a sphere against convex parts"
             ));
         }
         let jnt = jnt as usize;
@@ -298,6 +301,8 @@ impl PinchReplica {
             rot: mat3(&gm[9 * g..9 * g + 9]),
             half: Vector3::new(size[3 * g], size[3 * g + 1], size[3 * g + 2]),
         };
+        // A sphere's radius (MuJoCo's first size); boxes use all three.
+        let sphere = (m.geom_type()[g] == crate::mujoco::GEOM_SPHERE).then_some(size[3 * g]);
         let mut touching = [false; 2];
         let friction = 0.5 * (GRIPPER_FRICTION + DEFAULT_FRICTION);
         for (slot, (body, side, part)) in self.parts.iter().enumerate() {
@@ -307,15 +312,26 @@ impl PinchReplica {
             let b = *body;
             let (pos, rot) = body_pose(data, b);
             let start = self.points.len();
-            let added = box_manifold(
-                part,
-                &pos,
-                &rot,
-                &bx,
-                SPECULATIVE_DISTANCE,
-                &mut self.manifold,
-                &mut self.points,
-            );
+            let added = match sphere {
+                Some(radius) => sphere_manifold(
+                    part,
+                    &pos,
+                    &rot,
+                    &bx.center,
+                    radius,
+                    SPECULATIVE_DISTANCE,
+                    &mut self.points,
+                ),
+                None => box_manifold(
+                    part,
+                    &pos,
+                    &rot,
+                    &bx,
+                    SPECULATIVE_DISTANCE,
+                    &mut self.manifold,
+                    &mut self.points,
+                ),
+            };
             if added == 0 {
                 continue;
             }

@@ -522,8 +522,9 @@ pub enum PinchSolver {
     /// MuJoCo's step, as every other step (the default).
     #[default]
     Mujoco,
-    /// A replica of PhysX's TGS step for the robot and the pinched object, from the jaws'
-    /// convex parts (robots with `models/<robot>/convex_parts.json`: so100). Experimental:
+    /// A replica of PhysX's TGS step for the robot and the pinched object (a box or a
+    /// sphere), from the jaws' convex parts (`models/so100/convex_parts.json`; the Panda's
+    /// finger boxes, `robots::BOX_FINGER_ROBOTS`). Experimental:
     /// it reproduces PhysX's stall and reported velocities, and does not yet hold every
     /// grasp PhysX holds (docs/outcome-physics.md).
     PhysxTgs,

@@ -113,7 +113,7 @@ fn enable_pinch_replica(
         .map_err(unsupported)?
         .ok_or_else(|| {
             unsupported(format!(
-                "the robot ships no models/{}/{} (robots that do: so100)",
+                "the robot ships no models/{}/{} (robots with convex parts: so100, panda, panda_wristcam)",
                 rs.uid(),
                 crate::robots::CONVEX_PARTS_FILE
             ))
@@ -122,9 +122,12 @@ fn enable_pinch_replica(
     let geom = (0..model.ngeom())
         .find(|&g| {
             model.geom_bodyid()[g] as usize == body
-                && model.geom_type()[g] == crate::mujoco::GEOM_BOX
+                && [crate::mujoco::GEOM_BOX, crate::mujoco::GEOM_SPHERE]
+                    .contains(&model.geom_type()[g])
         })
-        .ok_or_else(|| unsupported("the task's object is not a box".to_string()))?;
+        .ok_or_else(|| {
+            unsupported("the task's object is neither a box nor a sphere".to_string())
+        })?;
     drives
         .enable_pinch_replica(model, parts, body, geom)
         .map_err(unsupported)

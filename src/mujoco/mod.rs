@@ -157,6 +157,8 @@ impl ObjType {
 
 /// MuJoCo's `mjGEOM_BOX` (a value of [`Model::geom_type`]).
 pub const GEOM_BOX: c_int = sys::mjtGeom__mjGEOM_BOX as c_int;
+/// MuJoCo's `mjGEOM_SPHERE` (a value of [`Model::geom_type`]).
+pub const GEOM_SPHERE: c_int = sys::mjtGeom__mjGEOM_SPHERE as c_int;
 
 /// Joint types (`mjtJoint`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -304,6 +304,10 @@ impl MountedCamera {
 /// [`RobotSpec::convex_parts`]).
 pub const CONVEX_PARTS_FILE: &str = "convex_parts.json";
 
+/// Robots whose fingers collide through boxes in ManiSkill's own URDF too (the Panda's four
+/// per finger): their convex parts are the model's finger boxes, with no file.
+pub const BOX_FINGER_ROBOTS: &[&str] = &["panda", "panda_wristcam"];
+
 /// Everything mjskill knows about one robot besides its URDF.
 #[derive(Debug, Clone)]
 pub struct RobotSpec {
@@ -363,12 +367,17 @@ impl RobotSpec {
 
     /// The gripper's convex collision parts (`models/<uid>/convex_parts.json`), resolved in
     /// `model`: `(body, jaw, part)` with jaw 0 for the first link the file names and 1 for
-    /// the second. `Ok(None)`: the robot ships none. Errors name the file and what is wrong.
+    /// the second. The robots of [`BOX_FINGER_ROBOTS`] take their grasp fingers' collision
+    /// boxes instead (jaw 0 the first finger). `Ok(None)`: the robot has none. Errors name
+    /// the file and what is wrong.
     pub fn convex_parts(
         &self,
         model: &Model,
     ) -> Result<Option<Vec<crate::controllers::tgs::JawPart>>, String> {
         use crate::controllers::convex::{ConvexPart, ConvexPartsFile};
+        if BOX_FINGER_ROBOTS.contains(&self.uid()) {
+            return self.finger_box_parts(model).map(Some);
+        }
         let path = format!("{}/{}", self.uid(), CONVEX_PARTS_FILE);
         let Ok(text) = crate::models::text(&path) else {
             return Ok(None);
@@ -402,6 +411,55 @@ impl RobotSpec {
             ));
         }
         Ok(Some(out))
+    }
+
+    /// The collision boxes of the two grasp fingers in `model`, as convex parts.
+    fn finger_box_parts(
+        &self,
+        model: &Model,
+    ) -> Result<Vec<crate::controllers::tgs::JawPart>, String> {
+        use crate::controllers::convex::ConvexPart;
+        let grasp = self
+            .grasp
+            .as_ref()
+            .ok_or_else(|| format!("{} has no grasp fingers", self.uid()))?;
+        let mut out = Vec::new();
+        for (jaw, link) in [grasp.finger1.0, grasp.finger2.0].into_iter().enumerate() {
+            let body = model
+                .id(ObjType::Body, link)
+                .ok_or_else(|| format!("no finger link {link:?} in the model"))?;
+            let before = out.len();
+            for g in 0..model.ngeom() {
+                if model.geom_bodyid()[g] as usize != body
+                    || model.geom_group()[g] != crate::mjcf::GROUP_COLLISION
+                {
+                    continue;
+                }
+                if model.geom_type()[g] != crate::mujoco::GEOM_BOX {
+                    return Err(format!("{link}'s collision geom {g} is not a box"));
+                }
+                let size = &model.geom_size()[3 * g..3 * g + 3];
+                let p = &model.geom_pos()[3 * g..3 * g + 3];
+                let q = &model.geom_quat()[4 * g..4 * g + 4];
+                let rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    q[0], q[1], q[2], q[3],
+                ))
+                .to_rotation_matrix()
+                .into_inner();
+                let part = ConvexPart::from_box(
+                    link,
+                    [size[0], size[1], size[2]],
+                    Vector3::new(p[0], p[1], p[2]),
+                    rot,
+                )
+                .map_err(|e| e.to_string())?;
+                out.push((body, jaw, part));
+            }
+            if out.len() == before {
+                return Err(format!("finger link {link:?} has no collision boxes"));
+            }
+        }
+        Ok(out)
     }
 
     /// The root pose in the table scene.

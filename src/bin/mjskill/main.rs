@@ -52,7 +52,7 @@ pub struct EnvArgs {
     #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
     pub sim_freq: u32,
     /// Who takes the physics steps in which the gripper pinches the object: mujoco, or
-    /// physx_tgs (a replica of PhysX's step; so100 only; experimental, docs/physics.md).
+    /// physx_tgs (a replica of PhysX's step; so100 and panda; experimental, docs/physics.md).
     #[arg(long, default_value = "mujoco", value_parser = pinch_solver)]
     pub pinch_solver: mjskill::PinchSolver,
 }
@@ -259,6 +259,10 @@ pub enum Command {
         /// Physics steps per second of the replaying env.
         #[arg(long, default_value_t = mjskill::SimConfig::DEFAULT_SIM_FREQ)]
         sim_freq: u32,
+        /// Who takes the replaying env's pinched physics steps: mujoco, or physx_tgs (a
+        /// replica of PhysX's step; robots with convex gripper parts only, docs/physics.md).
+        #[arg(long, default_value = "mujoco", value_parser = pinch_solver)]
+        pinch_solver: mjskill::PinchSolver,
         /// Include every episode's result.
         #[arg(long)]
         per_episode: bool,
@@ -459,9 +463,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
             path,
             episodes,
             sim_freq,
+            pinch_solver,
             per_episode,
             table,
-        } => outcomes(&path, episodes, sim_freq, per_episode, table),
+        } => outcomes(&path, episodes, sim_freq, pinch_solver, per_episode, table),
         Command::Envs => {
             out!("{}", serde_json::to_string_pretty(&mjskill::registry())?);
             Ok(())
@@ -680,13 +685,14 @@ fn outcomes(
     path: &std::path::Path,
     episodes: Option<usize>,
     sim_freq: u32,
+    pinch_solver: mjskill::PinchSolver,
     per_episode: bool,
     table: bool,
 ) -> Result<(), CliError> {
     use mjskill::maniskill::outcome::{files, measure, OutcomeFile};
     let sim = mjskill::SimConfig {
         sim_freq,
-        ..Default::default()
+        pinch_solver,
     };
     sim.validate()?;
     let paths = files(path)?;
