@@ -61,8 +61,15 @@ from eval_in_maniskill import FIXED_ROBOT, act, load, to_numpy  # noqa: E402
 #: prismatic joints), positions in m. About ten times the one-step errors of docs/agreement.md.
 TOLERANCES = {"arm_qpos": 0.01, "gripper_qpos": 0.002, "tcp_pos": 0.005, "obj_pos": 0.005}
 #: The task flags compared step by step (those the env's `info` has).
-FLAGS = ("is_grasped", "is_obj_grasped", "is_robot_static", "is_cube_placed",
-         "is_obj_placed", "is_obj_on_goal", "success")
+FLAGS = ("is_grasped", "is_obj_grasped", "is_peg_grasped", "is_robot_static", "is_cube_placed",
+         "is_peg_cube_fit", "is_obj_placed", "is_obj_on_goal", "success")
+#: The flags that say the gripper holds the task's object (one per task).
+GRASP_FLAGS = ("is_grasped", "is_obj_grasped", "is_peg_grasped")
+
+
+def grasped(flags):
+    """Whether a snapshot's flags say the object is held (any task's grasp flag)."""
+    return any(flags.get(k, False) for k in GRASP_FLAGS)
 
 
 #: Readings reported per episode in `open_action_gap`, the largest first.
@@ -271,7 +278,7 @@ def resync_errors(env, seed, states, actions, ms_snaps, arm):
         env.step(a)
         after = mj_snapshot(env, None, {}, None, None)
         errs.append(float(np.max(np.abs(after.qpos[arm] - target.qpos[arm]))))
-        held.append(bool(target.flags.get("is_grasped", target.flags.get("is_obj_grasped"))))
+        held.append(grasped(target.flags))
     return errs, held
 
 

@@ -149,3 +149,12 @@ def test_held_steps_keep_a_few_spread_held_steps_as_json_ready_cases():
     every = cmp.held_steps(7, states, actions, snaps, held, 9)
     assert [c["step"] for c in every] == [1, 2, 3, 4, 6]
     json.dumps(cases)
+
+
+def test_every_tasks_grasp_flag_counts_as_held():
+    assert cmp.grasped({"is_grasped": True})
+    assert cmp.grasped({"is_obj_grasped": True, "success": False})
+    assert cmp.grasped({"is_peg_grasped": True})
+    assert not cmp.grasped({"is_peg_grasped": False, "success": True})
+    assert not cmp.grasped({})
+    assert set(cmp.GRASP_FLAGS) <= set(cmp.FLAGS)
