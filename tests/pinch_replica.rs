@@ -317,3 +317,45 @@ fn recordings_keep_the_pinch_solver_and_replay_exactly() {
     let report = record::replay::replay(&path, 0.0, false).unwrap();
     assert!(report.ok && report.max_obs_dev == 0.0, "{report:?}");
 }
+
+/// PokeCube's held peg meets the cube: the replica steps only the robot and the held object,
+/// so MuJoCo's step takes the steps in which the object touches another free body, and the
+/// replica takes the pinch again after the poke.
+#[test]
+fn the_replica_hands_a_poke_to_mujoco() {
+    let mut env = make(
+        "PokeCube-v1",
+        "panda",
+        "pd_ee_delta_pos",
+        PinchSolver::PhysxTgs,
+    );
+    for seed in 0..3 {
+        env.reset(Some(seed));
+        let mut policy = mjskill::solvers::make_policy("solver", &env, seed).unwrap();
+        policy.reset(&env);
+        let mut action = vec![0.0f32; env.action_space().shape[0]];
+        // Per step: the replica took it ('R'), or MuJoCo while the peg is held ('g').
+        let mut steps = String::new();
+        for _ in 0..50 {
+            policy.act(&env, &mut action);
+            let out = env.step(&action).unwrap();
+            let held = out.info.get("is_peg_grasped").unwrap_or(0.0) > 0.5;
+            steps.push(match (env.drives().pinch_replica_active(), held) {
+                (true, _) => 'R',
+                (false, true) => 'g',
+                (false, false) => '.',
+            });
+        }
+        let first_handed = steps
+            .find('g')
+            .unwrap_or_else(|| panic!("seed {seed}: {steps}"));
+        assert!(
+            steps[..first_handed].matches('R').count() >= 5,
+            "seed {seed}: the carry is not the replica's: {steps}"
+        );
+        assert!(
+            steps[first_handed..].contains('R'),
+            "seed {seed}: the replica never took the pinch back: {steps}"
+        );
+    }
+}

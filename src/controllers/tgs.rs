@@ -35,6 +35,9 @@
 //!    out), the drives frozen. Positions do not move; the velocities it leaves are the ones
 //!    PhysX reports and steps on with.
 //!
+//! The replica steps the robot and the object alone, so it takes a step only while the object
+//! touches no other free body ([`PinchReplica::pinches`]); MuJoCo's step takes the others.
+//!
 //! PhysX's contact cache is kept as PhysX keeps it (`getFrictionPatches`): a jaw part's
 //! friction anchors carry over to the next step unless its friction broke (was clamped in the
 //! velocity iteration), the bodies turned its normal by more than about 2.5°, an anchor pair
@@ -285,8 +288,8 @@ impl PinchReplica {
     }
 
     /// Builds this step's contacts at the state of `data` (kinematics of [`Data::step1`])
-    /// and returns whether both jaws touch the object (a pinch), so that the replica should
-    /// take the step.
+    /// and returns whether both jaws touch the object (a pinch) while the object touches no
+    /// other free body, so that the replica should take the step.
     pub fn pinches(&mut self, data: &Data) -> bool {
         self.points.clear();
         self.point_bodies.clear();
@@ -379,17 +382,19 @@ impl PinchReplica {
             if b1 == self.object_body {
                 n = -n;
             }
-            let dynamic_other = m.body_jntadr()[other] >= 0;
+            if m.body_jntadr()[other] >= 0 {
+                // The object touches another free body (PokeCube's peg the cube, StackCube's
+                // cube the other): the replica steps only the robot and the object, so it
+                // would meet that body as a wall. MuJoCo's step takes these steps.
+                return false;
+            }
             let pair_start = self.points.len();
             self.points.push(ContactPoint {
                 pos: Vector3::from(c.pos),
                 normal: n,
                 separation: c.dist,
             });
-            self.point_bodies.push((
-                self.object_body,
-                if dynamic_other { other } else { usize::MAX },
-            ));
+            self.point_bodies.push((self.object_body, usize::MAX));
             let extends = self.patches.last().is_some_and(|p| {
                 p.end == pair_start
                     && self.point_bodies[p.start] == self.point_bodies[pair_start]
