@@ -662,33 +662,9 @@ mod tests {
 
     /// A unit-free cube part of half size `h` centred at the link origin.
     fn cube_part(h: f64) -> ConvexPart {
-        let mut vertices = Vec::new();
-        for i in 0..8 {
-            vertices.push([
-                if i & 1 == 0 { -h } else { h },
-                if i & 2 == 0 { -h } else { h },
-                if i & 4 == 0 { -h } else { h },
-            ]);
-        }
-        // Two triangles per face, wound either way (the normal is made outward).
-        let quads = [
-            [0, 2, 6, 4],
-            [1, 3, 7, 5],
-            [0, 1, 5, 4],
-            [2, 3, 7, 6],
-            [0, 1, 3, 2],
-            [4, 5, 7, 6],
-        ];
-        let triangles = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        ConvexPart::new(&ConvexPartFile {
-            link: "test".into(),
-            vertices,
-            triangles,
-        })
-        .expect("valid cube")
+        // Two triangles per face (ConvexPart::new merges them and makes the normals outward).
+        ConvexPart::from_box("test", [h, h, h], Vector3::zeros(), Matrix3::identity())
+            .expect("valid cube")
     }
 
     fn unit_box() -> BoxShape {
