@@ -201,15 +201,11 @@ impl ConvexPart {
         pos: Vector3<f64>,
         rot: Matrix3<f64>,
     ) -> Result<ConvexPart, ConvexError> {
-        let corner = |i: usize| {
-            let s = Vector3::new(
-                if i & 1 == 0 { -half[0] } else { half[0] },
-                if i & 2 == 0 { -half[1] } else { half[1] },
-                if i & 4 == 0 { -half[2] } else { half[2] },
-            );
-            let v = pos + rot * s;
-            [v.x, v.y, v.z]
-        };
+        let corners = box_corners(&BoxShape {
+            center: pos,
+            rot,
+            half: Vector3::from(half),
+        });
         // Two triangles per face; ConvexPart::new orients and merges them.
         let quads = [
             [0, 2, 6, 4],
@@ -225,7 +221,7 @@ impl ConvexPart {
             .collect();
         ConvexPart::new(&ConvexPartFile {
             link: link.to_string(),
-            vertices: (0..8).map(corner).collect(),
+            vertices: corners.iter().map(|v| [v.x, v.y, v.z]).collect(),
             triangles,
         })
     }

@@ -59,6 +59,9 @@ pub use cache::{
     CachedPatch, CACHED_PATCH_LEN, CORRELATION_DISTANCE, FRICTION_OFFSET_THRESHOLD, SAME_NORMAL,
 };
 
+/// The object geoms the replica has manifolds for (MuJoCo geom types): a box or a sphere.
+pub const OBJECT_GEOM_TYPES: [std::ffi::c_int; 2] =
+    [crate::mujoco::GEOM_BOX, crate::mujoco::GEOM_SPHERE];
 /// PhysX TGS position iterations per step (ManiSkill's `solver_position_iterations`).
 pub const SUB_STEPS: usize = 15;
 /// PhysX's push-out and friction weight: `min(0.8, 2/√SUB_STEPS)`.
@@ -221,8 +224,7 @@ impl PinchReplica {
                 "the pinched object (body {object_body}) is not a free body"
             ));
         }
-        let ty = model.geom_type()[object_geom];
-        if ty != crate::mujoco::GEOM_BOX && ty != crate::mujoco::GEOM_SPHERE {
+        if !OBJECT_GEOM_TYPES.contains(&model.geom_type()[object_geom]) {
             return Err(format!(
                 "the pinched object's geom {object_geom} is neither a box nor a sphere; the \
                  replica's manifolds are a box or a sphere against convex parts"

@@ -113,17 +113,17 @@ fn enable_pinch_replica(
         .map_err(unsupported)?
         .ok_or_else(|| {
             unsupported(format!(
-                "the robot ships no models/{}/{} (robots with convex parts: so100, panda, panda_wristcam)",
+                "the robot ships no models/{}/{} (robots with convex parts: so100, {})",
                 rs.uid(),
-                crate::robots::CONVEX_PARTS_FILE
+                crate::robots::CONVEX_PARTS_FILE,
+                crate::robots::BOX_FINGER_ROBOTS.join(", ")
             ))
         })?;
     let body = object.index();
     let geom = (0..model.ngeom())
         .find(|&g| {
             model.geom_bodyid()[g] as usize == body
-                && [crate::mujoco::GEOM_BOX, crate::mujoco::GEOM_SPHERE]
-                    .contains(&model.geom_type()[g])
+                && crate::controllers::tgs::OBJECT_GEOM_TYPES.contains(&model.geom_type()[g])
         })
         .ok_or_else(|| {
             unsupported("the task's object is neither a box nor a sphere".to_string())
