@@ -665,7 +665,7 @@ impl Drives {
             if self.fold_r.len() == max_rows {
                 break;
             }
-            if self.released.contains(&c) {
+            if self.released.contains(&c) || separated(data, c) {
                 continue;
             }
             let (g1, g2) = data.contact_geoms(c);
@@ -711,7 +711,7 @@ impl Drives {
         // Pinching: an object a gripper pushes also touches the robot outside that gripper.
         self.pinching.fill(false);
         for c in 0..data.ncon() {
-            if self.released.contains(&c) {
+            if self.released.contains(&c) || separated(data, c) {
                 continue;
             }
             let (g1, g2) = data.contact_geoms(c);
@@ -797,6 +797,9 @@ impl Drives {
             if self.released.len() == MAX_GRIPPER_CONTACTS {
                 break;
             }
+            if separated(data, c) {
+                continue;
+            }
             let (g1, g2) = data.contact_geoms(c);
             let geom_body = data.model().geom_bodyid();
             let (b1, b2) = (geom_body[g1] as usize, geom_body[g2] as usize);
@@ -871,6 +874,15 @@ impl Drives {
             }
         }
         self.release_deep_contacts(data);
+        if self.pinch.is_some() {
+            // A sphere's speculative contacts (its margin, `CONTACT_OFFSET`) are the replica's;
+            // MuJoCo's step gives them no force.
+            for c in 0..data.ncon() {
+                if separated(data, c) {
+                    data.release_contact(c);
+                }
+            }
+        }
         self.apply(data, h);
         data.step2();
         let v = data.qvel_mut();
@@ -884,4 +896,10 @@ impl Drives {
             p.write(data);
         }
     }
+}
+
+/// Whether contact `c` is one of a sphere object's speculative contacts, which MuJoCo reports
+/// in the sphere's gap when the pinch replica is on (never without gaps).
+fn separated(data: &Data, c: usize) -> bool {
+    data.contact(c).in_gap
 }

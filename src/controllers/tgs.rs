@@ -81,6 +81,10 @@ pub const DEFAULT_FRICTION: f64 = 0.3;
 /// ManiSkill's `patch_radius` and `min_patch_radius` of the gripper pads (m): the lever of
 /// PhysX's torsional friction on a patch with one anchor.
 pub const PATCH_RADIUS: f64 = 0.1;
+/// ManiSkill's `contact_offset` (m): PhysX makes a shape's contacts from this far apart and
+/// solves the separated ones as speculative contacts. A sphere object's scene contacts come
+/// from this far (the env gives its geoms this MuJoCo margin).
+pub const CONTACT_OFFSET: f64 = 0.02;
 /// Most contact points the replica solves in one step (the jaws' parts make at most four
 /// each; the object's scene contacts fill the rest).
 pub const MAX_POINTS: usize = 48;
@@ -373,7 +377,10 @@ impl PinchReplica {
             } else {
                 continue;
             };
-            if self.robot_body[other] || c.excluded {
+            // A contact in a sphere's gap (its margin, `CONTACT_OFFSET`) is one of PhysX's
+            // speculative contacts.
+            let separated = c.in_gap;
+            if self.robot_body[other] || (c.excluded && !separated) {
                 continue;
             }
             if self.points.len() == MAX_POINTS {
@@ -383,6 +390,10 @@ impl PinchReplica {
             let mut n = Vector3::new(c.frame[0], c.frame[1], c.frame[2]);
             if b1 == self.object_body {
                 n = -n;
+            }
+            if m.body_jntadr()[other] >= 0 && separated {
+                // Not yet touching: the replica's step leaves that body where it is.
+                continue;
             }
             if m.body_jntadr()[other] >= 0 {
                 // The object touches another free body (PokeCube's peg the cube, StackCube's

@@ -133,6 +133,34 @@ fn enable_pinch_replica(
         .map_err(unsupported)
 }
 
+/// Gives a sphere object's geoms PhysX's contact offset as MuJoCo margin and gap, so that
+/// MuJoCo's collision reports the sphere's contacts with the scene before they touch and the
+/// pinch replica solves them as PhysX's speculative contacts (a sphere released onto the bin's
+/// wall edge, docs/physics.md, "The pinch in PhysX's step"). MuJoCo's own step gives them no
+/// force (`Drives::step`). Box objects are left as they are: MuJoCo's box–box collider picks
+/// other touching points when given a margin.
+fn speculative_sphere_contacts(
+    model: &mut Arc<Model>,
+    object: crate::mujoco::BodyId,
+) -> Result<(), EnvError> {
+    let body = object.index();
+    let spheres: Vec<usize> = (0..model.ngeom())
+        .filter(|&g| {
+            model.geom_bodyid()[g] as usize == body
+                && model.geom_type()[g] == crate::mujoco::GEOM_SPHERE
+        })
+        .collect();
+    if spheres.is_empty() {
+        return Ok(());
+    }
+    let m = Arc::make_mut(model);
+    let offset = crate::controllers::tgs::CONTACT_OFFSET;
+    for g in spheres {
+        m.set_geom_margin(crate::mujoco::GeomId::from_index(g), offset, offset)?;
+    }
+    Ok(())
+}
+
 /// One environment.
 #[derive(Debug)]
 pub struct Env {
@@ -197,8 +225,12 @@ impl Env {
             drives,
             ..
         } = scene;
-        let data = Data::new(model.clone())?;
+        let mut model = model;
         task.resolve(&model)?;
+        if config.sim.pinch_solver == PinchSolver::PhysxTgs {
+            speculative_sphere_contacts(&mut model, task.grasp_object())?;
+        }
+        let data = Data::new(model.clone())?;
         let mut drives = drives;
         if config.sim.pinch_solver == PinchSolver::PhysxTgs {
             enable_pinch_replica(&model, &mut drives, rs, spec.id.id(), task.grasp_object())?;

@@ -19,6 +19,10 @@ pub struct Contact {
     pub frame: [f64; 9],
     /// Whether the contact was excluded from the constraint solver (gap).
     pub excluded: bool,
+    /// Whether the contact lies in a geom's gap: apart by more than `margin − gap` where
+    /// one of its geoms has a gap (never in a model without gaps). MuJoCo 2.2 may still give
+    /// such a contact constraint rows; [`Data::release_contact`] takes their force away.
+    pub in_gap: bool,
 }
 
 /// Owned simulation state (`mjData`) of one [`Model`]; keeps the model alive. Freed on drop.
@@ -426,6 +430,11 @@ impl Data {
             pos: c.pos,
             frame: c.frame,
             excluded: c.exclude != 0,
+            in_gap: {
+                let gap = self.model.geom_gap();
+                (gap[c.geom1 as usize] > 0.0 || gap[c.geom2 as usize] > 0.0)
+                    && c.dist > c.includemargin
+            },
         }
     }
 

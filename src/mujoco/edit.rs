@@ -69,6 +69,29 @@ impl Model {
         Ok(())
     }
 
+    /// Sets geom `g`'s collision `margin` and `gap` (m): MuJoCo reports its contacts from
+    /// `margin` apart, and those farther than `margin − gap` have positive distances (the
+    /// pinch replica's speculative contacts, [`crate::controllers::tgs`]). An error names a
+    /// geom outside the model or a value that is negative or not finite, or a gap above the
+    /// margin.
+    pub fn set_geom_margin(&mut self, g: GeomId, margin: f64, gap: f64) -> Result<()> {
+        let i = g.index();
+        let n = self.ngeom();
+        if i >= n {
+            return Err(MjError::Invalid(format!("geom {i} is not in this model")));
+        }
+        let valid = |x: f64| x.is_finite() && x >= 0.0;
+        if !(valid(margin) && valid(gap) && gap <= margin) {
+            return Err(MjError::Invalid(format!(
+                "geom {i}: margin {margin} and gap {gap} must be finite, non-negative, and the gap at most the margin"
+            )));
+        }
+        let m = self.raw_mut();
+        view_mut!(m.geom_margin, n)[i] = margin;
+        view_mut!(m.geom_gap, n)[i] = gap;
+        Ok(())
+    }
+
     /// The model in MuJoCo's binary MJB format (`mj_saveModel` into memory): equal bytes mean
     /// equal models, names and every compiled quantity included.
     pub fn to_mjb(&self) -> Vec<u8> {

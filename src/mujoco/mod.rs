@@ -435,6 +435,8 @@ model_arrays! {
     geom_group: c_int = |m: &sys::mjModel| m.ngeom;
     /// Radius of every geom's bounding sphere (0 for planes).
     geom_rbound: f64 = |m: &sys::mjModel| m.ngeom;
+    /// Geom collision gaps (m): contacts beyond `margin − gap` are reported but inactive.
+    geom_gap: f64 = |m: &sys::mjModel| m.ngeom;
     /// Geom sizes, 3 per geom (MuJoCo's type-dependent meaning).
     geom_size: f64 = |m: &sys::mjModel| m.ngeom * 3;
     /// Geom colours, 4 per geom.
@@ -762,6 +764,41 @@ mod tests {
         }
         assert!((fz - 9.81).abs() < 0.2, "fz = {fz}");
         assert!(!d.warnings().diverged());
+    }
+
+    #[test]
+    fn a_geom_gap_reports_contacts_before_they_touch() {
+        const SPHERE_ABOVE_PLANE: &str = r#"<mujoco>
+          <worldbody>
+            <geom name="floor" type="plane" size="1 1 0.1"/>
+            <body pos="0 0 0.055">
+              <freejoint/>
+              <geom name="ball" type="sphere" size="0.05" mass="1"/>
+            </body>
+          </worldbody>
+        </mujoco>"#;
+        let mut m = Model::from_xml_string(SPHERE_ABOVE_PLANE, &[]).unwrap();
+        let ball = m.require_geom("ball").unwrap();
+        let mut plain = Data::new(Arc::new(m.clone())).unwrap();
+        plain.forward();
+        assert_eq!(plain.ncon(), 0, "5 mm apart, no margin: no contact");
+        for (margin, gap) in [(-0.01, 0.0), (0.01, 0.02), (f64::NAN, 0.0)] {
+            let e = m
+                .set_geom_margin(ball, margin, gap)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("margin") && e.contains("gap"), "{e}");
+        }
+        assert!(m
+            .set_geom_margin(GeomId::from_index(99), 0.01, 0.01)
+            .is_err());
+        m.set_geom_margin(ball, 0.01, 0.01).unwrap();
+        let mut d = Data::new(Arc::new(m)).unwrap();
+        d.forward();
+        assert_eq!(d.ncon(), 1);
+        let c = d.contact(0);
+        assert!(c.in_gap, "{:?}", c.dist);
+        assert!((c.dist - 0.005).abs() < 1e-9, "dist {}", c.dist);
     }
 
     #[test]
