@@ -194,6 +194,9 @@ pub struct Drives {
     /// The replica of PhysX's step that takes the physics steps in which the gripper pinches
     /// the object (opt-in, [`Drives::enable_pinch_replica`]).
     pinch: Option<Box<PinchReplica>>,
+    /// Whether the model has geoms with a gap (a sphere object's speculative contacts, set
+    /// with the pinch replica): only then do contacts lie apart.
+    gap_contacts: bool,
 }
 
 impl Drives {
@@ -329,13 +332,16 @@ impl Drives {
             smooth_force: vec![0.0; nv],
             smooth_acc: vec![0.0; nv],
             pinch: None,
+            gap_contacts: false,
             dofs,
         })
     }
 
     /// Lets PhysX's step ([`super::tgs`]) take every physics step in which both jaws touch
     /// `object_body` (a free box or sphere, `object_geom`): `parts` are the jaws' convex parts, each
-    /// with its body and jaw (0 or 1). Errors say what does not fit.
+    /// with its body and jaw (0 or 1). Where `model`'s geoms have gaps (a sphere object's
+    /// speculative contacts, given by the env), MuJoCo's step gives the contacts in them no
+    /// force. Errors say what does not fit.
     pub fn enable_pinch_replica(
         &mut self,
         model: &Model,
@@ -370,6 +376,7 @@ impl Drives {
             object_geom,
         )?;
         self.pinch = Some(Box::new(replica));
+        self.gap_contacts = model.geom_gap().iter().any(|&g| g > 0.0);
         Ok(())
     }
 
@@ -665,7 +672,7 @@ impl Drives {
             if self.fold_r.len() == max_rows {
                 break;
             }
-            if self.released.contains(&c) || separated(data, c) {
+            if self.released.contains(&c) || (self.gap_contacts && separated(data, c)) {
                 continue;
             }
             let (g1, g2) = data.contact_geoms(c);
@@ -711,7 +718,7 @@ impl Drives {
         // Pinching: an object a gripper pushes also touches the robot outside that gripper.
         self.pinching.fill(false);
         for c in 0..data.ncon() {
-            if self.released.contains(&c) || separated(data, c) {
+            if self.released.contains(&c) || (self.gap_contacts && separated(data, c)) {
                 continue;
             }
             let (g1, g2) = data.contact_geoms(c);
@@ -797,7 +804,7 @@ impl Drives {
             if self.released.len() == MAX_GRIPPER_CONTACTS {
                 break;
             }
-            if separated(data, c) {
+            if self.gap_contacts && separated(data, c) {
                 continue;
             }
             let (g1, g2) = data.contact_geoms(c);
@@ -874,7 +881,7 @@ impl Drives {
             }
         }
         self.release_deep_contacts(data);
-        if self.pinch.is_some() {
+        if self.gap_contacts {
             // A sphere's speculative contacts (its margin, `CONTACT_OFFSET`) are the replica's;
             // MuJoCo's step gives them no force.
             for c in 0..data.ncon() {
