@@ -167,6 +167,33 @@ const MUJOCO_HELD_STEP_AT_LEAST: f64 = 0.008;
 const PANDA_REPLICA_HELD_STEP: f64 = 0.001;
 const PANDA_MUJOCO_HELD_STEP_AT_LEAST: f64 = 0.004;
 
+/// The cases of a file of ManiSkill's states in `tests/data/` (at least `at_least` of them).
+fn maniskill_cases(file: &str, at_least: usize) -> Vec<serde_json::Value> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(file);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let cases = v["cases"].as_array().unwrap().clone();
+    assert!(cases.len() >= at_least, "{file}: {} cases", cases.len());
+    cases
+}
+
+/// One control step from a case's ManiSkill state (after a reset with its seed) with its
+/// recorded action.
+fn step_from(env: &mut Env, case: &serde_json::Value) {
+    env.reset(Some(case["seed"].as_u64().unwrap()));
+    env.set_state_dict(&StateDict::from_json(&case["state_dict"]).unwrap())
+        .unwrap();
+    let action: Vec<f32> = case["action"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap() as f32)
+        .collect();
+    env.step(&action).unwrap();
+}
+
 /// From ManiSkill's held states in `file` (`compare_in_maniskill.py --record-held`), one
 /// control step with the recorded action in an env of `env_id`, `robot`, `mode`: the median
 /// over the cases of the largest error of the first `arm` joints, with the replica and with
@@ -178,28 +205,13 @@ fn held_arm_error_medians(
     mode: &str,
     arm: usize,
 ) -> [f64; 2] {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(file);
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let cases = v["cases"].as_array().unwrap();
-    assert!(cases.len() >= 20, "{} cases", cases.len());
+    let cases = maniskill_cases(file, 20);
     [PinchSolver::PhysxTgs, PinchSolver::Mujoco].map(|pinch| {
         let mut env = make(env_id, robot, mode, pinch);
         let mut errs: Vec<f64> = cases
             .iter()
             .map(|case| {
-                env.reset(Some(case["seed"].as_u64().unwrap()));
-                env.set_state_dict(&StateDict::from_json(&case["state_dict"]).unwrap())
-                    .unwrap();
-                let action: Vec<f32> = case["action"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap() as f32)
-                    .collect();
-                env.step(&action).unwrap();
+                step_from(&mut env, case);
                 let sd = env.get_state_dict();
                 let art = sd.articulations.values().next().unwrap();
                 (0..arm)
@@ -365,25 +377,11 @@ fn the_replica_hands_a_poke_to_mujoco() {
 /// action: the sphere's spin about the vertical after it, per solver, as (correlation with
 /// ManiSkill's, median of its size, episodes above 2 rad/s).
 fn release_spins(pinch: PinchSolver) -> (f64, f64, usize) {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/maniskill_placesphere_release.json");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let cases = v["cases"].as_array().unwrap();
-    assert!(cases.len() >= 30, "{} cases", cases.len());
+    let cases = maniskill_cases("maniskill_placesphere_release.json", 30);
     let mut env = make("PlaceSphere-v1", "panda", "pd_joint_delta_pos", pinch);
     let (mut ours, mut theirs) = (Vec::new(), Vec::new());
-    for case in cases {
-        env.reset(Some(case["seed"].as_u64().unwrap()));
-        env.set_state_dict(&StateDict::from_json(&case["state_dict"]).unwrap())
-            .unwrap();
-        let action: Vec<f32> = case["action"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap() as f32)
-            .collect();
-        env.step(&action).unwrap();
+    for case in &cases {
+        step_from(&mut env, case);
         ours.push(env.get_state_dict().actors["sphere"][12]);
         theirs.push(case["sphere_angvel_after"][2].as_f64().unwrap());
     }
