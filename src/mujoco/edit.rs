@@ -70,8 +70,8 @@ impl Model {
     }
 
     /// Sets geom `g`'s collision `margin` and `gap` (m): MuJoCo reports its contacts from
-    /// `margin` apart, and those farther than `margin − gap` have positive distances (the
-    /// pinch replica's speculative contacts, [`crate::controllers::tgs`]). An error names a
+    /// `margin` apart, and those farther than `margin − gap` lie in its gap
+    /// ([`Contact::in_gap`]; the pinch replica's speculative contacts). An error names a
     /// geom outside the model or a value that is negative or not finite, or a gap above the
     /// margin.
     pub fn set_geom_margin(&mut self, g: GeomId, margin: f64, gap: f64) -> Result<()> {
